@@ -1,0 +1,368 @@
+"""The run loop: closed-form free flight between contacts, integrator steps during contact.
+
+`simulate` advances B runs in lock step. In each pass a run either jumps in closed form to
+its next contact (or to its end), or takes one integrator step; so the step count follows the
+contact time, not the run time. Integrators with `events` shorten the step that would cross the
+start or end of a contact so that both land exactly on a step; the `seed` integrator keeps the
+report's fixed grid instead (its jumps land on grid points), which is what reproduces its tables.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from collide import physics as ph
+from collide.integrators import INTEGRATORS, Integrator, StepForces
+from collide.model import Model, State
+
+MAX_STEPS_DEFAULT = 20_000_000
+NO_CONTACT_TAIL = 1.0  # s: how long a run with no contact at all lasts
+
+
+class RunError(RuntimeError):
+    """A run that cannot be trusted: unstable step, blow-up, non-finite numbers, runaway length."""
+
+
+@dataclass
+class Trajectory:
+    """Every step of B runs. Segment k -> k+1 is closed-form free flight where `free[k]`.
+
+    t (S, B); s, v (S, B, N, D); w (S, B, N, K); q (S, B, N, Q); work (S, B);
+    friction_pair (S, B, P, D) and friction_wall (S, B, W, N, D) in N, or None without friction.
+    """
+
+    t: np.ndarray
+    s: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+    q: np.ndarray
+    work: np.ndarray
+    free: np.ndarray
+    friction_pair: np.ndarray | None = None
+    friction_wall: np.ndarray | None = None
+
+    @property
+    def n_steps(self) -> int:
+        return self.t.shape[0]
+
+    def member(self, b: int) -> Trajectory:
+        """Run b alone, without the repeated rows that lock-step added after it ended."""
+        t = self.t[:, b]
+        keep = np.ones(len(t), bool)
+        keep[1:] = t[1:] > t[:-1]
+
+        def pick(x: np.ndarray | None) -> np.ndarray | None:
+            return None if x is None else x[keep, b][:, None]
+
+        return Trajectory(t[keep][:, None], pick(self.s), pick(self.v), pick(self.w), pick(self.q),
+                          pick(self.work), pick(self.free), pick(self.friction_pair),
+                          pick(self.friction_wall))
+
+
+@dataclass
+class ContactLog:
+    """Per run (B,): first contact start, last contact end, total contact time, max overlap."""
+
+    first_start: np.ndarray
+    last_end: np.ndarray
+    duration: np.ndarray
+    max_overlap: np.ndarray
+    count: np.ndarray
+
+
+@dataclass
+class RunResult:
+    """What a run produced: the seam between the physics and everything that shows it."""
+
+    model: Model
+    initial: State
+    final: State
+    integrator: str
+    dt: np.ndarray
+    steps: np.ndarray
+    jumps: np.ndarray
+    wall_time_s: float
+    contacts: ContactLog
+    trajectory: Trajectory | None = None
+    warnings: list[str] = field(default_factory=list)
+
+
+# ---------------------------------------------------------------------------------------------
+# Stability
+
+
+def contact_frequencies(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    """Angular frequency of each pair spring (B, P) and each sphere-wall spring (B, N)."""
+    inv_reduced = model.inv_mass[:, model.pair_i] + model.inv_mass[:, model.pair_j]
+    pair = np.sqrt(model.k_pair * inv_reduced)
+    wall = np.sqrt(model.k_wall * model.inv_mass) if model.n_walls else np.zeros((model.batch, 0))
+    return pair, wall
+
+
+def max_frequency(model: Model) -> np.ndarray:
+    pair, wall = contact_frequencies(model)
+    return np.maximum(pair.max(axis=1, initial=0.0), wall.max(axis=1, initial=0.0))
+
+
+def energy_bounds(model: Model, state: State) -> tuple[np.ndarray, np.ndarray]:
+    """Upper bounds on the overlap each pair (B, P) and wall contact (B, N) can reach.
+
+    All the energy in the centre-of-mass frame could end up in one pair's spring; against a
+    wall, all the energy could. Gravity adds what a fall over the run could release (ignored
+    here without a fixed duration).
+    """
+    ke = ph.kinetic_energy(model, state.v, state.w)
+    total_mass = model.mass.sum(axis=1)
+    p = np.einsum("bn,bnd->bd", model.mass, state.v)
+    ke_com = ke - 0.5 * np.sum(p * p, -1) / total_mass
+    pair = np.sqrt(2 * np.maximum(ke_com, 0.0)[:, None] / model.k_pair)
+    wall = np.sqrt(2 * ke[:, None] / model.k_wall) if model.n_walls else np.zeros((model.batch, 0))
+    return pair, wall
+
+
+def check_run(model: Model, state: State, dt: np.ndarray, integrator: Integrator,
+              max_steps: int) -> list[str]:
+    """Refuse a step the integrator cannot keep stable, a contact so soft the spheres pass
+    through each other, or a run that would take too many steps. Returns warnings."""
+    warnings: list[str] = []
+    pair_w, wall_w = contact_frequencies(model)
+    omega = max_frequency(model)
+    limit = integrator.stability / omega
+    bad = dt > limit
+    if bad.any():
+        b = int(np.argmax(bad))
+        raise RunError(f"dt = {dt[b]:.3g} s is beyond the stability limit of '{integrator.name}' "
+                       f"for this contact (omega = {omega[b]:.4g} rad/s); the largest safe step is "
+                       f"{limit[b]:.3g} s (use --dt auto to choose one)")
+    pair_d, wall_d = energy_bounds(model, state)
+    reach = model.radius[:, model.pair_i] + model.radius[:, model.pair_j]
+    if model.n_pairs and (pair_d >= reach).any():
+        b, p = np.unravel_index(np.argmax(pair_d / reach), pair_d.shape)
+        names = model.contact_names()[p]
+        raise RunError(f"contact.k = {model.k_pair[b, p] * 2:.4g} N/m is too soft for {names}: the "
+                       f"overlap could reach {pair_d[b, p]:.3g} m, beyond the distance between "
+                       f"centres at touch ({reach[b, p]:.3g} m); the spheres would pass through "
+                       "each other. Use a stiffer contact.k")
+    if model.n_walls and (wall_d >= model.radius).any():
+        b, n = np.unravel_index(np.argmax(wall_d / model.radius), wall_d.shape)
+        raise RunError(f"contact.k = {model.k_wall[b, n]:.4g} N/m is too soft for body "
+                       f"{model.body_names[n]} on a wall: the overlap could reach {wall_d[b, n]:.3g} m, "
+                       f"more than its radius; it would pass through the wall. Use a stiffer contact.k")
+    small = np.minimum(model.radius[:, model.pair_i], model.radius[:, model.pair_j])
+    if model.n_pairs and (pair_d > small).any():
+        warnings.append("the contact is soft: an overlap could exceed the smaller radius")
+    # Steps one contact takes; the slowest spring sets the longest contact.
+    slowest = np.minimum(pair_w.min(axis=1, initial=np.inf), wall_w.min(axis=1, initial=np.inf))
+    per_contact = math.pi / (slowest * dt)
+    if (per_contact > max_steps).any():
+        b = int(np.argmax(per_contact))
+        raise RunError(f"dt = {dt[b]:.3g} s is so small that one contact would take "
+                       f"{per_contact[b]:.3g} steps (limit {max_steps:.3g}); use a larger dt or auto")
+    return warnings
+
+
+# ---------------------------------------------------------------------------------------------
+# Events
+
+
+def _hermite_root(d0: np.ndarray, d1: np.ndarray, r0: np.ndarray, r1: np.ndarray) -> np.ndarray:
+    """Root in (0, 1) of the cubic Hermite through (0, d0, r0) and (1, d1, r1); r in per-step units."""
+    theta = np.clip(d0 / np.where(d0 != d1, d0 - d1, 1.0), 0.0, 1.0)
+    lo, hi = np.zeros_like(theta), np.ones_like(theta)
+    for _ in range(8):
+        t2, t3 = theta * theta, theta * theta * theta
+        p = (2 * t3 - 3 * t2 + 1) * d0 + (t3 - 2 * t2 + theta) * r0 + (3 * t2 - 2 * t3) * d1 + (t3 - t2) * r1
+        dp = (6 * t2 - 6 * theta) * d0 + (3 * t2 - 4 * theta + 1) * r0 + (6 * theta - 6 * t2) * d1 + \
+            (3 * t2 - 2 * theta) * r1
+        same = np.sign(p) == np.sign(d0)
+        lo = np.where(same, theta, lo)
+        hi = np.where(same, hi, theta)
+        newton = theta - p / np.where(dp != 0, dp, np.inf)
+        inside = (newton > lo) & (newton < hi)
+        theta = np.where(inside, newton, 0.5 * (lo + hi))
+    return theta
+
+
+def event_fraction(model: Model, before: State, after: State, h: np.ndarray) -> np.ndarray:
+    """Fraction (B,) of the step at which the first contact starts or ends (1 if none)."""
+    c0 = ph.contact_geometry(model, before.s)
+    c1 = ph.contact_geometry(model, after.s)
+    r0p, r0w = ph.contact_rates(model, before, c0)
+    r1p, r1w = ph.contact_rates(model, after, c1)
+    reach = model.radius[:, model.pair_i] + model.radius[:, model.pair_j]
+    d0 = np.concatenate((c0.overlap / reach, c0.wall_overlap.reshape(model.batch, -1) /
+                         np.tile(model.radius, (1, model.n_walls))), axis=1)
+    d1 = np.concatenate((c1.overlap / reach, c1.wall_overlap.reshape(model.batch, -1) /
+                         np.tile(model.radius, (1, model.n_walls))), axis=1)
+    r0 = np.concatenate((r0p / reach, r0w.reshape(model.batch, -1) / np.tile(model.radius, (1, model.n_walls))), 1)
+    r1 = np.concatenate((r1p / reach, r1w.reshape(model.batch, -1) / np.tile(model.radius, (1, model.n_walls))), 1)
+    tol = ph.TOUCH_TOL
+    crossing = ((d0 > tol) & (d1 < -tol)) | ((d0 < -tol) & (d1 > tol))
+    if not crossing.any():
+        return np.ones(model.batch)
+    hb = h[:, None]
+    theta = _hermite_root(d0, d1, r0 * hb, r1 * hb)
+    theta = np.where(crossing, theta, 1.0)
+    return theta.min(axis=1)
+
+
+def step_with_events(model: Model, integrator: Integrator, state: State,
+                     h: np.ndarray) -> tuple[State, StepForces, np.ndarray]:
+    """One step; where a contact would start or end inside it, shorten it to land there."""
+    new, forces = integrator.step(model, state, h)
+    if not integrator.events:
+        return new, forces, h
+    for _ in range(8):
+        frac = event_fraction(model, state, new, h)
+        redo = frac < 1.0
+        if not redo.any():
+            break
+        h = np.where(redo, h * np.maximum(frac, 1e-9), h)
+        new, forces = integrator.step(model, state, h)
+    return new, forces, h
+
+
+# ---------------------------------------------------------------------------------------------
+# The loop
+
+
+def _masked(new: State, old: State, keep_old: np.ndarray) -> State:
+    """Runs where keep_old is set keep their old state (a no-op step for finished runs)."""
+    if not keep_old.any():
+        return new
+    k3 = keep_old[:, None, None]
+    return State(np.where(keep_old, old.t, new.t), np.where(k3, old.s, new.s), np.where(k3, old.v, new.v),
+                 np.where(k3, old.w, new.w), np.where(k3, old.q, new.q),
+                 np.where(keep_old, old.work, new.work))
+
+
+def default_tail(contacts: ContactLog) -> np.ndarray:
+    """After the last separation, keep going long enough to see the bodies part."""
+    span = contacts.last_end - contacts.first_start
+    tail = np.maximum(2.0 * span, 0.1 * contacts.last_end)
+    return np.where(np.isfinite(tail), tail, NO_CONTACT_TAIL)
+
+
+def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
+             duration: np.ndarray | None = None, tail: np.ndarray | None = None,
+             record: bool = True, max_steps: int = MAX_STEPS_DEFAULT) -> RunResult:
+    """Run B scenes to their end. `duration` and `tail` are (B,) with NaN meaning 'not set'."""
+    integ = INTEGRATORS[integrator]
+    b = model.batch
+    dt = np.broadcast_to(np.asarray(dt, dtype=float), (b,)).copy()
+    if model.friction and not integ.friction:
+        raise RunError(f"integrator '{integrator}' does not model friction yet; use 'verlet' or 'seed'")
+    warnings = check_run(model, initial, dt, integ, max_steps)
+    t_end = np.full(b, np.inf) if duration is None else np.where(np.isnan(duration), np.inf, duration)
+    tail_set = np.full(b, np.nan) if tail is None else np.asarray(tail, dtype=float)
+    state = initial.copy()
+    done = np.zeros(b, bool)
+    steps = np.zeros(b, dtype=np.int64)
+    jumps = np.zeros(b, dtype=np.int64)
+    log = ContactLog(np.full(b, np.nan), np.full(b, np.nan), np.zeros(b), np.zeros(b), np.zeros(b, np.int64))
+    in_contact = np.zeros(b, bool)
+    contact_began = np.zeros(b)
+    zero_forces = StepForces(np.zeros((b, model.n_pairs, model.dim)),
+                             np.zeros((b, model.n_walls, model.n_bodies, model.dim)))
+    rows: list[tuple] = []
+
+    def snapshot(s: State, free: np.ndarray, forces: StepForces) -> None:
+        if record:
+            rows.append((s.t, s.s, s.v, s.w, s.q, s.work, free, forces.pair, forces.wall))
+
+    snapshot(state, np.ones(b, bool), zero_forces)
+    started = time.perf_counter()
+    passes = 0
+    while not done.all():
+        passes += 1
+        if passes > max_steps:
+            raise RunError(f"the run did not end within {max_steps} steps; set a duration or a larger dt")
+        tau = ph.time_to_contact(model, state)
+        contact = (tau == 0.0) & ~done
+        # Contact bookkeeping: starts and ends, for the summary and the tail.
+        began = contact & ~in_contact
+        ended = ~contact & in_contact & ~done
+        log.first_start = np.where(began & np.isnan(log.first_start), state.t, log.first_start)
+        contact_began = np.where(began, state.t, contact_began)
+        log.count += began
+        log.last_end = np.where(ended, state.t, log.last_end)
+        log.duration += np.where(ended, state.t - contact_began, 0.0)
+        in_contact = contact
+        if ended.any():
+            _check_energy(model, initial, state, ended, dt, integ)
+
+        free = ~contact & ~done
+        # A free run with no contact ahead ends a tail after its last contact.
+        ending = free & np.isinf(tau) & np.isinf(t_end)
+        if ending.any():
+            tails = np.where(np.isnan(tail_set), default_tail(log), tail_set)
+            if not integ.events:
+                tails = np.ceil(tails / dt) * dt
+            t_end = np.where(ending, state.t + tails, t_end)
+        if not integ.events:
+            # The seed integrator only sees contact on its grid: step when it begins within one.
+            near = free & (tau < dt) & (state.t + dt <= t_end * (1 + 1e-15))
+            contact = contact | near
+            free = free & ~near
+            to_contact = np.floor(tau / dt) * dt
+        else:
+            to_contact = tau
+        jump = np.where(free, np.minimum(to_contact, t_end - state.t), 0.0)
+        h = np.where(contact, np.minimum(dt, t_end - state.t), 0.0)
+        forces = zero_forces
+        if free.any():
+            state = _masked(ph.free_flight(model, state, jump), state, ~free)
+            jumps += free
+        if contact.any():
+            new, forces, h = step_with_events(model, integ, state, h)
+            state = _masked(new, state, ~contact)
+            steps += contact
+            if not np.isfinite(state.s).all() or not np.isfinite(state.v).all():
+                bad = int(np.argmax(~np.isfinite(state.v).all(axis=(1, 2))))
+                raise RunError(f"non-finite numbers at t = {state.t[bad]:.6g} s: the step is unstable; "
+                               f"try a smaller dt (largest safe step {_safe_step(model, integ)[bad]:.3g} s)")
+        if free.any() or contact.any():
+            snapshot(state, free, forces)
+        if contact.any():
+            log.max_overlap = np.maximum(log.max_overlap, _max_overlap(model, state))
+        done = done | (state.t >= t_end * (1 - 1e-15))
+    wall_time = time.perf_counter() - started
+    trajectory = None
+    if record:
+        trajectory = Trajectory(*(np.stack(col) for col in zip(*rows)))
+        if not model.friction:
+            trajectory.friction_pair = trajectory.friction_wall = None
+    return RunResult(model=model, initial=initial, final=state, integrator=integrator, dt=dt,
+                     steps=steps, jumps=jumps, wall_time_s=wall_time, contacts=log,
+                     trajectory=trajectory, warnings=warnings)
+
+
+def _safe_step(model: Model, integ: Integrator) -> np.ndarray:
+    return integ.stability / max_frequency(model)
+
+
+def _max_overlap(model: Model, state: State) -> np.ndarray:
+    c = ph.contact_geometry(model, state.s)
+    pair = c.overlap.max(axis=1, initial=0.0)
+    wall = c.wall_overlap.reshape(model.batch, -1).max(axis=1, initial=0.0)
+    return np.maximum(pair, wall)
+
+
+def _check_energy(model: Model, initial: State, state: State, members: np.ndarray, dt: np.ndarray,
+                  integ: Integrator) -> None:
+    """Stop a run whose energy has grown far beyond its start: the step is unstable."""
+    e0 = ph.kinetic_energy(model, initial.v, initial.w)
+    e1 = ph.kinetic_energy(model, state.v, state.w)
+    if model.gravity is not None:
+        e0 = e0 - np.einsum("bn,bnd,bd->b", model.mass, initial.s, model.gravity)
+        e1 = e1 - np.einsum("bn,bnd,bd->b", model.mass, state.s, model.gravity)
+    grown = members & (e1 - e0 > 0.5 * np.abs(e0) + 1e-300)
+    if grown.any():
+        b = int(np.argmax(grown))
+        raise RunError(f"energy grew from {e0[b]:.4g} J to {e1[b]:.4g} J during a contact at "
+                       f"dt = {dt[b]:.3g} s: the step is unstable; the largest safe step is "
+                       f"{_safe_step(model, integ)[b]:.3g} s")
