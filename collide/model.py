@@ -25,7 +25,7 @@ A sweep widens only the first axis: `compile_scenes` takes B scenes of the same 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -164,3 +164,18 @@ def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
         q[..., 0] = 1.0
     state = State(t=np.zeros(b), s=s, v=v, w=w, q=q, work=np.zeros(b))
     return model, state
+
+
+def select_model(model: Model, index: int) -> Model:
+    """Batch member `index` as a model of batch 1."""
+    sl = slice(index, index + 1)
+    changes = {name: getattr(model, name)[sl] for name in
+               ("mass", "inv_mass", "radius", "inertia", "inv_inertia", "k_pair", "k_wall", "mu", "eps")}
+    if model.gravity is not None:
+        changes["gravity"] = model.gravity[sl]
+    return replace(model, **changes)
+
+
+def select_state(state: State, index: int) -> State:
+    sl = slice(index, index + 1)
+    return State(state.t[sl], state.s[sl], state.v[sl], state.w[sl], state.q[sl], state.work[sl])

@@ -18,10 +18,17 @@ class SceneRun:
 
     scenes: list[Scene]
     result: RunResult
+    dt_request: float | str | None = None
+    tol: list[float] | None = None
 
     @property
     def scene(self) -> Scene:
         return self.scenes[0]
+
+    def member(self, index: int) -> SceneRun:
+        """Batch member `index` as a run of its own."""
+        tol = None if self.tol is None else [self.tol[index]]
+        return SceneRun([self.scenes[index]], self.result.member(index), self.dt_request, tol)
 
 
 def auto_dt(scenes: list[Scene], integrator: str, tol: np.ndarray) -> np.ndarray:
@@ -67,7 +74,7 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
                          "(a bouncing sphere never stops)")
     result = simulate(model, state, integrator=integ, dt=dt_arr, duration=duration, tail=tail,
                       record=record, max_steps=max_steps)
-    return SceneRun(list(scenes), result)
+    return SceneRun(list(scenes), result, dt, [float(x) for x in tols])
 
 
 def run_scene(scene: Scene, **kwargs) -> SceneRun:

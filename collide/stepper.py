@@ -17,7 +17,7 @@ import numpy as np
 
 from collide import physics as ph
 from collide.integrators import INTEGRATORS, Integrator, StepForces
-from collide.model import Model, State
+from collide.model import Model, State, select_model, select_state
 
 MAX_STEPS_DEFAULT = 20_000_000
 NO_CONTACT_TAIL = 1.0  # s: how long a run with no contact at all lasts
@@ -89,6 +89,23 @@ class RunResult:
     contacts: ContactLog
     trajectory: Trajectory | None = None
     warnings: list[str] = field(default_factory=list)
+
+    @property
+    def batch_size(self) -> int:
+        return self.model.batch
+
+    def member(self, index: int) -> RunResult:
+        """Batch member `index` as a run of batch 1 (its trajectory without lock-step padding)."""
+        def pick(x: np.ndarray) -> np.ndarray:
+            return x[index:index + 1]
+
+        log = ContactLog(*(pick(getattr(self.contacts, f)) for f in
+                           ("first_start", "last_end", "duration", "max_overlap", "count")))
+        return RunResult(select_model(self.model, index), select_state(self.initial, index),
+                         select_state(self.final, index), self.integrator, pick(self.dt),
+                         pick(self.steps), pick(self.jumps), self.wall_time_s, log,
+                         None if self.trajectory is None else self.trajectory.member(index),
+                         list(self.warnings))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,0 +1,61 @@
+"""Options and helpers shared by the CLI commands."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Annotated, NoReturn
+
+import typer
+
+
+class UserError(Exception):
+    """A mistake in the command line: reported as one line, exit code 2."""
+
+
+def fail(message: str) -> NoReturn:
+    typer.echo(f"error: {message}", err=True)
+    raise SystemExit(2)
+
+
+SetOption = Annotated[
+    list[str] | None,
+    typer.Option("--set", help="Override a scene key: --set contact.mu=0.3 --set body.ball1.velocity=[1,0] "
+                 "(repeatable; TOML values; bodies by name; vector components as .x/.y/.z)."),
+]
+IntegratorOption = Annotated[
+    str | None, typer.Option(help="seed (the report's update), verlet, yoshida4 or kahan6 [default: the scene's].")
+]
+DtOption = Annotated[str | None, typer.Option(help="Time step in seconds, or 'auto' [default: the scene's].")]
+TolOption = Annotated[
+    float | None,
+    typer.Option(help="With --dt auto: the error allowed in the final velocities and spins, relative to "
+                 "the fastest initial speed [default: the scene's, 1e-6]."),
+]
+
+
+def parse_dt(text: str | None) -> float | str | None:
+    if text is None or text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise UserError(f"--dt must be a number of seconds or 'auto', got '{text}'") from None
+    if not value > 0 or value == float("inf"):
+        raise UserError(f"--dt must be positive and finite, got '{text}'")
+    return value
+
+
+def spawn_viewer(path: Path) -> None:
+    """Open a recording in the Rerun viewer if one is installed, else say how."""
+    rerun = shutil.which("rerun") or str(Path(sys.executable).parent / "rerun")
+    if not Path(rerun).exists():
+        typer.echo(f"  no Rerun viewer found; open the file with: rerun {path}")
+        return
+    try:
+        subprocess.Popen([rerun, str(path)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        typer.echo(f"  opened in the Rerun viewer: rerun {path}")
+    except OSError as exc:
+        typer.echo(f"  could not start the Rerun viewer ({exc.strerror}); open the file with: rerun {path}")

@@ -1,0 +1,184 @@
+"""`collide`: the command line. Commands parse options and call one library function each."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from cli.common import (
+    DtOption,
+    IntegratorOption,
+    SetOption,
+    TolOption,
+    UserError,
+    fail,
+    parse_dt,
+)
+
+app = typer.Typer(
+    name="collide",
+    help="Collisions of spheres with springs, Coulomb friction and spin: run scenes, record them "
+    "to Rerun, batch and sweep them, validate against textbooks, and view them live.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _fmt(x: Any) -> str:
+    if x is None:
+        return "n/a"
+    if isinstance(x, float):
+        return f"{x:.6g}" if math.isfinite(x) else "n/a"
+    if isinstance(x, list):
+        return "(" + ", ".join(_fmt(v) for v in x) + ")"
+    return str(x)
+
+
+def print_summary(summary: dict[str, Any], recording: Path | None) -> None:
+    """A readable summary: final state, residuals, cost."""
+    auto = " (auto)" if summary.get("dt_auto") else ""
+    typer.echo(f"{summary['scene']}: {summary['dim']}D, integrator {summary['integrator']}, "
+               f"dt {summary['dt']:.3g} s{auto}")
+    width = max(len(b["name"]) for b in summary["bodies"])
+    for body in summary["bodies"]:
+        spin = f"  spin {_fmt(body['spin'])} rad/s" if "spin" in body else ""
+        typer.echo(f"  {body['name']:<{width}}  velocity {_fmt(body['velocity'])} m/s{spin}")
+    res = summary["residuals"]
+    typer.echo(f"  residuals: energy {_fmt(res['energy'])}, momentum {_fmt(res['momentum'])}, "
+               f"angular momentum {_fmt(res['angular_momentum'])} (relative)")
+    contact = summary["contact"]
+    if contact["count"]:
+        typer.echo(f"  contacts: {contact['count']}, {contact['duration'] * 1e3:.4g} ms in contact, "
+                   f"max compression {contact['max_compression'] * 1e3:.4g} mm")
+    else:
+        typer.echo("  contacts: none")
+    typer.echo(f"  {summary['steps']} steps, {summary['jumps']} free-flight jumps, "
+               f"{summary['sim_time']:.6g} s simulated in {summary['wall_time_s'] * 1e3:.3g} ms")
+    for warning in summary.get("warnings", []):
+        typer.echo(f"  warning: {warning}")
+    if recording is not None:
+        typer.echo(f"  recording: {recording}")
+
+
+@app.command()
+def run(
+    scene: Annotated[str, typer.Argument(help="A built-in scene name (see `collide scenes`) or a .toml file.")],
+    set_: SetOption = None,
+    integrator: IntegratorOption = None,
+    dt: DtOption = None,
+    tol: TolOption = None,
+    json_: Annotated[bool, typer.Option("--json", help="Print the JSON summary (DESIGN section 4) only.")] = False,
+    csv: Annotated[Path | None, typer.Option(help="Write the report's CSV columns to this file.")] = None,
+    csv_every: Annotated[float | None, typer.Option(
+        help="CSV row interval in seconds [default: 100 steps, as the report printed]")] = None,
+    csv_layout: Annotated[str, typer.Option(
+        help="'aligned' (every column at the row's time) or 'report' (the report program's own "
+        "output: positions one step ahead, %f numbers)")] = "aligned",
+    out: Annotated[Path | None, typer.Option(help="Recording file [default: recordings/<scene>.rrd].")] = None,
+    no_record: Annotated[bool, typer.Option("--no-record", help="Do not write a recording.")] = False,
+    stride: Annotated[int, typer.Option(help="Record every n-th contact step.", min=1)] = 1,
+    spawn: Annotated[bool, typer.Option(help="Open the recording in the Rerun viewer.")] = False,
+) -> None:
+    """Run one scene, print a summary and write a Rerun recording.
+
+    Examples:
+
+      collide run demo-bonus
+
+      collide run demo-1d --integrator seed --dt 2e-5 --csv demo1d.csv --csv-layout report
+
+      collide run demo-bonus --set contact.mu=0.3 --set body.ball1.velocity=[1.5,0] --json
+
+      collide run my_scene.toml --dt auto --tol 1e-9 --no-record
+    """
+    from collide.run import run_scene
+    from collide.scene import load_scene
+    from collide.summary import report_csv, run_summary
+
+    loaded = load_scene(scene, set_ or [])
+    result = run_scene(loaded, integrator=integrator, dt=parse_dt(dt), tol=tol, record=True)
+    summary = run_summary(result)
+    if csv is not None:
+        every = csv_every if csv_every is not None else 100 * float(result.result.dt[0])
+        if not every > 0:
+            raise UserError(f"--csv-every must be positive, got {every}")
+        try:
+            csv.write_text(report_csv(result, every, csv_layout))
+        except OSError as exc:
+            raise UserError(f"cannot write {csv}: {exc.strerror}") from None
+    recording = None
+    if not no_record:
+        from collide.recording import write_recording
+
+        recording = out if out is not None else Path("recordings") / f"{loaded.name}.rrd"
+        write_recording(result, recording, stride=stride)
+    if json_:
+        typer.echo(json.dumps(summary))
+    else:
+        print_summary(summary, recording)
+        if csv is not None:
+            typer.echo(f"  csv: {csv}")
+    if spawn and recording is not None:
+        from cli.common import spawn_viewer
+
+        spawn_viewer(recording)
+
+
+@app.command()
+def scenes(
+    show: Annotated[str | None, typer.Option(help="Print this built-in scene's TOML (copy it to start your own).")] = None,
+) -> None:
+    """List the built-in scenes, or print one as TOML.
+
+    Examples:
+
+      collide scenes
+
+      collide scenes --show demo-bonus > my_scene.toml
+    """
+    from collide.scene import builtin_names, builtin_text, load_scene
+
+    if show is not None:
+        typer.echo(builtin_text(show), nl=False)
+        return
+    for name in builtin_names():
+        scene = load_scene(name)
+        typer.echo(f"{name:<20} {scene.description}")
+
+
+def _register_optional() -> None:
+    """Commands that live in their own modules."""
+    import importlib
+
+    for module in ("cli.numerics", "cli.batch", "cli.accuracy", "cli.view", "cli.bench"):
+        try:
+            mod = importlib.import_module(module)
+        except ModuleNotFoundError as exc:
+            if exc.name != module:
+                raise
+            continue
+        mod.register(app)
+
+
+_register_optional()
+
+
+def main() -> None:
+    """Entry point: known errors become one line on stderr and exit code 2."""
+    from collide.scene import SceneError
+    from collide.stepper import RunError
+
+    try:
+        # Standalone mode: click reports usage errors itself (one message, exit 2).
+        app()
+    except (SceneError, RunError, UserError, ValueError, OSError) as exc:
+        fail(str(exc))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,169 @@
+"""The JSON summary (DESIGN section 4) and the report's CSV columns (section III's printf)."""
+
+from __future__ import annotations
+
+import io
+import math
+from typing import Any
+
+import numpy as np
+
+from collide import diagnostics as dg
+from collide.model import Model, State
+from collide.run import SceneRun
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
+    """The DESIGN section 4 object for one member of a run. Inapplicable residuals are None."""
+    r = run.result
+    scene = run.scenes[member]
+    res = dg.residuals(r)
+    bodies = []
+    for n, name in enumerate(r.model.body_names):
+        body: dict[str, Any] = {"name": name}
+        pos, vel = r.final.s[member, n], r.final.v[member, n]
+        body["position"] = float(pos[0]) if scene.dim == 1 else pos.tolist()
+        body["velocity"] = float(vel[0]) if scene.dim == 1 else vel.tolist()
+        if scene.dim == 2:
+            body["spin"] = float(r.final.w[member, n, 0]) if r.model.spin_dim else 0.0
+        elif scene.dim == 3:
+            body["spin"] = r.final.w[member, n].tolist() if r.model.spin_dim else [0.0, 0.0, 0.0]
+        bodies.append(body)
+    log = r.contacts
+    max_overlap = float(log.max_overlap[member])
+    return {
+        "scene": scene.name,
+        "dim": scene.dim,
+        "integrator": r.integrator,
+        "dt": float(r.dt[member]),
+        "dt_auto": (scene.dt == "auto") if run.dt_request is None else run.dt_request == "auto",
+        "tol": run.tol[member] if run.tol is not None else scene.tol,
+        "steps": int(r.steps[member]),
+        "jumps": int(r.jumps[member]),
+        "sim_time": float(r.final.t[member]),
+        "wall_time_s": r.wall_time_s,
+        "bodies": bodies,
+        "residuals": {
+            "energy": _finite_or_none(res.energy[member]),
+            "momentum": _finite_or_none(res.momentum[member]),
+            "angular_momentum": _finite_or_none(res.angular_momentum[member]),
+        },
+        "contact": {
+            "count": int(log.count[member]),
+            # Each sphere of a pair takes half the overlap (equal springs in series); a sphere on
+            # a wall takes all of it.
+            "max_compression": max_overlap / 2 if r.model.n_walls == 0 else max_overlap,
+            "max_overlap": max_overlap,
+            "duration": float(log.duration[member]),
+            "first_start": _finite_or_none(log.first_start[member]),
+            "last_end": _finite_or_none(log.last_end[member]),
+        },
+        "warnings": list(r.warnings),
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# CSV in the report's columns
+
+
+def _vector_names(prefix: str, dim: int) -> list[str]:
+    return [f"{prefix}.{c}" for c in "xyz"[:dim]]
+
+
+def csv_columns(model: Model) -> list[str]:
+    """time, s1.x, ..., scom, v1, ..., vcom, p1, ..., p, w1, ..., L1, ..., L, E1, ..., E."""
+    n, d = model.n_bodies, model.dim
+    cols = ["time"]
+    for prefix in ("s", "v"):
+        for i in range(n):
+            cols += _vector_names(f"{prefix}{i + 1}", d)
+        cols += _vector_names(f"{prefix}com", d)
+    for i in range(n):
+        cols += _vector_names(f"p{i + 1}", d)
+    cols += _vector_names("p", d)
+    if d == 2:
+        cols += [f"w{i + 1}" for i in range(n)] + [f"L{i + 1}" for i in range(n)] + ["L"]
+    elif d == 3:
+        for i in range(n):
+            cols += _vector_names(f"w{i + 1}", 3)
+        for i in range(n):
+            cols += _vector_names(f"L{i + 1}", 3)
+        cols += _vector_names("L", 3)
+    cols += [f"E{i + 1}" for i in range(n)] + ["E"]
+    return cols
+
+
+def _per_body_energy(model: Model, st: State) -> np.ndarray:
+    """Each body's kinetic, rotational and own spring energy (T, N): the report's E1, E2."""
+    energy = 0.5 * model.mass * np.sum(st.v * st.v, -1)
+    if st.w.shape[-1]:
+        energy = energy + 0.5 * model.inertia * np.sum(st.w * st.w, -1)
+    pair, wall = dg.overlaps(model, st.s)
+    # Each sphere of a pair is a spring of constant k compressed by half the overlap.
+    k = 2 * model.k_pair
+    half = 0.5 * np.maximum(pair, 0.0)
+    own = 0.5 * k * half * half
+    energy = energy + np.einsum("...p,np->...n", own, model.pair_to_body_i + model.pair_to_body_j)
+    if model.n_walls:
+        energy = energy + 0.5 * np.sum(model.k_wall[:, None, :] * np.maximum(wall, 0.0) ** 2, axis=-2)
+    return energy
+
+
+def _rows(model: Model, st: State, diag: State) -> np.ndarray:
+    """Columns for states `st` (positions, velocities, spins) and `diag` (the derived sums)."""
+    t = diag.t
+    m = model.mass[0]
+    s, v, w = st.s[:, 0], st.v[:, 0], st.w[:, 0]
+    ds, dv, dw = diag.s[:, 0], diag.v[:, 0], diag.w[:, 0]
+    total = m.sum()
+    parts = [t[:, None], s.reshape(len(t), -1), (m[:, None] * ds).sum(1) / total,
+             v.reshape(len(t), -1), (m[:, None] * dv).sum(1) / total]
+    p = m[:, None] * dv
+    parts += [p.reshape(len(t), -1), p.sum(1)]
+    if model.dim > 1:
+        k_spin = max(model.spin_dim, 1 if model.dim == 2 else 3)
+        wv = w if w.shape[-1] else np.zeros((len(t), model.n_bodies, k_spin))
+        dwv = dw if dw.shape[-1] else np.zeros((len(t), model.n_bodies, k_spin))
+        lin = dg._cross_z(ds, p)
+        ang = lin + model.inertia[0][:, None] * dwv
+        parts += [wv.reshape(len(t), -1), ang.reshape(len(t), -1), ang.sum(1)]
+    energy = _per_body_energy(model, State(diag.t, diag.s[:, 0][:, None], diag.v[:, 0][:, None],
+                                           diag.w[:, 0][:, None], diag.q, diag.work))[:, 0]
+    parts += [energy, energy.sum(1, keepdims=True)]
+    return np.concatenate(parts, axis=1)
+
+
+def report_csv(run: SceneRun, every: float, layout: str = "aligned", member: int = 0) -> str:
+    """CSV text in the report's columns at times 0, every, 2 every, ... up to the end.
+
+    layout "aligned": every column at the row's time. layout "report": the report program's
+    own output, byte for byte in format: positions, velocities and spins one step (dt) after
+    the printed time, sums (com, p, L, E) at it, numbers printed with %f.
+    """
+    if run.result.batch_size > 1:
+        run = run.member(member)
+    r = run.result
+    member = 0
+    if r.trajectory is None:
+        raise ValueError("the run was not recorded; run it with record=True")
+    end = float(r.final.t[member])
+    times = np.arange(0.0, end + 0.5 * every, every)
+    times = times[times <= end + 1e-12]
+    diag = dg.sample(r.model, r.trajectory, times, member)
+    if layout == "report":
+        st = dg.sample(r.model, r.trajectory, times + r.dt[member], member)
+        fmt = "%f"
+    elif layout == "aligned":
+        st = diag
+        fmt = "%.12g"
+    else:
+        raise ValueError(f"unknown CSV layout '{layout}' (aligned or report)")
+    table = _rows(r.model, st, diag)
+    out = io.StringIO()
+    out.write(",".join(csv_columns(r.model)) + "\n")
+    np.savetxt(out, table, fmt=fmt, delimiter=",")
+    return out.getvalue()
