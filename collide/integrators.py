@@ -18,6 +18,21 @@ from collide.model import Model, State
 
 
 @dataclass
+class Geometry:
+    """Contact geometry and spring forces at one configuration, reused by the next step."""
+
+    c: ph.Contacts
+    fn: np.ndarray
+    fw: np.ndarray
+
+
+def geometry(model: Model, s: np.ndarray) -> Geometry:
+    c = ph.contact_geometry(model, s)
+    fn, fw = ph.normal_forces(model, c)
+    return Geometry(c, fn, fw)
+
+
+@dataclass
 class StepForces:
     """Friction forces in effect at the end of a step, for display (pairs, walls)."""
 
@@ -31,12 +46,13 @@ def _no_friction(model: Model, state: State) -> StepForces:
                       np.zeros((b, model.n_walls, model.n_bodies, model.dim)))
 
 
-def seed_step(model: Model, state: State, h: np.ndarray) -> tuple[State, StepForces]:
+def seed_step(model: Model, state: State, h: np.ndarray,
+              start: Geometry | None = None) -> tuple[State, StepForces, Geometry]:
     """The report's update (section III): forces from the current state, then
     w += alpha h, s += v h + a h^2 / 2, v += a h. First order; kept to reproduce its tables."""
     out = state.copy()
-    c = ph.contact_geometry(model, state.s)
-    fn, fw = ph.normal_forces(model, c)
+    start = start or geometry(model, state.s)
+    c, fn, fw = start.c, start.fn, start.fw
     acc = ph.normal_accel(model, c, fn, fw)
     forces = _no_friction(model, state)
     hb = h[:, None, None]
@@ -54,41 +70,45 @@ def seed_step(model: Model, state: State, h: np.ndarray) -> tuple[State, StepFor
     out.v = state.v + acc * hb
     out.q = ph.advance_orientation(state.q, 0.5 * (state.w + out.w), h)
     out.t = state.t + h
-    return out, forces
+    return out, forces, geometry(model, out.s)
 
 
-def _kick(model: Model, state: State, hk: np.ndarray) -> StepForces:
+def _kick(model: Model, state: State, hk: np.ndarray, g: Geometry) -> StepForces:
     """Velocity update over hk seconds: springs and gravity explicit, friction implicit."""
-    c = ph.contact_geometry(model, state.s)
-    fn, fw = ph.normal_forces(model, c)
-    state.v += ph.normal_accel(model, c, fn, fw) * hk[:, None, None]
+    state.v += ph.normal_accel(model, g.c, g.fn, g.fw) * hk[:, None, None]
     if not model.friction:
         return _no_friction(model, state)
-    ft, fwt = ph.friction_kick(model, c, fn, fw, state, hk)
+    ft, fwt = ph.friction_kick(model, g.c, g.fn, g.fw, state, hk)
     return StepForces(ft, fwt)
 
 
-def verlet_step(model: Model, state: State, h: np.ndarray) -> tuple[State, StepForces]:
-    """Velocity Verlet (kick-drift-kick): second order and symplectic without friction."""
+def verlet_step(model: Model, state: State, h: np.ndarray,
+                start: Geometry | None = None) -> tuple[State, StepForces, Geometry]:
+    """Velocity Verlet (kick-drift-kick): second order and symplectic without friction.
+
+    The geometry at the end is returned so the next step starts from it (one evaluation a step).
+    """
     out = state.copy()
-    _kick(model, out, 0.5 * h)
+    _kick(model, out, 0.5 * h, start or geometry(model, state.s))
     out.s += out.v * h[:, None, None]
     out.q = ph.advance_orientation(out.q, out.w, h)
-    forces = _kick(model, out, 0.5 * h)
+    end = geometry(model, out.s)
+    forces = _kick(model, out, 0.5 * h, end)
     out.t = state.t + h
-    return out, forces
+    return out, forces, end
 
 
 def _composition(weights: tuple[float, ...]) -> Callable:
     """A symmetric composition of Verlet steps (higher order, still momentum-exact)."""
 
-    def step(model: Model, state: State, h: np.ndarray) -> tuple[State, StepForces]:
-        out = state
+    def step(model: Model, state: State, h: np.ndarray,
+             start: Geometry | None = None) -> tuple[State, StepForces, Geometry]:
+        out, g = state, start
         forces = None
         for gamma in weights:
-            out, forces = verlet_step(model, out, gamma * h)
+            out, forces, g = verlet_step(model, out, gamma * h, g)
         out.t = state.t + h
-        return out, forces
+        return out, forces, g
 
     return step
 

@@ -57,6 +57,16 @@ class Model:
     seed_lever: bool
     pair_to_body_i: np.ndarray
     pair_to_body_j: np.ndarray
+    # Derived per-pair arrays, precomputed because gathers are slow on small arrays.
+    select_i: np.ndarray  # (P, N): row p picks body i of pair p
+    select_j: np.ndarray
+    pair_diff: np.ndarray  # (P, N): select_j - select_i
+    pair_ri: np.ndarray  # (B, P)
+    pair_rj: np.ndarray
+    pair_reach: np.ndarray  # r_i + r_j
+    pair_inv_mass: np.ndarray  # 1/m_i + 1/m_j
+    pair_inv_inertia_i: np.ndarray  # (B, P)
+    pair_inv_inertia_j: np.ndarray
 
     @property
     def batch(self) -> int:
@@ -151,6 +161,7 @@ def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
         gravity=gravity, wall_point=wall_point, wall_normal=wall_normal,
         friction=friction, seed_lever=first.contact.lever == "seed",
         pair_to_body_i=incidence_i, pair_to_body_j=incidence_j,
+        **_pair_arrays(pair_i, pair_j, radius, 1.0 / mass, 1.0 / inertia),
     )
     b = len(scenes)
     s = np.array([[b_.position for b_ in sc.bodies] for sc in scenes], dtype=float).reshape(b, n, dim)
@@ -166,11 +177,27 @@ def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
     return model, state
 
 
+def _pair_arrays(pair_i: np.ndarray, pair_j: np.ndarray, radius: np.ndarray,
+                 inv_mass: np.ndarray, inv_inertia: np.ndarray) -> dict[str, np.ndarray]:
+    n = radius.shape[1]
+    select_i = np.zeros((len(pair_i), n))
+    select_j = np.zeros((len(pair_i), n))
+    select_i[np.arange(len(pair_i)), pair_i] = 1.0
+    select_j[np.arange(len(pair_i)), pair_j] = 1.0
+    return dict(select_i=select_i, select_j=select_j, pair_diff=select_j - select_i,
+                pair_ri=radius[:, pair_i], pair_rj=radius[:, pair_j],
+                pair_reach=radius[:, pair_i] + radius[:, pair_j],
+                pair_inv_mass=inv_mass[:, pair_i] + inv_mass[:, pair_j],
+                pair_inv_inertia_i=inv_inertia[:, pair_i], pair_inv_inertia_j=inv_inertia[:, pair_j])
+
+
 def select_model(model: Model, index: int) -> Model:
     """Batch member `index` as a model of batch 1."""
     sl = slice(index, index + 1)
     changes = {name: getattr(model, name)[sl] for name in
-               ("mass", "inv_mass", "radius", "inertia", "inv_inertia", "k_pair", "k_wall", "mu", "eps")}
+               ("mass", "inv_mass", "radius", "inertia", "inv_inertia", "k_pair", "k_wall", "mu", "eps",
+                "pair_ri", "pair_rj", "pair_reach", "pair_inv_mass", "pair_inv_inertia_i",
+                "pair_inv_inertia_j")}
     if model.gravity is not None:
         changes["gravity"] = model.gravity[sl]
     return replace(model, **changes)

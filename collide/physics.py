@@ -16,9 +16,12 @@ from collide.model import Model, State
 TOUCH_TOL = 1e-12  # relative overlap below which spheres count as just touching
 
 
+_PERP = np.array([[0.0, 1.0], [-1.0, 0.0]])
+
+
 def perp2(a: np.ndarray) -> np.ndarray:
-    """Rotate 2D vectors by +90 degrees: z x a."""
-    return np.stack((-a[..., 1], a[..., 0]), axis=-1)
+    """Rotate 2D vectors by +90 degrees: z x a = (-a_y, a_x) (one matmul: cheapest here)."""
+    return a @ _PERP
 
 
 def spin_cross(w: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -35,62 +38,76 @@ def torque(a: np.ndarray, f: np.ndarray) -> np.ndarray:
     return np.cross(a, f)
 
 
+_add = np.add.reduce
+
+
+def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot product over the last axis (np.add.reduce: the cheapest call on small arrays)."""
+    return _add(a * b, -1)
+
+
+def norm(a: np.ndarray) -> np.ndarray:
+    return np.sqrt(_add(a * a, -1))
+
+
 @dataclass
 class Contacts:
     """Geometry of every pair and sphere-wall contact at one configuration.
 
     Pair arrays are (B, P[, D]); wall arrays are (B, W, N[, D]). `n` points from i to j for
-    pairs and out of the wall for walls; `overlap` is positive in contact.
+    pairs and out of the wall for walls; `overlap` is positive in contact. The lever arms from
+    each centre to the contact point are along -n / +n with lengths `arm_i`, `arm_j` (each
+    sphere of a pair is compressed by half the overlap: equal springs in series).
     """
 
     n: np.ndarray
     overlap: np.ndarray
-    lever_i: np.ndarray  # centre of i to the contact point
-    lever_j: np.ndarray
+    arm_i: np.ndarray
+    arm_j: np.ndarray
     wall_overlap: np.ndarray
-    wall_lever: np.ndarray
+    wall_arm: np.ndarray
+
+    @property
+    def lever_i(self) -> np.ndarray:
+        return self.arm_i[..., None] * self.n
+
+    @property
+    def lever_j(self) -> np.ndarray:
+        return -self.arm_j[..., None] * self.n
 
 
 def contact_geometry(model: Model, s: np.ndarray) -> Contacts:
     """Normals, overlaps and lever arms from positions s (B, N, D)."""
-    d = s[:, model.pair_j] - s[:, model.pair_i]
-    dist = np.sqrt(np.einsum("bpd,bpd->bp", d, d))
+    d = model.pair_diff @ s
+    dist = norm(d)
     n = d / dist[..., None]
-    ri = model.radius[:, model.pair_i]
-    rj = model.radius[:, model.pair_j]
-    overlap = ri + rj - dist
-    # Springs in series share the overlap in proportion to the other's constant (equal k: half).
+    overlap = model.pair_reach - dist
     half = 0.5 * np.maximum(overlap, 0.0)
-    lever_i = (ri - half)[..., None] * n
-    lever_j = -(rj - half)[..., None] * n
+    arm_i = model.pair_ri - half
+    arm_j = model.pair_rj - half
     if model.n_walls:
-        height = np.einsum("bnd,wd->bwn", s, model.wall_normal) - np.einsum(
-            "wd,wd->w", model.wall_point, model.wall_normal)[None, :, None]
+        height = np.einsum("bnd,wd->bwn", s, model.wall_normal) - dot(model.wall_point, model.wall_normal)[:, None]
         wall_overlap = model.radius[:, None, :] - height
-        wall_lever = -(model.radius[:, None, :] - np.maximum(wall_overlap, 0.0))[..., None] * \
-            model.wall_normal[None, :, None, :]
+        wall_arm = model.radius[:, None, :] - np.maximum(wall_overlap, 0.0)
     else:
-        wall_overlap = np.zeros((s.shape[0], 0, model.n_bodies))
-        wall_lever = np.zeros((s.shape[0], 0, model.n_bodies, model.dim))
-    return Contacts(n, overlap, lever_i, lever_j, wall_overlap, wall_lever)
+        wall_overlap = wall_arm = _EMPTY_WALLS
+    return Contacts(n, overlap, arm_i, arm_j, wall_overlap, wall_arm)
 
 
-def scatter_pairs(model: Model, f_i: np.ndarray, f_j: np.ndarray) -> np.ndarray:
-    """Sum per-pair quantities (B, P, X) onto bodies (B, N, X)."""
-    return model.pair_to_body_i @ f_i + model.pair_to_body_j @ f_j
+_EMPTY_WALLS = np.zeros((1, 0, 1))
 
 
 def normal_forces(model: Model, c: Contacts) -> tuple[np.ndarray, np.ndarray]:
     """Spring force magnitudes: pairs (B, P) and walls (B, W, N)."""
     fn = model.k_pair * np.maximum(c.overlap, 0.0)
-    fw = model.k_wall[:, None, :] * np.maximum(c.wall_overlap, 0.0)
+    fw = model.k_wall[:, None, :] * np.maximum(c.wall_overlap, 0.0) if model.n_walls else c.wall_overlap
     return fn, fw
 
 
 def normal_accel(model: Model, c: Contacts, fn: np.ndarray, fw: np.ndarray) -> np.ndarray:
     """Linear acceleration (B, N, D) from the normal springs and gravity."""
-    f_pair = fn[..., None] * c.n
-    force = scatter_pairs(model, -f_pair, f_pair)
+    # Force -F n on i and +F n on j: one product with the pair incidence matrix.
+    force = model.pair_diff.T @ (fn[..., None] * c.n)
     if model.n_walls:
         force = force + np.einsum("bwn,wd->bnd", fw, model.wall_normal)
     acc = force * model.inv_mass[..., None]
@@ -99,39 +116,55 @@ def normal_accel(model: Model, c: Contacts, fn: np.ndarray, fw: np.ndarray) -> n
     return acc
 
 
-def slip_levers(model: Model, c: Contacts) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Lever arms used to measure slip: the contact point, or the undeformed radius (seed)."""
-    if not model.seed_lever:
-        return c.lever_i, c.lever_j, c.wall_lever
-    ri = model.radius[:, model.pair_i][..., None]
-    rj = model.radius[:, model.pair_j][..., None]
-    wall = -model.radius[:, None, :, None] * model.wall_normal[None, :, None, :]
-    return ri * c.n, -rj * c.n, wall
+def _slip_arms(model: Model, c: Contacts) -> tuple[np.ndarray, np.ndarray]:
+    """Lever lengths used to measure slip: the contact point, or the undeformed radius (seed)."""
+    if model.seed_lever:
+        return model.pair_ri, model.pair_rj
+    return c.arm_i, c.arm_j
 
 
-def tangential(u: np.ndarray, n: np.ndarray) -> np.ndarray:
-    return u - np.sum(u * n, axis=-1, keepdims=True) * n
+def pair_slip(model: Model, c: Contacts, v: np.ndarray, w: np.ndarray,
+              arms: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """Tangential velocity of i's surface relative to j's at each pair contact (B, P, D).
+
+    u = v_i + w_i x a_i - v_j - w_j x a_j with a_i = l_i n, a_j = -l_j n.
+    """
+    li, lj = arms if arms is not None else _slip_arms(model, c)
+    u = _sliding(model, c, v)
+    if w.shape[-1]:
+        u = u + _rolling(model, c, w, li, lj)
+    return u
 
 
-def pair_slip(model: Model, c: Contacts, v: np.ndarray, w: np.ndarray, levers) -> np.ndarray:
-    """Tangential velocity of i's surface relative to j's at each pair contact (B, P, D)."""
-    li, lj, _ = levers
-    ui = v[:, model.pair_i] + spin_cross(w[:, model.pair_i], li)
-    uj = v[:, model.pair_j] + spin_cross(w[:, model.pair_j], lj)
-    return tangential(ui - uj, c.n)
+def _sliding(model: Model, c: Contacts, v: np.ndarray) -> np.ndarray:
+    """Tangential part of v_i - v_j at each pair (B, P, D)."""
+    rel = -(model.pair_diff @ v)
+    return rel - dot(rel, c.n)[..., None] * c.n
 
 
-def wall_slip(model: Model, c: Contacts, v: np.ndarray, w: np.ndarray, levers) -> np.ndarray:
-    """Tangential velocity of each sphere's surface on each wall (B, W, N, D)."""
-    _, _, lw = levers
-    u = v[:, None] + spin_cross(w[:, None], lw)
-    return tangential(u, model.wall_normal[None, :, None, :])
+def _rolling(model: Model, c: Contacts, w: np.ndarray, li: np.ndarray, lj: np.ndarray) -> np.ndarray:
+    """Surface velocity from spin, (l_i w_i + l_j w_j) x n, at each pair (B, P, D)."""
+    spin = (model.select_i @ w) * li[..., None] + (model.select_j @ w) * lj[..., None]
+    return spin_cross(spin, c.n)
+
+
+def wall_slip(model: Model, c: Contacts, v: np.ndarray, w: np.ndarray, arm: np.ndarray) -> np.ndarray:
+    """Tangential velocity of each sphere's surface on each wall (B, W, N, D); lever -arm n_w."""
+    nw = model.wall_normal[None, :, None, :]
+    vb = v[:, None]
+    u = vb - dot(vb, nw)[..., None] * nw
+    if w.shape[-1]:
+        u = u - spin_cross(w[:, None] * arm[..., None], nw)
+    return u
 
 
 def _unit(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    mag = np.sqrt(np.sum(x * x, axis=-1))
-    safe = np.where(mag > 0, mag, 1.0)
-    return x / safe[..., None], mag
+    mag = norm(x)
+    return x / np.where(mag > 0, mag, 1.0)[..., None], mag
+
+
+def _wall_slip_arm(model: Model, c: Contacts) -> np.ndarray:
+    return model.radius[:, None, :] * np.ones_like(c.wall_arm) if model.seed_lever else c.wall_arm
 
 
 def coulomb_explicit(model: Model, c: Contacts, fn: np.ndarray, fw: np.ndarray,
@@ -140,24 +173,37 @@ def coulomb_explicit(model: Model, c: Contacts, fn: np.ndarray, fw: np.ndarray,
 
     mu F_n against the slip when the slip exceeds the dead band eps, otherwise none.
     """
-    levers = slip_levers(model, c)
-    direction, mag = _unit(pair_slip(model, c, v, w, levers))
+    direction, mag = _unit(pair_slip(model, c, v, w))
     on = mag > model.eps[:, None]
     ft = -(model.mu[:, None] * fn * on)[..., None] * direction
-    wdir, wmag = _unit(wall_slip(model, c, v, w, levers))
-    won = wmag > model.eps[:, None, None]
-    fwt = -(model.mu[:, None, None] * fw * won)[..., None] * wdir
+    fwt = np.zeros((v.shape[0], model.n_walls, model.n_bodies, model.dim))
+    if model.n_walls:
+        wdir, wmag = _unit(wall_slip(model, c, v, w, _wall_slip_arm(model, c)))
+        won = wmag > model.eps[:, None, None]
+        fwt = -(model.mu[:, None, None] * fw * won)[..., None] * wdir
     return ft, fwt
+
+
+def friction_response(model: Model, c: Contacts, ft: np.ndarray, fwt: np.ndarray,
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Force (B, N, D) and torque (B, N, K) on each body from friction forces on contacts.
+
+    Pairs: +ft on i at lever a_i n, -ft on j at lever -a_j n; both torques are a n x ft.
+    """
+    force = -(model.pair_diff.T @ ft)
+    nxf = torque(c.n, ft)
+    tau = model.select_i.T @ (c.arm_i[..., None] * nxf) + model.select_j.T @ (c.arm_j[..., None] * nxf)
+    if model.n_walls:
+        force = force + fwt.sum(axis=1)
+        nw = model.wall_normal[None, :, None, :]
+        tau = tau - (c.wall_arm[..., None] * torque(np.broadcast_to(nw, fwt.shape), fwt)).sum(axis=1)
+    return force, tau
 
 
 def apply_friction(model: Model, c: Contacts, ft: np.ndarray, fwt: np.ndarray,
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Linear (B, N, D) and angular (B, N, K) accelerations from friction forces."""
-    force = scatter_pairs(model, ft, -ft)
-    tau = scatter_pairs(model, torque(c.lever_i, ft), torque(c.lever_j, -ft))
-    if model.n_walls:
-        force = force + fwt.sum(axis=1)
-        tau = tau + torque(c.wall_lever, fwt).sum(axis=1)
+    force, tau = friction_response(model, c, ft, fwt)
     return force * model.inv_mass[..., None], tau * model.inv_inertia[..., None]
 
 
@@ -169,53 +215,52 @@ def friction_kick(model: Model, c: Contacts, fn: np.ndarray, fw: np.ndarray, sta
     mu F_n hk: this is Coulomb's law with the band's sliding mode treated exactly, so there is
     no chatter on the band edge (DESIGN section 8). Impulses are equal and opposite at one
     contact point, so momentum and angular momentum stay at round-off. Adds the work done
-    against friction to `state.work`. Returns the friction forces (for display).
+    against friction to `state.work`. Returns the friction forces (for display). Several
+    contacts on one body are solved independently from the same slip (Jacobi).
     """
-    levers = slip_levers(model, c)
-    i, j = model.pair_i, model.pair_j
-    mi, mj = model.inv_mass[:, i], model.inv_mass[:, j]
-    ii, ij = model.inv_inertia[:, i], model.inv_inertia[:, j]
-    li = np.sqrt(np.sum(levers[0] ** 2, -1))
-    lj = np.sqrt(np.sum(levers[1] ** 2, -1))
-    ai = np.sqrt(np.sum(c.lever_i ** 2, -1))
-    aj = np.sqrt(np.sum(c.lever_j ** 2, -1))
-    # Slip change per unit tangential impulse (spheres: isotropic, so along the impulse).
-    k_slip = mi + mj + li * ai * ii + lj * aj * ij
-    direction, slip = _unit(pair_slip(model, c, state.v, state.w, levers))
-    hkp = hk[:, None]
-    cap = model.mu[:, None] * fn * np.abs(hkp)
-    impulse = np.minimum(cap, np.maximum(slip - model.eps[:, None], 0.0) / k_slip)
+    li, lj = _slip_arms(model, c)
+    # Slip change per unit tangential impulse (spheres are isotropic: along the impulse).
+    k_slip = model.pair_inv_mass + li * c.arm_i * model.pair_inv_inertia_i + \
+        lj * c.arm_j * model.pair_inv_inertia_j
+    sliding = _sliding(model, c, state.v)
+    direction, slip = _unit(sliding + _rolling(model, c, state.w, li, lj))
+    hkp = np.abs(hk)[:, None]
+    impulse = np.minimum(model.mu[:, None] * fn * hkp, np.maximum(slip - model.eps[:, None], 0.0) / k_slip)
     ji = -impulse[..., None] * direction
-    dv = scatter_pairs(model, ji, -ji) * model.inv_mass[..., None]
-    dw = scatter_pairs(model, torque(c.lever_i, ji), torque(c.lever_j, -ji)) * model.inv_inertia[..., None]
-    safe_h = np.where(hkp != 0, hkp, 1.0)
-    ft = ji / safe_h[..., None]
-    fwt = np.zeros(c.wall_lever.shape)
+    # Work against friction: the impulse times the mean slip at the contact point over the kick.
+    if model.seed_lever:
+        k_power = model.pair_inv_mass + c.arm_i ** 2 * model.pair_inv_inertia_i + \
+            c.arm_j ** 2 * model.pair_inv_inertia_j
+        power = dot(sliding + _rolling(model, c, state.w, c.arm_i, c.arm_j), direction)
+    else:
+        k_power, power = k_slip, slip
+    work = _add(impulse * (power - 0.5 * k_power * impulse), -1)
+    jw = np.zeros((state.v.shape[0], model.n_walls, model.n_bodies, model.dim))
     if model.n_walls:
+        warm = _wall_slip_arm(model, c)
         wm = model.inv_mass[:, None, :]
         wi = model.inv_inertia[:, None, :]
-        lw = np.sqrt(np.sum(levers[2] ** 2, -1))
-        aw = np.sqrt(np.sum(c.wall_lever ** 2, -1))
-        wdir, wslip = _unit(wall_slip(model, c, state.v, state.w, levers))
-        wcap = model.mu[:, None, None] * fw * np.abs(hk)[:, None, None]
-        wimp = np.minimum(wcap, np.maximum(wslip - model.eps[:, None, None], 0.0) / (wm + lw * aw * wi))
+        wdir, wslip = _unit(wall_slip(model, c, state.v, state.w, warm))
+        kw = wm + warm * c.wall_arm * wi
+        wimp = np.minimum(model.mu[:, None, None] * fw * np.abs(hk)[:, None, None],
+                          np.maximum(wslip - model.eps[:, None, None], 0.0) / kw)
         jw = -wimp[..., None] * wdir
-        dv = dv + jw.sum(axis=1) * model.inv_mass[..., None]
-        dw = dw + torque(c.wall_lever, jw).sum(axis=1) * model.inv_inertia[..., None]
-        fwt = jw / np.where(hk != 0, hk, 1.0)[:, None, None, None]
-    # The work done against friction is the kinetic energy these impulses remove.
-    before = kinetic_energy(model, state.v, state.w)
-    state.v += dv
-    state.w += dw
-    state.work += before - kinetic_energy(model, state.v, state.w)
-    return ft, fwt
+        kwp = wm + c.wall_arm ** 2 * wi
+        wpow = dot(wall_slip(model, c, state.v, state.w, c.wall_arm), wdir)
+        work = work + _add(_add(wimp * (wpow - 0.5 * kwp * wimp), -1), -1)
+    dp, dl = friction_response(model, c, ji, jw)
+    state.v += dp * model.inv_mass[..., None]
+    state.w += dl * model.inv_inertia[..., None]
+    state.work += work
+    safe = np.where(hkp > 0, hkp, 1.0)
+    return ji / safe[..., None], jw / safe[:, :, None, None]
 
 
 def kinetic_energy(model: Model, v: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Translational plus rotational kinetic energy (B,) in J."""
-    energy = 0.5 * np.sum(model.mass * np.sum(v * v, -1), -1)
+    energy = 0.5 * _add(model.mass * dot(v, v), -1)
     if w.shape[-1]:
-        energy = energy + 0.5 * np.sum(model.inertia * np.sum(w * w, -1), -1)
+        energy = energy + 0.5 * _add(model.inertia * dot(w, w), -1)
     return energy
 
 
@@ -272,19 +317,20 @@ def _smallest_positive_root(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.n
 
 def contact_rates(model: Model, state: State, c: Contacts) -> tuple[np.ndarray, np.ndarray]:
     """Rates of change of the overlaps: pairs (B, P) and walls (B, W, N)."""
-    u = state.v[:, model.pair_j] - state.v[:, model.pair_i]
-    pair_rate = -np.sum(u * c.n, axis=-1)
-    wall_rate = -np.einsum("bnd,wd->bwn", state.v, model.wall_normal)
-    return pair_rate, wall_rate
+    pair_rate = -dot(model.pair_diff @ state.v, c.n)
+    if not model.n_walls:
+        return pair_rate, c.wall_overlap
+    return pair_rate, -np.einsum("bnd,wd->bwn", state.v, model.wall_normal)
 
 
 def active_contacts(model: Model, state: State, c: Contacts | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Contacts that are pressing, or touching and approaching: pairs (B, P), walls (B, W, N)."""
     c = c or contact_geometry(model, state.s)
     pair_rate, wall_rate = contact_rates(model, state, c)
-    scale = model.radius[:, model.pair_i] + model.radius[:, model.pair_j]
-    tol = TOUCH_TOL * scale
+    tol = TOUCH_TOL * model.pair_reach
     pair = (c.overlap > tol) | ((c.overlap > -tol) & (pair_rate > 0))
+    if not model.n_walls:
+        return pair, c.wall_overlap > 0
     wtol = TOUCH_TOL * model.radius[:, None, :]
     wall = (c.wall_overlap > wtol) | ((c.wall_overlap > -wtol) & (wall_rate > 0))
     return pair, wall
@@ -295,12 +341,12 @@ def time_to_contact(model: Model, state: State) -> np.ndarray:
     c = contact_geometry(model, state.s)
     pair_active, wall_active = active_contacts(model, state, c)
     active = pair_active.any(axis=1) | wall_active.any(axis=(1, 2))
-    d = state.s[:, model.pair_j] - state.s[:, model.pair_i]
-    u = state.v[:, model.pair_j] - state.v[:, model.pair_i]  # gravity cancels in relative motion
-    reach = model.radius[:, model.pair_i] + model.radius[:, model.pair_j]
-    a = np.sum(u * u, -1)
-    b = 2 * np.sum(d * u, -1)
-    cc = np.sum(d * d, -1) - reach * reach
+    d = model.pair_diff @ state.s
+    u = model.pair_diff @ state.v  # gravity cancels in relative motion
+    reach = model.pair_reach
+    a = dot(u, u)
+    b = 2 * dot(d, u)
+    cc = dot(d, d) - reach * reach
     approaching = b < 0
     t_pair = np.where(approaching, _smallest_positive_root(a, b, np.maximum(cc, 0.0)), np.inf)
     tau = t_pair.min(axis=1, initial=np.inf)

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from collide import physics as ph
-from collide.integrators import INTEGRATORS, Integrator, StepForces
+from collide.integrators import INTEGRATORS, Geometry, Integrator, StepForces, geometry
 from collide.model import Model, State, select_model, select_state
 
 MAX_STEPS_DEFAULT = 20_000_000
@@ -204,19 +204,25 @@ def _hermite_root(d0: np.ndarray, d1: np.ndarray, r0: np.ndarray, r1: np.ndarray
     return theta
 
 
-def event_fraction(model: Model, before: State, after: State, h: np.ndarray) -> np.ndarray:
-    """Fraction (B,) of the step at which the first contact starts or ends (1 if none)."""
-    c0 = ph.contact_geometry(model, before.s)
-    c1 = ph.contact_geometry(model, after.s)
-    r0p, r0w = ph.contact_rates(model, before, c0)
-    r1p, r1w = ph.contact_rates(model, after, c1)
+def _scaled_overlaps(model: Model, state: State, g: Geometry) -> tuple[np.ndarray, np.ndarray]:
+    """Overlaps and their rates (B, C), pairs then walls, relative to the touching distance."""
+    c = g.c
+    rate_pair, rate_wall = ph.contact_rates(model, state, c)
     reach = model.radius[:, model.pair_i] + model.radius[:, model.pair_j]
-    d0 = np.concatenate((c0.overlap / reach, c0.wall_overlap.reshape(model.batch, -1) /
-                         np.tile(model.radius, (1, model.n_walls))), axis=1)
-    d1 = np.concatenate((c1.overlap / reach, c1.wall_overlap.reshape(model.batch, -1) /
-                         np.tile(model.radius, (1, model.n_walls))), axis=1)
-    r0 = np.concatenate((r0p / reach, r0w.reshape(model.batch, -1) / np.tile(model.radius, (1, model.n_walls))), 1)
-    r1 = np.concatenate((r1p / reach, r1w.reshape(model.batch, -1) / np.tile(model.radius, (1, model.n_walls))), 1)
+    if not model.n_walls:
+        return c.overlap / reach, rate_pair / reach
+    radius = np.tile(model.radius, (1, model.n_walls))
+    b = model.batch
+    d = np.concatenate((c.overlap / reach, c.wall_overlap.reshape(b, -1) / radius), axis=1)
+    r = np.concatenate((rate_pair / reach, rate_wall.reshape(b, -1) / radius), axis=1)
+    return d, r
+
+
+def event_fraction(model: Model, before: State, g0: Geometry, after: State, g1: Geometry,
+                   h: np.ndarray) -> np.ndarray:
+    """Fraction (B,) of the step at which the first contact starts or ends (1 if none)."""
+    d0, r0 = _scaled_overlaps(model, before, g0)
+    d1, r1 = _scaled_overlaps(model, after, g1)
     tol = ph.TOUCH_TOL
     crossing = ((d0 > tol) & (d1 < -tol)) | ((d0 < -tol) & (d1 > tol))
     if not crossing.any():
@@ -227,20 +233,25 @@ def event_fraction(model: Model, before: State, after: State, h: np.ndarray) -> 
     return theta.min(axis=1)
 
 
-def step_with_events(model: Model, integrator: Integrator, state: State,
-                     h: np.ndarray) -> tuple[State, StepForces, np.ndarray]:
+def step_with_events(model: Model, integrator: Integrator, state: State, h: np.ndarray,
+                     start: Geometry) -> tuple[State, StepForces, Geometry, np.ndarray]:
     """One step; where a contact would start or end inside it, shorten it to land there."""
-    new, forces = integrator.step(model, state, h)
+    new, forces, end = integrator.step(model, state, h, start)
     if not integrator.events:
-        return new, forces, h
+        return new, forces, end, h
     for _ in range(8):
-        frac = event_fraction(model, state, new, h)
+        frac = event_fraction(model, state, start, new, end, h)
         redo = frac < 1.0
         if not redo.any():
             break
         h = np.where(redo, h * np.maximum(frac, 1e-9), h)
-        new, forces = integrator.step(model, state, h)
-    return new, forces, h
+        new, forces, end = integrator.step(model, state, h, start)
+    return new, forces, end, h
+
+
+def _active(model: Model, state: State, g: Geometry) -> np.ndarray:
+    pair, wall = ph.active_contacts(model, state, g.c)
+    return pair.any(axis=1) | wall.any(axis=(1, 2))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -289,17 +300,19 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
 
     def snapshot(s: State, free: np.ndarray, forces: StepForces) -> None:
         if record:
+            # Lock-step rows repeat runs that did not move; `free` marks them as zero-length.
             rows.append((s.t, s.s, s.v, s.w, s.q, s.work, free, forces.pair, forces.wall))
 
     snapshot(state, np.ones(b, bool), zero_forces)
     started = time.perf_counter()
     passes = 0
     while not done.all():
-        passes += 1
-        if passes > max_steps:
-            raise RunError(f"the run did not end within {max_steps} steps; set a duration or a larger dt")
         tau = ph.time_to_contact(model, state)
         contact = (tau == 0.0) & ~done
+        if not integ.events:
+            # The seed integrator only sees contact on its grid: step when it begins within one.
+            t_next = state.t + dt
+            contact = contact | (~done & (tau < dt) & (t_next <= t_end * (1 + 1e-15)))
         # Contact bookkeeping: starts and ends, for the summary and the tail.
         began = contact & ~in_contact
         ended = ~contact & in_contact & ~done
@@ -320,32 +333,15 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
             if not integ.events:
                 tails = np.ceil(tails / dt) * dt
             t_end = np.where(ending, state.t + tails, t_end)
-        if not integ.events:
-            # The seed integrator only sees contact on its grid: step when it begins within one.
-            near = free & (tau < dt) & (state.t + dt <= t_end * (1 + 1e-15))
-            contact = contact | near
-            free = free & ~near
-            to_contact = np.floor(tau / dt) * dt
-        else:
-            to_contact = tau
-        jump = np.where(free, np.minimum(to_contact, t_end - state.t), 0.0)
-        h = np.where(contact, np.minimum(dt, t_end - state.t), 0.0)
-        forces = zero_forces
+        to_contact = tau if integ.events else np.floor(tau / dt) * dt
         if free.any():
+            jump = np.where(free, np.minimum(to_contact, t_end - state.t), 0.0)
             state = _masked(ph.free_flight(model, state, jump), state, ~free)
             jumps += free
+            snapshot(state, free, zero_forces)
         if contact.any():
-            new, forces, h = step_with_events(model, integ, state, h)
-            state = _masked(new, state, ~contact)
-            steps += contact
-            if not np.isfinite(state.s).all() or not np.isfinite(state.v).all():
-                bad = int(np.argmax(~np.isfinite(state.v).all(axis=(1, 2))))
-                raise RunError(f"non-finite numbers at t = {state.t[bad]:.6g} s: the step is unstable; "
-                               f"try a smaller dt (largest safe step {_safe_step(model, integ)[bad]:.3g} s)")
-        if free.any() or contact.any():
-            snapshot(state, free, forces)
-        if contact.any():
-            log.max_overlap = np.maximum(log.max_overlap, _max_overlap(model, state))
+            state, passes = _contact_phase(model, integ, state, contact, dt, t_end, steps, log,
+                                           snapshot, passes, max_steps)
         done = done | (state.t >= t_end * (1 - 1e-15))
     wall_time = time.perf_counter() - started
     trajectory = None
@@ -358,15 +354,49 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
                      trajectory=trajectory, warnings=warnings)
 
 
+def _contact_phase(model: Model, integ: Integrator, state: State, contact: np.ndarray, dt: np.ndarray,
+                   t_end: np.ndarray, steps: np.ndarray, log: ContactLog, snapshot, passes: int,
+                   max_steps: int) -> tuple[State, int]:
+    """Step the runs in `contact` until one of them leaves contact or reaches its end."""
+    g = geometry(model, state.s)
+    not_stepping = ~contact
+    all_stepping = not not_stepping.any()
+    free_flags = np.zeros(model.batch, bool) | not_stepping
+    while True:
+        passes += 1
+        if passes > max_steps:
+            raise RunError(f"the run did not end within {max_steps} steps; set a duration or a larger dt")
+        h = np.where(contact, np.minimum(dt, t_end - state.t), 0.0)
+        new, forces, g, h = step_with_events(model, integ, state, h, g)
+        state = new if all_stepping else _masked(new, state, not_stepping)
+        steps += contact
+        snapshot(state, free_flags, forces)
+        d = g.c.overlap
+        log.max_overlap = np.maximum(log.max_overlap, d.max(axis=1, initial=0.0))
+        if model.n_walls:
+            log.max_overlap = np.maximum(log.max_overlap, g.c.wall_overlap.max(axis=(1, 2), initial=0.0))
+        if passes % 256 == 0 and not (np.isfinite(state.s).all() and np.isfinite(state.v).all()):
+            _non_finite(model, integ, state)
+        active = _active(model, state, g) if integ.events else _active_seed(model, state, g, dt)
+        if ((contact & active & (state.t < t_end * (1 - 1e-15))) != contact).any():
+            if not (np.isfinite(state.s).all() and np.isfinite(state.v).all()):
+                _non_finite(model, integ, state)
+            return state, passes
+
+
+def _active_seed(model: Model, state: State, g: Geometry, dt: np.ndarray) -> np.ndarray:
+    """On the seed's grid a run stays in its contact phase while anything overlaps."""
+    return (g.c.overlap > 0).any(axis=1) | (g.c.wall_overlap > 0).any(axis=(1, 2))
+
+
+def _non_finite(model: Model, integ: Integrator, state: State) -> None:
+    bad = int(np.argmax(~(np.isfinite(state.v).all(axis=(1, 2)) & np.isfinite(state.s).all(axis=(1, 2)))))
+    raise RunError(f"non-finite numbers at t = {state.t[bad]:.6g} s: the step is unstable; "
+                   f"try a smaller dt (largest safe step {_safe_step(model, integ)[bad]:.3g} s)")
+
+
 def _safe_step(model: Model, integ: Integrator) -> np.ndarray:
     return integ.stability / max_frequency(model)
-
-
-def _max_overlap(model: Model, state: State) -> np.ndarray:
-    c = ph.contact_geometry(model, state.s)
-    pair = c.overlap.max(axis=1, initial=0.0)
-    wall = c.wall_overlap.reshape(model.batch, -1).max(axis=1, initial=0.0)
-    return np.maximum(pair, wall)
 
 
 def _check_energy(model: Model, initial: State, state: State, members: np.ndarray, dt: np.ndarray,

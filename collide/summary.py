@@ -137,33 +137,38 @@ def _rows(model: Model, st: State, diag: State) -> np.ndarray:
     return np.concatenate(parts, axis=1)
 
 
-def report_csv(run: SceneRun, every: float, layout: str = "aligned", member: int = 0) -> str:
-    """CSV text in the report's columns at times 0, every, 2 every, ... up to the end.
+def csv_table(run: SceneRun, times: np.ndarray, layout: str = "aligned") -> tuple[list[str], np.ndarray]:
+    """The report's columns at the given times, for member 0 of the run.
 
-    layout "aligned": every column at the row's time. layout "report": the report program's
-    own output, byte for byte in format: positions, velocities and spins one step (dt) after
-    the printed time, sums (com, p, L, E) at it, numbers printed with %f.
+    layout "aligned": every column at the row's time. layout "report": as the report's program
+    printed them: positions, velocities and spins one step (dt) after the printed time, the
+    sums (centre of mass, momenta, angular momenta, energies) at it (DESIGN section 8).
+    """
+    r = run.result
+    if r.trajectory is None:
+        raise ValueError("the run was not recorded; run it with record=True")
+    diag = dg.sample(r.model, r.trajectory, times)
+    if layout == "report":
+        st = dg.sample(r.model, r.trajectory, np.asarray(times) + r.dt[0])
+    elif layout == "aligned":
+        st = diag
+    else:
+        raise ValueError(f"unknown CSV layout '{layout}' (aligned or report)")
+    return csv_columns(r.model), _rows(r.model, st, diag)
+
+
+def report_csv(run: SceneRun, every: float, layout: str = "aligned", member: int = 0) -> str:
+    """CSV text in the report's columns at times 0, every, 2 every, ... up to the run's end.
+
+    With layout "report" the numbers are printed with %f, as the report's program did.
     """
     if run.result.batch_size > 1:
         run = run.member(member)
-    r = run.result
-    member = 0
-    if r.trajectory is None:
-        raise ValueError("the run was not recorded; run it with record=True")
-    end = float(r.final.t[member])
+    end = float(run.result.final.t[0])
     times = np.arange(0.0, end + 0.5 * every, every)
     times = times[times <= end + 1e-12]
-    diag = dg.sample(r.model, r.trajectory, times, member)
-    if layout == "report":
-        st = dg.sample(r.model, r.trajectory, times + r.dt[member], member)
-        fmt = "%f"
-    elif layout == "aligned":
-        st = diag
-        fmt = "%.12g"
-    else:
-        raise ValueError(f"unknown CSV layout '{layout}' (aligned or report)")
-    table = _rows(r.model, st, diag)
+    columns, table = csv_table(run, times, layout)
     out = io.StringIO()
-    out.write(",".join(csv_columns(r.model)) + "\n")
-    np.savetxt(out, table, fmt=fmt, delimiter=",")
+    out.write(",".join(columns) + "\n")
+    np.savetxt(out, table, fmt="%f" if layout == "report" else "%.12g", delimiter=",")
     return out.getvalue()
