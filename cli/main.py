@@ -131,7 +131,9 @@ def run(
 
 @app.command()
 def scenes(
-    show: Annotated[str | None, typer.Option(help="Print this built-in scene's TOML (copy it to start your own).")] = None,
+    show: Annotated[
+        str | None, typer.Option(help="Print this built-in scene's TOML (copy it to start your own).")
+    ] = None,
 ) -> None:
     """List the built-in scenes, or print one as TOML.
 

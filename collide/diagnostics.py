@@ -282,7 +282,10 @@ def frame_times(traj: Trajectory, fps: float, member: int = 0, stride: int = 1) 
     contact_points[:-1] |= steps
     idx = np.flatnonzero(contact_points)
     if stride > 1 and len(idx):
-        edges = np.flatnonzero(contact_points & ~np.roll(contact_points, 1) | contact_points & ~np.roll(contact_points, -1))
+        # Contact starts and ends stay frames whatever the stride.
+        first = contact_points & ~np.roll(contact_points, 1)
+        last = contact_points & ~np.roll(contact_points, -1)
+        edges = np.flatnonzero(first | last)
         idx = np.union1d(idx[::stride], edges)
     grid = np.arange(t[0], t[-1], 1.0 / fps) if fps > 0 else np.empty(0)
     times = np.union1d(np.union1d(t[idx], grid), [t[0], t[-1]])

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from decimal import Decimal
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
@@ -14,7 +14,7 @@ from collide.summary import csv_table, run_summary
 from tests.data.report_tables import FINALS, TABLES, TRUNCATED
 
 
-@lru_cache(maxsize=None)
+@cache
 def seed_run(scene: str, dt: float) -> SceneRun:
     return run_scene(load_scene(scene), integrator="seed", dt=dt)
 

@@ -1,0 +1,206 @@
+"""The stepper against closed forms and conservation laws (DESIGN section 2)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from collide import diagnostics as dg
+from collide import physics
+from collide.run import run_scene, run_scenes
+from collide.scene import builtin_names, load_scene, parse_scene
+
+
+def two_balls(dim: int, v1, v2, s2, *, m1=1.0, m2=1.0, r=0.05, k=1e5, mu=0.0, s1=None, w1=None, w2=None,
+              dt=None, integrator="verlet") -> dict:
+    zero = 0.0 if dim == 1 else [0.0] * dim
+    raw = {"dim": dim, "integrator": integrator, "contact": {"k": k, "mu": mu},
+           "body": [{"name": "ball1", "mass": m1, "radius": r, "position": s1 if s1 is not None else zero,
+                     "velocity": v1},
+                    {"name": "ball2", "mass": m2, "radius": r, "position": s2, "velocity": v2}]}
+    if dt is not None:
+        raw["dt"] = dt
+    if w1 is not None:
+        raw["body"][0]["spin"] = w1
+    if w2 is not None:
+        raw["body"][1]["spin"] = w2
+    return raw
+
+
+def final_velocities(raw: dict, **kwargs) -> np.ndarray:
+    return run_scene(parse_scene(raw), record=False, **kwargs).result.final.v[0]
+
+
+def test_equal_mass_head_on_exchange():
+    """Equal masses, elastic: the velocities swap (demo-1d: v1 = -2, v2 = +1 to 1e-6)."""
+    v = run_scene(load_scene("demo-1d"), record=False).result.final.v[0, :, 0]
+    assert v == pytest.approx([-2.0, 1.0], abs=1e-6)
+
+
+@pytest.mark.parametrize("m2", [0.1, 0.3, 3.0, 50.0])
+def test_unequal_mass_elastic_formula(m2):
+    """1D elastic collision: v1' = ((m1 - m2) v1 + 2 m2 v2) / (m1 + m2), and symmetrically. A linear
+    spring is elastic for any k, so the soft model's outcome is exact."""
+    m1, v1, v2 = 1.0, 1.5, -0.5
+    raw = two_balls(1, v1, v2, 0.3, m1=m1, m2=m2, dt="auto")
+    out = final_velocities(raw)[:, 0]
+    expect1 = ((m1 - m2) * v1 + 2 * m2 * v2) / (m1 + m2)
+    expect2 = ((m2 - m1) * v2 + 2 * m1 * v1) / (m1 + m2)
+    assert out == pytest.approx([expect1, expect2], abs=1e-6 * abs(v1 - v2))
+
+
+@pytest.mark.parametrize("angle_deg", [0.0, 30.0, 60.0])
+def test_frictionless_wall_bounce_keeps_speed(angle_deg):
+    """A frictionless sphere leaves a wall with its normal velocity reversed, tangential kept."""
+    a = math.radians(angle_deg)
+    v0 = [2.0 * math.sin(a), -2.0 * math.cos(a)]
+    raw = {"dim": 2, "contact": {"k": 1e4, "mu": 0.0},
+           "body": [{"name": "ball", "mass": 0.1, "radius": 0.05, "position": [0.0, 0.2], "velocity": v0}],
+           "wall": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}]}
+    v = final_velocities(raw)[0]
+    assert v == pytest.approx([v0[0], -v0[1]], abs=1e-6 * 2.0)
+
+
+def as_3d(raw2d: dict) -> dict:
+    raw = {**raw2d, "dim": 3, "body": []}
+    for body in raw2d["body"]:
+        b = dict(body)
+        b["position"] = list(body["position"]) + [0.0]
+        b["velocity"] = list(body["velocity"]) + [0.0]
+        if "spin" in body:
+            b["spin"] = [0.0, 0.0, body["spin"]]
+        raw["body"].append(b)
+    return raw
+
+
+@pytest.mark.parametrize("integrator", ["verlet", "seed"])
+def test_2d_scene_run_as_3d_agrees(integrator):
+    """The bonus demo (friction and spin) in the z = 0 plane of a 3D scene gives the 2D result."""
+    from collide.scene import read_raw
+
+    raw2d, _ = read_raw("demo-bonus")
+    r2 = run_scene(parse_scene(raw2d), integrator=integrator, record=False).result
+    r3 = run_scene(parse_scene(as_3d(raw2d)), integrator=integrator, record=False).result
+    assert r3.final.v[0, :, :2] == pytest.approx(r2.final.v[0], abs=1e-12)
+    assert r3.final.v[0, :, 2] == pytest.approx([0, 0], abs=1e-15)
+    assert r3.final.w[0, :, 2] == pytest.approx(r2.final.w[0, :, 0], abs=1e-10)
+    assert r3.final.w[0, :, :2] == pytest.approx(np.zeros((2, 2)), abs=1e-15)
+    assert r3.steps[0] == r2.steps[0]
+
+
+def newtons_cradle(n: int = 5, gap: float = 0.0) -> dict:
+    r = 0.02
+    bodies = [{"name": f"ball{i + 1}", "mass": 0.1, "radius": r, "position": 0.2 + i * (2 * r + gap),
+               "velocity": 0.0} for i in range(n)]
+    bodies[0]["position"] = 0.0
+    bodies[0]["velocity"] = 1.0
+    return {"dim": 1, "contact": {"k": 1e5}, "body": bodies, "dt": "auto"}
+
+
+def test_newtons_cradle_conserves_momentum_and_energy():
+    """Five touching balls: a chain of simultaneous contacts. Momentum at round-off, energy to
+    the tolerance of the run, and the whole energy ends up back in motion."""
+    run = run_scene(parse_scene(newtons_cradle()))
+    res = dg.residuals(run.result)
+    assert res.momentum[0] < 1e-12
+    assert res.energy[0] < 1e-6
+    c = dg.trajectory_conserved(run.result.model, run.result.trajectory)
+    drift = np.abs(c.total[:, 0] / c.total[0, 0] - 1).max()
+    assert drift < 1e-3  # Verlet's shadow-energy wobble at omega h of the auto step
+    v = run.result.final.v[0, :, 0]
+    assert v[-1] == v.max() > 0.5  # the pulse went down the chain
+    assert np.sum(0.5 * 0.1 * v * v) == pytest.approx(0.05, rel=1e-6)
+
+
+def test_friction_energy_plus_dissipated_work_is_conserved():
+    """With friction, E + W (work done against friction) is conserved by the model; Verlet keeps
+    it to O((omega dt)^2) during contact and much closer at the end (events are exact)."""
+    run = run_scene(load_scene("demo-bonus"))
+    r = run.result
+    c = dg.trajectory_conserved(r.model, r.trajectory)
+    assert c.dissipated[-1, 0] > 1e-4  # friction did work: the check is not vacuous
+    omega_h = math.sqrt(750 / 0.0127) * r.dt[0]
+    drift = np.abs(c.balance[:, 0] / c.balance[0, 0] - 1).max()
+    assert drift < omega_h**2
+    assert dg.residuals(r).energy[0] < 1e-7
+
+
+@pytest.mark.parametrize("name", builtin_names())
+def test_momenta_at_round_off_on_every_builtin(name):
+    r = run_scene(load_scene(name), record=False).result
+    res = dg.residuals(r)
+    assert res.momentum[0] <= 1e-12
+    if r.model.dim > 1:
+        assert res.angular_momentum[0] <= 1e-12
+
+
+@pytest.mark.parametrize("name", [n for n in builtin_names() if load_scene(n).contact.mu == 0])
+def test_frictionless_energy_residual(name):
+    r = run_scene(load_scene(name), record=False).result
+    assert dg.residuals(r).energy[0] < 1e-6
+
+
+def test_step_count_follows_contact_not_distance():
+    near = run_scene(load_scene("demo-1d"), record=False).result
+    far = run_scene(load_scene("demo-1d", ["body.ball2.position=10.0"]), record=False).result
+    assert far.steps[0] == near.steps[0]
+    assert far.final.t[0] > 5 * near.final.t[0]
+    assert far.final.v[0] == pytest.approx(near.final.v[0], abs=1e-9)
+
+
+def test_batch_equals_single_runs():
+    mus = [0.0, 0.1, 0.3, 0.5, 0.9]
+    scenes = [load_scene("demo-bonus", [f"contact.mu={mu}"]) for mu in mus]
+    batch = run_scenes(scenes, record=False).result
+    for b, scene in enumerate(scenes):
+        single = run_scene(scene, record=False).result
+        assert batch.final.v[b] == pytest.approx(single.final.v[0], abs=1e-12)
+        assert batch.final.w[b] == pytest.approx(single.final.w[0], abs=1e-12)
+        assert batch.steps[b] == single.steps[0]
+
+
+def test_batch_with_different_contact_times_equals_single_runs():
+    offsets = [0.0, 0.01, 0.03]
+    scenes = [load_scene("demo-2d-moving", [f"body.ball1.position.y={y}"]) for y in offsets]
+    batch = run_scenes(scenes, record=False).result
+    for b, scene in enumerate(scenes):
+        single = run_scene(scene, record=False).result
+        assert batch.final.v[b] == pytest.approx(single.final.v[0], abs=1e-12)
+        assert batch.final.t[b] == pytest.approx(single.final.t[0], abs=1e-12)
+
+
+def test_frictionless_scene_computes_no_friction(monkeypatch):
+    """Leave out what a scene does not need: no friction call, no angular state, 1D arrays."""
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("friction computed in a frictionless scene")
+
+    monkeypatch.setattr(physics, "friction_kick", forbidden)
+    monkeypatch.setattr(physics, "coulomb_explicit", forbidden)
+    r = run_scene(load_scene("demo-1d")).result
+    assert r.model.dim == 1 and r.final.s.shape == (1, 2, 1)
+    assert r.final.w.shape == (1, 2, 0) and r.trajectory.q.shape[-1] == 0
+    assert r.trajectory.friction_pair is None
+    r2 = run_scene(load_scene("demo-2d-moving"), integrator="seed").result
+    assert r2.model.spin_dim == 0
+
+
+def test_spin_without_friction_carries_spin_unchanged():
+    raw = two_balls(2, [1.0, 0.0], [0.0, 0.0], [0.2, 0.02], w1=4.0, dt="auto")
+    r = run_scene(parse_scene(raw), record=False).result
+    assert r.model.spin_dim == 1
+    assert r.final.w[0, :, 0] == pytest.approx([4.0, 0.0], abs=1e-15)
+
+
+def test_gravity_momentum_balance():
+    """Under gravity (no walls) the momentum balance P - P0 - M g t stays at round-off."""
+    raw = two_balls(2, [1.0, 0.1], [0.0, 0.0], [0.3, 0.03], dt="auto")
+    raw["gravity"] = [0.0, -9.81]
+    r = run_scene(parse_scene(raw), record=False).result
+    res = dg.residuals(r)
+    assert r.contacts.count[0] == 1
+    assert res.momentum[0] < 1e-12
+    assert res.angular_momentum[0] < 1e-12
+    assert res.energy[0] < 1e-6
