@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from collide import friction as fr
 from collide import physics as ph
 from collide.model import Model, State
 
@@ -24,12 +25,15 @@ class Geometry:
     c: ph.Contacts
     fn: np.ndarray
     fw: np.ndarray
+    engaged: ph.Engaged | None = None
+    modes: fr.Modes | None = None
 
 
-def geometry(model: Model, s: np.ndarray) -> Geometry:
-    c = ph.contact_geometry(model, s)
+def geometry(model: Model, s: np.ndarray, engaged: ph.Engaged | None = None,
+             modes: fr.Modes | None = None) -> Geometry:
+    c = ph.contact_geometry(model, s, engaged)
     fn, fw = ph.normal_forces(model, c)
-    return Geometry(c, fn, fw)
+    return Geometry(c, fn, fw, engaged, modes)
 
 
 @dataclass
@@ -73,11 +77,14 @@ def seed_step(model: Model, state: State, h: np.ndarray,
     return out, forces, geometry(model, out.s)
 
 
-def _kick(model: Model, state: State, hk: np.ndarray, g: Geometry) -> StepForces:
-    """Velocity update over hk seconds: springs and gravity explicit, friction implicit."""
+def _kick(model: Model, state: State, hk: np.ndarray, g: Geometry, first: bool) -> StepForces:
+    """Velocity update over hk seconds: springs and gravity explicit; friction by mode (or
+    implicit when modes are not tracked). `first`: the step's first half-kick."""
     state.v += ph.normal_accel(model, g.c, g.fn, g.fw) * hk[:, None, None]
     if not model.friction:
         return _no_friction(model, state)
+    if g.modes is not None:
+        return StepForces(*fr.mode_kick(model, g.c, g.fn, g.fw, state, hk, g.modes, first))
     ft, fwt = ph.friction_kick(model, g.c, g.fn, g.fw, state, hk)
     return StepForces(ft, fwt)
 
@@ -89,11 +96,11 @@ def verlet_step(model: Model, state: State, h: np.ndarray,
     The geometry at the end is returned so the next step starts from it (one evaluation a step).
     """
     out = state.copy()
-    _kick(model, out, 0.5 * h, start or geometry(model, state.s))
+    _kick(model, out, 0.5 * h, start or geometry(model, state.s), True)
     out.s += out.v * h[:, None, None]
     out.q = ph.advance_orientation(out.q, out.w, h)
-    end = geometry(model, out.s)
-    forces = _kick(model, out, 0.5 * h, end)
+    end = geometry(model, out.s, *((start.engaged, start.modes) if start is not None else ()))
+    forces = _kick(model, out, 0.5 * h, end, False)
     out.t = state.t + h
     return out, forces, end
 
@@ -138,7 +145,7 @@ INTEGRATORS: dict[str, Integrator] = {
     "seed": Integrator("seed", seed_step, 1, 2.0, events=False, friction=True),
     "verlet": Integrator("verlet", verlet_step, 2, 2.0, events=True, friction=True),
     "yoshida4": Integrator("yoshida4", _composition(YOSHIDA4), 4, 2.0 / (_CBRT2 * _Y1),
-                           events=True, friction=False),
+                           events=True, friction=True),
     "kahan6": Integrator("kahan6", _composition(KAHAN6), 6, 2.0 / max(abs(x) for x in KAHAN6),
-                         events=True, friction=False),
+                         events=True, friction=True),
 }

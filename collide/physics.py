@@ -51,6 +51,14 @@ def norm(a: np.ndarray) -> np.ndarray:
 
 
 @dataclass
+class Engaged:
+    """Contacts in the current contact phase: pairs (B, P) and walls (B, W, N), as floats 0/1."""
+
+    pair: np.ndarray
+    wall: np.ndarray
+
+
+@dataclass
 class Contacts:
     """Geometry of every pair and sphere-wall contact at one configuration.
 
@@ -66,6 +74,8 @@ class Contacts:
     arm_j: np.ndarray
     wall_overlap: np.ndarray
     wall_arm: np.ndarray
+    pressed: np.ndarray  # overlap where the spring acts (clamped, or smooth when engaged)
+    wall_pressed: np.ndarray
 
     @property
     def lever_i(self) -> np.ndarray:
@@ -76,22 +86,29 @@ class Contacts:
         return -self.arm_j[..., None] * self.n
 
 
-def contact_geometry(model: Model, s: np.ndarray) -> Contacts:
-    """Normals, overlaps and lever arms from positions s (B, N, D)."""
+def contact_geometry(model: Model, s: np.ndarray, engaged: Engaged | None = None) -> Contacts:
+    """Normals, overlaps and lever arms from positions s (B, N, D).
+
+    `engaged` marks the contacts of the current contact phase: they use the smooth extension of
+    the spring law (no clamp at zero overlap), so that a high-order step whose substeps stray
+    just outside the contact sees a smooth force; the phase's start and end are located events.
+    """
     d = model.pair_diff @ s
     dist = norm(d)
     n = d / dist[..., None]
     overlap = model.pair_reach - dist
-    half = 0.5 * np.maximum(overlap, 0.0)
+    pressed = np.maximum(overlap, 0.0) if engaged is None else overlap * engaged.pair
+    half = 0.5 * pressed
     arm_i = model.pair_ri - half
     arm_j = model.pair_rj - half
     if model.n_walls:
         height = np.einsum("bnd,wd->bwn", s, model.wall_normal) - dot(model.wall_point, model.wall_normal)[:, None]
         wall_overlap = model.radius[:, None, :] - height
-        wall_arm = model.radius[:, None, :] - np.maximum(wall_overlap, 0.0)
+        wall_pressed = np.maximum(wall_overlap, 0.0) if engaged is None else wall_overlap * engaged.wall
+        wall_arm = model.radius[:, None, :] - wall_pressed
     else:
-        wall_overlap = wall_arm = _EMPTY_WALLS
-    return Contacts(n, overlap, arm_i, arm_j, wall_overlap, wall_arm)
+        wall_overlap = wall_arm = wall_pressed = _EMPTY_WALLS
+    return Contacts(n, overlap, arm_i, arm_j, wall_overlap, wall_arm, 2.0 * half, wall_pressed)
 
 
 _EMPTY_WALLS = np.zeros((1, 0, 1))
@@ -99,8 +116,8 @@ _EMPTY_WALLS = np.zeros((1, 0, 1))
 
 def normal_forces(model: Model, c: Contacts) -> tuple[np.ndarray, np.ndarray]:
     """Spring force magnitudes: pairs (B, P) and walls (B, W, N)."""
-    fn = model.k_pair * np.maximum(c.overlap, 0.0)
-    fw = model.k_wall[:, None, :] * np.maximum(c.wall_overlap, 0.0) if model.n_walls else c.wall_overlap
+    fn = model.k_pair * c.pressed
+    fw = model.k_wall[:, None, :] * c.wall_pressed if model.n_walls else c.wall_overlap
     return fn, fw
 
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from collide import friction as fr
 from collide import physics as ph
 from collide.integrators import INTEGRATORS, Geometry, Integrator, StepForces, geometry
 from collide.model import Model, State, select_model, select_state
@@ -218,35 +219,102 @@ def _scaled_overlaps(model: Model, state: State, g: Geometry) -> tuple[np.ndarra
     return d, r
 
 
-def event_fraction(model: Model, before: State, g0: Geometry, after: State, g1: Geometry,
-                   h: np.ndarray) -> np.ndarray:
-    """Fraction (B,) of the step at which the first contact starts or ends (1 if none)."""
-    d0, r0 = _scaled_overlaps(model, before, g0)
-    d1, r1 = _scaled_overlaps(model, after, g1)
-    tol = ph.TOUCH_TOL
-    crossing = ((d0 > tol) & (d1 < -tol)) | ((d0 < -tol) & (d1 > tol))
-    if not crossing.any():
-        return np.ones(model.batch)
-    hb = h[:, None]
-    theta = _hermite_root(d0, d1, r0 * hb, r1 * hb)
-    theta = np.where(crossing, theta, 1.0)
-    return theta.min(axis=1)
+def _event_values(model: Model, state: State, g: Geometry, modes, scale: np.ndarray) -> np.ndarray | None:
+    if modes is None:
+        return None
+    return fr.mode_events(model, g.c, g.fn, g.fw, state, modes, scale)
 
 
 def step_with_events(model: Model, integrator: Integrator, state: State, h: np.ndarray,
-                     start: Geometry) -> tuple[State, StepForces, Geometry, np.ndarray]:
-    """One step; where a contact would start or end inside it, shorten it to land there."""
+                     start: Geometry, scale: np.ndarray) -> tuple[State, StepForces, Geometry, np.ndarray]:
+    """One step; where an event would happen inside it, shorten it to land there.
+
+    Events: a contact starts or ends (overlap crosses zero: located with a cubic Hermite
+    through both ends of the trial step), or a contact's friction mode must change (a mode
+    event function crosses zero: located by a bracketing secant, the Illinois method). Each
+    refinement re-steps from the start with a shorter step.
+    """
     new, forces, end = integrator.step(model, state, h, start)
     if not integrator.events:
         return new, forces, end, h
-    for _ in range(8):
-        frac = event_fraction(model, state, start, new, end, h)
-        redo = frac < 1.0
+    d0, r0 = _scaled_overlaps(model, state, start)
+    e0 = _event_values(model, state, start, start.modes, scale)
+    mode_tol = 0.5 * fr.EDGE_TOL
+    live = None if e0 is None else e0 > mode_tol  # a mode entered on its own boundary is not watched
+    b = model.batch
+    rows = np.arange(b)
+    h_full = np.where(h != 0, h, 1.0)
+    pending = np.zeros(b, bool)  # a mode event is bracketed
+    col = np.zeros(b, int)  # the event function being solved for
+    lo, hi = np.zeros(b), np.ones(b)
+    f_lo, f_hi = np.zeros(b), np.zeros(b)
+    last_t, last_f = np.full(b, np.nan), np.full(b, np.nan)  # the third point, for a quadratic
+    for _ in range(30):
+        frac = h / h_full
+        d1, r1 = _scaled_overlaps(model, new, end)
+        tol = ph.TOUCH_TOL
+        crossing = ((d0 > tol) & (d1 < -tol)) | ((d0 < -tol) & (d1 > tol))
+        theta = np.full(b, np.inf)  # where to re-step to; inf: accept this trial
+        if crossing.any():
+            root = _hermite_root(d0, d1, r0 * h[:, None], r1 * h[:, None])
+            theta = np.where(crossing, root, np.inf).min(axis=1) * frac
+        if e0 is not None:
+            e1 = _event_values(model, new, end, start.modes, scale)
+            beyond = live & (e1 < -mode_tol)
+            fresh = beyond.any(axis=1) & ~pending
+            if fresh.any():
+                # The function that crosses first (by linear estimate) is the one to solve for.
+                guess = np.where(beyond, e0 / np.where(beyond, e0 - e1, 1.0), np.inf)
+                col = np.where(fresh, guess.argmin(axis=1), col)
+                lo = np.where(fresh, 0.0, lo)
+                f_lo = np.where(fresh, e0[rows, col], f_lo)
+                pending = pending | fresh
+                hi = np.where(fresh, frac, hi)
+                f_hi = np.where(fresh, e1[rows, col], f_hi)
+            f = e1[rows, col]
+            update = pending & ~fresh
+            if update.any():
+                # Keep the bracket [lo, hi] around the root of the critical function.
+                was_t = np.where(f < 0, hi, lo)
+                was_f = np.where(f < 0, f_hi, f_lo)
+                last_t = np.where(update, was_t, last_t)
+                last_f = np.where(update, was_f, last_f)
+                hi = np.where(update & (f < 0), frac, hi)
+                f_hi = np.where(update & (f < 0), f, f_hi)
+                lo = np.where(update & (f >= 0), frac, lo)
+                f_lo = np.where(update & (f >= 0), f, f_lo)
+            others_fine = ~(beyond & (np.arange(e1.shape[1])[None, :] != col[:, None])).any(axis=1)
+            landed = pending & (np.abs(f) <= mode_tol) & others_fine
+            pending = pending & ~landed
+            if pending.any():
+                theta = np.where(pending, np.minimum(theta, _bracketed_root(lo, f_lo, hi, f_hi, last_t, last_f)),
+                                 theta)
+        redo = np.isfinite(theta) & (np.abs(theta - frac) > 1e-15)
         if not redo.any():
             break
-        h = np.where(redo, h * np.maximum(frac, 1e-9), h)
+        h = np.where(redo, h_full * np.maximum(theta, 1e-12), h)
         new, forces, end = integrator.step(model, state, h, start)
     return new, forces, end, h
+
+
+def _bracketed_root(lo: np.ndarray, f_lo: np.ndarray, hi: np.ndarray, f_hi: np.ndarray,
+                    t3: np.ndarray, f3: np.ndarray) -> np.ndarray:
+    """Next estimate of a root bracketed in [lo, hi] (f_lo >= 0 > f_hi): inverse quadratic
+    interpolation through three points where possible (exact for the quadratic onset of an event
+    at a tangency), else the secant; bisection when the estimate is not well inside."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        secant = lo + (hi - lo) * f_lo / (f_lo - f_hi)
+        a, b, c = lo, hi, t3
+        fa, fb, fc = f_lo, f_hi, f3
+        iqi = (a * fb * fc / ((fa - fb) * (fa - fc)) + b * fa * fc / ((fb - fa) * (fb - fc))
+               + c * fa * fb / ((fc - fa) * (fc - fb)))
+        estimate = np.where(np.isfinite(iqi) & np.isfinite(f3), iqi, secant)
+        width = hi - lo
+        inside = (estimate > lo + 0.01 * width) & (estimate < hi - 0.01 * width)
+        estimate = np.where(inside, estimate, np.where(np.isfinite(secant) & (secant > lo) & (secant < hi),
+                                                       np.clip(secant, lo + 0.01 * width, hi - 0.01 * width),
+                                                       0.5 * (lo + hi)))
+    return estimate
 
 
 def _active(model: Model, state: State, g: Geometry) -> np.ndarray:
@@ -282,8 +350,6 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     integ = INTEGRATORS[integrator]
     b = model.batch
     dt = np.broadcast_to(np.asarray(dt, dtype=float), (b,)).copy()
-    if model.friction and not integ.friction:
-        raise RunError(f"integrator '{integrator}' does not model friction yet; use 'verlet' or 'seed'")
     warnings = check_run(model, initial, dt, integ, max_steps)
     t_end = np.full(b, np.inf) if duration is None else np.where(np.isnan(duration), np.inf, duration)
     tail_set = np.full(b, np.nan) if tail is None else np.asarray(tail, dtype=float)
@@ -358,7 +424,9 @@ def _contact_phase(model: Model, integ: Integrator, state: State, contact: np.nd
                    t_end: np.ndarray, steps: np.ndarray, log: ContactLog, snapshot, passes: int,
                    max_steps: int) -> tuple[State, int]:
     """Step the runs in `contact` until one of them leaves contact or reaches its end."""
-    g = geometry(model, state.s)
+    # Speed scale for the friction events: the fastest body at the start (at least the band).
+    scale = np.maximum(np.sqrt(np.max(np.sum(state.v ** 2, -1), axis=1)), 10 * model.eps + 1e-300)
+    g = _engage(model, integ, state, geometry(model, state.s), scale)
     not_stepping = ~contact
     all_stepping = not not_stepping.any()
     free_flags = np.zeros(model.batch, bool) | not_stepping
@@ -367,7 +435,8 @@ def _contact_phase(model: Model, integ: Integrator, state: State, contact: np.nd
         if passes > max_steps:
             raise RunError(f"the run did not end within {max_steps} steps; set a duration or a larger dt")
         h = np.where(contact, np.minimum(dt, t_end - state.t), 0.0)
-        new, forces, g, h = step_with_events(model, integ, state, h, g)
+        new, forces, g, h = step_with_events(model, integ, state, h, g, scale)
+        g = _engage(model, integ, new, g, scale)
         state = new if all_stepping else _masked(new, state, not_stepping)
         steps += contact
         snapshot(state, free_flags, forces)
@@ -382,6 +451,22 @@ def _contact_phase(model: Model, integ: Integrator, state: State, contact: np.nd
             if not (np.isfinite(state.s).all() and np.isfinite(state.v).all()):
                 _non_finite(model, integ, state)
             return state, passes
+
+
+def _engage(model: Model, integ: Integrator, state: State, g: Geometry, scale: np.ndarray) -> Geometry:
+    """Geometry whose engaged contacts are those pressing or touching and approaching now, with
+    the friction mode of each decided from the state (events land exactly on mode changes)."""
+    if not integ.events:
+        return g  # the seed's own law: springs clamped at zero overlap, explicit friction
+    pair, wall = ph.active_contacts(model, state, g.c)
+    engaged = ph.Engaged(pair.astype(float), wall.astype(float))
+    same = g.engaged is not None and np.array_equal(engaged.pair, g.engaged.pair) and \
+        np.array_equal(engaged.wall, g.engaged.wall)
+    if not same:
+        g = geometry(model, state.s, engaged)
+    if model.friction:
+        g.modes = fr.decide_modes(model, g.c, g.fn, g.fw, state, engaged, scale)
+    return g
 
 
 def _active_seed(model: Model, state: State, g: Geometry, dt: np.ndarray) -> np.ndarray:
