@@ -84,7 +84,7 @@ def format_validation(result: validation.Validation) -> str:
         ladder = ", ".join(f"{dt:.3g}" for dt in check.ladder_dt)
         changes = ", ".join(f"{c:.1e}" for c in check.ladder_change)
         out.append(f"  {check.scene}: {check.regime}; {check.integrator} dt = {check.dt:.3g} s; "
-                   f"verlet ladder dt = {ladder} s, changes {changes}"
+                   f"{validation.LADDER_INTEGRATOR} ladder dt = {ladder} s, changes {changes}"
                    f"{'' if check.converged else ' (NOT CONVERGED)'}; {check.wall_time_s:.2f} s")
     if result.scans:
         out.append("")

@@ -178,16 +178,17 @@ def _impulse(terms: SlipTerms, mode: np.ndarray, side: np.ndarray, entry: np.nda
              eps: np.ndarray, hk: np.ndarray, dim: int, need: np.ndarray | None) -> np.ndarray:
     """Tangential impulse on the first body over hk seconds, by mode (B, C, D).
 
-    The sliding direction is the slip's side of the tangent in 2D; in 3D it is the slip's
-    direction at the start of the step, frozen over the step (exact for planar motion, first
+    The friction direction is the slip's side of the tangent in 2D; in 3D it is the slip's
+    direction at the start of the step carried over the step (exact for planar motion, first
     order in how fast a non-planar slip turns)."""
     if dim == 2:
         direction = terms.t * side[..., None]
         along = terms.slip * side
     else:
-        carried = _transport(entry, terms.n)
-        direction = np.where((mode == SLIDE)[..., None], carried, terms.t)
-        along = np.where(mode == SLIDE, ph.dot(terms.u, carried), terms.slip)
+        # Slide and stick keep the direction the slip had when the mode was chosen, carried onto
+        # the current tangent plane: the slip may pass near zero inside a (backward) substep.
+        direction = _transport(entry, terms.n)
+        along = ph.dot(terms.u, direction)
     # slide: mu F_n against the slip, for the signed time hk (substeps may run backwards).
     # stick: in a step's first half-kick the force that holds the slip at this state (explicit);
     # in its second, whatever puts the slip back on the band's edge (implicit: the hold force at
@@ -240,7 +241,8 @@ def _work(model: Model, c: ph.Contacts, state: State, j: np.ndarray, terms: Slip
         k_power = (model.inv_mass[:, None, :] + arm * arm * model.inv_inertia[:, None, :]).reshape(b, -1)
     else:
         up = ph.pair_slip(model, c, state.v, state.w, (c.arm_i, c.arm_j)) if model.seed_lever else terms.u
-        k_power = model.pair_inv_mass + c.arm_i ** 2 * model.pair_inv_inertia_i + c.arm_j ** 2 * model.pair_inv_inertia_j
+        k_power = (model.pair_inv_mass + c.arm_i ** 2 * model.pair_inv_inertia_i
+                   + c.arm_j ** 2 * model.pair_inv_inertia_j)
     return np.add.reduce(-ph.dot(j, up) - 0.5 * k_power * ph.dot(j, j), -1)
 
 

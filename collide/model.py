@@ -111,7 +111,7 @@ class State:
                      self.work.copy())
 
 
-def _shape_key(scene: Scene) -> tuple:
+def shape_key(scene: Scene) -> tuple:
     return (scene.dim, tuple(b.name for b in scene.bodies), len(scene.walls),
             scene.gravity is not None, scene.has_spin, scene.contact.lever)
 
@@ -121,9 +121,9 @@ def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
     if not scenes:
         raise SceneError("no scenes to run")
     first = scenes[0]
-    key = _shape_key(first)
+    key = shape_key(first)
     for scene in scenes[1:]:
-        if _shape_key(scene) != key:
+        if shape_key(scene) != key:
             raise SceneError(f"scene '{scene.name}' differs in shape from '{first.name}' "
                              "(dim, bodies, walls, gravity or spin); batch only same-shaped scenes")
     dim = first.dim

@@ -97,14 +97,17 @@ def contact_geometry(model: Model, s: np.ndarray, engaged: Engaged | None = None
     dist = norm(d)
     n = d / dist[..., None]
     overlap = model.pair_reach - dist
-    pressed = np.maximum(overlap, 0.0) if engaged is None else overlap * engaged.pair
+    clamped = np.maximum(overlap, 0.0)
+    # Contacts outside the phase (e.g. touching at rest) keep the clamped law.
+    pressed = clamped if engaged is None else np.where(engaged.pair > 0, overlap, clamped)
     half = 0.5 * pressed
     arm_i = model.pair_ri - half
     arm_j = model.pair_rj - half
     if model.n_walls:
         height = np.einsum("bnd,wd->bwn", s, model.wall_normal) - dot(model.wall_point, model.wall_normal)[:, None]
         wall_overlap = model.radius[:, None, :] - height
-        wall_pressed = np.maximum(wall_overlap, 0.0) if engaged is None else wall_overlap * engaged.wall
+        wall_clamped = np.maximum(wall_overlap, 0.0)
+        wall_pressed = wall_clamped if engaged is None else np.where(engaged.wall > 0, wall_overlap, wall_clamped)
         wall_arm = model.radius[:, None, :] - wall_pressed
     else:
         wall_overlap = wall_arm = wall_pressed = _EMPTY_WALLS

@@ -25,7 +25,7 @@ So in the limit:
 
 The soft model's distance from this limit shrinks as k^(-1/2) (the normal turns by about
 |v_t| T / (r1 + r2) during contact, and the centres come closer by delta); `softness_estimate`
-gives that a-priori size.
+gives that a-priori size. Head-on, the soft model is exact for every k.
 
 Vectors are embedded in 3D internally (2D: z = 0, spin about z); 1D uses the x axis only.
 """
@@ -322,13 +322,16 @@ def rigid_outcome(scene: Scene) -> RigidOutcome:
 
 def softness_estimate(scene: Scene) -> float:
     """A-priori size of the soft model's distance from the rigid limit, relative to the
-    fastest initial speed (0 when the bodies never touch).
+    fastest initial speed (0 when the bodies never touch or meet head-on).
 
-    Two effects of the finite contact time T = pi sqrt(m_red/k_eff): the centres approach by
-    delta = u_n sqrt(m_red/k_eff), and the normal turns by about pi |v_t| sqrt(m_red/k_eff) over
-    the distance R = r1 + r2 (the bodies slide past each other). Both scale as k^(-1/2); the
-    velocity changes |dv| are off by about that fraction. In 1D neither happens: a linear spring
-    collision is exactly elastic and head-on for every k, so the estimate is 0.
+    The soft impulse acts along a normal that turns during the contact, which lasts
+    T = pi sqrt(m_red/k_eff): the centres slide past each other by about |v_t| T over the
+    distance R = r1 + r2 (pi |v_t| sqrt(m_red/k_eff) / R), and they come closer by
+    delta = u_n sqrt(m_red/k_eff), which tilts the line of centres by about (v_t/u_n) delta/R =
+    |v_t| sqrt(m_red/k_eff) / R. Here v_t is the larger of the centres' relative tangential
+    speeds before and after the rigid impact (friction adds tangential motion). The velocity
+    changes |dv| are off by about that angle. Both effects scale as k^(-1/2). Head-on (v_t = 0,
+    also every 1D scene) the linear spring gives the rigid answer exactly, for every k.
     """
     out = rigid_outcome(scene)
     if out.impact is None or scene.dim == 1:
@@ -339,18 +342,21 @@ def softness_estimate(scene: Scene) -> float:
     if len(bodies) == 2:
         m_red = 1.0 / (1.0 / bodies[0].mass + 1.0 / bodies[1].mass)
         k_eff, reach = scene.contact.k / 2.0, bodies[0].radius + bodies[1].radius
-        v_rel = v0[0] - v0[1]
+        rel_before, rel_after = v0[0] - v0[1], out.v[0] - out.v[1]
     else:
         m_red, k_eff, reach = bodies[0].mass, scene.contact.k, bodies[0].radius
-        v_rel = v0[0]
+        rel_before, rel_after = v0[0], out.v[0]
     n = out.impact.normal
-    v_t = float(np.linalg.norm(v_rel - (v_rel @ n) * n))
-    scale = math.sqrt(m_red / k_eff)
-    fraction = scale * (out.impact.approach_speed + math.pi * v_t) / reach
+
+    def tangential(u: np.ndarray) -> float:
+        return float(np.linalg.norm(u - (u @ n) * n))
+
+    v_t = max(tangential(rel_before), tangential(rel_after))
+    angle = (math.pi + 1.0) * v_t * math.sqrt(m_red / k_eff) / reach
     dv = float(np.max(np.linalg.norm(out.v - v0, axis=1)))
     radii = np.array([b.radius for b in bodies])
     dspin = float(np.max(np.linalg.norm(out.w - w0, axis=1) * radii)) if w0.size else 0.0
-    return fraction * max(dv, dspin) / reference_speed(scene)
+    return angle * max(dv, dspin) / reference_speed(scene)
 
 
 def reference_speed(scene: Scene) -> float:

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 INTEGRATORS = ("seed", "verlet", "yoshida4", "kahan6")
-DEFAULT_INTEGRATOR = "verlet"
+DEFAULT_INTEGRATOR = "kahan6"
 DEFAULT_TOL = 1e-6
 
 

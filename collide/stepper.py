@@ -30,7 +30,7 @@ class RunError(RuntimeError):
 
 @dataclass
 class Trajectory:
-    """Every step of B runs. Segment k -> k+1 is closed-form free flight where `free[k]`.
+    """Every step of B runs. Segment k-1 -> k was closed-form free flight where `free[k]`.
 
     t (S, B); s, v (S, B, N, D); w (S, B, N, K); q (S, B, N, Q); work (S, B);
     friction_pair (S, B, P, D) and friction_wall (S, B, W, N, D) in N, or None without friction.
@@ -122,8 +122,23 @@ def contact_frequencies(model: Model) -> tuple[np.ndarray, np.ndarray]:
 
 
 def max_frequency(model: Model) -> np.ndarray:
+    """The stiffest frequency (B,) the contacts can produce, all engaged at once.
+
+    One pair alone: exactly sqrt(k_eff (1/m_i + 1/m_j)). Otherwise (chains, walls) a
+    Gershgorin bound on the mass-symmetrised stiffness matrix M^-1/2 K M^-1/2, whose rows hold
+    k/m_i on the diagonal and k/sqrt(m_i m_j) off it: exact for a uniform chain's fastest mode.
+    """
     pair, wall = contact_frequencies(model)
-    return np.maximum(pair.max(axis=1, initial=0.0), wall.max(axis=1, initial=0.0))
+    if model.n_bodies == 2 and not model.n_walls:
+        return pair.max(axis=1, initial=0.0)
+    mi = model.mass[:, model.pair_i]
+    mj = model.mass[:, model.pair_j]
+    cross = model.k_pair / np.sqrt(mi * mj)
+    rows = (model.select_i.T @ (model.k_pair / mi + cross)[..., None])[..., 0] + \
+        (model.select_j.T @ (model.k_pair / mj + cross)[..., None])[..., 0]
+    if model.n_walls:
+        rows = rows + model.n_walls * model.k_wall / model.mass
+    return np.sqrt(rows.max(axis=1))
 
 
 def energy_bounds(model: Model, state: State) -> tuple[np.ndarray, np.ndarray]:
@@ -257,7 +272,9 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
         theta = np.full(b, np.inf)  # where to re-step to; inf: accept this trial
         if crossing.any():
             root = _hermite_root(d0, d1, r0 * h[:, None], r1 * h[:, None])
-            theta = np.where(crossing, root, np.inf).min(axis=1) * frac
+            first = np.where(crossing, root, np.inf).min(axis=1)
+            theta = np.full(b, np.inf)
+            np.multiply(first, frac, out=theta, where=np.isfinite(first))
         if e0 is not None:
             e1 = _event_values(model, new, end, start.modes, scale)
             beyond = live & (e1 < -mode_tol)
@@ -370,6 +387,8 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
             rows.append((s.t, s.s, s.v, s.w, s.q, s.work, free, forces.pair, forces.wall))
 
     snapshot(state, np.ones(b, bool), zero_forces)
+    # Speed scale of the friction events: the fastest body at the start (at least the band).
+    scale = np.maximum(np.sqrt(np.max(np.sum(initial.v ** 2, -1), axis=1)), 10 * model.eps + 1e-300)
     started = time.perf_counter()
     passes = 0
     while not done.all():
@@ -407,7 +426,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
             snapshot(state, free, zero_forces)
         if contact.any():
             state, passes = _contact_phase(model, integ, state, contact, dt, t_end, steps, log,
-                                           snapshot, passes, max_steps)
+                                           snapshot, passes, max_steps, scale)
         done = done | (state.t >= t_end * (1 - 1e-15))
     wall_time = time.perf_counter() - started
     trajectory = None
@@ -422,10 +441,8 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
 
 def _contact_phase(model: Model, integ: Integrator, state: State, contact: np.ndarray, dt: np.ndarray,
                    t_end: np.ndarray, steps: np.ndarray, log: ContactLog, snapshot, passes: int,
-                   max_steps: int) -> tuple[State, int]:
+                   max_steps: int, scale: np.ndarray) -> tuple[State, int]:
     """Step the runs in `contact` until one of them leaves contact or reaches its end."""
-    # Speed scale for the friction events: the fastest body at the start (at least the band).
-    scale = np.maximum(np.sqrt(np.max(np.sum(state.v ** 2, -1), axis=1)), 10 * model.eps + 1e-300)
     g = _engage(model, integ, state, geometry(model, state.s), scale)
     not_stepping = ~contact
     all_stepping = not not_stepping.any()

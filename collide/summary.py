@@ -40,8 +40,12 @@ def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
         "dim": scene.dim,
         "integrator": r.integrator,
         "dt": float(r.dt[member]),
-        "dt_auto": (scene.dt == "auto") if run.dt_request is None else run.dt_request == "auto",
+        "dt_auto": bool(run.auto[member]) if run.auto is not None else scene.dt == "auto",
         "tol": run.tol[member] if run.tol is not None else scene.tol,
+        # The error model's prediction for the outcome at this step (relative to the fastest
+        # initial speed), and the report's own criterion: energy residual below 1%.
+        "error_estimate": None if run.error_estimate is None else float(run.error_estimate[member]),
+        "report_criterion_met": None if not math.isfinite(res.energy[member]) else bool(res.energy[member] < 0.01),
         "steps": int(r.steps[member]),
         "jumps": int(r.jumps[member]),
         "sim_time": float(r.final.t[member]),

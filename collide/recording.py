@@ -1,0 +1,751 @@
+"""Rerun recordings of runs: one `.rrd` per run, written in bulk and read back losslessly.
+
+This is the only module in `collide/` that imports rerun (DESIGN section 5). A recording holds
+two things:
+
+- what a person looks at, on one timeline `sim_time` (simulated seconds): spheres with spin
+  markers and trails, contact points with normal and friction force arrows, compression,
+  energies, momentum, angular momentum and their residuals, the scene and the run settings, and
+  a blueprint (3D view beside the plots);
+- what a program reads back: every integrator step exactly (float64 t, s, v, w, q, work, the
+  free-flight flags and friction forces) under `/collide/steps`, and the run's settings under
+  `/collide/meta`, from which `read_recording` rebuilds the `SceneRun`.
+
+Frames: plots (energies, momenta, compression, residuals) are drawn at exact states only:
+every contact step (or every `stride`-th; each contact's first and last step always) and a
+steady `fps` in free flight, where the motion is known in closed form. The 3D view adds at least
+`contact_frames` frames across each contact, interpolated between steps, so a contact taken in
+a few long steps still animates smoothly. Each entity is written with one `send_columns` call;
+static data with one `log`. Entities a scene does not need are absent: no friction without
+friction, no spin when nothing spins, no walls without walls, no angular momentum in 1D, no
+contact entity for a contact that never happened.
+
+Entity paths (`<b>` a body name, `<c>` a contact such as `ball1-ball2` or `ball1-wall0`):
+
+============================================  ==============================================
+/world/<b>                                    Ellipsoids3D: the sphere (turns with the body)
+/world/<b>/spin                               LineStrips3D: centre-to-rim marker (spinning)
+/world/<b>/trail                              LineStrips3D: path so far (a segment a frame)
+/world/walls/wall<k>                          LineStrips3D: a wall (static)
+/world/contacts/<c>/point                     Points3D: contact point while in contact
+/world/contacts/<c>/normal_force              Arrows3D: force on each body (force_scale m/N)
+/world/contacts/<c>/friction_force            Arrows3D: friction on each body
+/contacts/<c>/compression                     Scalars m: each sphere's compression
+/contacts/<c>/overlap                         Scalars m
+/contacts/<c>/normal_force                    Scalars N: magnitude
+/contacts/<c>/friction_force                  Scalars N: magnitude
+/energy/kinetic, spring, total                Scalars J
+/energy/rotational                            Scalars J (when something spins)
+/energy/gravitational                         Scalars J (with gravity)
+/energy/dissipated, total_plus_dissipated     Scalars J (with friction)
+/momentum                                     Scalars kg m/s, one series per axis
+/angular_momentum                             Scalars kg m^2/s about the origin (2D, 3D)
+/spin/<b>                                     Scalars rad/s (when something spins)
+/residuals/energy, momentum, angular_momentum  Scalars, relative, as in the JSON summary
+/scene                                        TextDocument: the scene TOML (static)
+/settings                                     TextDocument: run settings (static)
+/collide/meta                                 AnyValues: settings and shapes for read-back
+/collide/steps                                AnyValues float64: every step, exactly
+============================================  ==============================================
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tomllib
+import uuid
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import rerun as rr
+import rerun.blueprint as rrb
+from rerun.encodings import Vec3DBatch
+
+from collide import diagnostics as dg
+from collide.model import Model, State, compile_scenes
+from collide.run import SceneRun
+from collide.scene import SceneError, parse_scene
+from collide.stepper import ContactLog, RunResult, Trajectory
+
+APP_ID = "collide"
+FORMAT = "collide-recording"
+FORMAT_VERSION = 1
+TIMELINE = "sim_time"
+CONTACT_FRAMES = 100  # least frames across one contact in the 3D view
+
+_PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
+            (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207)]
+_AXES = "xyz"
+
+
+class RecordingError(ValueError):
+    """A file that is not a complete collide recording. The message names the file."""
+
+
+def collide_version() -> str:
+    """The installed collide version (stored in every recording)."""
+    try:
+        from importlib.metadata import version
+
+        return version("collide")
+    except Exception:  # not installed: running from a source tree
+        return "unknown"
+
+
+# ---------------------------------------------------------------------------------------------
+# Writing
+
+
+@dataclass
+class WriteStats:
+    """What the last `write_recording` call wrote (for benchmarks): frames, rows and calls."""
+
+    frames: int = 0
+    exact_frames: int = 0
+    steps: int = 0
+    rows: int = 0
+    calls: int = 0
+
+
+last_write = WriteStats()
+
+
+def write_recording(run: SceneRun, path: Path, *, stride: int = 1, fps: float = 120.0,
+                    contact_frames: int = CONTACT_FRAMES) -> Path:
+    """Write member 0 of `run` to `path` (an `.rrd`); return the path.
+
+    `stride` keeps every n-th contact step as a frame, `fps` sets the frame rate in free flight
+    and `contact_frames` the least number of frames across each contact in the 3D view. Every
+    step is stored exactly whatever these are.
+
+    The file appears under its final name only once complete (written beside it, then
+    `os.replace`d), so an interrupted write never leaves a half-written recording.
+    """
+    if run.result.batch_size != 1:
+        run = run.member(0)
+    if run.result.trajectory is None:
+        raise ValueError("the run was not recorded (record=False): nothing to write")
+    if stride < 1:
+        raise ValueError(f"stride must be at least 1, got {stride}")
+    if not fps > 0 or not math.isfinite(fps):
+        raise ValueError(f"fps must be positive, got {fps}")
+    if contact_frames < 1:
+        raise ValueError(f"contact_frames must be at least 1, got {contact_frames}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.parent / f".{path.name}.{uuid.uuid4().hex[:8]}.tmp"
+    try:
+        _Writer(run, stride, fps, contact_frames).write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def _pad3(x: np.ndarray) -> np.ndarray:
+    """Vectors of length D (1, 2 or 3) as 3D points; 1D and 2D scenes live in the z = 0 plane."""
+    if x.shape[-1] == 3:
+        return x
+    return np.concatenate((x, np.zeros((*x.shape[:-1], 3 - x.shape[-1]))), axis=-1)
+
+
+def _quaternion_xyzw(q: np.ndarray) -> np.ndarray:
+    """Orientation q (..., Q) as Rerun's xyzw quaternion: Q = 1 is an angle about z, Q = 4 wxyz."""
+    if q.shape[-1] == 1:
+        half = 0.5 * q[..., 0]
+        zero = np.zeros_like(half)
+        return np.stack((zero, zero, np.sin(half), np.cos(half)), axis=-1)
+    return q[..., [1, 2, 3, 0]]
+
+
+def _rotate(q: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    """Rotate a 3-vector by orientations q (..., Q)."""
+    if q.shape[-1] == 1:
+        c, s = np.cos(q[..., 0]), np.sin(q[..., 0])
+        return np.stack((c * vec[0] - s * vec[1], s * vec[0] + c * vec[1], np.full_like(c, vec[2])), -1)
+    w, u = q[..., :1], q[..., 1:]
+    t = 2.0 * np.cross(u, vec)
+    return vec + w * t + np.cross(u, t)
+
+
+def _axis_with_zero(values: np.ndarray) -> rrb.ScalarAxis:
+    """A y axis that includes zero: a conserved quantity then plots flat, not as magnified noise."""
+    lo, hi = min(float(np.min(values)), 0.0), max(float(np.max(values)), 0.0)
+    pad = 0.1 * (hi - lo) if hi > lo else 1.0
+    return rrb.ScalarAxis(range=(lo - pad, hi + pad))
+
+
+def _frame_residuals(model: Model, initial: State, frames: State) -> dg.Residuals:
+    """Residuals of every frame against the start, with the summary's formulas.
+
+    Frames stand in for batch members: the formulas broadcast a batch-of-one model over them.
+    """
+    return dg.residuals(SimpleNamespace(model=model, initial=initial, final=frames))
+
+
+@dataclass
+class _Frames:
+    """States at a set of times (T,) for one run: s, v (T, N, D), w (T, N, K), q (T, N, Q)."""
+
+    times: np.ndarray
+    state: State
+    contacts: dg.ContactSeries
+    index: rr.TimeColumn
+
+
+def _contact_segments(traj: Trajectory) -> np.ndarray:
+    """(S - 1,) True where the step from row k to row k + 1 was a contact step (not free flight).
+
+    `free[k + 1]` flags the segment that ends at row k + 1 (as `diagnostics.sample` reads it).
+    """
+    return ~traj.free[1:, 0]
+
+
+def frame_times(traj: Trajectory, fps: float, stride: int,
+                contact_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """Times of exact frames and of view frames for run 0 of a trajectory.
+
+    Exact frames: every `stride`-th contact step (each contact's first and last step always),
+    and a steady `fps` inside free flight, where the closed form is exact. View frames add at
+    least `contact_frames` evenly spaced frames across each contact, interpolated between steps,
+    so that a contact taken in a few long steps still animates smoothly.
+    """
+    t = traj.t[:, 0]
+    contact = _contact_segments(traj)
+    touches = np.zeros(len(t), bool)
+    touches[1:] |= contact
+    touches[:-1] |= contact
+    idx = np.flatnonzero(touches)
+    edges = np.flatnonzero(touches & ~np.roll(touches, 1) | touches & ~np.roll(touches, -1))
+    if stride > 1 and len(idx):
+        idx = np.union1d(idx[::stride], edges)
+    grid = np.arange(t[0], t[-1], 1.0 / fps)
+    segment = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, max(len(t) - 2, 0))
+    in_free = ~contact[segment] if len(contact) else np.ones(len(grid), bool)
+    exact = np.union1d(np.union1d(t[idx], grid[in_free]), [t[0], t[-1]])
+    dense = [np.linspace(t[a], t[b], contact_frames + 1) for a, b in zip(edges[::2], edges[1::2])]
+    view = np.union1d(exact, np.concatenate(dense)) if dense else exact
+    return exact, view
+
+
+class _Writer:
+    """Computes the frames of one run and sends them, one `send_columns` call per entity."""
+
+    def __init__(self, run: SceneRun, stride: int, fps: float, contact_frames: int) -> None:
+        self.run = run
+        self.scene = run.scene
+        self.result = run.result
+        self.model = run.result.model
+        self.traj = run.result.trajectory
+        self.stride = stride
+        self.fps = fps
+        self.contact_frames = contact_frames
+        self.rows = 0
+        self.calls = 0
+        self.spin = self.model.spin_dim > 0 and self.scene.has_spin
+        self.friction = self.traj.friction_pair is not None and self.scene.has_friction
+        self.contact_names = self.model.contact_names()
+
+    # -- frames ---------------------------------------------------------------------------
+
+    def _frames(self, times: np.ndarray) -> _Frames:
+        model, traj = self.model, self.traj
+        st = dg.sample(model, traj, times, 0)
+        fp = fw = None
+        if traj.friction_pair is not None:
+            # Friction is held over a step: the force of the step that ends at or after a frame.
+            t = traj.t[:, 0]
+            k = np.clip(np.searchsorted(t, times, side="left"), 0, len(t) - 1)
+            held = ~traj.free[k, 0] | (t[k] == times)
+            fp = np.where(held[:, None, None], traj.friction_pair[k, 0], 0.0)[:, None]
+            fw = np.where(held[:, None, None, None], traj.friction_wall[k, 0], 0.0)[:, None]
+        frames = Trajectory(times[:, None], st.s, st.v, st.w, st.q, st.work,
+                            np.zeros_like(st.work, bool), fp, fw)
+        state = State(st.t, st.s[:, 0], st.v[:, 0], st.w[:, 0], st.q[:, 0], st.work[:, 0])
+        index = rr.TimeColumn(TIMELINE, duration=times)
+        return _Frames(times, state, dg.contact_series(model, frames), index)
+
+    def _prepare(self) -> None:
+        exact, view = frame_times(self.traj, self.fps, self.stride, self.contact_frames)
+        self.exact = self._frames(exact)
+        self.view = self._frames(view)
+        # Contacts that ever happen, judged on every step (a frame could miss a short one).
+        pair, wall = dg.overlaps(self.model, self.traj.s)
+        rows = len(self.traj.t)
+        touched = np.concatenate((pair[:, 0], wall[:, 0].reshape(rows, -1)), axis=1).max(axis=0) > 0
+        self.touched = np.flatnonzero(touched)
+        normal = self.exact.contacts.normal_force[:, 0][:, self.touched]
+        peak = float(np.max(np.linalg.norm(normal, axis=-1))) if normal.size else 0.0
+        # Force arrows: the largest normal force is drawn as long as a sphere's diameter.
+        self.force_scale = 2.0 * float(self.model.radius.mean()) / peak if peak > 0 else 1.0
+        st = self.exact.state
+        self.conserved = dg.conserved(self.model, st.t, st.s, st.v, st.w, st.work)
+
+    def _send(self, entity: str, columns: Any, index: rr.TimeColumn) -> None:
+        self.rec.send_columns(entity, indexes=[index], columns=columns, strict=True)
+        self.calls += 1
+        self.rows += len(index.as_arrow_array())
+
+    def _static(self, entity: str, archetype: Any) -> None:
+        self.rec.log(entity, archetype, static=True, strict=True)
+
+    # -- layout ---------------------------------------------------------------------------
+
+    def _extent(self) -> tuple[np.ndarray, float]:
+        """Centre and size of the region the bodies sweep (3D), for the camera and the walls."""
+        s = _pad3(self.traj.s[:, 0])
+        r = self.model.radius[0][None, :, None]
+        lo, hi = (s - r).min(axis=(0, 1)), (s + r).max(axis=(0, 1))
+        return 0.5 * (lo + hi), float(max(np.max(hi - lo), 4 * self.model.radius.max()))
+
+    def blueprint(self) -> rrb.Blueprint:
+        """3D view (tabs: scene, settings) on the left, plots stacked on the right."""
+        centre, size = self._extent()
+        eye = None
+        if self.model.dim < 3:
+            # A 1D or 2D scene seen from above its plane, x to the right and y up.
+            eye = rrb.EyeControls3D(position=centre + np.array([0.0, 0.0, 1.1 * size]),
+                                    look_target=centre, eye_up=[0.0, 1.0, 0.0])
+        overrides = {f"/world/{b}/trail": rrb.VisibleTimeRanges(
+            timeline=TIMELINE, start=rrb.TimeRangeBoundary.infinite(),
+            end=rrb.TimeRangeBoundary.cursor_relative()) for b in self.model.body_names}
+        world = rrb.Spatial3DView(origin="/world", name="3D", eye_controls=eye, overrides=overrides)
+        left = rrb.Tabs(world, rrb.TextDocumentView(origin="/scene", name="scene"),
+                        rrb.TextDocumentView(origin="/settings", name="settings"), active_tab=0)
+        legend = rrb.PlotLegend(corner=rrb.Corner2D.RightTop)
+        axis = None
+        log = self.result.contacts
+        if log.count[0] > 0 and np.isfinite(log.last_end[0]):
+            # Plots open on the contacts (the interesting part), with as much time either side.
+            start, end = float(log.first_start[0]), float(log.last_end[0])
+            span = max(end - start, 1e-9)
+            axis = rrb.TimeAxis(view_range=rr.TimeRange(
+                start=rr.TimeRangeBoundary.absolute(seconds=max(start - span, 0.0)),
+                end=rr.TimeRangeBoundary.absolute(seconds=min(end + span, float(self.exact.times[-1])))))
+
+        def plot(origin: str, name: str, values: np.ndarray | None = None) -> rrb.TimeSeriesView:
+            return rrb.TimeSeriesView(origin=origin, name=name, plot_legend=legend, axis_x=axis,
+                                      axis_y=None if values is None else _axis_with_zero(values))
+
+        plots = [plot("/energy", "energy (J)")]
+        c = self.conserved
+        motion = [plot("/momentum", "momentum (kg m/s)", c.momentum)]
+        if c.angular_momentum is not None:
+            motion.append(plot("/angular_momentum", "L (kg m²/s)", c.angular_momentum))
+        if self.spin:
+            motion.append(plot("/spin", "spin (rad/s)"))
+        plots.append(rrb.Tabs(*motion, active_tab=0) if len(motion) > 1 else motion[0])
+        if len(self.touched):
+            first = self.contact_names[self.touched[0]]
+            plots.append(rrb.Tabs(plot(f"/contacts/{first}/compression", f"compression {first} (m)"),
+                                  plot("/contacts", "all contacts"), active_tab=0))
+        plots.append(plot("/residuals", "residuals (relative)"))
+        return rrb.Blueprint(rrb.Horizontal(left, rrb.Vertical(*plots), column_shares=[3, 2]),
+                             rrb.TimePanel(timeline=TIMELINE, state="collapsed"), collapse_panels=True)
+
+    # -- the recording --------------------------------------------------------------------
+
+    def write(self, path: Path) -> None:
+        self._prepare()
+        self.rec = rr.RecordingStream(APP_ID, recording_id=uuid.uuid4(), send_properties=False)
+        try:
+            self.rec.save(path, default_blueprint=self.blueprint())
+            self.rec.send_recording_name(self.scene.name)
+            self._write_static()
+            self._write_bodies()
+            self._write_contacts()
+            self._write_conserved()
+            self._write_steps()
+            self._write_meta()  # last: a truncated file has no meta and is refused on reading
+            self.rec.flush()
+        finally:
+            self.rec.disconnect()
+        last_write.frames = len(self.view.times)
+        last_write.exact_frames = len(self.exact.times)
+        last_write.steps = self.traj.n_steps
+        last_write.rows = self.rows
+        last_write.calls = self.calls
+
+    def _write_static(self) -> None:
+        r = self.result
+        self._static("/scene", rr.TextDocument(self.scene.to_toml(), media_type=rr.MediaType.TEXT))
+        lines = ["| setting | value |", "|---|---|",
+                 f"| scene | {self.scene.name} |", f"| dim | {self.model.dim} |",
+                 f"| integrator | {r.integrator} |", f"| dt | {float(r.dt[0]):.6g} s |",
+                 f"| steps | {int(r.steps[0])} |", f"| free-flight jumps | {int(r.jumps[0])} |",
+                 f"| simulated time | {float(r.final.t[0]):.6g} s |",
+                 f"| wall time | {r.wall_time_s:.4g} s |",
+                 f"| frames | {len(self.view.times)} (3D), {len(self.exact.times)} (plots) |",
+                 f"| stride | {self.stride} |", f"| fps (free flight) | {self.fps:g} |",
+                 f"| force arrows | {self.force_scale:.4g} m/N |", f"| collide | {collide_version()} |"]
+        lines += [f"| warning | {w} |" for w in r.warnings]
+        self._static("/settings", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
+        self._static("/world", rr.ViewCoordinates.RIGHT_HAND_Z_UP)
+        if self.model.n_walls:
+            centre, size = self._extent()
+            for k in range(self.model.n_walls):
+                self._static(f"/world/walls/wall{k}", rr.LineStrips3D(
+                    [self._wall_outline(k, centre, size)], colors=[(160, 160, 160)], radii=0.002 * size))
+
+    def _wall_outline(self, k: int, centre: np.ndarray, size: float) -> np.ndarray:
+        """A wall drawn across the region the bodies sweep: a segment (1D, 2D) or a square (3D)."""
+        n = _pad3(self.model.wall_normal[k])
+        p = _pad3(self.model.wall_point[k])
+        foot = centre - np.dot(centre - p, n) * n
+        h = 0.6 * size
+        if self.model.dim < 3:
+            t = np.array([-n[1], n[0], 0.0])
+            return np.stack((foot - h * t, foot + h * t))
+        a = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+        a /= np.linalg.norm(a)
+        b = np.cross(n, a)
+        corners = ((-1, -1), (1, -1), (1, 1), (-1, 1), (-1, -1))
+        return np.stack([foot + h * (i * a + j * b) for i, j in corners])
+
+    def _write_bodies(self) -> None:
+        view, exact = self.view, self.exact
+        centres = _pad3(view.state.s)  # (T, N, 3)
+        for n, name in enumerate(self.model.body_names):
+            r = float(self.model.radius[0, n])
+            color = _PALETTE[n % len(_PALETTE)]
+            entity = f"/world/{name}"
+            self._static(entity, rr.Ellipsoids3D(half_sizes=[[r, r, r]], colors=[color], labels=[name],
+                                                 fill_mode=rr.components.FillMode.MajorWireframe,
+                                                 line_radii=0.02 * r))
+            c = centres[:, n]
+            cols = [*rr.Ellipsoids3D.columns(centers=c)]
+            if self.spin:
+                cols += [*rr.Ellipsoids3D.columns(quaternions=_quaternion_xyzw(view.state.q[:, n]))]
+            self._send(entity, cols, view.index)
+            trail = np.stack((np.concatenate((c[:1], c[:-1])), c), axis=1)  # (T, 2, 3): one segment a frame
+            self._static(f"{entity}/trail", rr.LineStrips3D.from_fields(colors=[color], radii=0.03 * r))
+            self._send(f"{entity}/trail", [_strips_column(trail)], view.index)
+            if not self.spin:
+                continue
+            rim = c + r * _rotate(view.state.q[:, n], np.array([1.0, 0.0, 0.0]))
+            marker = rr.LineStrips3D.from_fields(colors=[(235, 235, 235)], radii=0.04 * r)
+            self._static(f"{entity}/spin", marker)
+            self._send(f"{entity}/spin", [_strips_column(np.stack((c, rim), axis=1))], view.index)
+            names = [name] if self.model.spin_dim == 1 else [f"{name}.{a}" for a in _AXES]
+            self._static(f"/spin/{name}", rr.SeriesLines(names=names))
+            self._send(f"/spin/{name}", rr.Scalars.columns(scalars=exact.state.w[:, n]), exact.index)
+
+    def _contact_bodies(self, c: int) -> list[str]:
+        model = self.model
+        if c < model.n_pairs:
+            return [model.body_names[model.pair_i[c]], model.body_names[model.pair_j[c]]]
+        return [model.body_names[(c - model.n_pairs) % model.n_bodies]]
+
+    def _write_contacts(self) -> None:
+        view, exact = self.view.contacts, self.exact.contacts
+        radius = float(self.model.radius.mean())
+        for c in self.touched:
+            name = self.contact_names[c]
+            bodies = self._contact_bodies(c)
+            on = view.overlap[:, 0, c] > 0
+            lengths = on.astype(np.int32)
+            point = _pad3(view.point[:, 0, c])[on]
+            entity = f"/world/contacts/{name}"
+            self._static(f"{entity}/point", rr.Points3D.from_fields(colors=[(0, 0, 0)], radii=0.05 * radius))
+            points = rr.Points3D.columns(positions=point).partition(lengths)
+            self._send(f"{entity}/point", points, self.view.index)
+            self._arrows(f"{entity}/normal_force", _pad3(view.normal_force[:, 0, c])[on], point, lengths,
+                         len(bodies), (255, 215, 0))
+            if self.friction:
+                self._arrows(f"{entity}/friction_force", _pad3(view.friction_force[:, 0, c])[on], point,
+                             lengths, len(bodies), (255, 64, 160))
+            plot = f"/contacts/{name}"
+            index = self.exact.index
+            self._static(f"{plot}/compression", rr.SeriesLines(names=bodies))
+            compression = exact.compression[:, 0, c, :len(bodies)]
+            self._send(f"{plot}/compression", rr.Scalars.columns(scalars=compression), index)
+            self._send(f"{plot}/overlap", rr.Scalars.columns(scalars=exact.overlap[:, 0, c]), index)
+            normal = np.linalg.norm(exact.normal_force[:, 0, c], axis=-1)
+            self._send(f"{plot}/normal_force", rr.Scalars.columns(scalars=normal), index)
+            if self.friction:
+                friction = np.linalg.norm(exact.friction_force[:, 0, c], axis=-1)
+                self._send(f"{plot}/friction_force", rr.Scalars.columns(scalars=friction), index)
+
+    def _arrows(self, entity: str, force: np.ndarray, point: np.ndarray, lengths: np.ndarray,
+                n_bodies: int, color: tuple[int, int, int]) -> None:
+        """Force on each body of a contact, drawn from the contact point (equal and opposite)."""
+        vec = self.force_scale * force
+        if n_bodies == 2:
+            vec = np.stack((vec, -vec), axis=1).reshape(-1, 3)
+            point = np.repeat(point, 2, axis=0)
+        radius = float(self.model.radius.mean())
+        self._static(entity, rr.Arrows3D.from_fields(colors=[color], radii=0.06 * radius))
+        columns = rr.Arrows3D.columns(origins=point, vectors=vec).partition(lengths * n_bodies)
+        self._send(entity, columns, self.view.index)
+
+    def _write_conserved(self) -> None:
+        model, st, index, c = self.model, self.exact.state, self.exact.index, self.conserved
+        series = {"kinetic": c.kinetic, "rotational": c.rotational if self.spin else None,
+                  "spring": c.spring, "gravitational": c.gravitational, "total": c.total}
+        if self.friction:
+            series["dissipated"] = c.dissipated
+            series["total_plus_dissipated"] = c.balance
+        for key, values in series.items():
+            if values is not None:
+                self._send(f"/energy/{key}", rr.Scalars.columns(scalars=values), index)
+        self._static("/momentum", rr.SeriesLines(names=[f"p.{a}" for a in _AXES[:model.dim]]))
+        self._send("/momentum", rr.Scalars.columns(scalars=c.momentum), index)
+        if c.angular_momentum is not None:
+            names = ["L.z"] if model.dim == 2 else [f"L.{a}" for a in _AXES]
+            self._static("/angular_momentum", rr.SeriesLines(names=names))
+            self._send("/angular_momentum", rr.Scalars.columns(scalars=c.angular_momentum), index)
+        res = _frame_residuals(model, self.result.initial, st)
+        self._send("/residuals/energy", rr.Scalars.columns(scalars=res.energy), index)
+        if not model.n_walls:
+            self._send("/residuals/momentum", rr.Scalars.columns(scalars=res.momentum), index)
+            if model.dim > 1:
+                angular = rr.Scalars.columns(scalars=res.angular_momentum)
+                self._send("/residuals/angular_momentum", angular, index)
+
+    def _write_steps(self) -> None:
+        """Every step, float64, so `read_recording` restores the run exactly."""
+        traj = self.traj
+        n_steps = traj.n_steps
+        arrays = {"step": np.arange(n_steps, dtype=np.int64), "t": traj.t[:, 0], "s": traj.s[:, 0],
+                  "v": traj.v[:, 0], "w": traj.w[:, 0], "q": traj.q[:, 0], "work": traj.work[:, 0],
+                  "free": traj.free[:, 0]}
+        if self.friction:
+            arrays["friction_pair"] = traj.friction_pair[:, 0]
+            arrays["friction_wall"] = traj.friction_wall[:, 0]
+        cols = []
+        for key, a in arrays.items():
+            width = int(np.prod(a.shape[1:]))
+            if width:
+                cols.append(_any_column(key, a.reshape(n_steps * width), width, n_steps))
+        self._send("/collide/steps", cols, rr.TimeColumn(TIMELINE, duration=traj.t[:, 0]))
+
+    def _write_meta(self) -> None:
+        r, run, model = self.result, self.run, self.model
+        meta: dict[str, Any] = {
+            "format": FORMAT, "format_version": FORMAT_VERSION, "collide_version": collide_version(),
+            "scene_name": self.scene.name, "scene_toml": self.scene.to_toml(),
+            "integrator": r.integrator, "dt": float(r.dt[0]), "steps": int(r.steps[0]),
+            "jumps": int(r.jumps[0]), "wall_time_s": float(r.wall_time_s),
+            "dt_request": "none" if run.dt_request is None else str(run.dt_request),
+            "tol": float(run.tol[0]) if run.tol is not None else float("nan"),
+            "rows": int(self.traj.n_steps), "dim": model.dim, "spin_dim": model.spin_dim,
+            "n_bodies": model.n_bodies, "n_walls": model.n_walls, "friction": bool(self.friction),
+            "stride": self.stride, "fps": float(self.fps), "contact_frames": self.contact_frames,
+            "force_scale": float(self.force_scale), "warnings": list(r.warnings) or None,
+        }
+        estimate = getattr(run, "error_estimate", None)
+        if estimate is not None:
+            meta["error_estimate"] = float(np.asarray(estimate).reshape(-1)[0])
+        auto = getattr(run, "auto", None)
+        if auto is not None:
+            meta["auto"] = bool(auto[0])
+        for field in ("first_start", "last_end", "duration", "max_overlap"):
+            meta[f"contact_{field}"] = float(getattr(r.contacts, field)[0])
+        meta["contact_count"] = int(r.contacts.count[0])
+        for label, state in (("initial", r.initial), ("final", r.final)):
+            meta[f"{label}_t"] = float(state.t[0])
+            meta[f"{label}_work"] = float(state.work[0])
+            for key in ("s", "v", "w", "q"):
+                value = getattr(state, key)[0].reshape(-1)
+                if value.size:
+                    meta[f"{label}_{key}"] = value
+        self._static("/collide/meta", rr.AnyValues(**meta))
+
+
+class _Arrow:
+    """A ready Arrow array as a component batch (skips rerun's per-row Python conversion)."""
+
+    def __init__(self, array: pa.Array) -> None:
+        self.array = array
+
+    def as_arrow_array(self) -> pa.Array:
+        return self.array
+
+
+def _rows_of(flat: pa.Array, width: int, rows: int, type_: pa.DataType | None = None) -> pa.ListArray:
+    offsets = pa.array(np.arange(rows + 1, dtype=np.int32) * width)
+    return pa.ListArray.from_arrays(offsets, flat, type=type_)
+
+
+def _any_column(name: str, flat: np.ndarray, width: int, rows: int) -> rr.ComponentColumn:
+    """An AnyValues column of `rows` rows of `width` values each, in the array's dtype (float64)."""
+    column = rr.AnyBatchValue.column(name, _rows_of(pa.array(flat), width, rows))
+    assert column is not None
+    return column
+
+
+def _strips_column(strips: np.ndarray) -> rr.ComponentColumn:
+    """LineStrips3D strips (T, P, 3): one strip of P points per row, built in numpy."""
+    rows, points = strips.shape[:2]
+    inner = Vec3DBatch(strips.reshape(-1, 3).astype(np.float32)).as_arrow_array()
+    array = _rows_of(inner, points, rows, rr.components.LineStrip3DBatch._ARROW_DATATYPE)
+    return rr.ComponentColumn(rr.LineStrips3D.descriptor_strips(), _Arrow(array))
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading
+
+
+def _fail(path: Path, reason: str) -> RecordingError:
+    return RecordingError(f"{path}: {reason}")
+
+
+def _load_chunks(path: Path) -> list:
+    from rerun.chunk import RrdReader
+
+    if not path.exists():
+        raise _fail(path, "no such file")
+    if not path.is_file():
+        raise _fail(path, "not a file")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # rerun warns about damaged files; we raise instead
+            reader = RrdReader(path)
+            if not reader.recordings():
+                raise _fail(path, "not a collide recording (the file holds no Rerun recording)")
+            return list(reader.stream())
+    except RecordingError:
+        raise
+    except Exception as exc:  # rerun raises several kinds for damaged input
+        text = " ".join(str(exc).split()) or type(exc).__name__
+        text = re.sub(r"^Failed to read RRD file at .*?: ", "", text)
+        if "FourCC" in text or "Not an RRD" in text:
+            raise _fail(path, f"not a Rerun recording (.rrd): {text}") from None
+        raise _fail(path, f"damaged or truncated Rerun recording (.rrd): {text}") from None
+
+
+def _columns(chunks: list, entity: str) -> dict[str, list]:
+    """All rows of an entity's components, concatenated over its chunks (as Python lists)."""
+    out: dict[str, list] = {}
+    for chunk in chunks:
+        if chunk.entity_path != entity:
+            continue
+        batch = chunk.to_record_batch()
+        for name in batch.schema.names:
+            if name.startswith("rerun."):
+                continue
+            out.setdefault(name, []).append(batch.column(name))
+    return out
+
+
+def entity_paths(path: str | Path) -> list[str]:
+    """Every entity path in a recording, sorted (what tools search for `friction`, `spin`...)."""
+    chunks = _load_chunks(Path(path))
+    return sorted({c.entity_path for c in chunks if not c.entity_path.startswith("/__")})
+
+
+def _meta(path: Path, chunks: list) -> dict[str, Any]:
+    columns = _columns(chunks, "/collide/meta")
+    if not columns:
+        if any(c.entity_path.startswith("/collide/") for c in chunks):
+            raise _fail(path, "incomplete collide recording (truncated: its settings are missing)")
+        raise _fail(path, "not a collide recording (no /collide/meta entity)")
+    meta: dict[str, Any] = {}
+    for name, arrays in columns.items():
+        values = arrays[-1].to_pylist()[-1]
+        listed = name == "warnings" or re.fullmatch(r"(initial|final)_[svwq]", name)
+        meta[name] = values if listed else values[0]
+    if meta.get("format") != FORMAT:
+        raise _fail(path, "not a collide recording (unknown format)")
+    if int(meta.get("format_version", 0)) > FORMAT_VERSION:
+        raise _fail(path, f"made by a newer collide (format {meta['format_version']}, this one reads "
+                          f"{FORMAT_VERSION}); upgrade collide")
+    return meta
+
+
+def _flat(arrays: list) -> np.ndarray:
+    """Concatenate list-typed arrow columns and flatten them into one numpy array."""
+    chunked = pa.chunked_array(arrays)
+    return np.concatenate([a.flatten().to_numpy(zero_copy_only=False) for a in chunked.chunks]) \
+        if chunked.num_chunks else np.empty(0)
+
+
+def read_recording(path: str | Path) -> SceneRun:
+    """Rebuild the run stored in a recording: scene, model, trajectory, final state and settings.
+
+    Raises `RecordingError` (a `ValueError`) naming the file when it is not an `.rrd`, is
+    truncated, or was not written by collide.
+    """
+    path = Path(path)
+    chunks = _load_chunks(path)
+    meta = _meta(path, chunks)
+    try:
+        return _rebuild(path, chunks, meta)
+    except RecordingError:
+        raise
+    except (KeyError, ValueError, TypeError) as exc:
+        raise _fail(path, f"inconsistent collide recording ({type(exc).__name__}: {exc})") from None
+
+
+def _rebuild(path: Path, chunks: list, meta: dict[str, Any]) -> SceneRun:
+    try:
+        scene = parse_scene(tomllib.loads(meta["scene_toml"]), meta["scene_name"])
+    except (SceneError, tomllib.TOMLDecodeError) as exc:
+        raise _fail(path, f"its stored scene is invalid: {exc}") from None
+    model, _ = compile_scenes([scene])
+    rows = int(meta["rows"])
+    n, d = model.n_bodies, model.dim
+    k, q_dim = model.spin_dim, model.orient_dim
+    steps = _columns(chunks, "/collide/steps")
+
+    def column(name: str, width: int, dtype: Any = float) -> np.ndarray:
+        if width == 0:
+            return np.zeros((rows, 0), dtype=dtype)
+        if name not in steps:
+            raise _fail(path, f"incomplete collide recording (step column '{name}' is missing)")
+        flat = _flat(steps[name])
+        if flat.size != rows * width:
+            raise _fail(path, f"incomplete collide recording (step column '{name}' has "
+                              f"{flat.size // max(width, 1)} of {rows} rows)")
+        return flat.reshape(rows, width).astype(dtype, copy=False)
+
+    order = np.argsort(column("step", 1, np.int64)[:, 0], kind="stable")
+
+    def get(name: str, shape: tuple[int, ...], dtype: Any = float) -> np.ndarray:
+        width = int(np.prod(shape))
+        return column(name, width, dtype)[order].reshape(rows, 1, *shape)
+
+    friction = bool(meta.get("friction")) and model.friction
+    traj = Trajectory(
+        t=column("t", 1)[order],
+        s=get("s", (n, d)), v=get("v", (n, d)), w=get("w", (n, k)), q=get("q", (n, q_dim)),
+        work=column("work", 1)[order], free=column("free", 1, bool)[order],
+        friction_pair=get("friction_pair", (model.n_pairs, d)) if friction else None,
+        friction_wall=get("friction_wall", (model.n_walls, n, d)) if friction else None,
+    )
+
+    def state(label: str) -> State:
+        def vec(key: str, width: int) -> np.ndarray:
+            if width == 0:
+                return np.zeros((1, n, 0))
+            return np.asarray(meta[f"{label}_{key}"], dtype=float).reshape(1, n, width)
+        return State(np.array([meta[f"{label}_t"]], float), vec("s", d), vec("v", d), vec("w", k),
+                     vec("q", q_dim), np.array([meta[f"{label}_work"]], float))
+
+    log = ContactLog(*(np.array([meta[f"contact_{f}"]], float) for f in
+                       ("first_start", "last_end", "duration", "max_overlap")),
+                     np.array([meta["contact_count"]], np.int64))
+    result = RunResult(model=model, initial=state("initial"), final=state("final"),
+                       integrator=str(meta["integrator"]), dt=np.array([meta["dt"]], float),
+                       steps=np.array([meta["steps"]], np.int64),
+                       jumps=np.array([meta["jumps"]], np.int64),
+                       wall_time_s=float(meta["wall_time_s"]), contacts=log, trajectory=traj,
+                       warnings=[str(w) for w in (meta.get("warnings") or [])])
+    request = meta.get("dt_request", "none")
+    dt_request: float | str | None = None if request == "none" else \
+        ("auto" if request == "auto" else float(request))
+    tol = float(meta["tol"])
+    run = SceneRun([scene], result, dt_request, None if math.isnan(tol) else [tol])
+    if "error_estimate" in meta and hasattr(run, "error_estimate"):
+        run.error_estimate = np.array([float(meta["error_estimate"])])
+    if "auto" in meta and hasattr(run, "auto"):
+        run.auto = [bool(meta["auto"])]
+    return run

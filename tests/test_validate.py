@@ -1,0 +1,152 @@
+"""Validation tables: textbook residuals, rigid cross-check, softness against k, and the CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import typer
+from typer.testing import CliRunner
+
+from cli import numerics
+from collide import rigid
+from collide import validate as v
+from collide.scene import builtin_text, load_scene, parse_scene
+
+
+@pytest.fixture(scope="module")
+def textbook() -> list[v.TextbookRow]:
+    return v.textbook_table()
+
+
+def test_textbook_residuals_against_exact_values_are_within_tolerance(textbook: list[v.TextbookRow]) -> None:
+    assert [r.figure for r in textbook] == ["Fig 3"] * 2 + ["Fig 4"] * 2 + ["Fig 5"] * 2 + ["Fig 6"]
+    for row in textbook:
+        assert row.residual_exact_pct == pytest.approx(100 * abs(row.simulated - row.exact) / row.exact)
+        assert row.residual_exact_pct <= row.tolerance_pct, row
+        assert row.passed
+    # The tolerances are tight enough to mean something: below the report's own residuals.
+    assert max(r.tolerance_pct for r in textbook) < 1.0
+    # 1D: a linear spring collision is exactly elastic for any k.
+    assert all(r.residual_exact_pct < 1e-6 for r in textbook if r.scene == "textbook-1d")
+
+
+def test_textbook_exact_values_are_design_numbers(textbook: list[v.TextbookRow]) -> None:
+    exact = [r.exact for r in textbook]
+    assert exact == pytest.approx([0.66, 1.86, 3.993178, 3.009075, math.sqrt(2), math.sqrt(6) / 3, 54.7356],
+                                  rel=1e-6)
+    printed = [r.printed for r in textbook]
+    assert printed == [0.66, 1.86, 4.00, 3.01, 1.4142, 0.8165, 54.7]
+
+
+def test_exit_angle_is_measured_from_the_y_axis() -> None:
+    assert v.exit_angle_deg(np.array([-2 / 3, -math.sqrt(2) / 3])) == pytest.approx(54.7356, abs=1e-4)
+    assert v.exit_angle_deg(np.array([0.0, 1.0])) == 0.0
+
+
+def test_a_wrong_simulator_value_fails_the_textbook_table() -> None:
+    # Feed a velocity 1 % off: the row must fail against its tolerance.
+    finals = {"textbook-1d": np.array([[0.66 * 1.01], [1.86]])}
+    rows = v.textbook_table(["textbook-1d"], finals=finals)
+    assert [r.passed for r in rows] == [False, True]
+
+
+def test_cross_check_with_friction_separates_discretisation_from_softness() -> None:
+    check = v.cross_check(load_scene("demo-bonus"))
+    assert check.regime == rigid.STICKING and check.converged and check.passed
+    quantities = [r.quantity for r in check.rows]
+    assert quantities == ["ball1.velocity", "ball1.spin", "ball2.velocity", "ball2.spin"]
+    for row in check.rows:
+        assert row.discretisation < row.discretisation_tol
+        assert row.softness < row.softness_tol
+    # At k = 1500 the soft balls are far from rigid; the stepper is far more accurate than that.
+    assert max(r.softness for r in check.rows) > 100 * max(r.discretisation for r in check.rows)
+
+
+def test_cross_check_sphere_on_wall_3d_rolls_like_the_rigid_limit() -> None:
+    scene = parse_scene({"dim": 3, "dt": 4e-6, "contact": {"k": 1.5e6, "mu": 0.8, "eps": 1e-6},
+                         "body": [{"name": "ball", "mass": 0.0254, "radius": 0.03021, "position": [0, 0.1, 0],
+                                   "velocity": [1.0, -2.0, 0.5], "spin": [1.0, 2.0, 3.0]}],
+                         "wall": [{"point": [0, 0, 0], "normal": [0, 1, 0]}]})
+    check = v.cross_check(scene)
+    assert check.regime == rigid.STICKING and check.passed
+    rigid_v = np.array(check.rows[0].rigid)
+    assert rigid_v[1] == pytest.approx(2.0)  # elastic bounce
+    assert np.array(check.rows[0].simulated) == pytest.approx(rigid_v, abs=2e-3)
+
+
+def test_tight_tolerance_fails_without_grinding() -> None:
+    # The ladder (kahan6) stalls at round-off: a 1e-13 target (changes below 1e-14) is out of reach.
+    check = v.cross_check(load_scene("demo-bonus", ["dt=4e-5", "integrator=verlet"]), tol=1e-13)
+    assert not check.passed and not check.converged
+    # After dt/4 the observed order shows that 1e-14 is out of reach in the halvings left: stop.
+    assert len(check.ladder_dt) == 3
+    first, second = check.ladder_change
+    assert first > second > 1e-14
+    assert math.log(second / 1e-14) / math.log(first / second) > v.MAX_HALVINGS - 2
+
+
+def test_coarse_step_fails_on_discretisation() -> None:
+    check = v.cross_check(load_scene("demo-2d-stationary", ["integrator=verlet", "dt=2e-3"]))
+    assert check.converged and not check.passed
+    assert all(r.discretisation > r.discretisation_tol for r in check.rows)
+    assert all(r.softness < r.softness_tol for r in check.rows)
+
+
+def test_softness_shrinks_as_inverse_root_k() -> None:
+    scan = v.softness_scan("textbook-glancing")
+    soft = [p.softness for p in scan.points]
+    assert soft[0] > soft[1] > soft[2]
+    assert scan.exponent == pytest.approx(-0.5, abs=0.01)
+    assert all(p.softness <= p.estimate for p in scan.points)
+    assert scan.passed
+
+
+def _app() -> typer.Typer:
+    app = typer.Typer()
+    numerics.register(app)
+
+    @app.command()
+    def noop() -> None:
+        """Keep typer in multi-command mode."""
+
+    return app
+
+
+def test_cli_validate_json_and_exit_codes(tmp_path: Path) -> None:
+    runner = CliRunner()
+    ok = runner.invoke(_app(), ["validate", "--scene", "textbook-unequal", "--json", "--no-scan"])
+    assert ok.exit_code == 0, ok.output
+    data = json.loads(ok.stdout)
+    assert data["passed"] is True and len(data["textbook"]) == 3 and data["cross_check"][0]["converged"]
+    text = runner.invoke(_app(), ["validate", "--scene", "textbook-1d", "--no-scan"])
+    assert text.exit_code == 0 and "Fig 3" in text.stdout and "PASS" in text.stdout
+    coarse = tmp_path / "coarse.toml"
+    text = builtin_text("demo-2d-stationary")
+    assert 'dt = "auto"' in text and 'integrator = "kahan6"' in text
+    coarse_text = text.replace('dt = "auto"', "dt = 2e-3").replace('integrator = "kahan6"', 'integrator = "verlet"')
+    coarse.write_text(coarse_text)
+    failing = runner.invoke(_app(), ["validate", "--scene", str(coarse), "--no-scan"])
+    assert failing.exit_code == 1 and "FAIL" in failing.stdout
+
+
+def test_cli_validate_bad_input_is_one_line_and_exit_2() -> None:
+    result = CliRunner().invoke(_app(), ["validate", "--scene", "no-such-scene"])
+    assert result.exit_code == 2
+    assert result.stderr.startswith("error: ") and result.stderr.count("\n") == 1
+    assert "Traceback" not in result.output
+    help_text = CliRunner().invoke(_app(), ["validate", "--help"])
+    assert help_text.exit_code == 0 and "Example" in help_text.stdout
+
+
+def test_head_on_soft_collision_is_already_rigid() -> None:
+    # v_t = 0: the linear spring gives the rigid answer for every k, and the bound says so.
+    scene = load_scene("demo-2d-stationary", ["body.ball1.position=[0.0, 0.0]"])
+    assert rigid.softness_estimate(scene) == 0.0
+    check = v.cross_check(scene)
+    assert check.passed and max(r.softness for r in check.rows) < 1e-9
+    scan = v.softness_scan(scene)
+    assert scan.passed and math.isnan(scan.exponent)
