@@ -77,9 +77,12 @@ def auto_dt(scenes: list[Scene], integrator: str, tol: np.ndarray) -> tuple[np.n
     steps = np.pi / omega_h
     if (steps > MAX_AUTO_STEPS_PER_CONTACT).any():
         b = int(np.argmax(steps))
+        advice = "use a looser --tol (about 1e-12 is reachable)" if integrator == "kahan6" else \
+            "use --integrator kahan6, a looser --tol, or give a step with --dt"
+        if integrator == "seed":
+            advice = "give the seed integrator a step with --dt (the report's steps are in the README)"
         raise RunError(f"--tol {tol[b]:.3g} would need about {steps[b]:.2g} steps per contact with "
-                       f"'{integrator}' (order {INTEGRATORS[integrator].order}); use a higher-order integrator "
-                       "(kahan6) or a looser --tol")
+                       f"'{integrator}' (order {INTEGRATORS[integrator].order}); {advice}")
     return omega_h / omega, predicted_error(integrator, friction, omega_h)
 
 
@@ -98,6 +101,8 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     for scene in scenes:
         step = scene.dt if dt is None else dt
         steps.append(step)
+    if tol is not None and not (np.isfinite(tol) and tol > 0):
+        raise SceneError(f"--tol must be a positive number, got {tol!r}")
     tols = np.array([scene.tol if tol is None else tol for scene in scenes])
     if any(step == "auto" for step in steps):
         auto, _ = auto_dt(scenes, integ, tols)
