@@ -1,0 +1,416 @@
+"""The viewer's pure-Python layer: controls, clamping, frames, plots, files, worker, replay."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from collide import diagnostics as dg
+from collide.run import run_scene
+from collide.scene import SceneError, load_scene, parse_scene
+from collide.stepper import RunError
+from viewer import ensemble as ens
+from viewer import files
+from viewer.geometry import compressed_sphere, fit_camera, orientation_wxyz, quat_from_to
+from viewer.params import Settings, build_scene, check_settings, parse_dt_choice, scene_controls, values_of
+from viewer.plots import CURSOR_OFF, display_scale, with_cursor, y_range
+from viewer.state import ViewRun
+from viewer.worker import LatestWorker
+
+
+@pytest.fixture(scope="module")
+def bonus_view() -> ViewRun:
+    return ViewRun(run_scene(load_scene("demo-bonus"), integrator="verlet", dt="auto", tol=1e-5))
+
+
+def _scene_3d():
+    raw = {"dim": 3, "contact": {"k": 2000.0, "mu": 0.3},
+           "body": [{"name": "a", "mass": 0.1, "radius": 0.02, "position": [0, 0, 0], "velocity": [1, 0, 0],
+                     "spin": [0, 0, 5]},
+                    {"name": "b", "mass": 0.1, "radius": 0.02, "position": [0.2, 0.01, 0.005]}]}
+    return parse_scene(raw, "three-d")
+
+
+# ---------------------------------------------------------------------------------------------
+# Controls
+
+
+def test_controls_1d_have_no_spin_or_friction():
+    controls = scene_controls(load_scene("demo-1d"))
+    idents = {p.ident for p in controls.params}
+    assert "contact.k" in idents and "body.ball1.mass" in idents and "body.ball1.velocity.x" in idents
+    assert not any("spin" in i or "mu" in i or "eps" in i for i in idents)
+
+
+def test_controls_2d_bonus_have_everything():
+    controls = scene_controls(load_scene("demo-bonus"))
+    idents = [p.ident for p in controls.params]
+    for body in ("ball1", "ball2"):
+        for key in ("mass", "radius", "position.x", "position.y", "velocity.x", "velocity.y", "spin"):
+            assert f"body.{body}.{key}" in idents
+    assert {"contact.k", "contact.mu", "contact.eps"} <= set(idents)
+    for p in controls.params:
+        assert p.lo <= p.value <= p.hi, p
+        assert p.step > 0
+
+
+def test_controls_3d_spin_is_a_vector():
+    idents = {p.ident for p in scene_controls(_scene_3d()).params}
+    assert {"body.a.spin.x", "body.a.spin.y", "body.a.spin.z", "body.b.position.z"} <= idents
+
+
+def test_defaults_rebuild_the_same_scene():
+    scene = load_scene("demo-bonus")
+    controls = scene_controls(scene)
+    rebuilt, notes = build_scene(controls, controls.defaults(), controls.settings)
+    assert notes == []
+    assert rebuilt.bodies == scene.bodies and rebuilt.contact == scene.contact
+    assert values_of(rebuilt, controls) == pytest.approx(controls.defaults())
+
+
+def test_slider_values_reach_the_scene_in_si_units():
+    controls = scene_controls(load_scene("demo-bonus"))
+    values = controls.defaults() | {"contact.k": 3000.0, "body.ball1.mass": 30.0, "body.ball1.position.y": 5.0,
+                                    "body.ball2.spin": -2.0}
+    scene, _ = build_scene(controls, values, controls.settings)
+    assert scene.contact.k == 3000.0
+    assert scene.bodies[0].mass == pytest.approx(0.030)
+    assert scene.bodies[0].position[1] == pytest.approx(0.005)
+    assert scene.bodies[1].spin == (-2.0,)
+
+
+def test_out_of_range_values_are_clamped_with_a_message():
+    controls = scene_controls(load_scene("demo-bonus"))
+    k = controls.by_ident()["contact.k"]
+    value, note = k.clamp(1e9)
+    assert value == k.hi and "clamped" in note
+    assert k.clamp(float("nan"))[0] == k.value
+    scene, notes = build_scene(controls, controls.defaults() | {"contact.k": -5.0}, controls.settings)
+    assert scene.contact.k == k.lo > 0
+    assert len(notes) == 1 and "contact.k" not in notes[0] and "k = -5" in notes[0]
+
+
+def test_overlap_at_start_is_a_scene_error():
+    controls = scene_controls(load_scene("demo-bonus"))
+    with pytest.raises(SceneError, match="overlaps"):
+        build_scene(controls, controls.defaults() | {"body.ball1.position.x": 480.0}, controls.settings)
+
+
+def test_too_soft_contact_is_a_run_error():
+    scene = load_scene("demo-bonus", ["contact.k=10", "body.ball1.velocity=[5,0]"])
+    with pytest.raises(RunError, match="too soft"):
+        run_scene(scene)
+
+
+def test_settings_are_checked():
+    assert parse_dt_choice("auto") == "auto"
+    assert parse_dt_choice("2e-5 s") == 2e-5
+    assert check_settings("seed", 1e-5, 1e-6) == Settings("seed", 1e-5, 1e-6)
+    with pytest.raises(SceneError):
+        check_settings("euler", 1e-5, 1e-6)
+    with pytest.raises(SceneError):
+        check_settings("verlet", 1.0, 1e-6)
+
+
+# ---------------------------------------------------------------------------------------------
+# What to draw at time t
+
+
+def test_frame_positions_follow_the_trajectory(bonus_view):
+    v = bonus_view
+    # At every step: the step's own state.
+    for k in range(0, v.traj.t.shape[0], 7):
+        f = v.frame(float(v.traj.t[k, 0]))
+        assert np.allclose(f.positions[:, :2], v.traj.s[k, 0], rtol=0, atol=1e-15)
+        assert np.allclose(f.positions[:, 2], 0.0)
+    # In free flight: the closed form (diagnostics.sample).
+    a, b = v.contact_windows[0]
+    for t in np.concatenate((np.linspace(v.t0, a, 5), np.linspace(b, v.t1, 5))):
+        expected = dg.sample(v.model, v.traj, np.array([t])).s[0, 0]
+        assert np.allclose(v.frame(t).positions[:, :2], expected, rtol=0, atol=1e-15)
+
+
+def test_between_steps_the_energy_stays_balanced():
+    """Inside a contact step, positions and velocities come from a quintic Hermite: the energy
+    plotted between steps keeps the balance the steps keep (a cubic-and-linear one wobbles)."""
+    v = ViewRun(run_scene(load_scene("demo-1d"), integrator="verlet", dt="auto", tol=1e-6))
+    total = v.plots.energy.lines["total"]
+    assert np.ptp(total) < 1e-4 * total[0]
+    a, b = v.contact_windows[0]
+    inside = (v.times > a) & (v.times < b)
+    assert inside.sum() > 50 and v.plots.energy.lines["spring"][inside].max() > 0.5 * total[0]
+
+
+def test_frame_in_contact_has_forces_and_compression(bonus_view):
+    v = bonus_view
+    a, b = v.contact_windows[0]
+    f = v.frame(a + 0.1 * (b - a))
+    assert len(f.contacts) == 1
+    c = f.contacts[0]
+    assert c.name == "ball1-ball2" and c.overlap > 0 and c.compression[0] == pytest.approx(c.overlap / 2)
+    assert np.linalg.norm(c.friction_force) > 0
+    # The normal force on ball1 points away from ball2; friction is tangential.
+    assert np.dot(c.normal_force, c.normal) < 0
+    # (the friction of the step containing t, against the normal at t: equal to the step's rotation)
+    assert abs(np.dot(c.friction_force, c.normal)) < 1e-3 * np.linalg.norm(c.friction_force)
+    assert v.frame(v.t0).contacts == [] and v.frame(v.t1).contacts == []
+
+
+def test_spin_turns_the_marker(bonus_view):
+    v = bonus_view
+    q0, q1 = v.frame(v.t0).wxyz, v.frame(v.t0 + 0.1).wxyz
+    assert np.allclose(np.linalg.norm(q1, axis=1), 1.0)
+    # ball1 spins at +3 rad/s about z: 0.3 rad in 0.1 s of free flight.
+    angle = 2 * np.arctan2(q1[0, 3], q1[0, 0]) - 2 * np.arctan2(q0[0, 3], q0[0, 0])
+    assert angle == pytest.approx(0.3, rel=1e-9)
+
+
+def test_1d_scene_has_no_spin_or_friction():
+    v = ViewRun(run_scene(load_scene("demo-1d"), dt="auto", tol=1e-3))
+    a, b = v.contact_windows[0]
+    c = v.frame(0.5 * (a + b)).contacts[0]
+    assert c.friction_force is None
+    assert np.allclose(v.frame(a).wxyz, [1, 0, 0, 0])
+    assert v.plots.angular_momentum is None
+    assert "rotational" not in v.plots.energy.lines and "dissipated" not in v.plots.energy.lines
+    assert v.status_lines()[1].endswith("angular momentum n/a")
+
+
+def test_plots_hold_the_conserved_quantities(bonus_view):
+    p = bonus_view.plots
+    assert list(p.energy.lines) == ["kinetic", "rotational", "spring", "total", "dissipated",
+                                    "total + dissipated"]
+    balance = p.energy.lines["total + dissipated"]
+    assert np.ptp(balance) < 2e-3 * balance[0]
+    assert list(p.momentum.lines) == ["px", "py"] and list(p.angular_momentum.lines) == ["Lz"]
+    assert list(p.compression.lines) == ["ball1-ball2"]
+    assert p.compression.lines["ball1-ball2"].max() == pytest.approx(6.05, rel=0.02)  # mm
+    assert np.all(np.diff(p.times) > 0)
+    # Half the plot points resolve the 13 ms contact.
+    a, b = bonus_view.contact_windows[0]
+    assert np.sum((p.times >= a) & (p.times <= b)) > 100
+
+
+def test_conserved_quantities_stay_flat_between_coarse_steps():
+    """At the scene's own settings (few, large steps) the plots show no interpolation spikes."""
+    v = ViewRun(run_scene(load_scene("demo-bonus")))
+    lz = v.plots.angular_momentum.lines["Lz"]
+    assert np.ptp(lz) < 1e-9 * abs(lz[0])
+    p = v.plots.momentum.lines
+    assert np.ptp(p["px"]) < 1e-9 * abs(p["px"][0]) and np.ptp(p["py"]) < 1e-12
+    balance = v.plots.energy.lines["total + dissipated"]
+    assert np.ptp(balance) < 5e-3 * balance[0]
+
+
+def test_3d_scene_frames():
+    v = ViewRun(run_scene(_scene_3d(), dt="auto", tol=1e-3))
+    assert v.frame(v.t1).wxyz.shape == (2, 4)
+    assert list(v.plots.angular_momentum.lines) == ["Lx", "Ly", "Lz"]
+    lo, hi = v.bounds()
+    assert hi[2] > lo[2]
+
+
+# ---------------------------------------------------------------------------------------------
+# Replay
+
+
+def test_replay_shows_the_same_positions_at_the_same_times(tmp_path):
+    from collide.recording import read_recording, write_recording
+
+    run = run_scene(load_scene("demo-bonus"))
+    path = write_recording(run, tmp_path / "bonus.rrd")
+    live, replay = ViewRun(run), ViewRun(read_recording(path))
+    assert (replay.t0, replay.t1) == (live.t0, live.t1)
+    a, b = live.contact_windows[0]
+    for t in np.concatenate((np.linspace(live.t0, live.t1, 25), np.linspace(a, b, 25))):
+        f, g = live.frame(t), replay.frame(t)
+        assert np.array_equal(f.positions, g.positions)
+        assert np.array_equal(f.wxyz, g.wxyz)
+        assert len(f.contacts) == len(g.contacts)
+        for c, d in zip(f.contacts, g.contacts):
+            assert np.array_equal(c.friction_force, d.friction_force)
+    assert replay.residuals == pytest.approx(live.residuals, nan_ok=True)
+
+
+def test_unreadable_recording_raises_recording_error(tmp_path):
+    from collide.recording import RecordingError, read_recording
+
+    bad = tmp_path / "bad.rrd"
+    bad.write_bytes(b"this is not a recording")
+    with pytest.raises(RecordingError):
+        read_recording(bad)
+
+
+# ---------------------------------------------------------------------------------------------
+# Files
+
+
+def test_safe_names_stay_inside_the_folder(tmp_path):
+    assert files.safe_stem("../../etc/passwd.rrd") == "passwd"
+    assert files.safe_stem("my run (1).rrd") == "my-run-1"
+    assert files.safe_stem("..rrd") == "run"
+    assert files.safe_stem("C:\\evil\\x.rrd") == "x"
+    p = files.unique_path(tmp_path, "../up")
+    assert p.parent == tmp_path.resolve() and p.name == "up.rrd"
+    p.write_bytes(b"x")
+    assert files.unique_path(tmp_path, "up").name == "up-2.rrd"
+    with pytest.raises(files.UploadError):
+        files.recording_path(tmp_path, "notes.txt")
+    assert files.recording_path(tmp_path, "../../x.rrd").parent == tmp_path.resolve()
+
+
+def test_uploads_are_checked():
+    files.check_upload("a.rrd", 10)
+    files.check_upload("A.RRD", 10)
+    for name, size, match in (("a.txt", 10, "not a .rrd"), ("a.rrd", 0, "empty"), ("a.rrd", 11, "limit")):
+        with pytest.raises(files.UploadError, match=match):
+            files.check_upload(name, size, limit=10)
+
+
+def test_recordings_list_and_scene_choices(tmp_path):
+    (tmp_path / "a.rrd").write_bytes(b"x")
+    (tmp_path / ".hidden.rrd").write_bytes(b"x")
+    (tmp_path / "b.txt").write_bytes(b"x")
+    assert files.list_recordings(tmp_path) == ["a.rrd"]
+    assert files.list_recordings(tmp_path / "missing") == []
+    (tmp_path / "mine.toml").write_text(load_scene("demo-1d").to_toml())
+    labels = [c.label for c in files.scene_choices(tmp_path)]
+    assert labels[0] == "demo-1d" and labels[-1] == "mine.toml"
+
+
+# ---------------------------------------------------------------------------------------------
+# Worker: the latest request wins, a preview is followed by a final pass
+
+
+def test_worker_drops_stale_requests():
+    seen: list[tuple[int, bool]] = []
+
+    def job(item: int, final: bool) -> bool:
+        time.sleep(0.05)
+        seen.append((item, final))
+        return False
+
+    worker = LatestWorker(job, settle=0.05)
+    for i in range(20):
+        worker.submit(i)
+        time.sleep(0.005)
+    assert worker.wait_idle(5)
+    worker.close()
+    items = [i for i, _ in seen]
+    assert items[-1] == 19 and len(items) < 8
+    assert items == sorted(items)
+
+
+def test_worker_runs_the_final_pass_after_the_user_stops():
+    seen: list[tuple[int, bool]] = []
+
+    def job(item: int, final: bool) -> bool:
+        seen.append((item, final))
+        return not final  # every first pass is a preview
+
+    worker = LatestWorker(job, settle=0.15)
+    worker.submit(1)
+    time.sleep(0.05)
+    worker.submit(2)  # arrives during the settle time: no final pass for 1
+    assert worker.wait_idle(5)
+    worker.close()
+    assert seen == [(1, False), (2, False), (2, True)]
+
+
+def test_worker_survives_errors():
+    errors: list[BaseException] = []
+    done = threading.Event()
+
+    def job(item: int, final: bool) -> bool:
+        if item == 0:
+            raise RuntimeError("boom")
+        done.set()
+        return False
+
+    worker = LatestWorker(job, on_error=errors.append)
+    worker.submit(0)
+    assert worker.wait_idle(5)
+    worker.submit(1)
+    assert done.wait(5)
+    worker.close()
+    assert str(errors[0]) == "boom"
+
+
+# ---------------------------------------------------------------------------------------------
+# Plots, geometry, ensembles
+
+
+def test_cursor_rows_in_plot_data():
+    times = np.linspace(0, 1, 11)
+    data = with_cursor(times, {"a": times * 2}, 0.35)
+    x, a, cursor = data
+    assert len(x) == 13 and np.all(np.diff(x) >= 0)
+    k = int(np.argmax(cursor > CURSOR_OFF))
+    assert x[k] == x[k + 1] == 0.35 and cursor[k] == 0 and cursor[k + 1] == 1
+    assert a[k] == pytest.approx(0.7)
+    assert np.all(np.isfinite(np.concatenate(data)))
+
+
+def test_plot_scales():
+    assert display_scale({"L": np.array([-2.7e-4, -2.7e-4])}, "kg m^2/s") == (1e6, "1e-6 kg m^2/s")
+    assert display_scale({"E": np.array([0.0, 0.063])}, "J") == pytest.approx((1e3, "mJ"))
+    lo, hi = y_range({"p": np.array([-0.0254, -0.0254 + 1e-17])})
+    assert hi - lo > 1e-3  # round-off is not magnified into a spike
+
+
+def test_compressed_sphere_is_flat_at_the_contact():
+    n = np.array([1.0, 0.0, 0.0])
+    v = compressed_sphere(0.03, [(n, 0.005)])
+    assert (v @ n).max() == pytest.approx(0.025)
+    assert (v @ -n).max() == pytest.approx(0.03, rel=1e-3)
+
+
+def test_orientations_and_camera():
+    assert np.allclose(orientation_wxyz(np.zeros((2, 0))), [[1, 0, 0, 0]] * 2)
+    q = orientation_wxyz(np.array([np.pi]))
+    assert np.allclose(q, [0, 0, 0, 1], atol=1e-12)
+    r = quat_from_to(np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
+    assert np.allclose(r, [np.sqrt(0.5), 0, 0, np.sqrt(0.5)])
+    fit = fit_camera(np.array([0, -0.1, -0.03]), np.array([0.5, 0.1, 0.03]), planar=True, aspect=1.0)
+    pos, look = np.array(fit.position), np.array(fit.look_at)
+    assert look == pytest.approx([0.25, 0, 0]) and pos[2] > 0.5  # looking down from above
+
+
+def test_ensemble_spreads_k_and_offset():
+    scene = load_scene("demo-bonus")
+    ks = [s.contact.k for s in ens.ensemble_scenes(scene, "k", 2.0, 5)]
+    assert ks == pytest.approx([1470, 1485, 1500, 1515, 1530])
+    ys = [s.bodies[0].position[1] for s in ens.ensemble_scenes(scene, "offset", 1.0, 3)]
+    assert ys == pytest.approx([0.009, 0.010, 0.011])
+    assert ens.kinds_for(load_scene("demo-1d")) == ["k", "speed"]
+    paths, wall = ens.ensemble_paths(ens.ensemble_scenes(scene, "offset", 2.0, 3), dt="auto", tol=1e-3)
+    assert len(paths) == 3 and paths[0].shape[0] == 2 and wall > 0
+    # Different impact parameters send ball2 off at different angles.
+    assert abs(paths[0][1, -1, 1] - paths[2][1, -1, 1]) > 1e-3
+
+
+# ---------------------------------------------------------------------------------------------
+# Command line: a file or scene that cannot be read is one line and a non-zero exit
+
+
+@pytest.mark.parametrize("make, expected", [
+    (lambda d: d / "bad.rrd", "Rerun recording"),
+    (lambda d: d / "missing.rrd", "does not exist"),
+    (lambda d: "no-such-scene", "unknown scene"),
+])
+def test_view_refuses_unreadable_input(tmp_path, make, expected):
+    import subprocess
+    import sys
+
+    (tmp_path / "bad.rrd").write_bytes(b"garbage")
+    root = Path(__file__).resolve().parent.parent
+    proc = subprocess.run([sys.executable, "-m", "cli.main", "view", str(make(tmp_path)), "--port", "0"],
+                          cwd=root, capture_output=True, text=True, timeout=60)
+    assert proc.returncode != 0
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and expected in lines[0]
+    assert proc.stdout == ""

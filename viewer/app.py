@@ -1,0 +1,152 @@
+"""`collide view`: a viser web app for live parameter scrubbing and replaying recordings.
+
+    from viewer.app import ViewerApp
+    app = ViewerApp("demo-bonus", port=8080)   # or a .toml path, or a .rrd recording
+    app.start()                               # binds 127.0.0.1 unless host= says otherwise
+    print(app.url)
+    app.serve_forever()                       # until Ctrl+C
+
+Each browser tab gets its own `Session` (controls, 3D scene, plots, timeline, worker); the
+first scene's run is computed once at start and shared. A scene or recording given at start
+that cannot be read raises (`SceneError`, `RunError`, `RecordingError`) before the server
+starts, so the CLI can turn it into a one-line error.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import threading
+import time
+from pathlib import Path
+
+import viser
+
+from collide.run import SceneRun, run_scene
+from collide.scene import Scene, load_scene
+from viewer import files
+from viewer.session import Session
+from viewer.state import ViewRun
+
+
+class ViewerApp:
+    """The viewer server: one viser server, one `Session` per connected tab."""
+
+    def __init__(self, initial: str | Path | None = None, *, host: str = "127.0.0.1", port: int = 8080,
+                 recordings_dir: str | Path = "recordings", scenes_dir: str | Path | None = None,
+                 max_upload_bytes: int = files.MAX_UPLOAD_BYTES) -> None:
+        self.initial = str(initial) if initial is not None else "demo-bonus"
+        self.host = host
+        self.port = port
+        self.recordings_dir = Path(recordings_dir)
+        self.scenes_dir = Path(scenes_dir) if scenes_dir is not None else None
+        self.max_upload_bytes = max_upload_bytes
+        self.server: viser.ViserServer | None = None
+        self.sessions: dict[int, Session] = {}
+        self._sessions_lock = threading.Lock()
+        self._session_added = threading.Condition(self._sessions_lock)
+        self.initial_scene: Scene | None = None
+        self.initial_run: SceneRun | None = None
+        self.initial_view: ViewRun | None = None
+        self.initial_recording: str | None = None
+        self.initial_cost: float | None = None  # s: wall time of the initial run
+        self.scene_choices: list[files.SceneChoice] = []
+        self.initial_label = ""
+
+    # ------------------------------------------------------------------------------------------
+
+    def prepare(self) -> None:
+        """Read the initial scene or recording and run it once (raises on a bad one)."""
+        source = self.initial
+        extra = []
+        if source.lower().endswith(".rrd"):
+            from collide.recording import read_recording
+
+            path = Path(source)
+            run = read_recording(path)
+            self.initial_recording = path.name
+            self.initial_view = ViewRun(run, origin=f"recording {path.name}")
+            self.initial_scene = run.scene
+        else:
+            scene = load_scene(source)
+            run = run_scene(scene, record=True)
+            self.initial_scene = scene
+            self.initial_view = ViewRun(run, origin=scene.name)
+            if source.endswith(".toml"):
+                extra.append(source)
+        self.initial_run = run
+        self.initial_cost = run.result.wall_time_s
+        self.scene_choices = files.scene_choices(self.scenes_dir, extra)
+        for choice in self.scene_choices:
+            if choice.source == source:
+                self.initial_label = choice.label
+        if not self.initial_label:
+            self.initial_label = self.scene_choices[0].label
+
+    def start(self) -> None:
+        """Prepare the initial run and start serving (non-blocking)."""
+        if self.initial_view is None:
+            self.prepare()
+        # viser prints its own banner; the CLI prints the URL itself.
+        with contextlib.redirect_stdout(io.StringIO()):
+            server = viser.ViserServer(host=self.host, port=self.port, label="collide view", verbose=False)
+        self.server = server
+        server.gui.configure_theme(show_share_button=False, brand_color=(66, 133, 244))
+        server.on_client_connect(self._connect)
+        server.on_client_disconnect(self._disconnect)
+
+    @property
+    def url(self) -> str:
+        assert self.server is not None, "start() first"
+        host = self.server.get_host()
+        shown = "localhost" if host in ("0.0.0.0", "::") else host
+        return f"http://{shown}:{self.server.get_port()}"
+
+    def serve_forever(self) -> None:
+        """Block until Ctrl+C, then stop."""
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            self.stop()
+
+    def stop(self) -> None:
+        with self._sessions_lock:
+            sessions = list(self.sessions.values())
+            self.sessions.clear()
+        for session in sessions:
+            session.close()
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+
+    # ------------------------------------------------------------------------------------------
+
+    def _connect(self, client: viser.ClientHandle) -> None:
+        session = Session(self, client)
+        with self._session_added:
+            self.sessions[client.client_id] = session
+            self._session_added.notify_all()
+        if self.initial_recording is not None and self.initial_view is not None:
+            session.show_recording(self.initial_view, self.initial_recording)
+        else:
+            session.load_scene(self.initial_scene, run=self.initial_run, label=self.initial_label)
+
+    def _disconnect(self, client: viser.ClientHandle) -> None:
+        with self._sessions_lock:
+            session = self.sessions.pop(client.client_id, None)
+        if session is not None:
+            session.close()
+
+    def wait_for_session(self, count: int = 1, timeout: float = 20.0) -> list[Session]:
+        """Wait until at least `count` tabs are connected (tests, benchmarks)."""
+        deadline = time.monotonic() + timeout
+        with self._session_added:
+            while len(self.sessions) < count:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError(f"{len(self.sessions)} of {count} browser tabs connected")
+                self._session_added.wait(left)
+            return list(self.sessions.values())
