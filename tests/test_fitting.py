@@ -8,11 +8,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import typer
 from scipy import stats
 from typer.testing import CliRunner
 
-from cli import numerics
+from cli.main import app as collide_app
 from collide import fitting
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -132,30 +131,19 @@ def test_format_pm(value: float, error: float, text: str) -> None:
     assert fitting.format_pm(value, error) == text
 
 
-def _app() -> typer.Typer:
-    app = typer.Typer()
-    numerics.register(app)
-
-    @app.command()
-    def noop() -> None:
-        """Keep typer in multi-command mode."""
-
-    return app
-
-
 def test_cli_fit_spring(tmp_path: Path) -> None:
     runner = CliRunner()
-    result = runner.invoke(_app(), ["fit-spring"])
+    result = runner.invoke(collide_app, ["fit-spring"])
     assert result.exit_code == 0 and "AVERAGE" in result.stdout and "1500 ± 10" in result.stdout
-    as_json = runner.invoke(_app(), ["fit-spring", "--json"])
+    as_json = runner.invoke(collide_app, ["fit-spring", "--json"])
     assert as_json.exit_code == 0
     import json
 
     data = json.loads(as_json.stdout)
     assert len(data["runs"]) == 10 and abs(data["k_mean"] - 1500) < data["k_uncertainty"]
     bad = write(tmp_path / "bad.csv", "Time (s),Force (N)\n0,1\n")
-    failed = runner.invoke(_app(), ["fit-spring", str(bad)])
+    failed = runner.invoke(collide_app, ["fit-spring", str(bad)])
     assert failed.exit_code == 2 and failed.stderr.startswith("error: ") and failed.stderr.count("\n") == 1
     assert "Traceback" not in failed.output
-    assert runner.invoke(_app(), ["fit-spring", "--range", "50:6"]).exit_code == 2
-    assert "Example" in runner.invoke(_app(), ["fit-spring", "--help"]).stdout
+    assert runner.invoke(collide_app, ["fit-spring", "--range", "50:6"]).exit_code == 2
+    assert "Example" in runner.invoke(collide_app, ["fit-spring", "--help"]).stdout

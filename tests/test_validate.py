@@ -8,10 +8,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import typer
 from typer.testing import CliRunner
 
-from cli import numerics
+from cli.main import app as collide_app
 from collide import rigid
 from collide import validate as v
 from collide.scene import builtin_text, load_scene, parse_scene
@@ -105,40 +104,29 @@ def test_softness_shrinks_as_inverse_root_k() -> None:
     assert scan.passed
 
 
-def _app() -> typer.Typer:
-    app = typer.Typer()
-    numerics.register(app)
-
-    @app.command()
-    def noop() -> None:
-        """Keep typer in multi-command mode."""
-
-    return app
-
-
 def test_cli_validate_json_and_exit_codes(tmp_path: Path) -> None:
     runner = CliRunner()
-    ok = runner.invoke(_app(), ["validate", "--scene", "textbook-unequal", "--json", "--no-scan"])
+    ok = runner.invoke(collide_app, ["validate", "--scene", "textbook-unequal", "--json", "--no-scan"])
     assert ok.exit_code == 0, ok.output
     data = json.loads(ok.stdout)
     assert data["passed"] is True and len(data["textbook"]) == 3 and data["cross_check"][0]["converged"]
-    text = runner.invoke(_app(), ["validate", "--scene", "textbook-1d", "--no-scan"])
+    text = runner.invoke(collide_app, ["validate", "--scene", "textbook-1d", "--no-scan"])
     assert text.exit_code == 0 and "Fig 3" in text.stdout and "PASS" in text.stdout
     coarse = tmp_path / "coarse.toml"
     text = builtin_text("demo-2d-stationary")
     assert 'dt = "auto"' in text and 'integrator = "kahan6"' in text
     coarse_text = text.replace('dt = "auto"', "dt = 2e-3").replace('integrator = "kahan6"', 'integrator = "verlet"')
     coarse.write_text(coarse_text)
-    failing = runner.invoke(_app(), ["validate", "--scene", str(coarse), "--no-scan"])
+    failing = runner.invoke(collide_app, ["validate", "--scene", str(coarse), "--no-scan"])
     assert failing.exit_code == 1 and "FAIL" in failing.stdout
 
 
 def test_cli_validate_bad_input_is_one_line_and_exit_2() -> None:
-    result = CliRunner().invoke(_app(), ["validate", "--scene", "no-such-scene"])
+    result = CliRunner().invoke(collide_app, ["validate", "--scene", "no-such-scene"])
     assert result.exit_code == 2
     assert result.stderr.startswith("error: ") and result.stderr.count("\n") == 1
     assert "Traceback" not in result.output
-    help_text = CliRunner().invoke(_app(), ["validate", "--help"])
+    help_text = CliRunner().invoke(collide_app, ["validate", "--help"])
     assert help_text.exit_code == 0 and "Example" in help_text.stdout
 
 
