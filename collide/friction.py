@@ -50,6 +50,7 @@ class SlipTerms:
     """Slip kinematics of one contact set (pairs, or walls flattened to (B, W*N))."""
 
     u: np.ndarray  # (B, C, D) slip vector, measured with the slip lever
+    sliding: np.ndarray  # (B, C, D) its part from the centres' velocities
     t: np.ndarray  # (B, C, D) unit tangent (2D: perp(n)); direction of u in 3D
     n: np.ndarray  # (B, C, D) contact normal
     slip: np.ndarray  # (B, C) slip along t (2D signed; 3D = |u|)
@@ -59,10 +60,11 @@ class SlipTerms:
 
 def _pair_terms(model: Model, c: ph.Contacts, fn: np.ndarray, state: State) -> SlipTerms:
     li, lj = ph._slip_arms(model, c)
-    u = ph.pair_slip(model, c, state.v, state.w, (li, lj))
+    sliding = ph._sliding(model, c, state.v)
+    u = sliding + ph._rolling(model, c, state.w, li, lj) if state.w.shape[-1] else sliding
     k_slip = model.pair_inv_mass + li * c.arm_i * model.pair_inv_inertia_i + lj * c.arm_j * model.pair_inv_inertia_j
     t, slip = _tangent(model, u, c.n)
-    return SlipTerms(u=u, t=t, n=c.n, slip=slip, k_slip=k_slip, fn=fn)
+    return SlipTerms(u=u, sliding=sliding, t=t, n=c.n, slip=slip, k_slip=k_slip, fn=fn)
 
 
 def _wall_terms(model: Model, c: ph.Contacts, fw: np.ndarray, state: State) -> SlipTerms:
@@ -72,7 +74,8 @@ def _wall_terms(model: Model, c: ph.Contacts, fw: np.ndarray, state: State) -> S
     nw = np.broadcast_to(model.wall_normal[None, :, None, :], (b, model.n_walls, model.n_bodies, model.dim))
     k_slip = (model.inv_mass[:, None, :] + arm * c.wall_arm * model.inv_inertia[:, None, :]).reshape(b, -1)
     t, slip = _tangent(model, u, nw.reshape(b, -1, model.dim))
-    return SlipTerms(u=u, t=t, n=nw.reshape(b, -1, model.dim), slip=slip, k_slip=k_slip, fn=fw.reshape(b, -1))
+    return SlipTerms(u=u, sliding=u, t=t, n=nw.reshape(b, -1, model.dim), slip=slip, k_slip=k_slip,
+                     fn=fw.reshape(b, -1))
 
 
 def _tangent(model: Model, u: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -123,11 +126,13 @@ def _all_terms(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray, sta
 
 
 def hold_force(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray, state: State,
+               acc: np.ndarray | None = None, terms: tuple[SlipTerms, SlipTerms | None] | None = None,
                ) -> tuple[tuple[SlipTerms, np.ndarray], tuple[SlipTerms, np.ndarray] | None]:
     """Friction each contact needs to hold its slip constant, signed along the slip's side:
-    positive means against the slip (what Coulomb friction can give)."""
-    acc = ph.normal_accel(model, c, fn, fw)
-    pairs, walls = _all_terms(model, c, fn, fw, state)
+    positive means against the slip (what Coulomb friction can give). `acc` (the springs' and
+    gravity's accelerations) and `terms` may be passed in when the caller has them."""
+    acc = ph.normal_accel(model, c, fn, fw) if acc is None else acc
+    pairs, walls = _all_terms(model, c, fn, fw, state) if terms is None else terms
     side = np.sign(pairs.slip) if model.dim == 2 else 1.0
     need = side * _hold_rate_pairs(model, c, state, acc, pairs) / pairs.k_slip
     out_walls = None
@@ -201,17 +206,16 @@ def _impulse(terms: SlipTerms, mode: np.ndarray, side: np.ndarray, entry: np.nda
 
 
 def mode_kick(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray, state: State,
-              hk: np.ndarray, modes: Modes, first: bool) -> tuple[np.ndarray, np.ndarray]:
+              hk: np.ndarray, modes: Modes, first: bool, acc: np.ndarray | None = None,
+              ) -> tuple[np.ndarray, np.ndarray]:
     """Apply the friction impulses of the current modes over hk seconds; returns forces.
-    `first` marks a step's first half-kick (explicit hold force in stick mode)."""
-    explicit = first and (np.any(modes.pair == STICK) or np.any(modes.wall == STICK))
-    if explicit:
-        (pairs, need), walls_need = hold_force(model, c, fn, fw, state)
-        walls = None if walls_need is None else walls_need[0]
+    `first` marks a step's first half-kick (explicit hold force in stick mode); `acc` is the
+    springs' and gravity's acceleration the kick already computed."""
+    pairs, walls = _all_terms(model, c, fn, fw, state)
+    need = wneed = None
+    if first and (np.any(modes.pair == STICK) or np.any(modes.wall == STICK)):
+        (_, need), walls_need = hold_force(model, c, fn, fw, state, acc, (pairs, walls))
         wneed = None if walls_need is None else walls_need[1]
-    else:
-        pairs, walls = _all_terms(model, c, fn, fw, state)
-        need = wneed = None
     hkc = hk[:, None]
     mu, eps = model.mu[:, None], model.eps[:, None]
     ji = _impulse(pairs, modes.pair, modes.pair_side, modes.pair_dir, mu, eps, hkc, model.dim, need)
@@ -240,7 +244,8 @@ def _work(model: Model, c: ph.Contacts, state: State, j: np.ndarray, terms: Slip
         up = ph.wall_slip(model, c, state.v, state.w, arm).reshape(b, -1, model.dim)
         k_power = (model.inv_mass[:, None, :] + arm * arm * model.inv_inertia[:, None, :]).reshape(b, -1)
     else:
-        up = ph.pair_slip(model, c, state.v, state.w, (c.arm_i, c.arm_j)) if model.seed_lever else terms.u
+        up = terms.sliding + ph._rolling(model, c, state.w, c.arm_i, c.arm_j) \
+            if model.seed_lever and state.w.shape[-1] else terms.u
         k_power = (model.pair_inv_mass + c.arm_i ** 2 * model.pair_inv_inertia_i
                    + c.arm_j ** 2 * model.pair_inv_inertia_j)
     return np.add.reduce(-ph.dot(j, up) - 0.5 * k_power * ph.dot(j, j), -1)

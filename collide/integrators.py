@@ -80,11 +80,12 @@ def seed_step(model: Model, state: State, h: np.ndarray,
 def _kick(model: Model, state: State, hk: np.ndarray, g: Geometry, first: bool) -> StepForces:
     """Velocity update over hk seconds: springs and gravity explicit; friction by mode (or
     implicit when modes are not tracked). `first`: the step's first half-kick."""
-    state.v += ph.normal_accel(model, g.c, g.fn, g.fw) * hk[:, None, None]
+    acc = ph.normal_accel(model, g.c, g.fn, g.fw)
+    state.v += acc * hk[:, None, None]
     if not model.friction:
         return _no_friction(model, state)
     if g.modes is not None:
-        return StepForces(*fr.mode_kick(model, g.c, g.fn, g.fw, state, hk, g.modes, first))
+        return StepForces(*fr.mode_kick(model, g.c, g.fn, g.fw, state, hk, g.modes, first, acc))
     ft, fwt = ph.friction_kick(model, g.c, g.fn, g.fw, state, hk)
     return StepForces(ft, fwt)
 
