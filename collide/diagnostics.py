@@ -357,12 +357,6 @@ def frame_times(traj: Trajectory, fps: float, member: int = 0, stride: int = 1) 
     return times
 
 
-def perp_marker(q: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    """A point on each sphere's equator that turns with it in 2D (for spin markers)."""
-    angle = q[..., 0]
-    return radius[..., None] * np.stack((np.cos(angle), np.sin(angle)), axis=-1)
-
-
 __all__ = ["Conserved", "ContactSeries", "Residuals", "conserved", "contact_series", "frame_times",
-           "overlaps", "perp2", "perp_marker", "residuals", "sample", "state_conserved",
+           "overlaps", "perp2", "residuals", "sample", "state_conserved",
            "trajectory_conserved"]
