@@ -352,7 +352,12 @@ def active_contacts(model: Model, state: State, c: Contacts | None = None) -> tu
     if not model.n_walls:
         return pair, c.wall_overlap > 0
     wtol = TOUCH_TOL * model.radius[:, None, :]
-    wall = (c.wall_overlap > wtol) | ((c.wall_overlap > -wtol) & (wall_rate > 0))
+    approaching = wall_rate > 0
+    if model.gravity is not None:
+        # Resting on a wall at zero normal speed: gravity presses it in at the next instant.
+        into = (model.gravity @ model.wall_normal.T)[:, :, None] < 0
+        approaching = approaching | ((wall_rate == 0) & into)
+    wall = (c.wall_overlap > wtol) | ((c.wall_overlap > -wtol) & approaching)
     return pair, wall
 
 

@@ -429,6 +429,8 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
                                            snapshot, passes, max_steps, scale)
         done = done | (state.t >= t_end * (1 - 1e-15))
     wall_time = time.perf_counter() - started
+    # A contact still pressing at the end (resting on a wall) counts up to the end.
+    log.duration += np.where(in_contact, state.t - contact_began, 0.0)
     trajectory = None
     if record:
         trajectory = Trajectory(*(np.stack(col) for col in zip(*rows)))

@@ -205,3 +205,18 @@ def test_gravity_momentum_balance():
     assert res.momentum[0] < 1e-12
     assert res.angular_momentum[0] < 1e-12
     assert res.energy[0] < 1e-6
+
+
+def test_sphere_resting_on_a_floor_under_gravity_stays_on_it():
+    """Touching a wall at zero normal speed with gravity pressing it in is a contact from the
+    start (free flight would drop it through the floor)."""
+    raw = {"dim": 3, "gravity": [0.0, 0.0, -9.81], "duration": 0.2, "contact": {"k": 1e5},
+           "body": [{"name": "ball", "mass": 0.17, "radius": 0.0286, "position": [0.0, 0.0, 0.0286],
+                     "velocity": [1.0, 0.0, 0.0]}],
+           "wall": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]}
+    r = run_scene(parse_scene(raw)).result
+    sag = 0.17 * 9.81 / 1e5  # static compression m g / k
+    assert r.trajectory.s[:, 0, 0, 2].min() > 0.0286 - 3 * sag
+    assert r.final.v[0, 0, 0] == pytest.approx(1.0, abs=1e-9)  # frictionless: glides on
+    assert r.contacts.duration[0] == pytest.approx(0.2, abs=1e-9)
+    assert dg.residuals(r).energy[0] < 1e-6
