@@ -138,15 +138,14 @@ class Integrator:
     step: Callable
     order: int
     stability: float
-    events: bool  # locates contact start and end exactly
-    friction: bool  # supports Coulomb friction
+    events: bool  # locates contact starts and ends and friction mode changes exactly
 
 
 INTEGRATORS: dict[str, Integrator] = {
-    "seed": Integrator("seed", seed_step, 1, 2.0, events=False, friction=True),
-    "verlet": Integrator("verlet", verlet_step, 2, 2.0, events=True, friction=True),
+    "seed": Integrator("seed", seed_step, 1, 2.0, events=False),
+    "verlet": Integrator("verlet", verlet_step, 2, 2.0, events=True),
     "yoshida4": Integrator("yoshida4", _composition(YOSHIDA4), 4, 2.0 / (_CBRT2 * _Y1),
-                           events=True, friction=True),
+                           events=True),
     "kahan6": Integrator("kahan6", _composition(KAHAN6), 6, 2.0 / max(abs(x) for x in KAHAN6),
-                         events=True, friction=True),
+                         events=True),
 }
