@@ -252,19 +252,43 @@ def _work(model: Model, c: ph.Contacts, state: State, j: np.ndarray, terms: Slip
 
 
 def mode_events(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray, state: State,
-                modes: Modes, scale: np.ndarray) -> np.ndarray:
-    """Event functions (B, C), positive while each contact stays in its mode, scaled to speeds:
+                modes: Modes, scale: np.ndarray, rates: bool = False):
+    """Event functions (B, 2C), positive while each contact stays in its mode, scaled to speeds:
     slide: slip beyond the band's edge; band: room left inside the band; stick: the margin to
-    mu F_n and the need itself (both as the slip rate they correspond to over the step)."""
+    mu F_n and the need itself (both as the slip rate they correspond to over the step).
+    With `rates`, also their time derivatives (NaN for stick, whose rate is not known in closed
+    form), so a crossing can be located with a cubic Hermite through both ends of a step."""
     (pairs, need), walls = hold_force(model, c, fn, fw, state)
     mu, eps = model.mu[:, None], model.eps[:, None]
     values = [_mode_values(pairs, need, modes.pair, modes.pair_side, modes.pair_dir, mu, eps, model.dim)]
+    slopes = [_mode_rates(pairs, need, modes.pair, modes.pair_side, modes.pair_dir, mu, model.dim)] if rates else []
     if walls is not None:
         b = state.v.shape[0]
         wterms, wneed = walls
-        values.append(_mode_values(wterms, wneed, modes.wall.reshape(b, -1), modes.wall_side.reshape(b, -1),
-                                   modes.wall_dir, mu, eps, model.dim))
-    return np.concatenate(values, axis=1) / scale[:, None]
+        wmode, wside = modes.wall.reshape(b, -1), modes.wall_side.reshape(b, -1)
+        values.append(_mode_values(wterms, wneed, wmode, wside, modes.wall_dir, mu, eps, model.dim))
+        if rates:
+            slopes.append(_mode_rates(wterms, wneed, wmode, wside, modes.wall_dir, mu, model.dim))
+    out = np.concatenate(values, axis=1) / scale[:, None]
+    if not rates:
+        return out
+    return out, np.concatenate(slopes, axis=1) / scale[:, None]
+
+
+def _mode_rates(terms: SlipTerms, need: np.ndarray, mode: np.ndarray, side: np.ndarray, entry: np.ndarray,
+                mu: np.ndarray, dim: int) -> np.ndarray:
+    """Time derivatives of `_mode_values`' columns (B, 2C); NaN where not known."""
+    # G, the slip's rate along t without friction, from need = sign(slip) G / K (2D; 3D: need = G / K).
+    g = need * terms.k_slip * (np.sign(terms.slip) if dim == 2 else 1.0)
+    slide = (side * g if dim == 2 else g) - terms.k_slip * mu * terms.fn
+    if dim == 2:
+        band_a, band_b = -g, g
+    else:
+        band_a, band_b = -g, g * ph.dot(terms.t, _transport(entry, terms.n))
+    nan = np.full_like(g, np.nan)
+    first = np.where(mode == SLIDE, slide, np.where(mode == STICK, nan, band_a))
+    second = np.where(mode == SLIDE, 0.0, np.where(mode == STICK, nan, band_b))
+    return np.concatenate((first, second), axis=1)
 
 
 def _transport(entry: np.ndarray, n: np.ndarray) -> np.ndarray:

@@ -276,7 +276,7 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
             theta = np.full(b, np.inf)
             np.multiply(first, frac, out=theta, where=np.isfinite(first))
         if e0 is not None:
-            e1 = _event_values(model, new, end, start.modes, scale)
+            e1, rate1 = fr.mode_events(model, end.c, end.fn, end.fw, new, start.modes, scale, True)
             beyond = live & (e1 < -mode_tol)
             fresh = beyond.any(axis=1) & ~pending
             if fresh.any():
@@ -304,9 +304,24 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
             landed = pending & (np.abs(f) <= mode_tol) & others_fine
             pending = pending & ~landed
             if pending.any():
-                theta = np.where(pending, np.minimum(theta, _bracketed_root(lo, f_lo, hi, f_hi, last_t, last_f)),
-                                 theta)
-        redo = np.isfinite(theta) & (np.abs(theta - frac) > 1e-15)
+                estimate = _bracketed_root(lo, f_lo, hi, f_hi, last_t, last_f)
+                # Slide and band events have analytic rates: a cubic Hermite through both ends of
+                # the first trial, then Newton from the latest trial, kept inside the bracket.
+                slope = rate1[rows, col] * h_full
+                if fresh.any():
+                    rate0 = fr.mode_events(model, start.c, start.fn, start.fw, state, start.modes, scale, True)[1]
+                    s0 = rate0[rows, col] * h
+                    known = fresh & np.isfinite(s0) & np.isfinite(slope)
+                    if known.any():
+                        cubic = _hermite_root(e0[rows, col][:, None], f[:, None], s0[:, None],
+                                              (slope * frac)[:, None])[:, 0] * frac
+                        estimate = np.where(known, cubic, estimate)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    newton = frac - f / slope
+                usable = update & np.isfinite(newton) & (newton > lo) & (newton < hi)
+                estimate = np.where(usable, newton, estimate)
+                theta = np.where(pending, np.minimum(theta, estimate), theta)
+        redo = np.isfinite(theta) & (np.abs(theta - frac) > 1e-12 * np.maximum(frac, 1e-300))
         if not redo.any():
             break
         h = np.where(redo, h_full * np.maximum(theta, 1e-12), h)
