@@ -151,25 +151,26 @@ def test_step_count_follows_contact_not_distance():
     assert far.final.v[0] == pytest.approx(near.final.v[0], abs=1e-9)
 
 
+def batch_and_singles(scenes: list) -> list[tuple]:
+    """(batch member, single run) final results for each scene, from one batched call."""
+    batch = run_scenes(scenes, record=False).result
+    return [(batch.member(b), run_scene(scene, record=False).result) for b, scene in enumerate(scenes)]
+
+
 def test_batch_equals_single_runs():
     mus = [0.0, 0.1, 0.3, 0.5, 0.9]
-    scenes = [load_scene("demo-bonus", [f"contact.mu={mu}"]) for mu in mus]
-    batch = run_scenes(scenes, record=False).result
-    for b, scene in enumerate(scenes):
-        single = run_scene(scene, record=False).result
-        assert batch.final.v[b] == pytest.approx(single.final.v[0], abs=1e-12)
-        assert batch.final.w[b] == pytest.approx(single.final.w[0], abs=1e-12)
-        assert batch.steps[b] == single.steps[0]
+    for member, single in batch_and_singles([load_scene("demo-bonus", [f"contact.mu={mu}"]) for mu in mus]):
+        assert member.final.v[0] == pytest.approx(single.final.v[0], abs=1e-12)
+        assert member.final.w[0] == pytest.approx(single.final.w[0], abs=1e-12)
+        assert member.steps[0] == single.steps[0]
 
 
 def test_batch_with_different_contact_times_equals_single_runs():
     offsets = [0.0, 0.01, 0.03]
     scenes = [load_scene("demo-2d-moving", [f"body.ball1.position.y={y}"]) for y in offsets]
-    batch = run_scenes(scenes, record=False).result
-    for b, scene in enumerate(scenes):
-        single = run_scene(scene, record=False).result
-        assert batch.final.v[b] == pytest.approx(single.final.v[0], abs=1e-12)
-        assert batch.final.t[b] == pytest.approx(single.final.t[0], abs=1e-12)
+    for member, single in batch_and_singles(scenes):
+        assert member.final.v[0] == pytest.approx(single.final.v[0], abs=1e-12)
+        assert member.final.t[0] == pytest.approx(single.final.t[0], abs=1e-12)
 
 
 def test_frictionless_scene_computes_no_friction(monkeypatch):
