@@ -159,9 +159,11 @@ def _decide(terms: SlipTerms, need: np.ndarray, mu: np.ndarray, eps: np.ndarray,
 
 
 def decide_modes(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray, state: State,
-                 engaged: ph.Engaged, scale: np.ndarray) -> Modes:
-    """Modes of every contact at this state (at a phase start or after a located event)."""
-    (pairs, need), walls = hold_force(model, c, fn, fw, state)
+                 engaged: ph.Engaged, scale: np.ndarray) -> tuple[Modes, np.ndarray]:
+    """Modes of every contact at this state (at a phase start or after a located event), and
+    their event values here (`mode_events`), from one evaluation of the hold force."""
+    held = hold_force(model, c, fn, fw, state)
+    (pairs, need), walls = held
     tol = (EDGE_TOL * scale)[:, None]
     mu, eps = model.mu[:, None], model.eps[:, None]
     pair_mode = _decide(pairs, need, mu, eps, tol, engaged.pair)
@@ -176,7 +178,8 @@ def decide_modes(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray, s
         wall_mode = _decide(wterms, wneed, mu, eps, tol, engaged.wall.reshape(b, -1)).reshape(shape)
         wall_side = np.where(wterms.slip >= 0, 1.0, -1.0).reshape(shape)
         wall_dir = wterms.t * wall_side.reshape(b, -1)[..., None]
-    return Modes(pair_mode, pair_side, wall_mode, wall_side, pairs.t * pair_side[..., None], wall_dir)
+    modes = Modes(pair_mode, pair_side, wall_mode, wall_side, pairs.t * pair_side[..., None], wall_dir)
+    return modes, mode_events(model, c, fn, fw, state, modes, scale, held=held)
 
 
 def _impulse(terms: SlipTerms, mode: np.ndarray, side: np.ndarray, entry: np.ndarray, mu: np.ndarray,
@@ -252,13 +255,14 @@ def _work(model: Model, c: ph.Contacts, state: State, j: np.ndarray, terms: Slip
 
 
 def mode_events(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray, state: State,
-                modes: Modes, scale: np.ndarray, rates: bool = False):
+                modes: Modes, scale: np.ndarray, rates: bool = False, held: tuple | None = None):
     """Event functions (B, 2C), positive while each contact stays in its mode, scaled to speeds:
     slide: slip beyond the band's edge; band: room left inside the band; stick: the margin to
     mu F_n and the need itself (both as the slip rate they correspond to over the step).
     With `rates`, also their time derivatives (NaN for stick, whose rate is not known in closed
-    form), so a crossing can be located with a cubic Hermite through both ends of a step."""
-    (pairs, need), walls = hold_force(model, c, fn, fw, state)
+    form), so a crossing can be located with a cubic Hermite through both ends of a step.
+    `held`: `hold_force`'s result at this state, when the caller has it."""
+    (pairs, need), walls = hold_force(model, c, fn, fw, state) if held is None else held
     mu, eps = model.mu[:, None], model.eps[:, None]
     values = [_mode_values(pairs, need, modes.pair, modes.pair_side, modes.pair_dir, mu, eps, model.dim)]
     slopes = [_mode_rates(pairs, need, modes.pair, modes.pair_side, modes.pair_dir, mu, model.dim)] if rates else []

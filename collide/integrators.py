@@ -27,6 +27,7 @@ class Geometry:
     fw: np.ndarray
     engaged: ph.Engaged | None = None
     modes: fr.Modes | None = None
+    events: np.ndarray | None = None  # the modes' event values at this state
 
 
 def geometry(model: Model, s: np.ndarray, engaged: ph.Engaged | None = None,

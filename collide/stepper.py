@@ -253,7 +253,7 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
     if not integrator.events:
         return new, forces, end, h
     d0, r0 = _scaled_overlaps(model, state, start)
-    e0 = _event_values(model, state, start, start.modes, scale)
+    e0 = start.events if start.events is not None else _event_values(model, state, start, start.modes, scale)
     mode_tol = 0.5 * fr.EDGE_TOL
     live = None if e0 is None else e0 > mode_tol  # a mode entered on its own boundary is not watched
     b = model.batch
@@ -499,7 +499,7 @@ def _engage(model: Model, integ: Integrator, state: State, g: Geometry, scale: n
     if not same:
         g = geometry(model, state.s, engaged)
     if model.friction:
-        g.modes = fr.decide_modes(model, g.c, g.fn, g.fw, state, engaged, scale)
+        g.modes, g.events = fr.decide_modes(model, g.c, g.fn, g.fw, state, engaged, scale)
     return g
 
 
