@@ -28,6 +28,7 @@ class Geometry:
     engaged: ph.Engaged | None = None
     modes: fr.Modes | None = None
     events: np.ndarray | None = None  # the modes' event values at this state
+    frame: fr.KickFrame | None = None  # the friction kick's rows here (built on first use)
 
 
 def geometry(model: Model, s: np.ndarray, engaged: ph.Engaged | None = None,
@@ -79,16 +80,27 @@ def seed_step(model: Model, state: State, h: np.ndarray,
 
 
 def _kick(model: Model, state: State, hk: np.ndarray, g: Geometry, first: bool) -> StepForces:
-    """Velocity update over hk seconds: springs and gravity explicit; friction by mode (or
-    implicit when modes are not tracked). `first`: the step's first half-kick."""
+    """Velocity update over hk seconds: springs and gravity explicit; friction by the contacts'
+    modes (`friction.frame_kick`; the stepper decides modes before it steps). `first`: the
+    step's first half-kick."""
     acc = ph.normal_accel(model, g.c, g.fn, g.fw)
-    state.v += acc * hk[:, None, None]
     if not model.friction:
+        state.v += acc * hk[:, None, None]
         return _no_friction(model, state)
-    if g.modes is not None:
-        return StepForces(*fr.mode_kick(model, g.c, g.fn, g.fw, state, hk, g.modes, first, acc))
-    ft, fwt = ph.friction_kick(model, g.c, g.fn, g.fw, state, hk)
-    return StepForces(ft, fwt)
+    if g.frame is None:
+        g.frame = fr.kick_frame(model, g.c, g.fn, g.fw, g.modes)
+    return StepForces(*fr.frame_kick(model, g.frame, state, hk, acc, first))
+
+
+def _settle(model: Model, state: State, g: Geometry) -> None:
+    """Put stuck slips back on the band's edge after a whole step: the symmetric step holds them
+    there to its order, and this keeps the drift from piling up (a projection: it keeps the order)."""
+    if g.modes is None or not model.friction:
+        return
+    if g.frame is None:
+        g.frame = fr.kick_frame(model, g.c, g.fn, g.fw, g.modes)
+    if g.frame.any_stick:
+        fr.settle(model, g.frame, state)
 
 
 def verlet_step(model: Model, state: State, h: np.ndarray,
@@ -116,6 +128,7 @@ def _composition(weights: tuple[float, ...]) -> Callable:
         forces = None
         for gamma in weights:
             out, forces, g = verlet_step(model, out, gamma * h, g)
+        _settle(model, out, g)
         out.t = state.t + h
         return out, forces, g
 
@@ -144,7 +157,7 @@ class Integrator:
 
 INTEGRATORS: dict[str, Integrator] = {
     "seed": Integrator("seed", seed_step, 1, 2.0, events=False),
-    "verlet": Integrator("verlet", verlet_step, 2, 2.0, events=True),
+    "verlet": Integrator("verlet", _composition((1.0,)), 2, 2.0, events=True),
     "yoshida4": Integrator("yoshida4", _composition(YOSHIDA4), 4, 2.0 / (_CBRT2 * _Y1),
                            events=True),
     "kahan6": Integrator("kahan6", _composition(KAHAN6), 6, 2.0 / max(abs(x) for x in KAHAN6),

@@ -227,55 +227,6 @@ def apply_friction(model: Model, c: Contacts, ft: np.ndarray, fwt: np.ndarray,
     return force * model.inv_mass[..., None], tau * model.inv_inertia[..., None]
 
 
-def friction_kick(model: Model, c: Contacts, fn: np.ndarray, fw: np.ndarray, state: State,
-                  hk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Apply a friction impulse over hk seconds, implicitly (backward Euler in the slip).
-
-    The impulse is the one that brings the slip to the edge of the dead band, capped at
-    mu F_n hk: this is Coulomb's law with the band's sliding mode treated exactly, so there is
-    no chatter on the band edge (DESIGN section 8). Impulses are equal and opposite at one
-    contact point, so momentum and angular momentum stay at round-off. Adds the work done
-    against friction to `state.work`. Returns the friction forces (for display). Several
-    contacts on one body are solved independently from the same slip (Jacobi).
-    """
-    li, lj = _slip_arms(model, c)
-    # Slip change per unit tangential impulse (spheres are isotropic: along the impulse).
-    k_slip = model.pair_inv_mass + li * c.arm_i * model.pair_inv_inertia_i + \
-        lj * c.arm_j * model.pair_inv_inertia_j
-    sliding = _sliding(model, c, state.v)
-    direction, slip = _unit(sliding + _rolling(model, c, state.w, li, lj))
-    hkp = np.abs(hk)[:, None]
-    impulse = np.minimum(model.mu[:, None] * fn * hkp, np.maximum(slip - model.eps[:, None], 0.0) / k_slip)
-    ji = -impulse[..., None] * direction
-    # Work against friction: the impulse times the mean slip at the contact point over the kick.
-    if model.seed_lever:
-        k_power = model.pair_inv_mass + c.arm_i ** 2 * model.pair_inv_inertia_i + \
-            c.arm_j ** 2 * model.pair_inv_inertia_j
-        power = dot(sliding + _rolling(model, c, state.w, c.arm_i, c.arm_j), direction)
-    else:
-        k_power, power = k_slip, slip
-    work = _add(impulse * (power - 0.5 * k_power * impulse), -1)
-    jw = np.zeros((state.v.shape[0], model.n_walls, model.n_bodies, model.dim))
-    if model.n_walls:
-        warm = _wall_slip_arm(model, c)
-        wm = model.inv_mass[:, None, :]
-        wi = model.inv_inertia[:, None, :]
-        wdir, wslip = _unit(wall_slip(model, c, state.v, state.w, warm))
-        kw = wm + warm * c.wall_arm * wi
-        wimp = np.minimum(model.mu[:, None, None] * fw * np.abs(hk)[:, None, None],
-                          np.maximum(wslip - model.eps[:, None, None], 0.0) / kw)
-        jw = -wimp[..., None] * wdir
-        kwp = wm + c.wall_arm ** 2 * wi
-        wpow = dot(wall_slip(model, c, state.v, state.w, c.wall_arm), wdir)
-        work = work + _add(_add(wimp * (wpow - 0.5 * kwp * wimp), -1), -1)
-    dp, dl = friction_response(model, c, ji, jw)
-    state.v += dp * model.inv_mass[..., None]
-    state.w += dl * model.inv_inertia[..., None]
-    state.work += work
-    safe = np.where(hkp > 0, hkp, 1.0)
-    return ji / safe[..., None], jw / safe[:, :, None, None]
-
-
 def kinetic_energy(model: Model, v: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Translational plus rotational kinetic energy (B,) in J."""
     energy = 0.5 * _add(model.mass * dot(v, v), -1)

@@ -500,6 +500,7 @@ def _engage(model: Model, integ: Integrator, state: State, g: Geometry, scale: n
         g = geometry(model, state.s, engaged)
     if model.friction:
         g.modes, g.events = fr.decide_modes(model, g.c, g.fn, g.fw, state, engaged, scale)
+        g.frame = None  # built for these modes on first use
     return g
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from collide import diagnostics as dg
-from collide import physics
+from collide import friction, physics
 from collide.run import run_scene, run_scenes
 from collide.scene import builtin_names, load_scene, parse_scene
 
@@ -179,7 +179,8 @@ def test_frictionless_scene_computes_no_friction(monkeypatch):
     def forbidden(*args, **kwargs):
         raise AssertionError("friction computed in a frictionless scene")
 
-    monkeypatch.setattr(physics, "friction_kick", forbidden)
+    monkeypatch.setattr(friction, "kick_frame", forbidden)
+    monkeypatch.setattr(friction, "decide_modes", forbidden)
     monkeypatch.setattr(physics, "coulomb_explicit", forbidden)
     r = run_scene(load_scene("demo-1d")).result
     assert r.model.dim == 1 and r.final.s.shape == (1, 2, 1)

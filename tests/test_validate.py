@@ -81,11 +81,12 @@ def test_tight_tolerance_fails_without_grinding() -> None:
     # The ladder (kahan6) stalls at round-off: a 1e-13 target (changes below 1e-14) is out of reach.
     check = v.cross_check(load_scene("demo-bonus", ["dt=4e-5", "integrator=verlet"]), tol=1e-13)
     assert not check.passed and not check.converged
-    # After dt/4 the observed order shows that 1e-14 is out of reach in the halvings left: stop.
+    # After dt/4 the changes have stopped shrinking (round-off) or shrink too slowly to reach
+    # 1e-14 in the halvings left: stop.
     assert len(check.ladder_dt) == 3
     first, second = check.ladder_change
-    assert first > second > 1e-14
-    assert math.log(second / 1e-14) / math.log(first / second) > v.MAX_HALVINGS - 2
+    assert second > 1e-14
+    assert second >= first or math.log(second / 1e-14) / math.log(first / second) > v.MAX_HALVINGS - 2
 
 
 def test_coarse_step_fails_on_discretisation() -> None:
