@@ -87,9 +87,14 @@ def _kick(model: Model, state: State, hk: np.ndarray, g: Geometry, first: bool) 
     if not model.friction:
         state.v += acc * hk[:, None, None]
         return _no_friction(model, state)
+    return StepForces(*fr.frame_kick(model, friction_frame(model, g), state, hk, acc, first))
+
+
+def friction_frame(model: Model, g: Geometry) -> fr.KickFrame:
+    """The friction rows of this geometry with its modes, built on first use."""
     if g.frame is None:
-        g.frame = fr.kick_frame(model, g.c, g.fn, g.fw, g.modes)
-    return StepForces(*fr.frame_kick(model, g.frame, state, hk, acc, first))
+        g.frame = fr.geometry_frame(model, g.c, g.fn, g.fw, g.modes)
+    return g.frame
 
 
 def _settle(model: Model, state: State, g: Geometry) -> None:
@@ -97,10 +102,9 @@ def _settle(model: Model, state: State, g: Geometry) -> None:
     there to its order, and this keeps the drift from piling up (a projection: it keeps the order)."""
     if g.modes is None or not model.friction:
         return
-    if g.frame is None:
-        g.frame = fr.kick_frame(model, g.c, g.fn, g.fw, g.modes)
-    if g.frame.any_stick:
-        fr.settle(model, g.frame, state)
+    frame = friction_frame(model, g)
+    if frame.any_stick:
+        fr.settle(model, frame, state)
 
 
 def verlet_step(model: Model, state: State, h: np.ndarray,

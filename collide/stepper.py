@@ -17,7 +17,7 @@ import numpy as np
 
 from collide import friction as fr
 from collide import physics as ph
-from collide.integrators import INTEGRATORS, Geometry, Integrator, StepForces, geometry
+from collide.integrators import INTEGRATORS, Geometry, Integrator, StepForces, friction_frame, geometry
 from collide.model import Model, State, select_model, select_state
 
 MAX_STEPS_DEFAULT = 20_000_000
@@ -234,10 +234,12 @@ def _scaled_overlaps(model: Model, state: State, g: Geometry) -> tuple[np.ndarra
     return d, r
 
 
-def _event_values(model: Model, state: State, g: Geometry, modes, scale: np.ndarray) -> np.ndarray | None:
-    if modes is None:
+def _mode_events(model: Model, state: State, g: Geometry, scale: np.ndarray, rates: bool = False):
+    """The friction modes' event values (and rates) at a geometry, or None without friction."""
+    if g.modes is None:
         return None
-    return fr.mode_events(model, g.c, g.fn, g.fw, state, modes, scale)
+    acc = ph.normal_accel(model, g.c, g.fn, g.fw)
+    return fr.frame_events(model, friction_frame(model, g), state, acc, scale, rates)
 
 
 def step_with_events(model: Model, integrator: Integrator, state: State, h: np.ndarray,
@@ -253,7 +255,7 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
     if not integrator.events:
         return new, forces, end, h
     d0, r0 = _scaled_overlaps(model, state, start)
-    e0 = start.events if start.events is not None else _event_values(model, state, start, start.modes, scale)
+    e0 = start.events if start.events is not None else _mode_events(model, state, start, scale)
     mode_tol = 0.5 * fr.EDGE_TOL
     live = None if e0 is None else e0 > mode_tol  # a mode entered on its own boundary is not watched
     b = model.batch
@@ -263,7 +265,10 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
     col = np.zeros(b, int)  # the event function being solved for
     lo, hi = np.zeros(b), np.ones(b)
     f_lo, f_hi = np.zeros(b), np.zeros(b)
-    last_t, last_f = np.full(b, np.nan), np.full(b, np.nan)  # the third point, for a quadratic
+    # The two trials before the latest (fraction of h, value): interpolation through the latest
+    # points converges fastest; the bracket keeps it safe.
+    t1, f1 = np.full(b, np.nan), np.full(b, np.nan)
+    t2, f2 = np.full(b, np.nan), np.full(b, np.nan)
     for _ in range(30):
         frac = h / h_full
         d1, r1 = _scaled_overlaps(model, new, end)
@@ -276,7 +281,7 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
             theta = np.full(b, np.inf)
             np.multiply(first, frac, out=theta, where=np.isfinite(first))
         if e0 is not None:
-            e1, rate1 = fr.mode_events(model, end.c, end.fn, end.fw, new, start.modes, scale, True)
+            e1, rate1 = _mode_events(model, new, end, scale, True)
             beyond = live & (e1 < -mode_tol)
             fresh = beyond.any(axis=1) & ~pending
             if fresh.any():
@@ -288,14 +293,12 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
                 pending = pending | fresh
                 hi = np.where(fresh, frac, hi)
                 f_hi = np.where(fresh, e1[rows, col], f_hi)
+                t1, f1 = np.where(fresh, 0.0, t1), np.where(fresh, e0[rows, col], f1)
+                t2, f2 = np.where(fresh, np.nan, t2), np.where(fresh, np.nan, f2)
             f = e1[rows, col]
             update = pending & ~fresh
             if update.any():
                 # Keep the bracket [lo, hi] around the root of the critical function.
-                was_t = np.where(f < 0, hi, lo)
-                was_f = np.where(f < 0, f_hi, f_lo)
-                last_t = np.where(update, was_t, last_t)
-                last_f = np.where(update, was_f, last_f)
                 hi = np.where(update & (f < 0), frac, hi)
                 f_hi = np.where(update & (f < 0), f, f_hi)
                 lo = np.where(update & (f >= 0), frac, lo)
@@ -304,12 +307,12 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
             landed = pending & (np.abs(f) <= mode_tol) & others_fine
             pending = pending & ~landed
             if pending.any():
-                estimate = _bracketed_root(lo, f_lo, hi, f_hi, last_t, last_f)
+                estimate = _bracketed_root(lo, f_lo, hi, f_hi, (t2, f2), (t1, f1), (frac, f))
                 # Slide and band events have analytic rates: a cubic Hermite through both ends of
                 # the first trial, then Newton from the latest trial, kept inside the bracket.
                 slope = rate1[rows, col] * h_full
                 if fresh.any():
-                    rate0 = fr.mode_events(model, start.c, start.fn, start.fw, state, start.modes, scale, True)[1]
+                    rate0 = _mode_events(model, state, start, scale, True)[1]
                     s0 = rate0[rows, col] * h
                     known = fresh & np.isfinite(s0) & np.isfinite(slope)
                     if known.any():
@@ -321,6 +324,8 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
                 usable = update & np.isfinite(newton) & (newton > lo) & (newton < hi)
                 estimate = np.where(usable, newton, estimate)
                 theta = np.where(pending, np.minimum(theta, estimate), theta)
+                t2, f2 = np.where(pending, t1, t2), np.where(pending, f1, f2)
+                t1, f1 = np.where(pending, frac, t1), np.where(pending, f, f1)
         redo = np.isfinite(theta) & (np.abs(theta - frac) > 1e-12 * np.maximum(frac, 1e-300))
         if not redo.any():
             break
@@ -330,24 +335,23 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
 
 
 def _bracketed_root(lo: np.ndarray, f_lo: np.ndarray, hi: np.ndarray, f_hi: np.ndarray,
-                    t3: np.ndarray, f3: np.ndarray) -> np.ndarray:
-    """Next estimate of a root bracketed in [lo, hi] (f_lo >= 0 > f_hi): inverse quadratic
-    interpolation through three points where possible (exact for the quadratic onset of an event
-    at a tangency), else the secant; bisection when the estimate is not well inside."""
+                    older: tuple, previous: tuple, latest: tuple) -> np.ndarray:
+    """Next estimate of a root bracketed in [lo, hi] (f_lo >= 0 > f_hi), from the latest three
+    trials (t, f): inverse quadratic interpolation through them (exact for the quadratic onset
+    of an event at a tangency), else the secant through the latest two; where that falls outside
+    the bracket, false position on it, nudged off its ends, or bisection."""
+    (a, fa), (b, fb), (c, fc) = older, previous, latest
     with np.errstate(divide="ignore", invalid="ignore"):
-        secant = lo + (hi - lo) * f_lo / (f_lo - f_hi)
-        a, b, c = lo, hi, t3
-        fa, fb, fc = f_lo, f_hi, f3
         iqi = (a * fb * fc / ((fa - fb) * (fa - fc)) + b * fa * fc / ((fb - fa) * (fb - fc))
                + c * fa * fb / ((fc - fa) * (fc - fb)))
-        estimate = np.where(np.isfinite(iqi) & np.isfinite(f3), iqi, secant)
+        secant = c - fc * (c - b) / (fc - fb)
+        estimate = np.where(np.isfinite(iqi) & (iqi > lo) & (iqi < hi), iqi, secant)
         width = hi - lo
-        inside = (estimate > lo + 0.01 * width) & (estimate < hi - 0.01 * width)
-        estimate = np.where(inside, estimate, np.where(np.isfinite(secant) & (secant > lo) & (secant < hi),
-                                                       np.clip(secant, lo + 0.01 * width, hi - 0.01 * width),
-                                                       0.5 * (lo + hi)))
-    return estimate
-
+        position = lo + width * f_lo / (f_lo - f_hi)
+        position = np.where(np.isfinite(position), np.clip(position, lo + 0.01 * width, hi - 0.01 * width),
+                            0.5 * (lo + hi))
+        inside = np.isfinite(estimate) & (estimate > lo) & (estimate < hi)
+    return np.where(inside, estimate, position)
 
 def _active(model: Model, state: State, g: Geometry) -> np.ndarray:
     pair, wall = ph.active_contacts(model, state, g.c)
@@ -499,8 +503,10 @@ def _engage(model: Model, integ: Integrator, state: State, g: Geometry, scale: n
     if not same:
         g = geometry(model, state.s, engaged)
     if model.friction:
-        g.modes, g.events = fr.decide_modes(model, g.c, g.fn, g.fw, state, engaged, scale)
-        g.frame = None  # built for these modes on first use
+        rows = fr.contact_rows(model, g.c, g.fn, g.fw)
+        acc = ph.normal_accel(model, g.c, g.fn, g.fw)
+        g.frame, g.events = fr.decide_modes(model, rows, state, acc, engaged, scale)
+        g.modes = g.frame.modes
     return g
 
 

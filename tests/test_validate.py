@@ -78,15 +78,15 @@ def test_cross_check_sphere_on_wall_3d_rolls_like_the_rigid_limit() -> None:
 
 
 def test_tight_tolerance_fails_without_grinding() -> None:
-    # The ladder (kahan6) stalls at round-off: a 1e-13 target (changes below 1e-14) is out of reach.
-    check = v.cross_check(load_scene("demo-bonus", ["dt=4e-5", "integrator=verlet"]), tol=1e-13)
+    # The ladder (kahan6) stalls at round-off: a 1e-15 target (changes below 1e-16) is out of reach.
+    check = v.cross_check(load_scene("demo-bonus", ["dt=4e-5", "integrator=verlet"]), tol=1e-15)
     assert not check.passed and not check.converged
     # After dt/4 the changes have stopped shrinking (round-off) or shrink too slowly to reach
-    # 1e-14 in the halvings left: stop.
+    # 1e-16 in the halvings left: stop.
     assert len(check.ladder_dt) == 3
     first, second = check.ladder_change
-    assert second > 1e-14
-    assert second >= first or math.log(second / 1e-14) / math.log(first / second) > v.MAX_HALVINGS - 2
+    assert second > 1e-16
+    assert second >= first or math.log(second / 1e-16) / math.log(first / second) > v.MAX_HALVINGS - 2
 
 
 def test_coarse_step_fails_on_discretisation() -> None:
