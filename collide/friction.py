@@ -272,49 +272,65 @@ def hold_rate(model: Model, frame: KickFrame, vel: np.ndarray, acc: np.ndarray) 
     return rate + turn, slope
 
 
-def frame_kick(model: Model, frame: KickFrame, state: State, hk: np.ndarray, acc: np.ndarray,
-               first: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Springs and gravity (`acc`) and friction by mode over hk seconds; returns the friction
-    forces on pairs (B, P, D) and walls (B, W, N, D).
+def frame_kick(model: Model, frame: KickFrame, state: State, acc: np.ndarray, end: np.ndarray | None,
+               start: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """The kicks at one geometry between two Verlet substeps: the end of one (springs and
+    gravity `acc` over `end` seconds, then friction) and the start of the next (friction, then
+    springs over `start`). Either may be None. Returns the friction forces at the end of a
+    step (pairs (B, P, D), walls (B, W, N, D)) when nothing follows, else None.
 
-    slide: mu F_n against the slip for the signed time hk (substeps may run backwards). stick:
-    the force that holds the slip on the band's edge, at the start state in a step's first
-    half-kick (explicit) and at the end state in its second (implicit: lam = hk G(v + dv(lam)) / K),
-    so the step's two halves mirror each other and compositions of it keep their order. The
-    work done is the kinetic energy the impulses remove, exactly.
+    slide: mu F_n against the slip for the signed time (substeps may run backwards). stick: the
+    force that holds the slip on the band's edge, at the start state of a substep (explicit) and
+    at its end state (implicit: lam = h G(v + dv(lam)) / K), so the substep's two halves mirror
+    each other and compositions of it keep their order. The work done is the kinetic energy the
+    impulses remove, exactly.
     """
-    hkc = hk[:, None]
-    lam = frame.slide * hkc
+    b, nv = state.v.shape[0], state.v[0].size
+    vel = np.concatenate((state.v.reshape(b, -1), state.w.reshape(b, -1)), axis=1)
     response = frame.rows.response
-    if first and frame.any_stick:
-        lam = lam + frame.stick * hkc * hold_rate(model, frame, _velocity(state), acc)[0] / response
-    state.v = state.v + acc * hk[:, None, None]
-    vel = _velocity(state)
-    if not first and frame.any_stick:
-        rate, slope = hold_rate(model, frame, vel, acc)
-        lam = lam + frame.stick * hkc * rate / (response - hkc * slope)
-    return _apply(model, frame, state, vel, lam, hk)
-
-
-def _apply(model: Model, frame: KickFrame, state: State, vel: np.ndarray, lam: np.ndarray,
-           hk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Apply friction impulses lam (B, C) against the slip; add their work; return forces."""
-    b = vel.shape[0]
-    nv = state.v[0].size
-    rows = frame.rows
-    coords = (lam[..., None] * frame.unit).reshape(b, 1, -1)
-    impulse = (coords @ rows.impulse_rows)[:, 0]
-    change = -rows.inv_mass_gen * impulse
-    # Kinetic energy removed: -(change . M . (vel + change / 2)) = impulse . (vel + change / 2).
-    state.work = state.work + np.add.reduce(impulse * (vel + 0.5 * change), -1)
-    vel = vel + change
+    kick = acc.reshape(b, -1)
+    work = 0.0
+    rate = slope = None
+    forces = None
+    if end is not None:
+        vel[:, :nv] += kick * end[:, None]
+        lam = frame.slide * end[:, None]
+        if frame.any_stick:
+            rate, slope = hold_rate(model, frame, vel, acc)
+            held = end[:, None] * rate / (response - end[:, None] * slope)
+            lam = lam + frame.stick * held
+            # G is affine in the contact's own impulse: its value after this one, for the next kick.
+            rate = rate + slope * held if response.shape[1] == 1 else None
+        vel, spent = _impulse(frame, vel, lam)
+        work = work + spent
+        if start is None:
+            safe = np.where(end != 0, end, 1.0)[:, None]
+            forces = -(lam / safe)[..., None] * frame.direction
+    if start is not None:
+        lam = frame.slide * start[:, None]
+        if frame.any_stick:
+            if rate is None:
+                rate = hold_rate(model, frame, vel, acc)[0]
+            lam = lam + frame.stick * start[:, None] * rate / response
+        vel[:, :nv] += kick * start[:, None]
+        vel, spent = _impulse(frame, vel, lam)
+        work = work + spent
     state.v = vel[:, :nv].reshape(state.v.shape)
     state.w = vel[:, nv:].reshape(state.w.shape)
-    safe = np.where(hk != 0, hk, 1.0)[:, None]
-    forces = -(lam / safe)[..., None] * frame.direction
-    pair = forces[:, :model.n_pairs]
-    wall = forces[:, model.n_pairs:].reshape(b, model.n_walls, model.n_bodies, model.dim)
-    return pair, wall
+    state.work = state.work + work
+    if forces is None:
+        return None
+    return forces[:, :model.n_pairs], forces[:, model.n_pairs:].reshape(b, model.n_walls, model.n_bodies, model.dim)
+
+
+def _impulse(frame: KickFrame, vel: np.ndarray, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Friction impulses lam (B, C) against the slip: the new velocities and the kinetic energy
+    they remove, -(dv . M . (vel + dv / 2)) = impulse . (vel + dv / 2)."""
+    rows = frame.rows
+    coords = (lam[..., None] * frame.unit).reshape(vel.shape[0], 1, -1)
+    impulse = (coords @ rows.impulse_rows)[:, 0]
+    change = -rows.inv_mass_gen * impulse
+    return vel + change, np.add.reduce(impulse * (vel + 0.5 * change), -1)
 
 
 def settle(model: Model, frame: KickFrame, state: State) -> None:
@@ -322,8 +338,11 @@ def settle(model: Model, frame: KickFrame, state: State) -> None:
     step holds them there to its order; this keeps the drift from piling up, and keeps it)."""
     vel = _velocity(state)
     along = np.add.reduce(slip(model, frame.rows, vel) * frame.unit, -1)
-    lam = frame.stick * (along - model.eps[:, None]) / frame.rows.response
-    _apply(model, frame, state, vel, lam, np.zeros(state.t.shape))
+    vel, spent = _impulse(frame, vel, frame.stick * (along - model.eps[:, None]) / frame.rows.response)
+    nv = state.v[0].size
+    state.v = vel[:, :nv].reshape(state.v.shape)
+    state.w = vel[:, nv:].reshape(state.w.shape)
+    state.work = state.work + spent
 
 
 def decide_modes(model: Model, rows: ContactRows, state: State, acc: np.ndarray, engaged: ph.Engaged,

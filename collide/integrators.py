@@ -79,15 +79,21 @@ def seed_step(model: Model, state: State, h: np.ndarray,
     return out, forces, geometry(model, out.s)
 
 
-def _kick(model: Model, state: State, hk: np.ndarray, g: Geometry, first: bool) -> StepForces:
-    """Velocity update over hk seconds: springs and gravity explicit; friction by the contacts'
-    modes (`friction.frame_kick`; the stepper decides modes before it steps). `first`: the
-    step's first half-kick."""
+def _kick(model: Model, state: State, g: Geometry, end: np.ndarray | None, start: np.ndarray | None,
+          ) -> StepForces | None:
+    """The velocity kicks at geometry g between two Verlet substeps: the end of one (over `end`
+    seconds) and the start of the next (over `start`); either may be None. Springs and gravity
+    are explicit; friction goes by the contacts' modes (`friction.frame_kick`; the stepper
+    decides modes before it steps). Returns the friction forces after a step's last kick."""
     acc = ph.normal_accel(model, g.c, g.fn, g.fw)
     if not model.friction:
-        state.v += acc * hk[:, None, None]
-        return _no_friction(model, state)
-    return StepForces(*fr.frame_kick(model, friction_frame(model, g), state, hk, acc, first))
+        # Two adds, as with friction: a sweep mixing mu = 0 with mu > 0 matches single runs.
+        for part in (end, start):
+            if part is not None:
+                state.v = state.v + acc * part[:, None, None]
+        return _no_friction(model, state) if start is None else None
+    forces = fr.frame_kick(model, friction_frame(model, g), state, acc, end, start)
+    return None if forces is None else StepForces(*forces)
 
 
 def friction_frame(model: Model, g: Geometry) -> fr.KickFrame:
@@ -107,31 +113,24 @@ def _settle(model: Model, state: State, g: Geometry) -> None:
         fr.settle(model, frame, state)
 
 
-def verlet_step(model: Model, state: State, h: np.ndarray,
-                start: Geometry | None = None) -> tuple[State, StepForces, Geometry]:
-    """Velocity Verlet (kick-drift-kick): second order and symplectic without friction.
-
-    The geometry at the end is returned so the next step starts from it (one evaluation a step).
-    """
-    out = state.copy()
-    _kick(model, out, 0.5 * h, start or geometry(model, state.s), True)
-    out.s += out.v * h[:, None, None]
-    out.q = ph.advance_orientation(out.q, out.w, h)
-    end = geometry(model, out.s, *((start.engaged, start.modes) if start is not None else ()))
-    forces = _kick(model, out, 0.5 * h, end, False)
-    out.t = state.t + h
-    return out, forces, end
-
-
 def _composition(weights: tuple[float, ...]) -> Callable:
-    """A symmetric composition of Verlet steps (higher order, still momentum-exact)."""
+    """A symmetric composition of Verlet (kick-drift-kick) substeps of gamma h each: second order
+    and symplectic for one, higher order for more, always momentum-exact. The kicks between two
+    substeps share a geometry and are applied together; the geometry at the end is returned so
+    the next step starts from it (one geometry a substep)."""
 
     def step(model: Model, state: State, h: np.ndarray,
              start: Geometry | None = None) -> tuple[State, StepForces, Geometry]:
-        out, g = state, start
+        out = state.copy()
+        g = start or geometry(model, state.s)
+        steps = [gamma * h for gamma in weights]
+        _kick(model, out, g, None, 0.5 * steps[0])
         forces = None
-        for gamma in weights:
-            out, forces, g = verlet_step(model, out, gamma * h, g)
+        for k, hk in enumerate(steps):
+            out.s = out.s + out.v * hk[:, None, None]
+            out.q = ph.advance_orientation(out.q, out.w, hk)
+            g = geometry(model, out.s, g.engaged, g.modes)
+            forces = _kick(model, out, g, 0.5 * hk, 0.5 * steps[k + 1] if k + 1 < len(steps) else None)
         _settle(model, out, g)
         out.t = state.t + h
         return out, forces, g
@@ -161,7 +160,7 @@ class Integrator:
 
 INTEGRATORS: dict[str, Integrator] = {
     "seed": Integrator("seed", seed_step, 1, 2.0, events=False),
-    "verlet": Integrator("verlet", _composition((1.0,)), 2, 2.0, events=True),
+    "verlet": Integrator("verlet", _composition((1.0,)), 2, 2.0, events=True),  # velocity Verlet
     "yoshida4": Integrator("yoshida4", _composition(YOSHIDA4), 4, 2.0 / (_CBRT2 * _Y1),
                            events=True),
     "kahan6": Integrator("kahan6", _composition(KAHAN6), 6, 2.0 / max(abs(x) for x in KAHAN6),
