@@ -22,6 +22,7 @@ G = d(s . d)/dt with no friction (the "hold rate"); holding the slip needs frict
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +45,12 @@ class Modes:
     side: np.ndarray
     entry: np.ndarray
 
+    def __post_init__(self) -> None:
+        # Fixed for the whole step: what every kick of it uses.
+        self.sliding = (self.mode == SLIDE).astype(float)
+        self.stuck = (self.mode == STICK).astype(float)
+        self.any_stick = bool(self.stuck.any())
+
 
 @dataclass
 class ContactRows:
@@ -65,8 +72,8 @@ class ContactRows:
     normal: np.ndarray  # (B, C): normal force
     dist: np.ndarray  # (B, P) distance between the pairs' centres
     slip_spin: np.ndarray  # (B, P, N): lever of each body's spin in the pair's slip (l_i, l_j)
-    turn_response: np.ndarray  # (B, P): l_i a_i / I_i + l_j a_j / I_j
-    lever_response: np.ndarray  # (B, C): contact lever, pairs a_i / I_i + a_j / I_j, walls -a / I
+    turn_response: np.ndarray | None  # 3D (B, P): l_i a_i / I_i + l_j a_j / I_j
+    lever_response: np.ndarray | None  # contact lever (B, C): pairs a_i / I_i + a_j / I_j, walls -a / I
 
 
 @dataclass
@@ -126,49 +133,63 @@ def contact_rows(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray) -
     si, sj = model.select_i[None], model.select_j[None]
     slip_spin = si * li[..., None] + sj * lj[..., None]  # (B, P, N)
     if k:
-        nxe = _cross(c.n[:, :, None, :], basis)[:, :, :, None, :]  # (B, P, T, 1, K)
         force_spin = si * c.arm_i[..., None] + sj * c.arm_j[..., None]
-        slip_w.append((slip_spin[:, :, None, :, None] * nxe).reshape(b, pair_rows, n_bodies * k))
-        imp_w.append((force_spin[:, :, None, :, None] * nxe).reshape(b, pair_rows, n_bodies * k))
+        if dim == 2:  # n x perp(n) = 1
+            slip_w.append(slip_spin)
+            imp_w.append(force_spin)
+        else:
+            nxe = _cross(c.n[:, :, None, :], basis)[:, :, :, None, :]  # (B, P, T, 1, K)
+            slip_w.append((slip_spin[:, :, None, :, None] * nxe).reshape(b, pair_rows, n_bodies * k))
+            imp_w.append((force_spin[:, :, None, :, None] * nxe).reshape(b, pair_rows, n_bodies * k))
     bases, normals = [basis], [c.n]
-    lever = [c.arm_i * model.pair_inv_inertia_i + c.arm_j * model.pair_inv_inertia_j]
+    lever = None if model.seed_lever or not k else \
+        [c.arm_i * model.pair_inv_inertia_i + c.arm_j * model.pair_inv_inertia_j]
     normal = fn
     if model.n_walls:
         wall_normal = np.broadcast_to(model.wall_normal[None, :, None, :],
                                       (b, model.n_walls, n_bodies, dim)).reshape(b, -1, dim)
         wbasis = _tangent_basis(wall_normal)  # (B, W N, T, D)
         # Sphere n on wall w: slip = v_n . e - arm w_n . (n_w x e); the impulse -j acts at -arm n_w.
-        own = np.tile(np.eye(n_bodies), (model.n_walls, 1))[None, :, None, :, None]  # (1, W N, 1, N, 1)
+        own = _owners(model.n_walls, n_bodies)  # (1, W N, 1, N, 1)
         wall_rows = model.n_walls * n_bodies * tangents
         wv = (own * wbasis[:, :, :, None, :]).reshape(b, wall_rows, n_bodies * dim)
         slip_v.append(wv)
         imp_v.append(wv)
         if k:
-            nxe = _cross(wall_normal[:, :, None, :], wbasis)[:, :, :, None, :]
+            nxe = 1.0 if dim == 2 else _cross(wall_normal[:, :, None, :], wbasis)[:, :, :, None, :]
             slip_arm = ph._wall_slip_arm(model, c).reshape(b, -1)[:, :, None, None, None]
             force_arm = c.wall_arm.reshape(b, -1)[:, :, None, None, None]
             slip_w.append(-(own * slip_arm * nxe).reshape(b, wall_rows, n_bodies * k))
             imp_w.append(-(own * force_arm * nxe).reshape(b, wall_rows, n_bodies * k))
         bases.append(wbasis)
         normals.append(wall_normal)
-        lever.append(-(c.wall_arm * model.inv_inertia[:, None, :]).reshape(b, -1))
+        if lever is not None:
+            lever.append(-(c.wall_arm * model.inv_inertia[:, None, :]).reshape(b, -1))
         normal = np.concatenate((fn, fw.reshape(b, -1)), axis=1)
     slip_rows, impulse_rows = _join(slip_v), _join(imp_v)
     if k:
         slip_rows = np.concatenate((slip_rows, _join(slip_w)), axis=2)
         impulse_rows = np.concatenate((impulse_rows, _join(imp_w)), axis=2)
-    inv_mass_gen = np.concatenate((np.repeat(model.inv_mass, dim, axis=1), np.repeat(model.inv_inertia, k, axis=1)),
-                                  axis=1)
+    inv_mass_gen = model.inv_mass_gen
     # The response along the first tangent is the response along any.
-    width = slip_rows.shape[-1]
-    first = slip_rows.reshape(b, -1, tangents, width)[:, :, 0]
-    first_imp = impulse_rows.reshape(b, -1, tangents, width)[:, :, 0]
+    if tangents == 1:
+        first, first_imp = slip_rows, impulse_rows
+    else:
+        width = slip_rows.shape[-1]
+        first = slip_rows.reshape(b, -1, tangents, width)[:, :, 0]
+        first_imp = impulse_rows.reshape(b, -1, tangents, width)[:, :, 0]
+    turn = li * c.arm_i * model.pair_inv_inertia_i + lj * c.arm_j * model.pair_inv_inertia_j if dim == 3 else None
     return ContactRows(
         slip_rows=slip_rows, impulse_rows=impulse_rows, basis=_join(bases), normals=_join(normals),
         inv_mass_gen=inv_mass_gen, response=np.add.reduce(first * inv_mass_gen[:, None, :] * first_imp, -1),
-        normal=normal, dist=model.pair_reach - c.overlap, slip_spin=slip_spin,
-        turn_response=li * c.arm_i * model.pair_inv_inertia_i + lj * c.arm_j * model.pair_inv_inertia_j,
-        lever_response=_join(lever))
+        normal=normal, dist=model.pair_reach - c.overlap, slip_spin=slip_spin, turn_response=turn,
+        lever_response=None if lever is None else _join(lever))
+
+
+@functools.cache
+def _owners(n_walls: int, n_bodies: int) -> np.ndarray:
+    """(1, W N, 1, N, 1): contact (w, n) belongs to body n."""
+    return np.tile(np.eye(n_bodies), (n_walls, 1))[None, :, None, :, None]
 
 
 def _join(parts: list[np.ndarray], axis: int = 1) -> np.ndarray:
@@ -179,12 +200,13 @@ def kick_frame(model: Model, rows: ContactRows, modes: Modes) -> KickFrame:
     """The rows with these modes in effect (see `KickFrame`)."""
     if model.dim == 2:
         direction = rows.basis[:, :, 0] * modes.side[..., None]
+        unit = modes.side[..., None]
     else:
         direction = _transport(modes.entry, rows.normals)
-    stuck = modes.mode == STICK
-    return KickFrame(rows=rows, modes=modes, unit=np.add.reduce(rows.basis * direction[:, :, None, :], -1),
-                     direction=direction, slide=np.where(modes.mode == SLIDE, model.mu[:, None] * rows.normal, 0.0),
-                     stick=stuck.astype(float), any_stick=bool(stuck.any()))
+        unit = np.add.reduce(rows.basis * direction[:, :, None, :], -1)
+    return KickFrame(rows=rows, modes=modes, unit=unit, direction=direction,
+                     slide=modes.sliding * model.mu[:, None] * rows.normal, stick=modes.stuck,
+                     any_stick=modes.any_stick)
 
 
 def geometry_frame(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray, modes: Modes) -> KickFrame:
@@ -272,77 +294,70 @@ def hold_rate(model: Model, frame: KickFrame, vel: np.ndarray, acc: np.ndarray) 
     return rate + turn, slope
 
 
-def frame_kick(model: Model, frame: KickFrame, state: State, acc: np.ndarray, end: np.ndarray | None,
-               start: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
-    """The kicks at one geometry between two Verlet substeps: the end of one (springs and
-    gravity `acc` over `end` seconds, then friction) and the start of the next (friction, then
-    springs over `start`). Either may be None. Returns the friction forces at the end of a
-    step (pairs (B, P, D), walls (B, W, N, D)) when nothing follows, else None.
+def frame_kick(model: Model, frame: KickFrame, vel: np.ndarray, acc: np.ndarray, end: np.ndarray | None,
+               start: np.ndarray | None) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+    """The kicks at one geometry between two Verlet substeps, on the generalised velocity vel
+    (B, F) in place: the end of one (springs and gravity `acc` over `end` seconds, then friction)
+    and the start of the next (friction, then springs over `start`). Either may be None.
+    Returns the work done against friction (B,) and, when nothing follows, the friction forces
+    at the end of the step (pairs (B, P, D), walls (B, W, N, D)).
 
     slide: mu F_n against the slip for the signed time (substeps may run backwards). stick: the
     force that holds the slip on the band's edge, at the start state of a substep (explicit) and
     at its end state (implicit: lam = h G(v + dv(lam)) / K), so the substep's two halves mirror
-    each other and compositions of it keep their order. The work done is the kinetic energy the
+    each other and compositions of it keep their order. The work is the kinetic energy the
     impulses remove, exactly.
     """
-    b, nv = state.v.shape[0], state.v[0].size
-    vel = np.concatenate((state.v.reshape(b, -1), state.w.reshape(b, -1)), axis=1)
+    b = vel.shape[0]
+    nv = acc[0].size
     response = frame.rows.response
-    kick = acc.reshape(b, -1)
+    kick = acc.reshape(b, nv)
     work = 0.0
-    rate = slope = None
+    rate = None
     forces = None
     if end is not None:
-        vel[:, :nv] += kick * end[:, None]
-        lam = frame.slide * end[:, None]
+        span = end[:, None]
+        vel[:, :nv] += kick * span
+        lam = frame.slide * span
         if frame.any_stick:
             rate, slope = hold_rate(model, frame, vel, acc)
-            held = end[:, None] * rate / (response - end[:, None] * slope)
+            held = span * rate / (response - span * slope)
             lam = lam + frame.stick * held
             # G is affine in the contact's own impulse: its value after this one, for the next kick.
             rate = rate + slope * held if response.shape[1] == 1 else None
-        vel, spent = _impulse(frame, vel, lam)
-        work = work + spent
+        work = _impulse(frame, vel, lam)
         if start is None:
-            safe = np.where(end != 0, end, 1.0)[:, None]
-            forces = -(lam / safe)[..., None] * frame.direction
+            forces = -(lam / np.where(span != 0, span, 1.0))[..., None] * frame.direction
     if start is not None:
-        lam = frame.slide * start[:, None]
+        span = start[:, None]
+        lam = frame.slide * span
         if frame.any_stick:
             if rate is None:
                 rate = hold_rate(model, frame, vel, acc)[0]
-            lam = lam + frame.stick * start[:, None] * rate / response
-        vel[:, :nv] += kick * start[:, None]
-        vel, spent = _impulse(frame, vel, lam)
-        work = work + spent
-    state.v = vel[:, :nv].reshape(state.v.shape)
-    state.w = vel[:, nv:].reshape(state.w.shape)
-    state.work = state.work + work
+            lam = lam + frame.stick * span * rate / response
+        vel[:, :nv] += kick * span
+        work = work + _impulse(frame, vel, lam)
     if forces is None:
-        return None
-    return forces[:, :model.n_pairs], forces[:, model.n_pairs:].reshape(b, model.n_walls, model.n_bodies, model.dim)
+        return work, None
+    return work, (forces[:, :model.n_pairs],
+                  forces[:, model.n_pairs:].reshape(b, model.n_walls, model.n_bodies, model.dim))
 
 
-def _impulse(frame: KickFrame, vel: np.ndarray, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Friction impulses lam (B, C) against the slip: the new velocities and the kinetic energy
-    they remove, -(dv . M . (vel + dv / 2)) = impulse . (vel + dv / 2)."""
+def _impulse(frame: KickFrame, vel: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """Apply friction impulses lam (B, C) against the slip to vel in place; returns the kinetic
+    energy they remove, -(dv . M . (vel + dv / 2)) = impulse . (vel + dv / 2)."""
     rows = frame.rows
-    coords = (lam[..., None] * frame.unit).reshape(vel.shape[0], 1, -1)
-    impulse = (coords @ rows.impulse_rows)[:, 0]
+    impulse = ((lam[..., None] * frame.unit).reshape(vel.shape[0], 1, -1) @ rows.impulse_rows)[:, 0]
     change = -rows.inv_mass_gen * impulse
-    return vel + change, np.add.reduce(impulse * (vel + 0.5 * change), -1)
+    work = np.add.reduce(impulse * (vel + 0.5 * change), -1)
+    vel += change
+    return work
 
 
-def settle(model: Model, frame: KickFrame, state: State) -> None:
-    """Put stuck slips back on the band's edge: a projection after a whole step (the symmetric
-    step holds them there to its order; this keeps the drift from piling up, and keeps it)."""
-    vel = _velocity(state)
+def settle(model: Model, frame: KickFrame, vel: np.ndarray) -> np.ndarray:
+    """Put stuck slips back on the band's edge (vel in place); returns the work done."""
     along = np.add.reduce(slip(model, frame.rows, vel) * frame.unit, -1)
-    vel, spent = _impulse(frame, vel, frame.stick * (along - model.eps[:, None]) / frame.rows.response)
-    nv = state.v[0].size
-    state.v = vel[:, :nv].reshape(state.v.shape)
-    state.w = vel[:, nv:].reshape(state.w.shape)
-    state.work = state.work + spent
+    return _impulse(frame, vel, frame.stick * (along - model.eps[:, None]) / frame.rows.response)
 
 
 def decide_modes(model: Model, rows: ContactRows, state: State, acc: np.ndarray, engaged: ph.Engaged,
@@ -376,11 +391,7 @@ def decide_modes(model: Model, rows: ContactRows, state: State, acc: np.ndarray,
     mode = np.where(at_edge, edge_mode, np.where(along > eps, SLIDE, BAND))
     active = np.concatenate((engaged.pair, engaged.wall.reshape(b, -1)), axis=1) if model.n_walls else engaged.pair
     mode = np.where(active > 0, mode, BAND).astype(np.int8)
-    stuck = mode == STICK
-    frame = KickFrame(rows=rows, modes=Modes(mode, side, entry), unit=candidate.unit,
-                      direction=candidate.direction,
-                      slide=np.where(mode == SLIDE, model.mu[:, None] * rows.normal, 0.0),
-                      stick=stuck.astype(float), any_stick=bool(stuck.any()))
+    frame = kick_frame(model, rows, Modes(mode, side, entry))
     return frame, frame_events(model, frame, state, acc, scale)
 
 

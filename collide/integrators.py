@@ -46,8 +46,8 @@ class StepForces:
     wall: np.ndarray
 
 
-def _no_friction(model: Model, state: State) -> StepForces:
-    b = state.s.shape[0]
+def _no_friction(model: Model, state: State | np.ndarray) -> StepForces:
+    b = state.shape[0] if isinstance(state, np.ndarray) else state.s.shape[0]
     return StepForces(np.zeros((b, model.n_pairs, model.dim)),
                       np.zeros((b, model.n_walls, model.n_bodies, model.dim)))
 
@@ -79,21 +79,25 @@ def seed_step(model: Model, state: State, h: np.ndarray,
     return out, forces, geometry(model, out.s)
 
 
-def _kick(model: Model, state: State, g: Geometry, end: np.ndarray | None, start: np.ndarray | None,
-          ) -> StepForces | None:
+def _kick(model: Model, vel: np.ndarray, g: Geometry, end: np.ndarray | None, start: np.ndarray | None,
+          ) -> tuple[np.ndarray, StepForces | None]:
     """The velocity kicks at geometry g between two Verlet substeps: the end of one (over `end`
-    seconds) and the start of the next (over `start`); either may be None. Springs and gravity
+    seconds) and the start of the next (over `start`); either may be None. `vel` (B, F) holds
+    the velocities and then the spins, flattened, and is updated in place. Springs and gravity
     are explicit; friction goes by the contacts' modes (`friction.frame_kick`; the stepper
-    decides modes before it steps). Returns the friction forces after a step's last kick."""
+    decides modes before it steps). Returns the work done against friction and, after a step's
+    last kick, the friction forces."""
     acc = ph.normal_accel(model, g.c, g.fn, g.fw)
     if not model.friction:
+        nv = acc[0].size
+        kick = acc.reshape(acc.shape[0], nv)
         # Two adds, as with friction: a sweep mixing mu = 0 with mu > 0 matches single runs.
         for part in (end, start):
             if part is not None:
-                state.v = state.v + acc * part[:, None, None]
-        return _no_friction(model, state) if start is None else None
-    forces = fr.frame_kick(model, friction_frame(model, g), state, acc, end, start)
-    return None if forces is None else StepForces(*forces)
+                vel[:, :nv] += kick * part[:, None]
+        return 0.0, (_no_friction(model, vel) if start is None else None)
+    work, forces = fr.frame_kick(model, friction_frame(model, g), vel, acc, end, start)
+    return work, (None if forces is None else StepForces(*forces))
 
 
 def friction_frame(model: Model, g: Geometry) -> fr.KickFrame:
@@ -103,37 +107,36 @@ def friction_frame(model: Model, g: Geometry) -> fr.KickFrame:
     return g.frame
 
 
-def _settle(model: Model, state: State, g: Geometry) -> None:
-    """Put stuck slips back on the band's edge after a whole step: the symmetric step holds them
-    there to its order, and this keeps the drift from piling up (a projection: it keeps the order)."""
-    if g.modes is None or not model.friction:
-        return
-    frame = friction_frame(model, g)
-    if frame.any_stick:
-        fr.settle(model, frame, state)
-
-
 def _composition(weights: tuple[float, ...]) -> Callable:
     """A symmetric composition of Verlet (kick-drift-kick) substeps of gamma h each: second order
     and symplectic for one, higher order for more, always momentum-exact. The kicks between two
     substeps share a geometry and are applied together; the geometry at the end is returned so
-    the next step starts from it (one geometry a substep)."""
+    the next step starts from it (one geometry a substep).
+
+    After the whole step, stuck slips are put back on the band's edge: the symmetric step holds
+    them there to its order, and this projection keeps the drift from piling up (and the order).
+    """
 
     def step(model: Model, state: State, h: np.ndarray,
              start: Geometry | None = None) -> tuple[State, StepForces, Geometry]:
-        out = state.copy()
+        b, n, dim = state.s.shape
+        nv = n * dim
+        vel = np.concatenate((state.v.reshape(b, nv), state.w.reshape(b, -1)), axis=1)
         g = start or geometry(model, state.s)
+        s, q = state.s, state.q
         steps = [gamma * h for gamma in weights]
-        _kick(model, out, g, None, 0.5 * steps[0])
+        work, _ = _kick(model, vel, g, None, 0.5 * steps[0])
         forces = None
         for k, hk in enumerate(steps):
-            out.s = out.s + out.v * hk[:, None, None]
-            out.q = ph.advance_orientation(out.q, out.w, hk)
-            g = geometry(model, out.s, g.engaged, g.modes)
-            forces = _kick(model, out, g, 0.5 * hk, 0.5 * steps[k + 1] if k + 1 < len(steps) else None)
-        _settle(model, out, g)
-        out.t = state.t + h
-        return out, forces, g
+            s = s + vel[:, :nv].reshape(b, n, dim) * hk[:, None, None]
+            q = ph.advance_orientation(q, vel[:, nv:].reshape(state.w.shape), hk)
+            g = geometry(model, s, g.engaged, g.modes)
+            done, forces = _kick(model, vel, g, 0.5 * hk, 0.5 * steps[k + 1] if k + 1 < len(steps) else None)
+            work = work + done
+        if model.friction and g.modes is not None and g.modes.any_stick:
+            work = work + fr.settle(model, friction_frame(model, g), vel)
+        return State(state.t + h, s, vel[:, :nv].reshape(state.v.shape), vel[:, nv:].reshape(state.w.shape), q,
+                     state.work + work), forces, g
 
     return step
 

@@ -67,6 +67,7 @@ class Model:
     pair_inv_mass: np.ndarray  # 1/m_i + 1/m_j
     pair_inv_inertia_i: np.ndarray  # (B, P)
     pair_inv_inertia_j: np.ndarray
+    inv_mass_gen: np.ndarray  # (B, N D + N K): 1/m per velocity component, then 1/I per spin one
 
     @property
     def batch(self) -> int:
@@ -162,6 +163,8 @@ def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
         friction=friction, seed_lever=first.contact.lever == "seed",
         pair_to_body_i=incidence_i, pair_to_body_j=incidence_j,
         **_pair_arrays(pair_i, pair_j, radius, 1.0 / mass, 1.0 / inertia),
+        inv_mass_gen=np.concatenate((np.repeat(1.0 / mass, dim, axis=1), np.repeat(1.0 / inertia, spin_dim, axis=1)),
+                                    axis=1),
     )
     b = len(scenes)
     s = np.array([[b_.position for b_ in sc.bodies] for sc in scenes], dtype=float).reshape(b, n, dim)
@@ -197,7 +200,7 @@ def select_model(model: Model, index: int) -> Model:
     changes = {name: getattr(model, name)[sl] for name in
                ("mass", "inv_mass", "radius", "inertia", "inv_inertia", "k_pair", "k_wall", "mu", "eps",
                 "pair_ri", "pair_rj", "pair_reach", "pair_inv_mass", "pair_inv_inertia_i",
-                "pair_inv_inertia_j")}
+                "pair_inv_inertia_j", "inv_mass_gen")}
     if model.gravity is not None:
         changes["gravity"] = model.gravity[sl]
     return replace(model, **changes)

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from collide.friction import EDGE_TOL
 from collide.integrators import INTEGRATORS
 from collide.model import compile_scenes
 from collide.scene import Scene, SceneError
@@ -125,9 +126,12 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     if model.gravity is not None and model.n_walls and np.isnan(duration).any():
         raise SceneError("duration: required when a scene has both gravity and walls "
                          "(a bouncing sphere never stops)")
-    result = simulate(model, state, integrator=integ, dt=dt_arr, duration=duration, tail=tail,
-                      record=record, max_steps=max_steps)
     auto_used = [(scene.dt if dt is None else dt) == "auto" for scene in scenes]
+    # A step chosen for tol lands friction mode changes to a hundredth of it (their error is
+    # about that much); a given step lands them as closely as they can be.
+    event_tol = np.where(auto_used, np.maximum(EDGE_TOL, 0.01 * tols), EDGE_TOL)
+    result = simulate(model, state, integrator=integ, dt=dt_arr, duration=duration, tail=tail,
+                      record=record, max_steps=max_steps, event_tol=event_tol)
     return SceneRun(list(scenes), result, dt, [float(x) for x in tols], estimate, auto_used)
 
 

@@ -381,8 +381,11 @@ def default_tail(contacts: ContactLog) -> np.ndarray:
 
 def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
              duration: np.ndarray | None = None, tail: np.ndarray | None = None,
-             record: bool = True, max_steps: int = MAX_STEPS_DEFAULT) -> RunResult:
-    """Run B scenes to their end. `duration` and `tail` are (B,) with NaN meaning 'not set'."""
+             record: bool = True, max_steps: int = MAX_STEPS_DEFAULT,
+             event_tol: np.ndarray | float = fr.EDGE_TOL) -> RunResult:
+    """Run B scenes to their end. `duration` and `tail` are (B,) with NaN meaning 'not set'.
+    `event_tol` (relative to the fastest initial speed): how close a friction mode change must
+    land (the slip to the band's edge, a stuck contact's force to its limits)."""
     integ = INTEGRATORS[integrator]
     b = model.batch
     dt = np.broadcast_to(np.asarray(dt, dtype=float), (b,)).copy()
@@ -406,8 +409,10 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
             rows.append((s.t, s.s, s.v, s.w, s.q, s.work, free, forces.pair, forces.wall))
 
     snapshot(state, np.ones(b, bool), zero_forces)
-    # Speed scale of the friction events: the fastest body at the start (at least the band).
-    scale = np.maximum(np.sqrt(np.max(np.sum(initial.v ** 2, -1), axis=1)), 10 * model.eps + 1e-300)
+    # Scale of the friction events: the fastest body at the start (at least the band), times the
+    # tolerance asked for over the one the events are located to.
+    speed = np.maximum(np.sqrt(np.max(np.sum(initial.v ** 2, -1), axis=1)), 10 * model.eps + 1e-300)
+    scale = speed * np.broadcast_to(np.asarray(event_tol, dtype=float), (b,)) / fr.EDGE_TOL
     started = time.perf_counter()
     passes = 0
     while not done.all():
