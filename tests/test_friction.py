@@ -95,3 +95,43 @@ def test_friction_keeps_sixth_order():
     order = np.log2(errors[0] / errors[1])
     assert errors[1] < 1e-8
     assert order > 5.0
+
+
+def tilted_bonus(**changes) -> dict:
+    """The bonus demo in 3D with the first ball thrown and both spinning out of the plane."""
+    raw = {"name": "tilted", "dim": 3, "contact": {"k": 1500.0, "mu": 0.5, "lever": "seed"},
+           "body": [{"name": "ball1", "mass": 0.0254, "radius": 0.03021, "position": [0.0, 0.01, 0.0],
+                     "velocity": [1.0, 0.0, 0.3], "spin": [2.0, -1.0, 3.0]},
+                    {"name": "ball2", "mass": 0.0254, "radius": 0.03021, "position": [0.5, 0.0, 0.0],
+                     "velocity": [-2.0, 0.0, 0.0], "spin": [-1.0, 4.0, -5.0]}]}
+    raw.update(changes)
+    return raw
+
+
+def test_error_regime_knows_when_friction_leaves_the_plane():
+    from collide.run import error_regime
+
+    assert error_regime(load_scene("demo-bonus")) == "friction"
+    assert error_regime(load_scene("demo-2d-moving")) == "smooth"
+    flat = tilted_bonus()
+    flat["body"][0].update(velocity=[1.0, 0.0, 0.0], spin=[0.0, 0.0, 3.0])
+    flat["body"][1].update(spin=[0.0, 0.0, -5.0])
+    assert error_regime(parse_scene(flat)) == "friction"
+    assert error_regime(parse_scene(tilted_bonus())) == "friction-3d"
+
+
+def test_friction_out_of_the_plane_meets_its_first_order_estimate():
+    """The estimate is honest out of the plane (first order), and a tol that would take minutes
+    is refused with the tol that is reachable."""
+    from collide.stepper import RunError
+
+    scene = parse_scene(tilted_bonus())
+    with pytest.raises(RunError, match="first order"):
+        run_scene(scene, tol=1e-6, record=False)
+    model, _ = compile_scenes([scene])
+    omega = float(max_frequency(model)[0])
+    reference = outcome(run_scene(scene, dt=0.005 / omega, record=False).result)
+    run = run_scene(scene, tol=1e-3, record=False)
+    error = np.abs(outcome(run.result) - reference).max() / speed_scale(scene)
+    assert run.error_estimate[0] == pytest.approx(1e-3)
+    assert error <= 1e-3
