@@ -98,7 +98,7 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[..., _ROLL1] * b[..., _ROLL2] - a[..., _ROLL2] * b[..., _ROLL1]
 
 
-_ROLL1, _ROLL2 = [1, 2, 0], [2, 0, 1]
+_ROLL1, _ROLL2 = np.array([1, 2, 0]), np.array([2, 0, 1])
 _EX, _EY = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
 
 
@@ -110,6 +110,11 @@ def _tangent_basis(n: np.ndarray) -> np.ndarray:
     e1 = _cross(n, helper)
     e1 = e1 / ph.norm(e1)[..., None]
     return np.stack((e1, _cross(n, e1)), axis=-2)
+
+
+def _turned(basis: np.ndarray) -> np.ndarray:
+    """n x e for a 3D tangent basis (e1, e2 = n x e1): (e2, -e1)."""
+    return np.stack((basis[..., 1, :], -basis[..., 0, :]), axis=-2)
 
 
 def _transport(entry: np.ndarray, n: np.ndarray) -> np.ndarray:
@@ -138,7 +143,7 @@ def contact_rows(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray) -
             slip_w.append(slip_spin)
             imp_w.append(force_spin)
         else:
-            nxe = _cross(c.n[:, :, None, :], basis)[:, :, :, None, :]  # (B, P, T, 1, K)
+            nxe = _turned(basis)[:, :, :, None, :]  # (B, P, T, 1, K): n x e
             slip_w.append((slip_spin[:, :, None, :, None] * nxe).reshape(b, pair_rows, n_bodies * k))
             imp_w.append((force_spin[:, :, None, :, None] * nxe).reshape(b, pair_rows, n_bodies * k))
     bases, normals = [basis], [c.n]
@@ -148,7 +153,8 @@ def contact_rows(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray) -
     if model.n_walls:
         wall_normal = np.broadcast_to(model.wall_normal[None, :, None, :],
                                       (b, model.n_walls, n_bodies, dim)).reshape(b, -1, dim)
-        wbasis = _tangent_basis(wall_normal)  # (B, W N, T, D)
+        wbasis = np.broadcast_to(_wall_basis(model.wall_normal.tobytes(), dim, n_bodies),
+                                 (b, model.n_walls * n_bodies, tangents, dim))  # (B, W N, T, D)
         # Sphere n on wall w: slip = v_n . e - arm w_n . (n_w x e); the impulse -j acts at -arm n_w.
         own = _owners(model.n_walls, n_bodies)  # (1, W N, 1, N, 1)
         wall_rows = model.n_walls * n_bodies * tangents
@@ -156,7 +162,7 @@ def contact_rows(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray) -
         slip_v.append(wv)
         imp_v.append(wv)
         if k:
-            nxe = 1.0 if dim == 2 else _cross(wall_normal[:, :, None, :], wbasis)[:, :, :, None, :]
+            nxe = 1.0 if dim == 2 else _turned(wbasis)[:, :, :, None, :]
             slip_arm = ph._wall_slip_arm(model, c).reshape(b, -1)[:, :, None, None, None]
             force_arm = c.wall_arm.reshape(b, -1)[:, :, None, None, None]
             slip_w.append(-(own * slip_arm * nxe).reshape(b, wall_rows, n_bodies * k))
@@ -184,6 +190,13 @@ def contact_rows(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray) -
         inv_mass_gen=inv_mass_gen, response=np.add.reduce(first * inv_mass_gen[:, None, :] * first_imp, -1),
         normal=normal, dist=model.pair_reach - c.overlap, slip_spin=slip_spin, turn_response=turn,
         lever_response=None if lever is None else _join(lever))
+
+
+@functools.cache
+def _wall_basis(normals: bytes, dim: int, n_bodies: int) -> np.ndarray:
+    """(1, W N, T, D): the tangent basis of every sphere-wall contact (walls do not move)."""
+    wall_normal = np.frombuffer(normals).reshape(-1, dim)
+    return _tangent_basis(np.repeat(wall_normal, n_bodies, axis=0))[None]
 
 
 @functools.cache
@@ -258,6 +271,7 @@ def hold_rate(model: Model, frame: KickFrame, vel: np.ndarray, acc: np.ndarray) 
         e = frame.modes.entry[:, :p]
         en = ph.dot(e, n)
         length = ph.norm(e - en[..., None] * n)[..., None]
+        length = np.where(length > 0, length, 1.0)  # no direction yet (no slip): no turning
 
         def d_rate_of(nr: np.ndarray) -> np.ndarray:
             pr = -ph.dot(e, nr)[..., None] * n - en[..., None] * nr
