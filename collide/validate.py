@@ -214,7 +214,8 @@ def cross_check(scene: Scene, *, tol: float = DEFAULT_TOL, max_halvings: int = M
 
     The converged run: `kahan6` (LADDER_INTEGRATOR) at dt/2, dt/4, ... (dt = the scene's step)
     until two successive runs differ by less than tol/10; its own error is then below that
-    change (order >= 1; kahan6 converges at third to sixth order, so far below it).
+    change (order >= 1; kahan6 converges at sixth order, first order only for friction whose slip
+    turns out of its plane, so its error is far below the change).
     """
     if max_halvings < 2:
         raise ValueError(f"max_halvings: need at least 2 to see convergence, got {max_halvings}")
