@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from collide import friction as fr
+from collide import pairstep
 from collide import physics as ph
 from collide.model import Model, State
 
@@ -107,6 +108,9 @@ def friction_frame(model: Model, g: Geometry) -> fr.KickFrame:
     return g.frame
 
 
+SCALAR_PAIRS = True  # one run of two spheres in 1D/2D without walls: `pairstep` (plain floats)
+
+
 def _composition(weights: tuple[float, ...]) -> Callable:
     """A symmetric composition of Verlet (kick-drift-kick) substeps of gamma h each: second order
     and symplectic for one, higher order for more, always momentum-exact. The kicks between two
@@ -119,6 +123,14 @@ def _composition(weights: tuple[float, ...]) -> Callable:
 
     def step(model: Model, state: State, h: np.ndarray,
              start: Geometry | None = None) -> tuple[State, StepForces, Geometry]:
+        if SCALAR_PAIRS and pairstep.applies(model):
+            g = start or geometry(model, state.s)
+            engaged = g.engaged is not None and bool(g.engaged.pair[0, 0] > 0)
+            new, force = pairstep.composite(model, state, float(h[0]), weights, engaged, g.modes)
+            forces = _no_friction(model, state)
+            if model.friction:
+                forces.pair = force
+            return new, forces, geometry(model, new.s, g.engaged, g.modes)
         b, n, dim = state.s.shape
         nv = n * dim
         vel = np.concatenate((state.v.reshape(b, nv), state.w.reshape(b, -1)), axis=1)

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numpy as np
 import pytest
 
 from collide import diagnostics as dg
-from collide import friction, physics
+from collide import friction, integrators, physics
 from collide.run import run_scene, run_scenes
 from collide.scene import builtin_names, load_scene, parse_scene
 
@@ -152,9 +153,23 @@ def test_step_count_follows_contact_not_distance():
 
 
 def batch_and_singles(scenes: list) -> list[tuple]:
-    """(batch member, single run) final results for each scene, from one batched call."""
+    """(batch member, single run) final results for each scene, from one batched call. The single
+    runs go through the same numpy stepper (`integrators.SCALAR_PAIRS` off): one stepper serves
+    both; `tests/test_pairstep.py` checks the plain-float path against it."""
     batch = run_scenes(scenes, record=False).result
-    return [(batch.member(b), run_scene(scene, record=False).result) for b, scene in enumerate(scenes)]
+    with numpy_pairs():
+        return [(batch.member(b), run_scene(scene, record=False).result) for b, scene in enumerate(scenes)]
+
+
+@contextlib.contextmanager
+def numpy_pairs():
+    """Single runs of two spheres through the numpy kernels rather than `collide.pairstep`."""
+    saved = integrators.SCALAR_PAIRS
+    integrators.SCALAR_PAIRS = False
+    try:
+        yield
+    finally:
+        integrators.SCALAR_PAIRS = saved
 
 
 def test_batch_equals_single_runs():
