@@ -30,6 +30,7 @@ class Geometry:
     modes: fr.Modes | None = None
     events: np.ndarray | None = None  # the modes' event values at this state
     frame: fr.KickFrame | None = None  # the friction kick's rows here (built on first use)
+    speeds: tuple | None = None  # the modes' event values and rates here, unscaled, when known
 
 
 def geometry(model: Model, s: np.ndarray, engaged: ph.Engaged | None = None,
@@ -126,11 +127,13 @@ def _composition(weights: tuple[float, ...]) -> Callable:
         if SCALAR_PAIRS and pairstep.applies(model):
             g = start or geometry(model, state.s)
             engaged = g.engaged is not None and bool(g.engaged.pair[0, 0] > 0)
-            new, force = pairstep.composite(model, state, float(h[0]), weights, engaged, g.modes)
+            new, force, speeds = pairstep.composite(model, state, float(h[0]), weights, engaged, g.modes)
             forces = _no_friction(model, state)
             if model.friction:
                 forces.pair = force
-            return new, forces, geometry(model, new.s, g.engaged, g.modes)
+            end = geometry(model, new.s, g.engaged, g.modes)
+            end.speeds = speeds
+            return new, forces, end
         b, n, dim = state.s.shape
         nv = n * dim
         vel = np.concatenate((state.v.reshape(b, nv), state.w.reshape(b, -1)), axis=1)

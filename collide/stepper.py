@@ -238,6 +238,9 @@ def _mode_events(model: Model, state: State, g: Geometry, scale: np.ndarray, rat
     """The friction modes' event values (and rates) at a geometry, or None without friction."""
     if g.modes is None:
         return None
+    if g.speeds is not None:  # computed by the step that ended here
+        values, slopes = g.speeds
+        return (values / scale[:, None], slopes / scale[:, None]) if rates else values / scale[:, None]
     acc = ph.normal_accel(model, g.c, g.fn, g.fw)
     return fr.frame_events(model, friction_frame(model, g), state, acc, scale, rates)
 
@@ -269,6 +272,11 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
     # points converges fastest; the bracket keeps it safe.
     t1, f1 = np.full(b, np.nan), np.full(b, np.nan)
     t2, f2 = np.full(b, np.nan), np.full(b, np.nan)
+    # The shortest trial that crossed a contact's start or end (fraction, overlaps and rates at
+    # its end): a re-step that falls just short of the crossing refines between the two.
+    past = np.full(b, np.inf)
+    d_past, r_past = np.zeros_like(d0), np.zeros_like(r0)
+    accepted = np.zeros(b, bool)
     for _ in range(30):
         frac = h / h_full
         d1, r1 = _scaled_overlaps(model, new, end)
@@ -280,6 +288,19 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
             first = np.where(crossing, root, np.inf).min(axis=1)
             theta = np.full(b, np.inf)
             np.multiply(first, frac, out=theta, where=np.isfinite(first))
+            crossed = crossing.any(axis=1) & (frac < past)
+            past = np.where(crossed, frac, past)
+            d_past = np.where(crossed[:, None], d1, d_past)
+            r_past = np.where(crossed[:, None], r1, r_past)
+        short = np.isfinite(past) & (frac < past) & ~crossing.any(axis=1)
+        if short.any():
+            # Fell short: the crossing lies between this trial's end and the shorter crossing one.
+            gap = np.where(short, past - frac, 0.0)
+            ahead = ((d1 > tol) & (d_past < -tol)) | ((d1 < -tol) & (d_past > tol))
+            root = _hermite_root(d1, d_past, r1 * (gap * h_full)[:, None], r_past * (gap * h_full)[:, None])
+            first = np.where(ahead, root, np.inf).min(axis=1)
+            found = short & np.isfinite(first)
+            theta = np.where(found, frac + np.where(found, first, 0.0) * gap, theta)
         if e0 is not None:
             e1, rate1 = _mode_events(model, new, end, scale, True)
             beyond = live & (e1 < -mode_tol)
@@ -306,6 +327,8 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
             others_fine = ~(beyond & (np.arange(e1.shape[1])[None, :] != col[:, None])).any(axis=1)
             landed = pending & (np.abs(f) <= mode_tol) & others_fine
             pending = pending & ~landed
+            # A mode change landed short of a contact crossing: it comes first; stop here.
+            theta = np.where(landed & short, np.inf, theta)
             if pending.any():
                 estimate = _bracketed_root(lo, f_lo, hi, f_hi, (t2, f2), (t1, f1), (frac, f))
                 # Slide and band events have analytic rates: a cubic Hermite through both ends of
@@ -326,7 +349,10 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
                 theta = np.where(pending, np.minimum(theta, estimate), theta)
                 t2, f2 = np.where(pending, t1, t2), np.where(pending, f1, f2)
                 t1, f1 = np.where(pending, frac, t1), np.where(pending, f, f1)
-        redo = np.isfinite(theta) & (np.abs(theta - frac) > 1e-12 * np.maximum(frac, 1e-300))
+        # A run that accepted its trial keeps it while others refine theirs (its trial is taken
+        # again unchanged, but the bookkeeping above has moved on).
+        redo = np.isfinite(theta) & (np.abs(theta - frac) > 1e-12 * np.maximum(frac, 1e-300)) & ~accepted
+        accepted = accepted | ~redo
         if not redo.any():
             break
         h = np.where(redo, h_full * np.maximum(theta, 1e-12), h)
@@ -511,7 +537,7 @@ def _engage(model: Model, integ: Integrator, state: State, g: Geometry, scale: n
         rows = fr.contact_rows(model, g.c, g.fn, g.fw)
         acc = ph.normal_accel(model, g.c, g.fn, g.fw)
         g.frame, g.events = fr.decide_modes(model, rows, state, acc, engaged, scale)
-        g.modes = g.frame.modes
+        g.modes, g.speeds = g.frame.modes, None
     return g
 
 

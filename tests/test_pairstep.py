@@ -52,13 +52,19 @@ def pressed(lever: str, gravity: bool, mode: int):
 def test_one_step_matches_the_numpy_kernels(monkeypatch, mode, lever, gravity, integrator):
     model, state, g = pressed(lever, gravity, mode)
     h = np.array([2e-4])
-    (a, fa, _), (b, fb, _) = both_paths(monkeypatch, lambda: INTEGRATORS[integrator].step(model, state, h, g))
+    (a, fa, _), (b, fb, end) = both_paths(monkeypatch, lambda: INTEGRATORS[integrator].step(model, state, h, g))
     for x, y in ((a.s, b.s), (a.v, b.v), (a.w, b.w), (a.q, b.q), (a.t, b.t)):
         assert np.abs(x - y).max() <= 1e-14 * max(1.0, np.abs(x).max())
     assert a.work == pytest.approx(b.work, rel=1e-12, abs=1e-18)
     assert fa.pair == pytest.approx(fb.pair, rel=1e-12, abs=1e-12)
     if mode != fr.BAND:
         assert a.work[0] > 0  # friction did work, so the comparison covered it
+    # The event values and rates the plain-float step hands the stepper are frame_events'.
+    acc = ph.normal_accel(model, end.c, end.fn, end.fw)
+    frame = fr.geometry_frame(model, end.c, end.fn, end.fw, end.modes)
+    values, rates = fr.frame_events(model, frame, b, acc, np.ones(1), rates=True)
+    assert end.speeds[0] == pytest.approx(values, rel=1e-10, abs=1e-13)
+    assert end.speeds[1] == pytest.approx(rates, rel=1e-10, abs=1e-12, nan_ok=True)
 
 
 def random_scene(rng: np.random.Generator) -> dict:
