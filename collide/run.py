@@ -65,8 +65,14 @@ def error_regime(scene: Scene) -> str:
 def predicted_error(integrator: str, regimes: list[str], omega_h: np.ndarray) -> np.ndarray:
     """The error model: expected relative error (B,) of the outcome at this omega h, for scenes in
     these regimes (`error_regime`)."""
-    terms = [ERROR_MODELS[integrator][regime] for regime in regimes]
-    return np.array([sum(c * x**p for c, p in term) for term, x in zip(terms, np.broadcast_to(omega_h, len(regimes)))])
+    omega_h = np.broadcast_to(np.asarray(omega_h, dtype=float), (len(regimes),))
+    out = np.empty(len(regimes))
+    names = np.array(regimes)
+    for regime in set(regimes):
+        mine = names == regime
+        x = omega_h[mine]
+        out[mine] = sum(c * x**p for c, p in ERROR_MODELS[integrator][regime])
+    return out
 
 
 def auto_dt(scenes: list[Scene], integrator: str, tol: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -203,22 +203,26 @@ def check_run(model: Model, state: State, dt: np.ndarray, integrator: Integrator
 
 
 def _hermite_root(d0: np.ndarray, d1: np.ndarray, r0: np.ndarray, r1: np.ndarray) -> np.ndarray:
-    """Root in (0, 1) of the cubic Hermite through (0, d0, r0) and (1, d1, r1); r in per-step units."""
+    """Root in (0, 1) of the cubic Hermite through (0, d0, r0) and (1, d1, r1); r in per-step units.
+    Safeguarded Newton on the cubic in Horner form, kept inside the bracket."""
+    c2 = 3.0 * (d1 - d0) - 2.0 * r0 - r1
+    c3 = 2.0 * (d0 - d1) + r0 + r1
     theta = np.clip(d0 / np.where(d0 != d1, d0 - d1, 1.0), 0.0, 1.0)
     lo, hi = np.zeros_like(theta), np.ones_like(theta)
-    for _ in range(8):
-        t2, t3 = theta * theta, theta * theta * theta
-        p = (2 * t3 - 3 * t2 + 1) * d0 + (t3 - 2 * t2 + theta) * r0 + (3 * t2 - 2 * t3) * d1 + (t3 - t2) * r1
-        dp = (6 * t2 - 6 * theta) * d0 + (3 * t2 - 4 * theta + 1) * r0 + (6 * theta - 6 * t2) * d1 + \
-            (3 * t2 - 2 * theta) * r1
-        same = np.sign(p) == np.sign(d0)
+    positive = d0 > 0
+    for _ in range(60):  # Newton converges in a few; bisection bounds the rest
+        p = d0 + theta * (r0 + theta * (c2 + theta * c3))
+        dp = r0 + theta * (2.0 * c2 + 3.0 * c3 * theta)
+        same = (p > 0) == positive
         lo = np.where(same, theta, lo)
         hi = np.where(same, hi, theta)
         newton = theta - p / np.where(dp != 0, dp, np.inf)
-        inside = (newton > lo) & (newton < hi)
-        theta = np.where(inside, newton, 0.5 * (lo + hi))
+        step = np.where((newton >= lo) & (newton <= hi), newton, 0.5 * (lo + hi))
+        done = np.abs(step - theta).max(initial=0.0) <= 1e-15
+        theta = step
+        if done:
+            break
     return theta
-
 
 def _scaled_overlaps(model: Model, state: State, g: Geometry) -> tuple[np.ndarray, np.ndarray]:
     """Overlaps and their rates (B, C), pairs then walls, relative to the touching distance."""
