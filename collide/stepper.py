@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from collide import friction as fr
+from collide import integrators, pairstep
 from collide import physics as ph
 from collide.integrators import INTEGRATORS, Geometry, Integrator, StepForces, friction_frame, geometry
 from collide.model import Model, State, select_model, select_state
@@ -538,10 +539,14 @@ def _engage(model: Model, integ: Integrator, state: State, g: Geometry, scale: n
     if not same:
         g = geometry(model, state.s, engaged)
     if model.friction:
-        rows = fr.contact_rows(model, g.c, g.fn, g.fw)
-        acc = ph.normal_accel(model, g.c, g.fn, g.fw)
-        g.frame, g.events = fr.decide_modes(model, rows, state, acc, engaged, scale)
-        g.modes, g.speeds = g.frame.modes, None
+        if integrators.SCALAR_PAIRS and pairstep.applies(model):
+            g.modes, g.speeds = pairstep.decide(model, state, bool(engaged.pair[0, 0] > 0), float(scale[0]))
+            g.frame, g.events = None, g.speeds[0] / scale[:, None]
+        else:
+            rows = fr.contact_rows(model, g.c, g.fn, g.fw)
+            acc = ph.normal_accel(model, g.c, g.fn, g.fw)
+            g.frame, g.events = fr.decide_modes(model, rows, state, acc, engaged, scale)
+            g.modes, g.speeds = g.frame.modes, None
     return g
 
 

@@ -93,3 +93,27 @@ def test_runs_match_the_numpy_kernels(monkeypatch, name):
     assert np.abs(a.final.s - b.final.s).max() <= 1e-12 * max(1.0, np.abs(a.final.s).max())
     assert a.final.work == pytest.approx(b.final.work, rel=1e-9, abs=1e-15)
     assert abs(int(a.steps[0]) - int(b.steps[0])) <= 1
+
+
+@pytest.mark.parametrize("lever", ["seed", "contact"])
+@pytest.mark.parametrize("gravity", [False, True])
+def test_decide_matches_the_numpy_kernels(lever, gravity):
+    """The plain-float mode decision equals friction.decide_modes, on the band's edge (where the
+    hold force decides) and off it, with its event values and rates."""
+    from collide import pairstep
+
+    model, state, g = pressed(lever, gravity, fr.STICK)
+    rows = fr.contact_rows(model, g.c, g.fn, g.fw)
+    acc = ph.normal_accel(model, g.c, g.fn, g.fw)
+    scale = np.array([2.0])
+    vel = np.concatenate((state.v.reshape(1, -1), state.w.reshape(1, -1)), axis=1)
+    slip = fr.slip(model, rows, vel)[0, 0, 0]
+    for target in (slip, 1e-6, -1e-6, 0.5e-6):  # off the edge, on either edge, inside the band
+        moved = state.copy()
+        moved.w[0, 0, 0] += (target - slip) / float(rows.slip_rows[0, 0, 4])  # the first body's spin
+        frame, events = fr.decide_modes(model, rows, moved, acc, g.engaged, scale)
+        modes, (values, rates) = pairstep.decide(model, moved, True, 2.0)
+        assert modes.mode[0, 0] == frame.modes.mode[0, 0] and modes.side[0, 0] == frame.modes.side[0, 0]
+        assert values / 2.0 == pytest.approx(events, rel=1e-9, abs=1e-12)
+        numpy_values, numpy_rates = fr.frame_events(model, frame, moved, acc, scale, rates=True)
+        assert rates / 2.0 == pytest.approx(numpy_rates, rel=1e-9, abs=1e-9, nan_ok=True)
