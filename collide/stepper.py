@@ -211,6 +211,7 @@ def _hermite_root(d0: np.ndarray, d1: np.ndarray, r0: np.ndarray, r1: np.ndarray
     theta = np.clip(d0 / np.where(d0 != d1, d0 - d1, 1.0), 0.0, 1.0)
     lo, hi = np.zeros_like(theta), np.ones_like(theta)
     positive = d0 > 0
+    bracketed = positive != (d1 > 0)  # the others have no root to find: they do not hold it up
     for _ in range(60):  # Newton converges in a few; bisection bounds the rest
         p = d0 + theta * (r0 + theta * (c2 + theta * c3))
         dp = r0 + theta * (2.0 * c2 + 3.0 * c3 * theta)
@@ -219,7 +220,7 @@ def _hermite_root(d0: np.ndarray, d1: np.ndarray, r0: np.ndarray, r1: np.ndarray
         hi = np.where(same, hi, theta)
         newton = theta - p / np.where(dp != 0, dp, np.inf)
         step = np.where((newton >= lo) & (newton <= hi), newton, 0.5 * (lo + hi))
-        done = np.abs(step - theta).max(initial=0.0) <= 1e-15
+        done = np.abs(step - theta)[bracketed].max(initial=0.0) <= 1e-15
         theta = step
         if done:
             break
