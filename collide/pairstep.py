@@ -100,16 +100,43 @@ def _slip(geo: tuple, vel: tuple) -> float:
     return (u1 - u2) * tx + (v1 - v2) * ty + li * w1 + lj * w2
 
 
-def _events(p: Pair, geo: tuple, mode: int, side: float, vel: tuple) -> tuple[tuple, tuple]:
-    """friction.frame_events for the pair, unscaled: two values and their rates."""
+def _events(p: Pair, geo: tuple, mode: int, side: float, vel: tuple, positions: tuple,
+            engaged: bool) -> tuple[tuple, tuple]:
+    """friction.frame_events for the pair, unscaled: two values and their rates. The stuck
+    contact's rates, which have no closed form, come from a central difference along its motion
+    (numpy's path leaves them unknown and brackets instead)."""
     slip = _slip(geo, vel)
     rate = _hold(p, geo, side, vel)[0]
     response, mu_fn = geo[11], p.mu * geo[9]
     if mode == fr.SLIDE:
         return (side * slip - p.eps, 1.0), (rate - response * mu_fn, 0.0)
     if mode == fr.STICK:
-        return ((mu_fn * response - rate) * fr.STICK_SCALE, rate * fr.STICK_SCALE), (math.nan, math.nan)
+        values = ((mu_fn * response - rate) * fr.STICK_SCALE, rate * fr.STICK_SCALE)
+        return values, _stick_rates(p, geo, side, vel, positions, engaged, rate)
     return (p.eps - slip, p.eps + slip), (-rate * side, rate * side)
+
+
+def _stick_rates(p: Pair, geo: tuple, side: float, vel: tuple, positions: tuple, engaged: bool,
+                 rate: float) -> tuple[float, float]:
+    """Time derivatives of a stuck contact's event values: central differences over +-delta
+    along the motion (springs, gravity and the hold force G / K), delta = 1e-4 / omega, so the
+    truncation error is about 1e-9 and rounding about 1e-12, relative."""
+    _, _, tx, ty, _, arm_i, arm_j, _, _, _, (a1x, a1y, a2x, a2y), response = geo
+    c = side * rate / response  # the hold force along d, as an impulse per unit time
+    accel = (a1x - p.inv_m1 * c * tx, a1y - p.inv_m1 * c * ty, a2x + p.inv_m2 * c * tx,
+             a2y + p.inv_m2 * c * ty, -p.inv_i1 * c * arm_i, -p.inv_i2 * c * arm_j)
+    delta = 1e-4 / math.sqrt(p.k * p.inv_pair)
+    u1, v1, u2, v2 = vel[:4]
+    out = []
+    for sign in (1.0, -1.0):
+        d = sign * delta
+        x1, y1, x2, y2 = positions
+        moved = _geometry(p, x1 + d * u1, y1 + d * v1, x2 + d * u2, y2 + d * v2, engaged)
+        w = tuple(a + d * b for a, b in zip(vel, accel))
+        g = _hold(p, moved, side, w)[0]
+        out.append((p.mu * moved[9] * moved[11] - g, g))
+    scale = fr.STICK_SCALE / (2.0 * delta)
+    return (out[0][0] - out[1][0]) * scale, (out[0][1] - out[1][1]) * scale
 
 
 def _unpack(state: State, dim: int) -> tuple[list[float], list[float]]:
@@ -141,7 +168,7 @@ def decide(model: Model, state: State, engaged: bool, scale: float) -> tuple[fr.
         mode = fr.BAND if need <= force_tol else (fr.STICK if need < p.mu * fn - force_tol else fr.SLIDE)
     else:
         mode = fr.SLIDE if along > p.eps else fr.BAND
-    values, rates = _events(p, geo, mode, side, vel)
+    values, rates = _events(p, geo, mode, side, vel, (x1, y1, x2, y2), engaged)
     modes = fr.Modes(np.full((1, 1), mode, np.int8), np.full((1, 1), side), np.zeros((1, 1, 2)))
     return modes, (np.array([values]), np.array([rates]))
 
@@ -220,7 +247,7 @@ def composite(model: Model, state: State, h: float, weights: tuple[float, ...], 
         geo = kick(0.5 * hk, 0.5 * steps[i + 1] if i + 1 < len(steps) else None)
     speeds = None
     if friction:
-        values, rates = _events(p, geo, mode, side, (u1, v1, u2, v2, w1, w2))
+        values, rates = _events(p, geo, mode, side, (u1, v1, u2, v2, w1, w2), (x1, y1, x2, y2), engaged)
         speeds = (np.array([values]), np.array([rates]))
 
     def pack(a: float, b: float, c: float, d: float) -> np.ndarray:
