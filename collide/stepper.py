@@ -230,7 +230,7 @@ def _scaled_overlaps(model: Model, state: State, g: Geometry) -> tuple[np.ndarra
     """Overlaps and their rates (B, C), pairs then walls, relative to the touching distance."""
     c = g.c
     rate_pair, rate_wall = ph.contact_rates(model, state, c)
-    reach = model.radius[:, model.pair_i] + model.radius[:, model.pair_j]
+    reach = model.pair_reach
     if not model.n_walls:
         return c.overlap / reach, rate_pair / reach
     radius = np.tile(model.radius, (1, model.n_walls))
