@@ -283,6 +283,7 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
     past = np.full(b, np.inf)
     d_past, r_past = np.zeros_like(d0), np.zeros_like(r0)
     accepted = np.zeros(b, bool)
+    shortest = np.where(h != 0, 16 * np.spacing(np.abs(state.t) + np.abs(h)), 0.0)
     for _ in range(30):
         frac = h / h_full
         d1, r1 = _scaled_overlaps(model, new, end)
@@ -361,7 +362,9 @@ def step_with_events(model: Model, integrator: Integrator, state: State, h: np.n
         accepted = accepted | ~redo
         if not redo.any():
             break
-        h = np.where(redo, h_full * np.maximum(theta, 1e-12), h)
+        # Never shorter than a few ticks of the clock: an event closer than that is taken as
+        # passed (by under 1e-15 s of a 0.1 s run), or the step would not move the time at all.
+        h = np.where(redo, np.maximum(h_full * np.maximum(theta, 1e-12), shortest), h)
         new, forces, end = integrator.step(model, state, h, start)
     return new, forces, end, h
 
@@ -505,12 +508,18 @@ def _contact_phase(model: Model, integ: Integrator, state: State, contact: np.nd
     not_stepping = ~contact
     all_stepping = not not_stepping.any()
     free_flags = np.zeros(model.batch, bool) | not_stepping
+    stalled = 0
     while True:
         passes += 1
         if passes > max_steps:
             raise RunError(f"the run did not end within {max_steps} steps; set a duration or a larger dt")
         h = np.where(contact, np.minimum(dt, t_end - state.t), 0.0)
+        before = state.t
         new, forces, g, h = step_with_events(model, integ, state, h, g, scale)
+        stalled = stalled + 1 if (contact & (new.t == before)).any() else 0
+        if stalled > 64:
+            raise RunError(f"the run stopped advancing at t = {float(before.max()):.6g} s (events closer than the "
+                           "clock resolves); report this scene, or try a looser --tol or a given --dt")
         g = _engage(model, integ, new, g, scale)
         state = new if all_stepping else _masked(new, state, not_stepping)
         steps += contact

@@ -135,3 +135,18 @@ def test_friction_out_of_the_plane_meets_its_first_order_estimate():
     error = np.abs(outcome(run.result) - reference).max() / speed_scale(scene)
     assert run.error_estimate[0] == pytest.approx(1e-3)
     assert error <= 1e-3
+
+
+@pytest.mark.parametrize("scalar", [True, False])
+def test_stiff_friction_at_a_tight_tolerance_does_not_stall(monkeypatch, scalar):
+    """At k = 1e12 N/m a stick-to-slide change came due closer than the clock resolves at
+    t = 0.147 s (2.8e-17 s): the step to it did not move the time, and the run stalled. Such an
+    event is now taken as passed (by under 1e-15 s)."""
+    from collide import integrators
+
+    monkeypatch.setattr(integrators, "SCALAR_PAIRS", scalar)
+    run = run_scene(load_scene("demo-bonus", ["contact.k=1e12"]), tol=1e-9, record=False)
+    assert int(run.result.steps[0]) < 60
+    reference = run_scene(load_scene("demo-bonus", ["contact.k=1e12"]), tol=1e-11, record=False)
+    scene = load_scene("demo-bonus")
+    assert np.abs(outcome(run.result) - outcome(reference.result)).max() / speed_scale(scene) < 1e-8
