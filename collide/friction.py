@@ -44,6 +44,14 @@ class Modes:
     mode: np.ndarray
     side: np.ndarray
     entry: np.ndarray
+    turn: np.ndarray | None = None  # 3D (B, C, D): how fast a sliding slip's direction turns
+
+    def midway(self, h: np.ndarray) -> Modes:
+        """The modes for a step of h: in 3D a sliding contact's direction is the one its slip
+        will have half-way through, so that its turning is followed to second order."""
+        if self.turn is None:
+            return self
+        return Modes(self.mode, self.side, self.entry + 0.5 * h[:, None, None] * self.turn)
 
     def __post_init__(self) -> None:
         # Fixed for the whole step: what every kick of it uses.
@@ -405,7 +413,14 @@ def decide_modes(model: Model, rows: ContactRows, state: State, acc: np.ndarray,
     mode = np.where(at_edge, edge_mode, np.where(along > eps, SLIDE, BAND))
     active = np.concatenate((engaged.pair, engaged.wall.reshape(b, -1)), axis=1) if model.n_walls else engaged.pair
     mode = np.where(active > 0, mode, BAND).astype(np.int8)
-    frame = kick_frame(model, rows, Modes(mode, side, entry))
+    turn = None
+    if model.dim == 3 and (mode == SLIDE).any():
+        # The slip turns at (ds/dt . e) / |s| towards e = n x d (friction only shortens it).
+        across = _cross(rows.normals, candidate.direction)
+        sideways = kick_frame(model, rows, Modes(mode, side, across))
+        rate = hold_rate(model, sideways, vel, acc)[0]
+        turn = np.where((mode == SLIDE) & (along > 0), rate / np.where(along > 0, along, 1.0), 0.0)[..., None] * across
+    frame = kick_frame(model, rows, Modes(mode, side, entry, turn))
     return frame, frame_events(model, frame, state, acc, scale)
 
 

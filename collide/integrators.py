@@ -138,6 +138,8 @@ def _composition(weights: tuple[float, ...]) -> Callable:
         nv = n * dim
         vel = np.concatenate((state.v.reshape(b, nv), state.w.reshape(b, -1)), axis=1)
         g = start or geometry(model, state.s)
+        if g.modes is not None and g.modes.turn is not None:
+            g = Geometry(g.c, g.fn, g.fw, g.engaged, g.modes.midway(h))
         s, q = state.s, state.q
         steps = [gamma * h for gamma in weights]
         work, _ = _kick(model, vel, g, None, 0.5 * steps[0])
