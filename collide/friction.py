@@ -425,11 +425,13 @@ def decide_modes(model: Model, rows: ContactRows, state: State, acc: np.ndarray,
 
 
 def frame_events(model: Model, frame: KickFrame, state: State, acc: np.ndarray, scale: np.ndarray,
-                 rates: bool = False):
+                 rates: bool = False, engaged: ph.Engaged | None = None):
     """Event functions (B, 2C) of the frame's modes at this state, positive while each contact
-    stays in its mode, scaled to speeds; with `rates` also their time derivatives (NaN where not
-    known in closed form: stick, and in 3D the band's near edge), so a crossing can be located
-    with a cubic Hermite through both ends of a step.
+    stays in its mode, scaled to speeds; with `rates` also their time derivatives, so a crossing
+    can be located with a cubic Hermite through both ends of a step. A stuck contact's rates have
+    no closed form: given the contact phase's `engaged` contacts they come from a central
+    difference along the motion (`_stick_rates`), else they are NaN (and bracketed); in 3D the
+    band's near edge is NaN.
 
     Two columns per contact, so that a mode entered on one of its boundaries still sees the
     other: slide: slip beyond the band's edge (and a constant); band: room left to either edge
@@ -455,6 +457,38 @@ def frame_events(model: Model, frame: KickFrame, state: State, acc: np.ndarray, 
     # The slip along d grows at G - K mu F_n when sliding, at G in the band (2D: d = side t).
     nan = np.full_like(rate, np.nan)
     rate_t = rate * frame.modes.side if model.dim == 2 else nan
-    first_rate = np.where(mode == SLIDE, rate - k * mu_fn, np.where(mode == STICK, nan, -rate_t))
-    second_rate = np.where(mode == SLIDE, 0.0, np.where(mode == STICK, nan, rate_t if model.dim == 2 else rate))
+    stick_first = stick_second = nan
+    if engaged is not None and frame.any_stick:
+        stick_first, stick_second = _stick_rates(model, frame, state, acc, engaged, rate)
+    first_rate = np.where(mode == SLIDE, rate - k * mu_fn, np.where(mode == STICK, stick_first, -rate_t))
+    band_b_rate = rate_t if model.dim == 2 else rate
+    second_rate = np.where(mode == SLIDE, 0.0, np.where(mode == STICK, stick_second, band_b_rate))
     return values, np.concatenate((first_rate, second_rate), axis=1) / scale[:, None]
+
+
+def _stick_rates(model: Model, frame: KickFrame, state: State, acc: np.ndarray, engaged: ph.Engaged,
+                 rate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Time derivatives (B, C) of the stick event values (mu F_n K - G and G, times STICK_SCALE):
+    central differences over +-delta along the motion (springs, gravity and every contact's
+    friction), delta = 1e-4 / omega, so the truncation error is about 1e-9 and rounding about
+    1e-12, relative. `rate`: G here."""
+    rows = frame.rows
+    b, nv = state.v.shape[0], state.v[0].size
+    vel = _velocity(state)
+    force = frame.slide + frame.stick * rate / rows.response
+    impulse = ((force[..., None] * frame.unit).reshape(b, 1, -1) @ rows.impulse_rows)[:, 0]
+    motion = np.concatenate((acc.reshape(b, nv), np.zeros((b, vel.shape[1] - nv))), axis=1) - \
+        rows.inv_mass_gen * impulse
+    stiffest = np.concatenate((model.k_pair * model.pair_inv_mass, model.k_wall * model.inv_mass), axis=1) \
+        if model.n_walls else model.k_pair * model.pair_inv_mass
+    delta = 1e-4 / np.sqrt(stiffest.max(axis=1))
+    ends = []
+    for sign in (1.0, -1.0):
+        d = sign * delta
+        c = ph.contact_geometry(model, state.s + d[:, None, None] * state.v, engaged)
+        fn, fw = ph.normal_forces(model, c)
+        moved = kick_frame(model, contact_rows(model, c, fn, fw), frame.modes)
+        g = hold_rate(model, moved, vel + d[:, None] * motion, ph.normal_accel(model, c, fn, fw))[0]
+        ends.append((model.mu[:, None] * moved.rows.normal * moved.rows.response - g, g))
+    per = (STICK_SCALE / (2.0 * delta))[:, None]
+    return (ends[0][0] - ends[1][0]) * per, (ends[0][1] - ends[1][1]) * per

@@ -248,7 +248,7 @@ def _mode_events(model: Model, state: State, g: Geometry, scale: np.ndarray, rat
         values, slopes = g.speeds
         return (values / scale[:, None], slopes / scale[:, None]) if rates else values / scale[:, None]
     acc = ph.normal_accel(model, g.c, g.fn, g.fw)
-    return fr.frame_events(model, friction_frame(model, g), state, acc, scale, rates)
+    return fr.frame_events(model, friction_frame(model, g), state, acc, scale, rates, g.engaged)
 
 
 def step_with_events(model: Model, integrator: Integrator, state: State, h: np.ndarray,

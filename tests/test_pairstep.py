@@ -69,6 +69,9 @@ def test_one_step_matches_the_numpy_kernels(monkeypatch, mode, lever, gravity, i
         # along the motion: compare with the event values a short step either way.
         assert np.isnan(rates).all()
         assert end.speeds[1] == pytest.approx(stick_rates_along_motion(model, b, end), rel=1e-5)
+        # Given the contact phase, numpy's path differentiates along the motion the same way.
+        differenced = fr.frame_events(model, frame, b, acc, np.ones(1), rates=True, engaged=end.engaged)[1]
+        assert differenced == pytest.approx(end.speeds[1], rel=1e-6)
     else:
         assert end.speeds[1] == pytest.approx(rates, rel=1e-10, abs=1e-12)
 
