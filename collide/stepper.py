@@ -206,6 +206,9 @@ def check_run(model: Model, state: State, dt: np.ndarray, integrator: Integrator
 def _hermite_root(d0: np.ndarray, d1: np.ndarray, r0: np.ndarray, r1: np.ndarray) -> np.ndarray:
     """Root in (0, 1) of the cubic Hermite through (0, d0, r0) and (1, d1, r1); r in per-step units.
     Safeguarded Newton on the cubic in Horner form, kept inside the bracket."""
+    if d0.size == 1:  # one run, one contact: the same iteration in floats
+        return np.full(d0.shape, _hermite_root_1(float(d0.flat[0]), float(d1.flat[0]), float(r0.flat[0]),
+                                                 float(r1.flat[0])))
     c2 = 3.0 * (d1 - d0) - 2.0 * r0 - r1
     c3 = 2.0 * (d0 - d1) + r0 + r1
     theta = np.clip(d0 / np.where(d0 != d1, d0 - d1, 1.0), 0.0, 1.0)
@@ -225,6 +228,31 @@ def _hermite_root(d0: np.ndarray, d1: np.ndarray, r0: np.ndarray, r1: np.ndarray
         if done:
             break
     return theta
+
+def _hermite_root_1(d0: float, d1: float, r0: float, r1: float) -> float:
+    """`_hermite_root` for one cubic."""
+    c2 = 3.0 * (d1 - d0) - 2.0 * r0 - r1
+    c3 = 2.0 * (d0 - d1) + r0 + r1
+    theta = min(max(d0 / (d0 - d1 if d0 != d1 else 1.0), 0.0), 1.0)
+    if (d0 > 0) == (d1 > 0):
+        return theta  # no root to find
+    lo, hi = 0.0, 1.0
+    positive = d0 > 0
+    for _ in range(60):
+        p = d0 + theta * (r0 + theta * (c2 + theta * c3))
+        dp = r0 + theta * (2.0 * c2 + 3.0 * c3 * theta)
+        if (p > 0) == positive:
+            lo = theta
+        else:
+            hi = theta
+        newton = theta - p / dp if dp != 0 else math.inf
+        step = newton if lo <= newton <= hi else 0.5 * (lo + hi)
+        done = abs(step - theta) <= 1e-15
+        theta = step
+        if done:
+            break
+    return theta
+
 
 def _scaled_overlaps(model: Model, state: State, g: Geometry) -> tuple[np.ndarray, np.ndarray]:
     """Overlaps and their rates (B, C), pairs then walls, relative to the touching distance."""
