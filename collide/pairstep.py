@@ -49,6 +49,19 @@ class Pair:
 
     @classmethod
     def of(cls, model: Model) -> Pair:
+        """The model's constants, built once per model (a run asks for them at every step)."""
+        key = id(model)
+        cached = _PAIRS.get(key)
+        if cached is not None and cached[0] is model:
+            return cached[1]
+        pair = cls._build(model)
+        if len(_PAIRS) > 16:
+            _PAIRS.clear()
+        _PAIRS[key] = (model, pair)
+        return pair
+
+    @classmethod
+    def _build(cls, model: Model) -> Pair:
         spin = model.spin_dim > 0
         g = (0.0, 0.0) if model.gravity is None else \
             (float(model.gravity[0, 0]), float(model.gravity[0, 1]) if model.dim == 2 else 0.0)
@@ -58,6 +71,9 @@ class Pair:
         return cls(model.dim, spin, m1, m2, i1, i2, r1, r2, float(model.pair_reach[0, 0]),
                    float(model.k_pair[0, 0]), float(model.pair_inv_mass[0, 0]), g[0], g[1],
                    float(model.mu[0]), float(model.eps[0]), model.seed_lever, model.friction)
+
+
+_PAIRS: dict[int, tuple[Model, Pair]] = {}  # id -> (the model itself, so the id is not reused, its Pair)
 
 
 def _geometry(p: Pair, x1: float, y1: float, x2: float, y2: float, engaged: bool) -> tuple:
