@@ -160,10 +160,7 @@ def validate_command(
     except (SceneError, ValueError, RuntimeError) as exc:
         _fail(str(exc))
         return
-    if as_json:
-        typer.echo(json.dumps(_clean(result.to_dict()), indent=2))
-    else:
-        typer.echo(format_validation(result))
+    _emit(result, as_json, format_validation)
     if not result.passed:
         raise typer.Exit(1)
 
@@ -186,10 +183,12 @@ def fit_spring_command(
     except ValueError as exc:
         _fail(str(exc))
         return
-    if as_json:
-        typer.echo(json.dumps(_clean(fit.to_dict()), indent=2))
-    else:
-        typer.echo(format_spring_fit(fit))
+    _emit(fit, as_json, format_spring_fit)
+
+
+def _emit(result, as_json: bool, as_text) -> None:
+    """Print a result as one JSON object or as its text table."""
+    typer.echo(json.dumps(_clean(result.to_dict()), indent=2) if as_json else as_text(result))
 
 
 def register(app: typer.Typer) -> None:

@@ -66,7 +66,7 @@ class ContactRows:
 
     Each contact has T = D - 1 tangent directions (`basis`; 2D: perp(n), 3D: an orthonormal
     pair). Its slip in that basis is `slip_rows[:, c*T:(c+1)*T] . V`, V = (v, w) flattened (B, F);
-    a friction impulse with coordinates j changes V by -inv_mass_gen * (j . impulse_rows). A
+    a friction impulse with coordinates j changes V by -model.inv_mass_gen * (j . impulse_rows). A
     sphere's slip responds to a tangential impulse the same in every tangent direction
     (`response`, the K of the module notes), so an impulse along the slip never turns it.
     """
@@ -75,7 +75,6 @@ class ContactRows:
     impulse_rows: np.ndarray  # (B, C T, F)
     basis: np.ndarray  # (B, C, T, D)
     normals: np.ndarray  # (B, C, D): contact normals (pairs from i to j, walls outward)
-    inv_mass_gen: np.ndarray  # (B, F)
     response: np.ndarray  # (B, C)
     normal: np.ndarray  # (B, C): normal force
     dist: np.ndarray  # (B, P) distance between the pairs' centres
@@ -95,18 +94,17 @@ class KickFrame:
     unit: np.ndarray  # (B, C, T): d in tangent coordinates
     direction: np.ndarray  # (B, C, D): d in space
     slide: np.ndarray  # (B, C): mu F_n where the contact slides, else 0
-    stick: np.ndarray  # (B, C): 1.0 where it sticks, else 0
-    any_stick: bool
+
+    @property
+    def stick(self) -> np.ndarray:
+        """(B, C): 1.0 where the contact sticks, else 0."""
+        return self.modes.stuck
+
+    @property
+    def any_stick(self) -> bool:
+        return self.modes.any_stick
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b with K components (np.cross is slow on small arrays)."""
-    if a.shape[-1] == 2:
-        return (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0])[..., None]
-    return a[..., _ROLL1] * b[..., _ROLL2] - a[..., _ROLL2] * b[..., _ROLL1]
-
-
-_ROLL1, _ROLL2 = np.array([1, 2, 0]), np.array([2, 0, 1])
 _EX, _EY = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
 
 
@@ -115,9 +113,9 @@ def _tangent_basis(n: np.ndarray) -> np.ndarray:
     if n.shape[-1] == 2:
         return ph.perp2(n)[..., None, :]
     helper = np.where((np.abs(n[..., :1]) < 0.9), _EX, _EY)
-    e1 = _cross(n, helper)
+    e1 = ph.torque(n, helper)
     e1 = e1 / ph.norm(e1)[..., None]
-    return np.stack((e1, _cross(n, e1)), axis=-2)
+    return np.stack((e1, ph.torque(n, e1)), axis=-2)
 
 
 def _turned(basis: np.ndarray) -> np.ndarray:
@@ -195,7 +193,7 @@ def contact_rows(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray) -
     turn = li * c.arm_i * model.pair_inv_inertia_i + lj * c.arm_j * model.pair_inv_inertia_j if dim == 3 else None
     return ContactRows(
         slip_rows=slip_rows, impulse_rows=impulse_rows, basis=_join(bases), normals=_join(normals),
-        inv_mass_gen=inv_mass_gen, response=np.add.reduce(first * inv_mass_gen[:, None, :] * first_imp, -1),
+        response=np.add.reduce(first * inv_mass_gen[:, None, :] * first_imp, -1),
         normal=normal, dist=model.pair_reach - c.overlap, slip_spin=slip_spin, turn_response=turn,
         lever_response=None if lever is None else _join(lever))
 
@@ -226,8 +224,7 @@ def kick_frame(model: Model, rows: ContactRows, modes: Modes) -> KickFrame:
         direction = _transport(modes.entry, rows.normals)
         unit = np.add.reduce(rows.basis * direction[:, :, None, :], -1)
     return KickFrame(rows=rows, modes=modes, unit=unit, direction=direction,
-                     slide=modes.sliding * model.mu[:, None] * rows.normal, stick=modes.stuck,
-                     any_stick=modes.any_stick)
+                     slide=modes.sliding * model.mu[:, None] * rows.normal)
 
 
 def geometry_frame(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray, modes: Modes) -> KickFrame:
@@ -238,11 +235,6 @@ def geometry_frame(model: Model, c: ph.Contacts, fn: np.ndarray, fw: np.ndarray,
 def slip(model: Model, rows: ContactRows, vel: np.ndarray) -> np.ndarray:
     """Slip coordinates (B, C, T) at generalised velocity vel (B, F)."""
     return (rows.slip_rows @ vel[..., None]).reshape(vel.shape[0], -1, model.dim - 1)
-
-
-def _velocity(state: State) -> np.ndarray:
-    b = state.v.shape[0]
-    return np.concatenate((state.v.reshape(b, -1), state.w.reshape(b, -1)), axis=1)
 
 
 def hold_rate(model: Model, frame: KickFrame, vel: np.ndarray, acc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -293,21 +285,21 @@ def hold_rate(model: Model, frame: KickFrame, vel: np.ndarray, acc: np.ndarray) 
         slope = slope + ph.dot(s_vec, d_rate_slope)
         if k:
             # s . d' above already holds the rolling part's (L x n) . d'.
-            n_rate_x_d = _cross(n_rate, d)
+            n_rate_x_d = ph.torque(n_rate, d)
             turn = turn + ph.dot(rows.slip_spin @ w, n_rate_x_d)
             # The impulse turns the spins (along -n x d) and n' (along d, so n' x d stays).
-            slope = slope - rows.turn_response * ph.dot(_cross(n, d), n_rate_x_d)
+            slope = slope - rows.turn_response * ph.dot(ph.torque(n, d), n_rate_x_d)
     lever_speed = None
     if k and not model.seed_lever:
         lever_speed = 0.5 * un
-        turn = turn + ph.dot((model.select_i + model.select_j) @ w, _cross(n, d)) * lever_speed
+        turn = turn + ph.dot((model.select_i + model.select_j) @ w, ph.torque(n, d)) * lever_speed
     if model.n_walls:
         wall = np.zeros((b, rate.shape[1] - p))
         if lever_speed is not None:
             vw = np.broadcast_to(v[:, None], (b, model.n_walls) + v.shape[1:]).reshape(b, -1, model.dim)
             ww = np.broadcast_to(w[:, None], (b, model.n_walls) + w.shape[1:]).reshape(b, -1, k)
             speed = -ph.dot(vw, rows.normals[:, p:])
-            wall = speed * ph.dot(ww, _cross(rows.normals[:, p:], frame.direction[:, p:]))
+            wall = speed * ph.dot(ww, ph.torque(rows.normals[:, p:], frame.direction[:, p:]))
             lever_speed = np.concatenate((lever_speed, speed), axis=1)
         turn = np.concatenate((turn, wall), axis=1)
         slope = np.concatenate((slope, np.zeros_like(wall)), axis=1)
@@ -347,7 +339,7 @@ def frame_kick(model: Model, frame: KickFrame, vel: np.ndarray, acc: np.ndarray,
             lam = lam + frame.stick * held
             # G is affine in the contact's own impulse: its value after this one, for the next kick.
             rate = rate + slope * held if response.shape[1] == 1 else None
-        work = _impulse(frame, vel, lam)
+        work = _impulse(model, frame, vel, lam)
         if start is None:
             forces = -(lam / np.where(span != 0, span, 1.0))[..., None] * frame.direction
     if start is not None:
@@ -358,19 +350,19 @@ def frame_kick(model: Model, frame: KickFrame, vel: np.ndarray, acc: np.ndarray,
                 rate = hold_rate(model, frame, vel, acc)[0]
             lam = lam + frame.stick * span * rate / response
         vel[:, :nv] += kick * span
-        work = work + _impulse(frame, vel, lam)
+        work = work + _impulse(model, frame, vel, lam)
     if forces is None:
         return work, None
     return work, (forces[:, :model.n_pairs],
                   forces[:, model.n_pairs:].reshape(b, model.n_walls, model.n_bodies, model.dim))
 
 
-def _impulse(frame: KickFrame, vel: np.ndarray, lam: np.ndarray) -> np.ndarray:
+def _impulse(model: Model, frame: KickFrame, vel: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """Apply friction impulses lam (B, C) against the slip to vel in place; returns the kinetic
     energy they remove, -(dv . M . (vel + dv / 2)) = impulse . (vel + dv / 2)."""
     rows = frame.rows
     impulse = ((lam[..., None] * frame.unit).reshape(vel.shape[0], 1, -1) @ rows.impulse_rows)[:, 0]
-    change = -rows.inv_mass_gen * impulse
+    change = -model.inv_mass_gen * impulse
     work = np.add.reduce(impulse * (vel + 0.5 * change), -1)
     vel += change
     return work
@@ -379,7 +371,7 @@ def _impulse(frame: KickFrame, vel: np.ndarray, lam: np.ndarray) -> np.ndarray:
 def settle(model: Model, frame: KickFrame, vel: np.ndarray) -> np.ndarray:
     """Put stuck slips back on the band's edge (vel in place); returns the work done."""
     along = np.add.reduce(slip(model, frame.rows, vel) * frame.unit, -1)
-    return _impulse(frame, vel, frame.stick * (along - model.eps[:, None]) / frame.rows.response)
+    return _impulse(model, frame, vel, frame.stick * (along - model.eps[:, None]) / frame.rows.response)
 
 
 def decide_modes(model: Model, rows: ContactRows, state: State, acc: np.ndarray, engaged: ph.Engaged,
@@ -391,7 +383,7 @@ def decide_modes(model: Model, rows: ContactRows, state: State, acc: np.ndarray,
     of `frame_events`, so a step that landed on a mode change always switches): stick if the
     friction that holds the slip there is available (0 < G / K < mu F_n), else slide or band."""
     b = state.v.shape[0]
-    vel = _velocity(state)
+    vel = ph.generalised_velocity(state)
     coords = slip(model, rows, vel)
     if model.dim == 2:
         side = np.where(coords[..., 0] >= 0, 1.0, -1.0)
@@ -416,7 +408,7 @@ def decide_modes(model: Model, rows: ContactRows, state: State, acc: np.ndarray,
     turn = None
     if model.dim == 3 and (mode == SLIDE).any():
         # The slip turns at (ds/dt . e) / |s| towards e = n x d (friction only shortens it).
-        across = _cross(rows.normals, candidate.direction)
+        across = ph.torque(rows.normals, candidate.direction)
         sideways = kick_frame(model, rows, Modes(mode, side, across))
         rate = hold_rate(model, sideways, vel, acc)[0]
         turn = np.where((mode == SLIDE) & (along > 0), rate / np.where(along > 0, along, 1.0), 0.0)[..., None] * across
@@ -438,7 +430,7 @@ def frame_events(model: Model, frame: KickFrame, state: State, acc: np.ndarray, 
     (3D: the far edge as seen along the slip's direction when the band was entered); stick: the
     margin to mu F_n and the need itself, as the slip change they would make over STICK_SCALE."""
     rows = frame.rows
-    vel = _velocity(state)
+    vel = ph.generalised_velocity(state)
     coords = slip(model, rows, vel)
     along = np.add.reduce(coords * frame.unit, -1)
     rate, _ = hold_rate(model, frame, vel, acc)
@@ -474,11 +466,11 @@ def _stick_rates(model: Model, frame: KickFrame, state: State, acc: np.ndarray, 
     1e-12, relative. `rate`: G here."""
     rows = frame.rows
     b, nv = state.v.shape[0], state.v[0].size
-    vel = _velocity(state)
+    vel = ph.generalised_velocity(state)
     force = frame.slide + frame.stick * rate / rows.response
     impulse = ((force[..., None] * frame.unit).reshape(b, 1, -1) @ rows.impulse_rows)[:, 0]
     motion = np.concatenate((acc.reshape(b, nv), np.zeros((b, vel.shape[1] - nv))), axis=1) - \
-        rows.inv_mass_gen * impulse
+        model.inv_mass_gen * impulse
     stiffest = np.concatenate((model.k_pair * model.pair_inv_mass, model.k_wall * model.inv_mass), axis=1) \
         if model.n_walls else model.k_pair * model.pair_inv_mass
     delta = 1e-4 / np.sqrt(stiffest.max(axis=1))

@@ -48,10 +48,10 @@ class StepForces:
     wall: np.ndarray
 
 
-def _no_friction(model: Model, state: State | np.ndarray) -> StepForces:
-    b = state.shape[0] if isinstance(state, np.ndarray) else state.s.shape[0]
-    return StepForces(np.zeros((b, model.n_pairs, model.dim)),
-                      np.zeros((b, model.n_walls, model.n_bodies, model.dim)))
+def no_friction(model: Model) -> StepForces:
+    """No friction forces on any contact (display arrays of the right shapes)."""
+    return StepForces(np.zeros((model.batch, model.n_pairs, model.dim)),
+                      np.zeros((model.batch, model.n_walls, model.n_bodies, model.dim)))
 
 
 def seed_step(model: Model, state: State, h: np.ndarray,
@@ -62,7 +62,7 @@ def seed_step(model: Model, state: State, h: np.ndarray,
     start = start or geometry(model, state.s)
     c, fn, fw = start.c, start.fn, start.fw
     acc = ph.normal_accel(model, c, fn, fw)
-    forces = _no_friction(model, state)
+    forces = no_friction(model)
     hb = h[:, None, None]
     if model.friction:
         ft, fwt = ph.coulomb_explicit(model, c, fn, fw, state.v, state.w)
@@ -97,7 +97,7 @@ def _kick(model: Model, vel: np.ndarray, g: Geometry, end: np.ndarray | None, st
         for part in (end, start):
             if part is not None:
                 vel[:, :nv] += kick * part[:, None]
-        return 0.0, (_no_friction(model, vel) if start is None else None)
+        return 0.0, (no_friction(model) if start is None else None)
     work, forces = fr.frame_kick(model, friction_frame(model, g), vel, acc, end, start)
     return work, (None if forces is None else StepForces(*forces))
 
@@ -128,7 +128,7 @@ def _composition(weights: tuple[float, ...]) -> Callable:
             g = start or geometry(model, state.s)
             engaged = g.engaged is not None and bool(g.engaged.pair[0, 0] > 0)
             new, force, speeds = pairstep.composite(model, state, float(h[0]), weights, engaged, g.modes)
-            forces = _no_friction(model, state)
+            forces = no_friction(model)
             if model.friction:
                 forces.pair = force
             end = geometry(model, new.s, g.engaged, g.modes)
@@ -136,7 +136,7 @@ def _composition(weights: tuple[float, ...]) -> Callable:
             return new, forces, end
         b, n, dim = state.s.shape
         nv = n * dim
-        vel = np.concatenate((state.v.reshape(b, nv), state.w.reshape(b, -1)), axis=1)
+        vel = ph.generalised_velocity(state)
         g = start or geometry(model, state.s)
         if g.modes is not None and g.modes.turn is not None:
             g = Geometry(g.c, g.fn, g.fw, g.engaged, g.modes.midway(h))

@@ -32,10 +32,13 @@ def spin_cross(w: np.ndarray, a: np.ndarray) -> np.ndarray:
 
 
 def torque(a: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """a x f with K components (the z-component in 2D)."""
+    """a x f with K components (the z-component in 2D); np.cross is slow on small arrays."""
     if a.shape[-1] == 2:
         return (a[..., 0] * f[..., 1] - a[..., 1] * f[..., 0])[..., None]
-    return np.cross(a, f)
+    return a[..., _ROLL1] * f[..., _ROLL2] - a[..., _ROLL2] * f[..., _ROLL1]
+
+
+_ROLL1, _ROLL2 = np.array([1, 2, 0]), np.array([2, 0, 1])
 
 
 _add = np.add.reduce
@@ -44,6 +47,12 @@ _add = np.add.reduce
 def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Dot product over the last axis (np.add.reduce: the cheapest call on small arrays)."""
     return _add(a * b, -1)
+
+
+def generalised_velocity(state: State) -> np.ndarray:
+    """Velocities then spins of every body, flattened (B, N D + N K): what a friction impulse acts on."""
+    b = state.v.shape[0]
+    return np.concatenate((state.v.reshape(b, -1), state.w.reshape(b, -1)), axis=1)
 
 
 def norm(a: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 from collide import friction as fr
 from collide import integrators, pairstep
 from collide import physics as ph
-from collide.integrators import INTEGRATORS, Geometry, Integrator, StepForces, friction_frame, geometry
+from collide.integrators import INTEGRATORS, Geometry, Integrator, StepForces, friction_frame, geometry, no_friction
 from collide.model import Model, State, select_model, select_state
 
 MAX_STEPS_DEFAULT = 20_000_000
@@ -462,8 +462,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     log = ContactLog(np.full(b, np.nan), np.full(b, np.nan), np.zeros(b), np.zeros(b), np.zeros(b, np.int64))
     in_contact = np.zeros(b, bool)
     contact_began = np.zeros(b)
-    zero_forces = StepForces(np.zeros((b, model.n_pairs, model.dim)),
-                             np.zeros((b, model.n_walls, model.n_bodies, model.dim)))
+    zero_forces = no_friction(model)
     rows: list[tuple] = []
 
     def snapshot(s: State, free: np.ndarray, forces: StepForces) -> None:

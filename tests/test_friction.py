@@ -78,7 +78,7 @@ def test_hold_rate_is_the_slip_rate_without_friction(dim, lever, wall):
         lam = np.zeros(rate.shape)
         lam[0, contact] = 1e-4
         coords = (lam[..., None] * frame.unit).reshape(1, 1, -1)
-        moved = vel - frame.rows.inv_mass_gen * (coords @ frame.rows.impulse_rows)[:, 0]
+        moved = vel - model.inv_mass_gen * (coords @ frame.rows.impulse_rows)[:, 0]
         finite = (fr.hold_rate(model, frame, moved, acc)[0][0, contact] - rate[0, contact]) / 1e-4
         assert slope[0, contact] == pytest.approx(finite, rel=1e-8, abs=1e-6)
 
