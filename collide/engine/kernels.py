@@ -38,9 +38,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-jit = njit(cache=True, error_model="numpy", nogil=True)
+from collide.engine.tier import jit
 
 BAND, SLIDE, STICK = 0, 1, 2
 EDGE_TOL = 1e-9  # relative to the speed scale: how close to the band's edge counts as on it
@@ -82,8 +81,10 @@ NFP = 5
 # Contact parameter tables: pairs (M, M, NP), walls (M, NP).
 TP_K, TP_MU, TP_EPS = range(3)
 # Records.
-K_T, K_BODY, K_FREE, K_S, K_V, K_W, K_Q, K_A, K_WORK = 0, 1, 2, 3, 6, 9, 12, 16, 19
-NK = 20
+# Knots: a body's exact state at a time, with its acceleration just before (K_A) and just after
+# (K_AN): a friction mode change or the seed's per-step forces make it jump there.
+K_T, K_BODY, K_FREE, K_S, K_V, K_W, K_Q, K_A, K_AN, K_WORK = 0, 1, 2, 3, 6, 9, 12, 16, 19, 22
+NK = 23
 R_T, R_I, R_J, R_DELTA, R_FN, R_FX, R_FY, R_FZ, R_MODE = range(9)
 NR = 9
 V_I, V_J, V_START, V_END = range(4)
@@ -388,14 +389,23 @@ def hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed):
 
 
 @jit
-def slide_direction(X, C, CI, c, vc, wc, spin):
-    """The slip that sliding friction opposes: the slip itself while its component a along the
-    direction it slid in at the step's start (held) is above eps / 2, so that friction follows
-    the slip as it turns; below that, the slip shifted along held by phi(a) - a, phi(a) =
-    eps / 4 + a^2 / eps (C^1 at eps / 2), so that a trial step overshooting the mode's boundary
-    (the slip reversing through the band) still sees a smooth force. In 2D this is the held side
-    of the tangent, whatever the slip."""
+def slide_direction(X, C, CI, c, vc, wc, spin, span):
+    """The slip that sliding friction opposes at contact c, for the velocities in (vc, wc).
+
+    `span` > 0: those velocities already hold this contact's own friction impulse over `span`
+    seconds (C_FF), which is taken back out: the implicit kick's slip at the end is parallel to the
+    slip before the contact's own impulse (s1 = s0 - span K mu F_n s1 / |s1|), so the direction is
+    exact whatever the step (a fixed point on it would diverge once span K mu F_n > |slip|).
+
+    While the slip's component a along the way it slid at the step's start (held) is above eps / 2,
+    that slip itself, so friction follows the slip as it turns; below, the slip shifted along held
+    by phi(a) - a, phi(a) = eps / 4 + a^2 / eps (C^1 at eps / 2), so that a trial step overshooting
+    the mode's boundary (a slip reversing through the band) still sees a smooth force. In the
+    plane this is the held side of the tangent, whatever the slip."""
     sx, sy, sz = slip(X, C, CI, c, vc, wc, spin)
+    if span != 0.0:
+        k = span * response(X, C, CI, c, spin)
+        sx, sy, sz = sx - k * C[c, C_FF], sy - k * C[c, C_FF + 1], sz - k * C[c, C_FF + 2]
     hx, hy, hz = C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2]
     a = sx * hx + sy * hy + sz * hz
     eps = C[c, C_EPS]
@@ -409,10 +419,12 @@ def slide_direction(X, C, CI, c, vc, wc, spin):
 
 
 @jit
-def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl):
+def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span):
     """Friction forces (C_FF, on body i) of every contact at the velocities in columns (vc, wc),
     by mode, and their accelerations (X_F, X_L); X_A holds everything else's. Stuck contacts'
-    slips stop changing: W f = -G, with G their slip rates under every other force."""
+    slips stop changing: W f = -G, with G their slip rates under every other force. `span`: the
+    velocities already hold the forces now in C_FF over that many seconds (see
+    `slide_direction`); 0 when they hold none."""
     spin, seed = fl[FL_SPIN], fl[FL_SEED]
     for a in range(na):
         for d in range(3):
@@ -420,19 +432,23 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl):
             X[a, X_L + d] = 0.0
     m = 0
     for c in range(nc):
-        C[c, C_FF] = 0.0
-        C[c, C_FF + 1] = 0.0
-        C[c, C_FF + 2] = 0.0
         if CI[c, CI_MODE] == SLIDE:
-            sx, sy, sz = slide_direction(X, C, CI, c, vc, wc, spin)
+            sx, sy, sz = slide_direction(X, C, CI, c, vc, wc, spin, span)
             mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+            C[c, C_FF] = 0.0
+            C[c, C_FF + 1] = 0.0
+            C[c, C_FF + 2] = 0.0
             if mag > 0.0:
                 f = -C[c, C_MU] * C[c, C_FN] / mag
                 C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2] = f * sx, f * sy, f * sz
                 add_force(X, C, CI, c, f * sx, f * sy, f * sz, X_F, X_L, spin)
-        elif CI[c, CI_MODE] == STICK:
-            stuck[m] = c
-            m += 1
+        else:
+            C[c, C_FF] = 0.0
+            C[c, C_FF + 1] = 0.0
+            C[c, C_FF + 2] = 0.0
+            if CI[c, CI_MODE] == STICK:
+                stuck[m] = c
+                m += 1
     if m == 0:
         return True
     for a in range(na):
@@ -484,8 +500,9 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl):
                 X[a, X_V + d] += h_end * X[a, X_A + d]
                 X[a, X_V1 + d] = X[a, X_V + d]
                 X[a, X_W1 + d] = X[a, X_W + d]
-        for _ in range(FIXED_POINT):
-            if not friction(X, C, CI, na, nc, X_V1, X_W1, stuck, A, b, fl):
+        for it in range(FIXED_POINT):
+            # The first pass sees no friction yet in V1; later ones take each contact's own back out.
+            if not friction(X, C, CI, na, nc, X_V1, X_W1, stuck, A, b, fl, h_end if it > 0 else 0.0):
                 return work, False
             change = 0.0
             size = 0.0
@@ -504,7 +521,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl):
             for d in range(3):
                 X[a, X_V + d] = X[a, X_V1 + d]
                 X[a, X_W + d] = X[a, X_W1 + d]
-    elif not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl):
+    elif not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0):
         return work, False
     if h_start != 0.0:
         for a in range(na):
@@ -644,7 +661,7 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale):
     slip, as the slip change they would make over STICK_SCALE (rates NaN: no closed form).
     Leaves the friction forces in C_FF. Returns False if the hold system is singular."""
     spin, seed = fl[FL_SPIN], fl[FL_SEED]
-    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl):
+    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0):
         return False
     for a in range(na):
         for d in range(3):
@@ -663,11 +680,14 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale):
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
         gx, gy, gz = slip_rate(X, C, CI, c, X_V, X_W, X_T, X_L, spin, seed, YES)
         if CI[c, CI_MODE] == SLIDE:
-            # Along the direction it slid in at the step's start, so that a slip reversing
-            # through the band within a step still changes sign.
+            # |slip| - eps, with |slip| counted negative once the slip points against the way it
+            # slid at the step's start: a slip reversing through the band within a step then
+            # still changes sign, and one that turns as it slows lands where |slip| = eps.
             hx, hy, hz = C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2]
-            E[c, vcol] = (sx * hx + sy * hy + sz * hz - C[c, C_EPS]) / scale
-            E[c, rcol] = (gx * hx + gy * hy + gz * hz) / scale
+            mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+            sign = 1.0 if sx * hx + sy * hy + sz * hz >= 0 else -1.0
+            E[c, vcol] = (sign * mag - C[c, C_EPS]) / scale
+            E[c, rcol] = sign * (sx * gx + sy * gy + sz * gz) / mag / scale if mag > 0 else 0.0
             E[second, vcol] = 1.0
             E[second, rcol] = 0.0
         else:
@@ -709,7 +729,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
         else:
             CI[c, CI_MODE] = BAND
     for _ in range(nc + 1):
-        if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl):
+        if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0):
             return 0.0, False
         changed = False
         for c in range(nc):
@@ -846,12 +866,13 @@ def overlap(G, GI, X, Q, QF, k, t, WP, grav):
 @jit
 def engaged(Q, k, d, r, WP, grav):
     """A contact is engaged when pressing, or touching and approaching (or, on a wall, resting
-    with gravity pressing it in)."""
+    with gravity pressing it in), or touching and not separating if it was engaged already (a
+    contact of a Newton's cradle, engaged when a step found it pressing from touching)."""
     if d > TOUCH_TOL:
         return True
     if d < -TOUCH_TOL:
         return False
-    if r > 0:
+    if r > 0 or (Q[k, Q_ENG] > 0 and r == 0):
         return True
     j = Q[k, Q_J]
     if j < 0 and r == 0:
@@ -1035,6 +1056,7 @@ def add_knot(KN, CNT, t, g, free, X, a, sc, vc, wc, qc, acc, work):
         KN[r, K_V + d] = X[a, vc + d]
         KN[r, K_W + d] = X[a, wc + d]
         KN[r, K_A + d] = acc[d]
+        KN[r, K_AN + d] = acc[d]
     for d in range(4):
         KN[r, K_Q + d] = X[a, qc + d]
     KN[r, K_WORK] = work
@@ -1172,17 +1194,51 @@ def energy(X, C, na, nc, grav, spin):
 
 
 @jit
-def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale):
+def slip_turn(X, C, CI, nc, fl):
+    """The largest angle (rad) a sliding contact's slip turned by over the step just taken, seen
+    in the contact's frame: from its direction at the step's start (held, carried onto the end's
+    tangent plane) to its direction at the end. Zero in the plane, where a slip cannot turn."""
+    if fl[FL_PLANAR]:
+        return 0.0
+    top = 0.0
+    for c in range(nc):
+        if CI[c, CI_MODE] != SLIDE:
+            continue
+        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, fl[FL_SPIN])
+        nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+        hx, hy, hz = C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2]
+        hn = hx * nx + hy * ny + hz * nz
+        hx, hy, hz = hx - hn * nx, hy - hn * ny, hz - hn * nz
+        cross = math.sqrt((hy * sz - hz * sy) ** 2 + (hz * sx - hx * sz) ** 2 + (hx * sy - hy * sx) ** 2)
+        top = max(top, math.atan2(cross, hx * sx + hy * sy + hz * sz))
+    return top
+
+
+@jit
+def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
+                max_turn):
     """One step from the start state; where an event would happen inside it, shortened to land
     there, each refinement re-stepping from the start. Contacts starting or ending: a cubic
     Hermite through the overlaps at both ends of a trial; friction modes: a bracketed root find
     (Hermite with both ends' rates where they have closed forms, then inverse quadratic
-    interpolation, secant or Newton in the bracket). Returns (h taken, work, ok)."""
+    interpolation, secant or Newton in the bracket). In 3D a sliding slip may turn by at most
+    `max_turn` (rad) a step: just after it leaves the band's edge it turns on a time scale of
+    eps over its rate, far below a step, and the step is shortened to follow it.
+    Returns (h taken, work, ok, whether the turning limited the step, a candidate that began
+    pressing from touching within the step: -1 if none, else the step was not taken)."""
     h = h_full
+    limited = False
     work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl)
     if not ok:
-        return h, work, False
+        return h, work, False, limited, -1
     tol = TOUCH_TOL
+    # A contact touching at the start with no approach speed that presses by the end began with
+    # the step: it is engaged from the start and the step taken again (a Newton's cradle).
+    for k in range(nq):
+        if Q[k, Q_ENG] == 0 and -tol <= QF[k, QF_D0] <= tol:
+            d1, r1 = overlap(G, GI, X, Q, QF, k, t + h, WP, grav)
+            if d1 > tol:
+                return 0.0, work, True, limited, k
     modes = 2 * nc if fl[FL_FRICTION] else 0
     pending = False
     col = -1
@@ -1220,7 +1276,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                 theta = frac + first * gap
         if modes:
             if not mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale):
-                return h, work, False
+                return h, work, False, limited, -1
             best = -1
             guess = math.inf
             for k in range(modes):
@@ -1256,14 +1312,20 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                         estimate = frac - f / slope
                     theta = min(theta, estimate)
                     ta, fa, tb, fb = tb, fb, frac, f
+        if modes and not pending:
+            turned = slip_turn(X, C, CI, nc, fl)
+            if turned > max_turn:
+                # The turning angle grows about in proportion to the step near the edge.
+                limited = True
+                theta = min(theta, frac * max(0.8 * max_turn / turned, 0.05))
         if not (theta < math.inf and abs(theta - frac) > 1e-12 * max(frac, 1e-300)):
             break
         # Never shorter than a few ticks of the clock: an event closer than that is taken as passed.
         h = max(h_full * max(theta, 1e-12), shortest)
         work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl)
         if not ok:
-            return h, work, False
-    return h, work, True
+            return h, work, False, limited, -1
+    return h, work, True, limited, -1
 
 
 @jit
@@ -1318,7 +1380,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         n_eng = 0
         for k in range(nq):
             d, r = overlap(G, GI, X, Q, QF, k, t, WP, grav)
-            Q[k, Q_ENG] = engaged(Q, k, d, r, WP, grav)
+            Q[k, Q_ENG] = 1 if engaged(Q, k, d, r, WP, grav) else 0
             n_eng += Q[k, Q_ENG]
         IV, OP = intervals(Q, nq, t, IV, OP, CNT, ST)
         if n_eng == 0:
@@ -1340,6 +1402,9 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             A = np.zeros((2 * nc, 2 * nc))
         omega = island_omega(X, C, CI, na, nc)
         dt = fp[FP_OMEGA_H] / omega if fl[FL_AUTO] else fp[FP_DT]
+        # A slip may turn by the angle the stiffest contact's oscillation advances in a step.
+        max_turn = max(dt * omega, 1e-3)
+        grown = math.inf
         FG[F_DT_MIN] = min(FG[F_DT_MIN], dt)
         geometry(X, C, CI, nc, WP, fl[FL_SEED])
         springs(X, C, CI, na, nc, grav)
@@ -1349,14 +1414,13 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             for a in range(na):
                 g = XI[a]
                 last = GI[g, GI_KNOT]
-                if last >= 0 and KN[last, K_T] == t:
-                    KN[last, K_FREE] = 0.0
-                else:
-                    acc = np.empty(3)
-                    for d in range(3):
-                        acc[d] = X[a, X_A + d]
-                    KN = add_knot(KN, CNT, t, g, 0.0, X, a, X_S, X_V, X_W, X_Q, acc, G[g, G_WK])
-                    GI[g, GI_KNOT] = CNT[CN_KNOTS] - 1
+                if not (last >= 0 and KN[last, K_T] == t):
+                    KN = add_knot(KN, CNT, t, g, 0.0, X, a, X_S, X_V, X_W, X_Q, grav, G[g, G_WK])
+                    last = CNT[CN_KNOTS] - 1
+                    GI[g, GI_KNOT] = last
+                KN[last, K_FREE] = 0.0
+                for d in range(3):
+                    KN[last, K_AN + d] = X[a, X_A + d]
         changed = False
         while t < W and not changed and ST[S_STATUS] == OK:
             if fric:
@@ -1371,11 +1435,25 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             for a in range(na):
                 for d in range(13):
                     X[a, X_S0 + d] = X[a, X_S + d]
+                if record and fric:
+                    # The acceleration the coming step starts with (its modes).
+                    for d in range(3):
+                        KN[GI[XI[a], GI_KNOT], K_AN + d] = X[a, X_A + d] + X[a, X_F + d]
             for k in range(nq):
                 QF[k, QF_D0], QF[k, QF_R0] = overlap(G, GI, X, Q, QF, k, t, WP, grav)
-            h_full = min(dt, W - t)
-            h, work, ok = step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A,
-                                      b, fl, scale)
+            h_full = min(dt, W - t, grown)
+            h, work, ok, limited, late = step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP,
+                                                     grav, stuck, A, b, fl, scale, max_turn)
+            if late >= 0:
+                # Engage it from here: back to the step's start, and a new phase.
+                for a in range(na):
+                    for d in range(13):
+                        X[a, X_S + d] = X[a, X_S0 + d]
+                Q[late, Q_ENG] = 1
+                changed = True
+                break
+            # After a step the turning limited, let the next ones grow back by doubling.
+            grown = 2.0 * h if limited else (2.0 * grown if grown < dt else math.inf)
             if not ok:
                 ST[S_STATUS] = SINGULAR
                 FG[F_STATUS_T] = t
@@ -1769,4 +1847,243 @@ def simulate(G, tables, WP, grav, weights, fl, fp):
             GI[i, GI_KNOT] = CNT[CN_KNOTS] - 1
     for k in range(CNT[CN_OPEN]):
         IV[OP[k], V_END] = t
+    return t, KN[:CNT[CN_KNOTS]].copy(), RC[:CNT[CN_RECS]].copy(), IV[:CNT[CN_IVALS]].copy(), ST, FG
+
+
+# ---------------------------------------------------------------------------------------------
+# The report's own update (section III), on its fixed grid
+
+
+@jit
+def seed_forces(G, pairs, WP, grav, tables, fl, force, facc, alp, RC, CNT, t_rec):
+    """The report's forces at the bodies' base states: springs clamped at zero overlap, and
+    friction mu F_n against the slip when it exceeds eps (explicit), the slip measured with the
+    slip lever and the torque applied at the contact point. Fills force (springs), facc
+    (friction, as accelerations) and alp, records each pressed contact at t_rec (when
+    recording); returns the largest overlap and the records."""
+    ptab, wtab = tables
+    n = G.shape[0]
+    seed, spin, fric = fl[FL_SEED], fl[FL_SPIN], fl[FL_FRICTION]
+    for i in range(n):
+        for d in range(3):
+            force[i, d] = 0.0
+            facc[i, d] = 0.0
+            alp[i, d] = 0.0
+    top = 0.0
+    npair = pairs.shape[0]
+    for p in range(npair + n * WP.shape[0]):
+        if p < npair:
+            i, j = pairs[p, 0], pairs[p, 1]
+        else:
+            i, j = (p - npair) % n, -1 - (p - npair) // n
+        r = G[i, G_R]
+        mi = int(G[i, G_MAT])
+        if j >= 0:
+            dx, dy, dz = G[j, G_S] - G[i, G_S], G[j, G_S + 1] - G[i, G_S + 1], G[j, G_S + 2] - G[i, G_S + 2]
+            dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+            nx, ny, nz = dx / dist, dy / dist, dz / dist
+            delta = r + G[j, G_R] - dist
+            mj = int(G[j, G_MAT])
+            k, mu, eps = ptab[mi, mj, TP_K], ptab[mi, mj, TP_MU], ptab[mi, mj, TP_EPS]
+            half = 0.5 * delta
+        else:
+            w = -1 - j
+            dist = (G[i, G_S] - WP[w, 0]) * WP[w, 3] + (G[i, G_S + 1] - WP[w, 1]) * WP[w, 4] + \
+                (G[i, G_S + 2] - WP[w, 2]) * WP[w, 5]
+            nx, ny, nz = -WP[w, 3], -WP[w, 4], -WP[w, 5]
+            delta = r - dist
+            k, mu, eps = wtab[mi, TP_K], wtab[mi, TP_MU], wtab[mi, TP_EPS]
+            half = delta
+        if delta <= 0.0:
+            continue
+        top = max(top, delta)
+        fn = k * delta
+        if fl[FL_RECORD]:
+            RC = grow(RC, CNT[CN_RECS])
+            row = CNT[CN_RECS]
+            RC[row, R_T], RC[row, R_I], RC[row, R_J] = t_rec, i, j
+            RC[row, R_DELTA], RC[row, R_FN] = delta, fn
+            RC[row, R_FX], RC[row, R_FY], RC[row, R_FZ], RC[row, R_MODE] = 0.0, 0.0, 0.0, 0.0
+            CNT[CN_RECS] += 1
+        force[i, 0] -= fn * nx
+        force[i, 1] -= fn * ny
+        force[i, 2] -= fn * nz
+        if j >= 0:
+            force[j, 0] += fn * nx
+            force[j, 1] += fn * ny
+            force[j, 2] += fn * nz
+        if not fric:
+            continue
+        lif = r - half
+        ljf = G[j, G_R] - half if j >= 0 else 0.0
+        lis = r if seed else lif
+        ljs = (G[j, G_R] if seed else ljf) if j >= 0 else 0.0
+        rx, ry, rz = G[i, G_V], G[i, G_V + 1], G[i, G_V + 2]
+        lx, ly, lz = lis * G[i, G_W], lis * G[i, G_W + 1], lis * G[i, G_W + 2]
+        if j >= 0:
+            rx, ry, rz = rx - G[j, G_V], ry - G[j, G_V + 1], rz - G[j, G_V + 2]
+            lx, ly, lz = lx + ljs * G[j, G_W], ly + ljs * G[j, G_W + 1], lz + ljs * G[j, G_W + 2]
+        rn = rx * nx + ry * ny + rz * nz
+        sx = rx - rn * nx + ly * nz - lz * ny
+        sy = ry - rn * ny + lz * nx - lx * nz
+        sz = rz - rn * nz + lx * ny - ly * nx
+        mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+        if not mag > eps:
+            continue
+        f = -mu * fn / mag
+        fx, fy, fz = f * sx, f * sy, f * sz
+        if fl[FL_RECORD]:
+            row = CNT[CN_RECS] - 1
+            RC[row, R_FX], RC[row, R_FY], RC[row, R_FZ], RC[row, R_MODE] = fx, fy, fz, SLIDE
+        cx, cy, cz = ny * fz - nz * fy, nz * fx - nx * fz, nx * fy - ny * fx
+        facc[i, 0] += fx * G[i, G_IM]
+        facc[i, 1] += fy * G[i, G_IM]
+        facc[i, 2] += fz * G[i, G_IM]
+        if spin:
+            alp[i, 0] += lif * G[i, G_II] * cx
+            alp[i, 1] += lif * G[i, G_II] * cy
+            alp[i, 2] += lif * G[i, G_II] * cz
+        if j >= 0:
+            facc[j, 0] -= fx * G[j, G_IM]
+            facc[j, 1] -= fy * G[j, G_IM]
+            facc[j, 2] -= fz * G[j, G_IM]
+            if spin:
+                alp[j, 0] += ljf * G[j, G_II] * cx
+                alp[j, 1] += ljf * G[j, G_II] * cy
+                alp[j, 2] += ljf * G[j, G_II] * cz
+    return top, RC
+
+
+@jit
+def seed_run(G, tables, WP, grav, fl, fp):
+    """The report's update on its grid of dt: forces from the current state, then w += alpha dt,
+    s += v dt + a dt^2 / 2, v += a dt (first order; it reproduces the report's tables). Free
+    flight between contacts jumps whole steps in closed form, so every step lands on the grid.
+    Returns what `simulate` returns."""
+    n = G.shape[0]
+    dim = fl[FL_DIM]
+    dt = fp[FP_DT]
+    spin, planar, record = fl[FL_SPIN], fl[FL_PLANAR], fl[FL_RECORD]
+    KN = np.empty((max(64, 4 * n), NK))
+    RC = np.empty((64, NR))
+    IV = np.empty((16, 4))
+    CNT = np.zeros(4, np.int64)
+    ST = np.zeros(NS, np.int64)
+    FG = np.zeros(NF)
+    FG[F_DT_MIN] = dt
+    P = np.zeros((n, 3))
+    V = np.zeros((n, 3))
+    force = np.zeros((n, 3))
+    facc = np.zeros((n, 3))
+    alp = np.zeros((n, 3))
+    acc = np.zeros((n, 3))
+    g3 = np.zeros(3)
+    for d in range(3):
+        g3[d] = grav[d]
+    knot_of = np.zeros(n, np.int64)
+    if record:
+        for i in range(n):
+            KN = add_knot(KN, CNT, 0.0, i, 1.0, G, i, G_S, G_V, G_W, G_Q, g3, 0.0)
+            knot_of[i] = i
+    t = 0.0
+    t_end = fp[FP_TEND]
+    in_contact = False
+
+    while t < t_end * (1 - 1e-15) and ST[S_STATUS] == OK:
+        positions_at(G, n, t, grav, P, V)
+        margin = np.zeros(n)
+        for i in range(n):
+            margin[i] = math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2) * dt + 1e-12 * G[i, G_R]
+        pairs = near_pairs(P, G[:, G_R], margin, n, dim)
+        for i in range(n):
+            bring(G, i, t, grav, fl)
+        top, RC = seed_forces(G, pairs, WP, grav, tables, fl, force, facc, alp, RC, CNT, t + dt)
+        if top > 0.0:
+            if not in_contact:
+                in_contact = True
+
+                IV = grow(IV, CNT[CN_IVALS])
+                IV[CNT[CN_IVALS], V_I] = -1.0
+                IV[CNT[CN_IVALS], V_J] = -1.0
+                IV[CNT[CN_IVALS], V_START] = t
+                IV[CNT[CN_IVALS], V_END] = math.nan
+                CNT[CN_IVALS] += 1
+                ST[S_CONTACTS] += 1
+            FG[F_MAX_OVERLAP] = max(FG[F_MAX_OVERLAP], top)
+            before = 0.0
+            after = 0.0
+            for i in range(n):
+                for d in range(3):
+                    acc[i, d] = force[i, d] * G[i, G_IM] + grav[d] + facc[i, d]
+            # Work against friction: what the friction kick removes at the start of the step.
+            for i in range(n):
+                for d in range(3):
+                    vm = G[i, G_V + d] + facc[i, d] * dt
+                    before += 0.5 * G[i, G_M] * G[i, G_V + d] ** 2
+                    after += 0.5 * G[i, G_M] * vm * vm
+                    if spin:
+                        before += 0.5 * G[i, G_I] * G[i, G_W + d] ** 2
+                        after += 0.5 * G[i, G_I] * (G[i, G_W + d] + alp[i, d] * dt) ** 2
+            work = before - after
+            if record:
+                # A knot where the step starts (within a seed step the motion is exactly
+                # quadratic: the step's acceleration on both of its sides).
+                for i in range(n):
+                    last = knot_of[i]
+                    if KN[last, K_T] < t:
+                        KN = add_knot(KN, CNT, t, i, 0.0, G, i, G_S, G_V, G_W, G_Q, g3, G[i, G_WK])
+                        last = CNT[CN_KNOTS] - 1
+                        knot_of[i] = last
+                    KN[last, K_FREE] = 0.0
+                    for d in range(3):
+                        KN[last, K_AN + d] = acc[i, d]
+            for i in range(n):
+                w0x, w0y, w0z = G[i, G_W], G[i, G_W + 1], G[i, G_W + 2]
+                for d in range(3):
+                    G[i, G_W + d] += alp[i, d] * dt
+                    G[i, G_S + d] += G[i, G_V + d] * dt + 0.5 * acc[i, d] * dt * dt
+                    G[i, G_V + d] += acc[i, d] * dt
+                if spin:
+                    turn(G[i, G_Q:G_Q + 4], 0.5 * (w0x + G[i, G_W]), 0.5 * (w0y + G[i, G_W + 1]),
+                         0.5 * (w0z + G[i, G_W + 2]), dt, planar)
+                G[i, G_WK] += work / n
+                G[i, G_TB] = t + dt
+            t += dt
+            ST[S_STEPS] += 1
+            if ST[S_STEPS] > fl[FL_MAXSTEPS]:
+                ST[S_STATUS] = MAXSTEPS
+            for i in range(n):
+                for d in range(6):
+                    if not math.isfinite(G[i, G_S + d]):
+                        ST[S_STATUS] = NONFINITE
+            if record:
+                for i in range(n):
+                    KN = add_knot(KN, CNT, t, i, 0.0, G, i, G_S, G_V, G_W, G_Q, acc[i], G[i, G_WK])
+                    knot_of[i] = CNT[CN_KNOTS] - 1
+            continue
+        if in_contact:
+            in_contact = False
+            IV[CNT[CN_IVALS] - 1, V_END] = t
+            if record:
+                for i in range(n):
+                    KN[knot_of[i], K_FREE] = 1.0
+                    for d in range(3):
+                        KN[knot_of[i], K_AN + d] = grav[d]
+        # Free flight: whole steps in closed form, up to the step in which a contact begins.
+        positions_at(G, n, t, grav, P, V)
+        tau = next_contact(G, P, V, n, t, WP, grav, dim, math.inf, YES)
+        if tau == math.inf and t_end == math.inf:
+            t_end = t + math.ceil(tail_after(fp[FP_TAIL], IV, CNT) / dt) * dt
+        jump = min(math.floor(tau / dt) * dt if tau < math.inf else math.inf, t_end - t)
+        if jump <= 0.0:
+            jump = dt  # a contact begins within this step: take it with the spring clamped
+            for i in range(n):
+                bring(G, i, t + dt, grav, fl)
+        t += jump
+    for i in range(n):
+        bring(G, i, t, grav, fl)
+        if record and KN[knot_of[i], K_T] < t:
+            KN = add_knot(KN, CNT, t, i, 1.0, G, i, G_S, G_V, G_W, G_Q, g3, G[i, G_WK])
+    if in_contact:
+        IV[CNT[CN_IVALS] - 1, V_END] = t
     return t, KN[:CNT[CN_KNOTS]].copy(), RC[:CNT[CN_RECS]].copy(), IV[:CNT[CN_IVALS]].copy(), ST, FG
