@@ -896,7 +896,10 @@ class _Reader:
                     length = _HEADER.unpack(data[:_HEADER.size])[0]
                     need = _HEADER.size + length
                 if length is not None and len(data) >= need:
-                    if self.rss_mb() > memory_mb:  # a read quicker than one memory check
+                    # Limits hold for reads quicker than one check too.
+                    if time.monotonic() > deadline:
+                        return "failed", f"reading it took longer than {timeout_s:g} s (stopped)"
+                    if self.rss_mb() > memory_mb:
                         return "failed", f"reading it needs more than {memory_mb} MB of memory (stopped)"
                     try:
                         return pickle.loads(data[_HEADER.size:need])
