@@ -86,7 +86,7 @@ from collide.stepper import ContactLog, RunResult, Trajectory
 
 APP_ID = "collide"
 FORMAT = "collide-recording"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: /collide/meta carries `checksum` (1: none, still read)
 TIMELINE = "sim_time"
 CONTACT_FRAMES = 100  # least frames across one contact in the 3D view
 
@@ -531,10 +531,12 @@ class _Writer:
             arrays["friction_pair"] = traj.friction_pair[:, 0]
             arrays["friction_wall"] = traj.friction_wall[:, 0]
         cols = []
+        self.step_columns = {}
         for key, a in arrays.items():
             width = int(np.prod(a.shape[1:]))
             if width:
-                cols.append(_any_column(key, a.reshape(n_steps * width), width, n_steps))
+                self.step_columns[key] = a.reshape(n_steps * width)
+                cols.append(_any_column(key, self.step_columns[key], width, n_steps))
         self._send("/collide/steps", cols, rr.TimeColumn(TIMELINE, duration=traj.t[:, 0]))
 
     def _write_meta(self) -> None:
@@ -567,6 +569,7 @@ class _Writer:
                 value = getattr(state, key)[0].reshape(-1)
                 if value.size:
                     meta[f"{label}_{key}"] = value
+        meta["checksum"] = checksum(self.step_columns, meta)
         self._static("/collide/meta", rr.AnyValues(**meta))
 
 
@@ -665,7 +668,10 @@ def _meta(path: Path, chunks: list) -> dict[str, Any]:
         meta[name] = values if listed else values[0]
     if meta.get("format") != FORMAT:
         raise _fail(path, "not a collide recording (unknown format)")
-    if int(meta.get("format_version", 0)) > FORMAT_VERSION:
+    version = meta.get("format_version")
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise _fail(path, f"not a collide recording (format version {version!r})")
+    if version > FORMAT_VERSION:
         raise _fail(path, f"made by a newer collide (format {meta['format_version']}, this one reads "
                           f"{FORMAT_VERSION}); upgrade collide")
     return meta
@@ -678,21 +684,78 @@ def _flat(arrays: list) -> np.ndarray:
         if chunked.num_chunks else np.empty(0)
 
 
+def _canonical(value: Any) -> bytes:
+    """Bytes of a meta value or step column that do not depend on how Arrow handed it back."""
+    if value is None:
+        return b"n"
+    if isinstance(value, (bool, np.bool_)):
+        return b"b1" if value else b"b0"
+    if isinstance(value, (int, np.integer)):
+        return b"i" + str(int(value)).encode()
+    if isinstance(value, (float, np.floating)):
+        return b"f" + float(value).hex().encode()
+    if isinstance(value, str):
+        return b"s" + value.encode("utf-8", "surrogatepass")
+    if isinstance(value, np.ndarray) and value.dtype.kind in "fiub":
+        kind = {"f": "<f8", "i": "<i8", "u": "<i8", "b": "u1"}[value.dtype.kind]
+        return b"a" + kind.encode() + np.ascontiguousarray(value, dtype=kind).tobytes()
+    if isinstance(value, (list, tuple, np.ndarray)):
+        items = list(value)
+        if items and all(isinstance(v, (float, np.floating)) for v in items):
+            return _canonical(np.asarray(items, dtype=float))
+        return b"l[" + b",".join(_canonical(v) for v in items) + b"]"
+    raise TypeError(f"no canonical form for {type(value).__name__}")
+
+
+def checksum(step_columns: dict[str, np.ndarray], meta: dict[str, Any]) -> str:
+    """SHA-256 over what `read_recording` restores: every step column (flat, as stored) and every
+    setting in `/collide/meta` but the checksum itself, in sorted key order."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for label, table in ((b"steps", step_columns), (b"meta", meta)):
+        digest.update(label)
+        for key in sorted(table):
+            if key == "checksum" or table[key] is None:  # AnyValues stores no None: absent
+                continue
+            digest.update(len(key).to_bytes(4, "little") + key.encode())
+            data = _canonical(table[key])
+            digest.update(len(data).to_bytes(8, "little") + data)
+    return digest.hexdigest()
+
+
+def _verify(path: Path, chunks: list, meta: dict[str, Any]) -> None:
+    """Refuse a recording whose steps or settings differ from what its writer checksummed."""
+    if int(meta["format_version"]) < 2:
+        return  # written before recordings carried a checksum
+    stored = meta.get("checksum")
+    if not isinstance(stored, str):
+        raise _fail(path, "damaged collide recording (its checksum is missing)")
+    columns = {name: _flat(arrays) for name, arrays in _columns(chunks, "/collide/steps").items()
+               if name != TIMELINE}
+    if checksum(columns, meta) != stored:
+        raise _fail(path, "damaged collide recording (checksum mismatch: its steps or settings changed "
+                          "after it was written)")
+
+
 def read_recording(path: str | Path) -> SceneRun:
     """Rebuild the run stored in a recording: scene, model, trajectory, final state and settings.
 
     Raises `RecordingError` (a `ValueError`) naming the file when it is not an `.rrd`, is
-    truncated, or was not written by collide.
+    truncated or damaged (its checksum does not match), or was not written by collide. Files
+    from elsewhere: `read_recording_safely`, which also survives a crash of Rerun's reader.
     """
     path = Path(path)
     chunks = _load_chunks(path)
-    meta = _meta(path, chunks)
     try:
+        meta = _meta(path, chunks)
+        _verify(path, chunks, meta)
         return _rebuild(path, chunks, meta)
     except RecordingError:
         raise
-    except (KeyError, ValueError, TypeError) as exc:
-        raise _fail(path, f"inconsistent collide recording ({type(exc).__name__}: {exc})") from None
+    except Exception as exc:  # anything a foreign or damaged file's contents make the parsing raise
+        text = " ".join(str(exc).split())[:300]
+        raise _fail(path, f"not a valid collide recording ({type(exc).__name__}: {text})") from None
 
 
 def _rebuild(path: Path, chunks: list, meta: dict[str, Any]) -> SceneRun:
