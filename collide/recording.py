@@ -97,6 +97,8 @@ FORMAT_VERSION = 3
 MANY_BODIES = 24  # from this many bodies on, one instanced entity draws them all
 MANY_CONTACTS = 24  # from this many contacts on, one entity draws them all (no per-contact plots)
 TIMELINE = "sim_time"
+DEFAULT_FPS = 120.0  # frames per simulated second of free flight
+MAX_FREE_FRAMES = 100_000  # frames of free flight in one recording, at most (fps drops beyond)
 CONTACT_FRAMES = 100  # least frames across one contact in the 3D view
 
 _PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
@@ -128,6 +130,7 @@ class WriteStats:
 
     frames: int = 0
     exact_frames: int = 0
+    fps: float = 0.0  # the free-flight frame rate used (lower than asked for a long run)
     steps: int = 0
     rows: int = 0
     calls: int = 0
@@ -136,11 +139,12 @@ class WriteStats:
 last_write = WriteStats()
 
 
-def write_recording(run: SceneRun, path: Path, *, stride: int = 1, fps: float = 120.0,
+def write_recording(run: SceneRun, path: Path, *, stride: int = 1, fps: float = DEFAULT_FPS,
                     contact_frames: int = CONTACT_FRAMES) -> Path:
     """Write member 0 of `run` to `path` (an `.rrd`); return the path.
 
     `stride` keeps every n-th contact step as a frame, `fps` sets the frame rate in free flight
+    (lowered so that a long run holds at most MAX_FREE_FRAMES; `last_write.fps` says what was used)
     and `contact_frames` the least number of frames across each contact in the 3D view. Every
     step is stored exactly whatever these are.
 
@@ -158,8 +162,16 @@ def write_recording(run: SceneRun, path: Path, *, stride: int = 1, fps: float = 
     if contact_frames < 1:
         raise ValueError(f"contact_frames must be at least 1, got {contact_frames}")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.is_dir():
+        raise _fail(path, "is a folder; give a file name ending in .rrd")
     tmp = path.parent / f".{path.name}.{uuid.uuid4().hex[:8]}.tmp"
+    try:
+        # Fail here, in one line, rather than inside Rerun's writer (a RuntimeError from Rust).
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "wb"):
+            pass
+    except OSError as exc:
+        raise _fail(path, f"cannot write the recording here ({exc.strerror or type(exc).__name__})") from None
     try:
         _Writer(run, stride, fps, contact_frames).write(tmp)
         os.replace(tmp, path)
@@ -273,7 +285,11 @@ class _Writer:
         self.model = run.result.model
         self.traj = run.result.trajectory
         self.stride = stride
-        self.fps = fps
+        # A long free flight at a steady fps would be millions of frames (demo-1d for 1e6 s:
+        # 1.2e8): the frame rate drops so that the run holds at most MAX_FREE_FRAMES of them.
+        knots = self.traj.knots[:, kn.K_T]
+        span = float(knots.max() - knots.min()) if len(knots) else 0.0
+        self.fps = min(fps, MAX_FREE_FRAMES / span) if span > 0 else fps
         self.contact_frames = contact_frames
         self.rows = 0
         self.calls = 0
@@ -389,6 +405,7 @@ class _Writer:
             self.rec.disconnect()
         last_write.frames = len(self.view.times)
         last_write.exact_frames = len(self.exact.times)
+        last_write.fps = self.fps
         last_write.steps = int(self.result.steps[0])
         last_write.rows = self.rows
         last_write.calls = self.calls
