@@ -38,16 +38,19 @@ def batch(
         "--resume", help="Skip runs already in the summary (after an interrupted batch) and add the rest."
     )] = False,
     chunk: Annotated[int, typer.Option(
-        help="Runs per vectorised call (progress granularity).", min=1)] = 1000,
+        help="Most runs per call to the stepper (calls are sized to about a second each, so finished runs "
+        "reach the disk that often).", min=1)] = 1000,
     stride: Annotated[int, typer.Option(
         help="With --record: record every n-th contact step.", min=1)] = 1,
     progress: Annotated[bool, typer.Option(help="Show a progress bar on stderr.")] = True,
 ) -> None:
     """Run many scenes or a parameter sweep, vectorised; write a summary CSV (and recordings).
 
-    Rows are saved after every chunk, so Ctrl-C keeps every finished run.
+    Each run's row is on disk (synced) as soon as it finishes, before its recording, so Ctrl-C,
+    a kill or a power loss keeps every finished run.
 
-    After Ctrl-C, run the same command with --resume to finish. Output paths are printed.
+    After an interruption, run the same command with --resume to finish: complete rows are kept,
+    a row cut short is run again. Output paths are printed.
 
     Examples:
 
@@ -81,6 +84,8 @@ def batch(
         typer.echo(f"\ninterrupted: finished runs are kept in {summary}; run the same command with "
                    "--resume to finish the rest", err=True)
         raise SystemExit(130) from None
+    for note in result.notes[len(plan.notes):]:
+        typer.echo(f"note: {note}", err=True)
     per_run = result.wall_time_s / result.ran if result.ran else 0.0
     skipped = f", {result.skipped} already in the summary" if result.skipped else ""
     typer.echo(f"{total} runs: {result.ran} run in {result.wall_time_s:.3g} s ({per_run * 1e3:.3g} ms each)"

@@ -15,9 +15,11 @@ class UserError(Exception):
     """A mistake in the command line: reported as one line, exit code 2."""
 
 
-def fail(message: str) -> NoReturn:
-    typer.echo(f"error: {message}", err=True)
-    raise SystemExit(2)
+def fail(message: str, code: int = 2) -> NoReturn:
+    """Report an error as one line on stderr (whatever the message holds) and exit."""
+    line = " ".join(str(message).splitlines())  # \n, \r, \u2028...: a scene can hold any of them
+    typer.echo(f"error: {line}", err=True)
+    raise SystemExit(code)
 
 
 SetOption = Annotated[

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from typer import Abort, TyperException
 
 from cli.common import (
     DtOption,
@@ -113,10 +114,15 @@ def run(
             raise UserError(f"cannot write {csv}: {exc.strerror}") from None
     recording = None
     if not no_record:
-        from collide.recording import write_recording
+        from collide.batch import safe_name
+        from collide.recording import DEFAULT_FPS, last_write, write_recording
 
-        recording = out if out is not None else Path("recordings") / f"{loaded.name}.rrd"
+        # The scene's name is the user's text: it names a file in recordings/, never a path elsewhere.
+        recording = out if out is not None else Path("recordings") / f"{safe_name(loaded.name)}.rrd"
         write_recording(result, recording, stride=stride)
+        if last_write.fps < DEFAULT_FPS:
+            summary["warnings"].append(f"the recording draws free flight at {last_write.fps:.3g} frames per "
+                                       "simulated second (a long run: the frames are capped)")
     if json_:
         typer.echo(json.dumps(summary))
     else:
@@ -171,15 +177,48 @@ _register_optional()
 
 
 def main() -> None:
-    """Entry point: known errors become one line on stderr and exit code 2."""
+    """Entry point: every error is one line `error: ...` on stderr and a non-zero exit.
+
+    Known errors (bad input, a run that cannot be trusted, usage mistakes) exit with 2. A numpy
+    floating-point warning is raised as an error rather than printed above the result: a number
+    that overflowed is no result. Anything else is a bug in collide: one line too (exit 1), with
+    the traceback only when COLLIDE_DEBUG is set.
+    """
+    import os
+    import warnings
+
     from collide.scene import SceneError
     from collide.stepper import RunError
 
     try:
-        # Standalone mode: click reports usage errors itself (one message, exit 2).
-        app()
-    except (SceneError, RunError, UserError, ValueError, OSError) as exc:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            code = app(standalone_mode=False)
+    except TyperException as exc:  # usage errors: unknown option, bad option value, missing argument
+        if type(exc).__name__ == "NoArgsIsHelpError":
+            exc.show()  # `collide` alone: the help text, as before
+            raise SystemExit(exc.exit_code) from None
+        command = getattr(getattr(exc, "ctx", None), "command_path", "collide")
+        fail(f"{exc.format_message()} (see '{command} --help')")
+    except (SceneError, RunError, UserError, ValueError) as exc:
         fail(str(exc))
+    except OSError as exc:
+        where = f": {exc.filename}" if getattr(exc, "filename", None) else ""
+        fail(f"{exc.strerror or exc}{where}")
+    except RuntimeWarning as exc:
+        fail(f"a number overflowed float64 during the run ({exc}); use smaller values")
+    except MemoryError:
+        fail("out of memory: the run is too large for this machine; use fewer bodies or steps, or --no-record")
+    except RecursionError:
+        fail("input nested too deeply")
+    except Abort:
+        fail("aborted")
+    except Exception as exc:
+        if os.environ.get("COLLIDE_DEBUG"):
+            raise
+        fail(f"internal error ({type(exc).__name__}: {exc}); please report it with the command line "
+             "(COLLIDE_DEBUG=1 shows the traceback)", code=1)
+    raise SystemExit(code if isinstance(code, int) else 0)  # as click's standalone mode ends
 
 
 if __name__ == "__main__":

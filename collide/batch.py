@@ -1,9 +1,13 @@
 """Batches: many scenes, parameter sweeps and ensembles, run vectorised and summarised.
 
 A batch is a list of `RunSpec`s (scene + the parameter values that made it). `run_batch`
-groups same-shaped scenes, runs them in chunks through the batch stepper (`run_scenes`), and
-after every chunk rewrites the summary CSV atomically (temporary file + `os.replace`), so a
-batch stopped by Ctrl-C keeps every finished run, and `resume=True` skips exactly those.
+groups same-shaped scenes and runs them through the batch stepper (`run_scenes`) in sub-chunks
+of about a second each. Each finished run's row is appended to the summary CSV and flushed to
+disk (fsync) before its recording is written, so whatever stops the batch (Ctrl-C, SIGKILL,
+power loss) every complete recording has its row, and at most a second or two of work is lost.
+`resume=True` trusts only complete, well-formed rows of the same batch (a row cut short is run
+again, as is a row whose recording is missing), removes the temporary files a killed run left,
+and at the end the summary is rewritten in run order, as an uninterrupted batch writes it.
 
 Syntax (the CLI passes the user's strings straight here):
 
@@ -37,6 +41,8 @@ from collide.stepper import RunError
 
 DEFAULT_CHUNK = 1000
 MAX_DRAW_FACTOR = 100  # give up after this many invalid draws per requested sample
+SUBCHUNK_SECONDS = 1.0  # finished runs reach the disk at least this often (sub-chunks sized to it)
+MAX_RUNS = 1_000_000  # runs in one batch: each holds its scene in memory (about 8 KB) before it runs
 
 
 class BatchError(ValueError):
@@ -181,11 +187,14 @@ def plan_batch(sources: list[str], *, sets: list[str] | None = None, sweeps: lis
     specs: list[RunSpec] = []
     notes: list[str] = []
     raws = [(src, *read_raw(src)) for src in scene_sources(sources)]
+    total = len(raws) * (samples if varies else math.prod(s.num for s in sweeps))
+    if total > MAX_RUNS:
+        raise BatchError(f"the batch would have {total:.3g} runs; at most {MAX_RUNS:.0e} fit in memory at once "
+                         "(each run's scene is built before any runs): split the sweep into several batches")
     if sweeps:
         grid = list(itertools.product(*(s.values for s in sweeps)))
     else:
         grid = [()]
-    total = len(raws) * (samples if varies else len(grid))
     width = max(len(str(total - 1)), 4)
     for src, raw, default_name in raws:
         base = _scene(raw, default_name, sets)  # the scene itself must be valid
@@ -330,32 +339,68 @@ def outcome_row(spec: RunSpec, run: SceneRun, member: int, wall_time_s: float,
 
 
 def failure_row(spec: RunSpec, error: str) -> dict[str, str]:
-    row = {"run_id": spec.run_id, "scene": spec.scene.name, "error": error}
+    row = {"run_id": spec.run_id, "scene": spec.scene.name, "error": " ".join(error.split())}  # one line
     row.update({k: _text(v) for k, v in spec.params.items()})
     return row
 
 
 # ---------------------------------------------------------------------------------------------
-# The summary file: rewritten whole and atomically after every chunk
+# The summary file: rows appended and synced as runs finish; rewritten in run order at the end
+
+
+def _csv_text(header: list[str], rows: list[dict[str, str]], with_header: bool) -> str:
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=header, restval="", lineterminator="\n")
+    if with_header:
+        writer.writeheader()
+    writer.writerows(rows)
+    return buf.getvalue()
 
 
 def write_csv_atomic(path: Path, header: list[str], rows: list[dict[str, str]]) -> None:
     """Write a CSV beside `path` and move it into place: readers never see half a file."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=header, restval="", lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
     tmp = path.parent / f".{path.name}.{uuid.uuid4().hex[:8]}.tmp"
     try:
         with open(tmp, "w", newline="") as f:
-            f.write(buf.getvalue())
+            f.write(_csv_text(header, rows, True))
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
+        _sync_folder(path.parent)
     finally:
         if tmp.exists():
             tmp.unlink()
+
+
+def _sync_folder(folder: Path) -> None:
+    """fsync a folder, so that a file just renamed into it survives a power loss too."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass  # some file systems cannot sync a folder; the rename itself is still atomic
+    finally:
+        os.close(fd)
+
+
+class _Journal:
+    """The summary file open for appending: each row written, flushed and synced at once."""
+
+    def __init__(self, path: Path, header: list[str]) -> None:
+        self.header = header
+        self.file = open(path, "a", newline="")
+
+    def append(self, rows: list[dict[str, str]]) -> None:
+        self.file.write(_csv_text(self.header, rows, False))
+        self.file.flush()
+        os.fsync(self.file.fileno())
+
+    def close(self) -> None:
+        self.file.close()
 
 
 def read_summary(path: Path) -> tuple[list[str], list[dict[str, str]]]:
@@ -417,19 +462,30 @@ def run_batch(plan: Plan, *, integrator: str | None = None, dt: float | str | No
               tol: float | None = None, summary: Path | None = None, record_dir: Path | None = None,
               resume: bool = False, chunk_size: int = DEFAULT_CHUNK, stride: int = 1,
               progress: ProgressCallback | None = None) -> BatchResult:
-    """Run every spec of the plan in vectorised chunks; save rows (and recordings) per chunk.
+    """Run every spec of the plan; save each finished run's row (and recording) as it finishes.
 
-    `progress(done, total)` is called after each chunk is saved; raising from it (or Ctrl-C)
-    stops the batch with everything finished so far on disk. With `resume`, runs whose row is
-    already in `summary` (same run id, scene and parameter values) are skipped.
+    Runs go to the stepper in sub-chunks of at most `chunk_size`, sized to take about
+    SUBCHUNK_SECONDS each; their rows are appended to `summary` and synced to disk right away,
+    each before its recording. `progress(done, total)` is called after each sub-chunk; raising
+    from it (or Ctrl-C, or a kill) stops the batch with every finished run on disk. With
+    `resume`, runs whose complete, well-formed row is already in `summary` (same run id, scene
+    and parameter values; with `record_dir`, its recording there too) are skipped.
     """
     if chunk_size < 1:
         raise BatchError(f"chunk size must be at least 1, got {chunk_size}")
     columns = summary_columns(plan)
     header = columns.all
+    notes = list(plan.notes)
     done: dict[str, dict[str, str]] = {}
-    if resume and summary is not None and summary.exists():
-        done = _resumable(summary, header, plan)
+    if resume and summary is not None:
+        removed = _remove_stale_temporaries(plan, summary, record_dir)
+        if removed:
+            notes.append(f"removed {removed} temporary file(s) left by an interrupted run")
+        if summary.exists():
+            done, dropped = _resumable(summary, header, plan, record_dir)
+            if dropped:
+                notes.append(f"{dropped} row(s) of {summary} were cut short, malformed or without their "
+                             "recording: run again")
     todo = [s for s in plan.specs if s.run_id not in done]
     total = len(plan.specs)
     rows = dict(done)
@@ -438,55 +494,146 @@ def run_batch(plan: Plan, *, integrator: str | None = None, dt: float | str | No
     failed = 0
     order = {s.run_id: i for i, s in enumerate(plan.specs)}
 
-    def save() -> None:
+    def save_in_order() -> None:
         if summary is not None:
             write_csv_atomic(summary, header, sorted(rows.values(), key=lambda r: order[r["run_id"]]))
 
-    save()
+    save_in_order()  # the header, and the trusted rows of an earlier run (nothing torn)
+    journal = _Journal(summary, header) if summary is not None else None
     if progress is not None:
         progress(len(rows), total)
-    saved = len(rows)
     try:
         for group in _groups(todo, integrator):
-            for start in range(0, len(group), chunk_size):
-                chunk = group[start:start + chunk_size]
+            start, size = 0, 1
+            while start < len(group):
+                chunk = group[start:start + size]
+                began = time.perf_counter()
                 for spec, row, run, member in _run_chunk(chunk, integrator, dt, tol, record_dir is not None):
+                    failed += bool(row["error"])
+                    rows[spec.run_id] = row
+                    if journal is not None:
+                        journal.append([row])  # on disk before the recording: a recording always has its row
                     if run is not None and record_dir is not None:
                         from collide.recording import write_recording
 
                         path = record_dir / recording_name(spec)
                         recordings.append(write_recording(run.member(member), path, stride=stride))
-                    failed += bool(row["error"])
-                    rows[spec.run_id] = row
-                save()
-                saved = len(rows)
+                start += len(chunk)
+                per_run = (time.perf_counter() - began) / len(chunk)
+                size = max(1, min(chunk_size, 2 * size, int(SUBCHUNK_SECONDS / max(per_run, 1e-9))))
                 if progress is not None:
                     progress(len(rows), total)
+    except KeyboardInterrupt:
+        if journal is not None:
+            journal.close()
+        save_in_order()  # the rows appended so far, in run order (killed, the next resume does it)
+        raise
     finally:
-        if len(rows) != saved:
-            save()  # interrupted inside a chunk: keep the runs whose recordings are written
+        if journal is not None:
+            journal.close()
+    save_in_order()
     ordered = sorted(rows.values(), key=lambda r: order[r["run_id"]])
     return BatchResult(header, ordered, len(todo), len(done), failed, summary, recordings,
-                       time.perf_counter() - started, list(plan.notes))
+                       time.perf_counter() - started, notes)
 
 
-def _resumable(summary: Path, header: list[str], plan: Plan) -> dict[str, dict[str, str]]:
-    """Rows of an earlier, interrupted run of the same batch (refuses another batch's file)."""
-    old_header, old_rows = read_summary(summary)
+_TEMPORARY = re.compile(r"\.(?P<name>.+)\.[0-9a-f]{8}\.tmp")
+
+
+def _remove_stale_temporaries(plan: Plan, summary: Path, record_dir: Path | None) -> int:
+    """Remove the temporary files (`.<name>.<hex>.tmp`) that killed writes of this batch's
+    recordings and summary left behind; files of other names are left alone."""
+    targets: list[tuple[Path, set[str]]] = [(summary.parent, {summary.name})]
+    if record_dir is not None:
+        targets.append((record_dir, {recording_name(s) for s in plan.specs}))
+    removed = 0
+    for folder, names in targets:
+        if not folder.is_dir():
+            continue
+        for path in folder.iterdir():
+            match = _TEMPORARY.fullmatch(path.name)
+            if match and match.group("name") in names and path.is_file():
+                try:
+                    path.unlink()
+                    removed += 1
+                except FileNotFoundError:
+                    pass
+    return removed
+
+
+def _complete_lines(path: Path) -> tuple[list[str], bool]:
+    """The lines of a file that end in a newline (a kill can cut the last one short), and
+    whether there was such a cut line."""
+    lines = path.read_bytes().decode("utf-8", errors="replace").split("\n")
+    return lines[:-1], lines[-1] != ""
+
+
+def _well_formed(row: dict[str, str], spec: RunSpec) -> bool:
+    """Whether a row holds what a finished run writes: a failed run its error, a successful one
+    every outcome of its scene as a finite number, and its steps, step and times."""
+    if row["error"]:
+        return True
+
+    def number(text: str, empty_ok: bool = False) -> bool:
+        if text == "":
+            return empty_ok
+        try:
+            return math.isfinite(float(text))
+        except ValueError:
+            return False
+
+    for col in outcome_columns(spec.scene):
+        if not number(row[col], empty_ok=col.endswith(".deflection_deg")):
+            return False
+    if not all(number(row[c], empty_ok=True) for c in
+               ("residual.energy", "residual.momentum", "residual.angular_momentum")):
+        return False
+    return re.fullmatch(r"\d+", row["steps"]) is not None and \
+        all(number(row[c]) for c in ("dt", "sim_time", "wall_time_s"))
+
+
+def _resumable(summary: Path, header: list[str], plan: Plan,
+               record_dir: Path | None) -> tuple[dict[str, dict[str, str]], int]:
+    """Rows of an earlier, interrupted run of the same batch that can be trusted, and how many
+    others were dropped (cut short, malformed, or a finished run whose recording is missing).
+    Refuses another batch's file: other columns, or a complete row of other parameters."""
+    lines, cut = _complete_lines(summary)
+    if not lines:
+        return {}, 0  # no complete header: nothing of this batch was finished
+    old_header = next(csv.reader([lines[0]]), [])
     if old_header != header:
         raise BatchError(f"--resume: {summary} has other columns than this batch; "
                          "use the same arguments, or a new --summary file")
-    wanted = {_identity({"run_id": s.run_id, "scene": s.scene.name,
-                         **{k: _text(v) for k, v in s.params.items()}}, plan.param_keys): s.run_id
+    specs = {s.run_id: s for s in plan.specs}
+    wanted = {s.run_id: _identity({"run_id": s.run_id, "scene": s.scene.name,
+                                   **{k: _text(v) for k, v in s.params.items()}}, plan.param_keys)
               for s in plan.specs}
-    done = {}
-    for row in old_rows:
-        ident = _identity(row, plan.param_keys)
-        if ident not in wanted:
-            raise BatchError(f"--resume: {summary} has run {row.get('run_id')} with other parameters "
+    done: dict[str, dict[str, str]] = {}
+    dropped = int(cut)
+    for line in lines[1:]:
+        try:
+            fields = next(csv.reader([line]), [])
+        except csv.Error:
+            fields = []
+        if len(fields) != len(header):
+            dropped += 1
+            continue
+        row = dict(zip(header, fields))
+        spec = specs.get(row["run_id"])
+        if spec is None or _identity(row, plan.param_keys) != wanted[row["run_id"]]:
+            raise BatchError(f"--resume: {summary} has run {row['run_id']} with other parameters "
                              "than this batch; use the same arguments, or a new --summary file")
-        done[row["run_id"]] = dict(row)
-    return done
+        if not _well_formed(row, spec):
+            dropped += 1
+            continue
+        done[row["run_id"]] = row  # a run appended twice (rerun after a kill): the last row
+    if record_dir is not None:
+        missing = [i for i, row in done.items()
+                   if not row["error"] and not (record_dir / recording_name(specs[i])).is_file()]
+        for run_id in missing:
+            del done[run_id]
+        dropped += len(missing)
+    return done, dropped
 
 
 def _run_chunk(chunk: list[RunSpec], integrator: str | None, dt: float | str | None, tol: float | None,

@@ -55,9 +55,19 @@ Entity paths (`<b>` a body name, `<c>` a contact such as `ball1-ball2` or `ball1
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import math
 import os
+import pickle
 import re
+import select
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
 import tomllib
 import uuid
 import warnings
@@ -81,10 +91,14 @@ from collide.stepper import ContactLog, RunResult, Trajectory
 
 APP_ID = "collide"
 FORMAT = "collide-recording"
-FORMAT_VERSION = 2
+# 3: the trajectory's tables (knots, contact records, contact intervals) and `checksum` in
+# /collide/meta; 2: the same tables, no checksum (still read); 1: every step (no longer read).
+FORMAT_VERSION = 3
 MANY_BODIES = 24  # from this many bodies on, one instanced entity draws them all
 MANY_CONTACTS = 24  # from this many contacts on, one entity draws them all (no per-contact plots)
 TIMELINE = "sim_time"
+DEFAULT_FPS = 120.0  # frames per simulated second of free flight
+MAX_FREE_FRAMES = 100_000  # frames of free flight in one recording, at most (fps drops beyond)
 CONTACT_FRAMES = 100  # least frames across one contact in the 3D view
 
 _PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
@@ -116,6 +130,7 @@ class WriteStats:
 
     frames: int = 0
     exact_frames: int = 0
+    fps: float = 0.0  # the free-flight frame rate used (lower than asked for a long run)
     steps: int = 0
     rows: int = 0
     calls: int = 0
@@ -124,11 +139,12 @@ class WriteStats:
 last_write = WriteStats()
 
 
-def write_recording(run: SceneRun, path: Path, *, stride: int = 1, fps: float = 120.0,
+def write_recording(run: SceneRun, path: Path, *, stride: int = 1, fps: float = DEFAULT_FPS,
                     contact_frames: int = CONTACT_FRAMES) -> Path:
     """Write member 0 of `run` to `path` (an `.rrd`); return the path.
 
     `stride` keeps every n-th contact step as a frame, `fps` sets the frame rate in free flight
+    (lowered so that a long run holds at most MAX_FREE_FRAMES; `last_write.fps` says what was used)
     and `contact_frames` the least number of frames across each contact in the 3D view. Every
     step is stored exactly whatever these are.
 
@@ -146,8 +162,16 @@ def write_recording(run: SceneRun, path: Path, *, stride: int = 1, fps: float = 
     if contact_frames < 1:
         raise ValueError(f"contact_frames must be at least 1, got {contact_frames}")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.is_dir():
+        raise _fail(path, "is a folder; give a file name ending in .rrd")
     tmp = path.parent / f".{path.name}.{uuid.uuid4().hex[:8]}.tmp"
+    try:
+        # Fail here, in one line, rather than inside Rerun's writer (a RuntimeError from Rust).
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "wb"):
+            pass
+    except OSError as exc:
+        raise _fail(path, f"cannot write the recording here ({exc.strerror or type(exc).__name__})") from None
     try:
         _Writer(run, stride, fps, contact_frames).write(tmp)
         os.replace(tmp, path)
@@ -261,7 +285,11 @@ class _Writer:
         self.model = run.result.model
         self.traj = run.result.trajectory
         self.stride = stride
-        self.fps = fps
+        # A long free flight at a steady fps would be millions of frames (demo-1d for 1e6 s:
+        # 1.2e8): the frame rate drops so that the run holds at most MAX_FREE_FRAMES of them.
+        knots = self.traj.knots[:, kn.K_T]
+        span = float(knots.max() - knots.min()) if len(knots) else 0.0
+        self.fps = min(fps, MAX_FREE_FRAMES / span) if span > 0 else fps
         self.contact_frames = contact_frames
         self.rows = 0
         self.calls = 0
@@ -377,6 +405,7 @@ class _Writer:
             self.rec.disconnect()
         last_write.frames = len(self.view.times)
         last_write.exact_frames = len(self.exact.times)
+        last_write.fps = self.fps
         last_write.steps = int(self.result.steps[0])
         last_write.rows = self.rows
         last_write.calls = self.calls
@@ -598,6 +627,9 @@ class _Writer:
                 value = getattr(state, key)[0].reshape(-1)
                 if value.size:
                     meta[f"{label}_{key}"] = value
+        traj = self.traj
+        meta["checksum"] = checksum({"knots": traj.knots, "records": traj.records,
+                                     "intervals": traj.intervals}, meta)
         self._static("/collide/meta", rr.AnyValues(**meta))
 
 
@@ -696,7 +728,13 @@ def _meta(path: Path, chunks: list) -> dict[str, Any]:
         meta[name] = values if listed else values[0]
     if meta.get("format") != FORMAT:
         raise _fail(path, "not a collide recording (unknown format)")
-    if int(meta.get("format_version", 0)) > FORMAT_VERSION:
+    version = meta.get("format_version")
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise _fail(path, f"not a collide recording (format version {version!r})")
+    if version < 2:
+        raise _fail(path, f"written by an older collide (format {version}, every step) that this one "
+                          "no longer reads; record the run again")
+    if version > FORMAT_VERSION:
         raise _fail(path, f"made by a newer collide (format {meta['format_version']}, this one reads "
                           f"{FORMAT_VERSION}); upgrade collide")
     return meta
@@ -709,24 +747,115 @@ def _flat(arrays: list) -> np.ndarray:
         if chunked.num_chunks else np.empty(0)
 
 
+def _canonical(value: Any) -> bytes:
+    """Bytes of a meta value or table that do not depend on how Arrow handed it back."""
+    if value is None:
+        return b"n"
+    if isinstance(value, (bool, np.bool_)):
+        return b"b1" if value else b"b0"
+    if isinstance(value, (int, np.integer)):
+        return b"i" + str(int(value)).encode()
+    if isinstance(value, (float, np.floating)):
+        return b"f" + float(value).hex().encode()
+    if isinstance(value, str):
+        return b"s" + value.encode("utf-8", "surrogatepass")
+    if isinstance(value, np.ndarray) and value.dtype.kind in "fiub":
+        kind = {"f": "<f8", "i": "<i8", "u": "<i8", "b": "u1"}[value.dtype.kind]
+        shape = ",".join(str(n) for n in value.shape).encode()
+        return b"a" + kind.encode() + b"(" + shape + b")" + np.ascontiguousarray(value, dtype=kind).tobytes()
+    if isinstance(value, (list, tuple, np.ndarray)):
+        items = list(value)
+        if items and all(isinstance(v, (float, np.floating)) for v in items):
+            return _canonical(np.asarray(items, dtype=float))
+        return b"l[" + b",".join(_canonical(v) for v in items) + b"]"
+    raise TypeError(f"no canonical form for {type(value).__name__}")
+
+
+def checksum(tables: dict[str, np.ndarray], meta: dict[str, Any]) -> str:
+    """SHA-256 over what `read_recording` restores: the trajectory's tables (knots, contact
+    records, contact intervals: shape and float64 values in row order) and every setting in
+    `/collide/meta` but the checksum itself, in sorted key order."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for label, table in ((b"tables", tables), (b"meta", meta)):
+        digest.update(label)
+        for key in sorted(table):
+            if key == "checksum" or table[key] is None:  # AnyValues stores no None: absent
+                continue
+            digest.update(len(key).to_bytes(4, "little") + key.encode())
+            data = _canonical(table[key])
+            digest.update(len(data).to_bytes(8, "little") + data)
+    return digest.hexdigest()
+
+
+_TABLES = (("knots", "/collide/knots", int(kn.NK)), ("records", "/collide/contact_records", int(kn.NR)),
+           ("intervals", "/collide/contact_intervals", 4))
+
+
+def _tables(path: Path, chunks: list, meta: dict[str, Any]) -> dict[str, np.ndarray]:
+    """The trajectory's tables as the writer held them (rows restored to their order)."""
+    out = {}
+    for name, entity, width in _TABLES:
+        rows = meta.get(name)
+        if isinstance(rows, bool) or not isinstance(rows, int) or rows < 0:
+            raise _fail(path, f"inconsistent collide recording (its row count '{name}' is {rows!r})")
+        if rows == 0:
+            out[name] = np.zeros((0, width))
+            continue
+        columns = _columns(chunks, entity)
+        if "values" not in columns or "row" not in columns:
+            raise _fail(path, f"incomplete collide recording ({entity} is missing)")
+        values, order = _flat(columns["values"]), _flat(columns["row"])
+        if values.size != rows * width or order.size != rows:
+            raise _fail(path, f"incomplete collide recording ({entity} has {order.size} of {rows} rows)")
+        order = order.astype(np.int64)
+        if not np.array_equal(np.sort(order), np.arange(rows)):
+            raise _fail(path, f"damaged collide recording ({entity}'s row numbers are not 0..{rows - 1})")
+        table = np.empty((rows, width))
+        table[order] = values.reshape(rows, width)
+        out[name] = table
+    return out
+
+
+def _verified_tables(path: Path, chunks: list, meta: dict[str, Any]) -> dict[str, np.ndarray]:
+    """The trajectory's tables, refused if they or the settings differ from what the writer
+    checksummed.
+
+    A checksum present is always checked (a flipped bit could lower `format_version` too); it
+    is required from format 3 on, and absent only from files written before (format 2).
+    """
+    stored = meta.get("checksum")
+    required = int(meta["format_version"]) >= 3
+    if (stored is not None or required) and not isinstance(stored, str):
+        raise _fail(path, "damaged collide recording (its checksum is missing)")
+    tables = _tables(path, chunks, meta)
+    if stored is not None and checksum(tables, meta) != stored:
+        raise _fail(path, "damaged collide recording (checksum mismatch: its trajectory or settings "
+                          "changed after it was written)")
+    return tables
+
+
 def read_recording(path: str | Path) -> SceneRun:
     """Rebuild the run stored in a recording: scene, model, trajectory, final state and settings.
 
     Raises `RecordingError` (a `ValueError`) naming the file when it is not an `.rrd`, is
-    truncated, or was not written by collide.
+    truncated or damaged (its checksum does not match), or was not written by collide. Files
+    from elsewhere: `read_recording_safely`, which also survives a crash of Rerun's reader.
     """
     path = Path(path)
     chunks = _load_chunks(path)
-    meta = _meta(path, chunks)
     try:
-        return _rebuild(path, chunks, meta)
+        meta = _meta(path, chunks)
+        return _rebuild(path, _verified_tables(path, chunks, meta), meta)
     except RecordingError:
         raise
-    except (KeyError, ValueError, TypeError) as exc:
-        raise _fail(path, f"inconsistent collide recording ({type(exc).__name__}: {exc})") from None
+    except Exception as exc:  # anything a foreign or damaged file's contents make the parsing raise
+        text = " ".join(str(exc).split())[:300]
+        raise _fail(path, f"not a valid collide recording ({type(exc).__name__}: {text})") from None
 
 
-def _rebuild(path: Path, chunks: list, meta: dict[str, Any]) -> SceneRun:
+def _rebuild(path: Path, tables: dict[str, np.ndarray], meta: dict[str, Any]) -> SceneRun:
     try:
         scene = parse_scene(tomllib.loads(meta["scene_toml"]), meta["scene_name"])
     except (SceneError, tomllib.TOMLDecodeError) as exc:
@@ -735,23 +864,7 @@ def _rebuild(path: Path, chunks: list, meta: dict[str, Any]) -> SceneRun:
     n, d = model.n_bodies, model.dim
     k, q_dim = model.spin_dim, model.orient_dim
 
-    def table(entity: str, count: str, width: int) -> np.ndarray:
-        rows = int(meta[count])
-        if rows == 0:
-            return np.zeros((0, width))
-        columns = _columns(chunks, entity)
-        if "values" not in columns or "row" not in columns:
-            raise _fail(path, f"incomplete collide recording ({entity} is missing)")
-        values, order = _flat(columns["values"]), _flat(columns["row"]).astype(np.int64)
-        if values.size != rows * width or order.size != rows:
-            raise _fail(path, f"incomplete collide recording ({entity} has {order.size} of {rows} rows)")
-        out = np.empty((rows, width))
-        out[order] = values.reshape(rows, width)
-        return out
-
-    traj = Trajectory(table("/collide/knots", "knots", int(kn.NK)),
-                      table("/collide/contact_records", "records", int(kn.NR)),
-                      table("/collide/contact_intervals", "intervals", 4), model)
+    traj = Trajectory(tables["knots"], tables["records"], tables["intervals"], model)
 
     def state(label: str) -> State:
         def vec(key: str, width: int) -> np.ndarray:
@@ -817,3 +930,193 @@ def write_accuracy_recording(wp: Any, path: Path) -> Path:
         if tmp.exists():
             tmp.unlink()
     return path
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading untrusted files in a child process
+
+SAFE_TIMEOUT_S = 60.0
+SAFE_MEMORY_MB = 2048
+_POLL_S = 0.05
+_HEADER = struct.Struct("!Q")
+_IDLE_READERS = 2  # reader processes kept warm between reads
+
+
+def _send_message(stream: Any, obj: Any) -> None:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(_HEADER.pack(len(data)) + data)
+    stream.flush()
+
+
+def _serve_reads() -> None:
+    """The reader process: read (path, memory_mb) requests on stdin, answer on stdout.
+
+    Started by `read_recording_safely` as a fresh interpreter (never a fork of the caller, whose
+    threads or main script it must not inherit). Answers ("ok", SceneRun) or ("error", message);
+    a damaged file that aborts Rerun's Rust reader kills only this process.
+    """
+    import resource
+
+    inp, out = sys.stdin.buffer, sys.stdout.buffer
+    sys.stdout = sys.stderr  # nothing but answers on the answer channel
+    warnings.simplefilter("ignore")
+    while True:
+        header = inp.read(_HEADER.size)
+        if len(header) < _HEADER.size:
+            return
+        path, memory_mb = pickle.loads(inp.read(_HEADER.unpack(header)[0]))
+        try:
+            # A backstop against one huge allocation between the parent's memory checks; a
+            # process with rerun loaded reserves about 3 GB of address space before it reads.
+            _, hard = resource.getrlimit(resource.RLIMIT_AS)
+            limit = (4096 + 2 * memory_mb) * 1024 * 1024
+            resource.setrlimit(resource.RLIMIT_AS, (limit if hard == resource.RLIM_INFINITY
+                                                    else min(limit, hard), hard))
+        except (ValueError, OSError):
+            pass
+        try:
+            message: tuple[str, Any] = ("ok", read_recording(path))
+        except RecordingError as exc:
+            message = ("error", str(exc))
+        except MemoryError:
+            message = ("error", f"{path}: reading it needs more than {memory_mb} MB of memory")
+        except Exception as exc:  # whatever a damaged file makes the reader raise
+            message = ("error", f"{path}: damaged or not a collide recording ({type(exc).__name__}: {exc})")
+        _send_message(out, message)
+
+
+class _Reader:
+    """One reader process and its pipes."""
+
+    def __init__(self) -> None:
+        code = "from collide.recording import _serve_reads; _serve_reads()"
+        self.proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait()
+        for stream in (self.proc.stdin, self.proc.stdout):
+            with contextlib.suppress(OSError):
+                stream.close()
+
+    def rss_mb(self) -> float:
+        try:
+            with open(f"/proc/{self.proc.pid}/statm") as f:
+                return int(f.read().split()[1]) * (os.sysconf("SC_PAGE_SIZE") / 2**20)
+        except (OSError, ValueError, IndexError):
+            return 0.0
+
+    def read(self, path: Path, timeout_s: float, memory_mb: int) -> tuple[str, Any]:
+        """Send one request; ("ok", run), ("error", message) or ("failed", reason)."""
+        try:
+            _send_message(self.proc.stdin, (str(path), int(memory_mb)))
+        except OSError:
+            return "failed", self._died()
+        fd = self.proc.stdout.fileno()
+        deadline = time.monotonic() + timeout_s
+        data = b""
+        need = _HEADER.size
+        length = None
+        while True:
+            ready, _, _ = select.select([fd], [], [], _POLL_S)
+            if ready:
+                chunk = os.read(fd, max(need - len(data), 1 << 16))
+                if not chunk:
+                    return "failed", self._died()
+                data += chunk
+                if length is None and len(data) >= _HEADER.size:
+                    length = _HEADER.unpack(data[:_HEADER.size])[0]
+                    need = _HEADER.size + length
+                if length is not None and len(data) >= need:
+                    # Limits hold for reads quicker than one check too.
+                    if time.monotonic() > deadline:
+                        return "failed", f"reading it took longer than {timeout_s:g} s (stopped)"
+                    if self.rss_mb() > memory_mb:
+                        return "failed", f"reading it needs more than {memory_mb} MB of memory (stopped)"
+                    try:
+                        return pickle.loads(data[_HEADER.size:need])
+                    except Exception as exc:
+                        return "failed", f"its contents could not be passed back ({type(exc).__name__})"
+                continue
+            if time.monotonic() > deadline:
+                return "failed", f"reading it took longer than {timeout_s:g} s (stopped)"
+            if self.rss_mb() > memory_mb:
+                return "failed", f"reading it needs more than {memory_mb} MB of memory (stopped)"
+
+    def _died(self) -> str:
+        code = self.proc.wait()
+        if code < 0:
+            try:
+                how = f"killed by {signal.Signals(-code).name}"
+            except ValueError:
+                how = f"killed by signal {-code}"
+        else:
+            how = f"exit code {code}"
+        return f"damaged recording: Rerun's reader crashed on it ({how})"
+
+
+_idle: list[_Reader] = []
+_idle_lock = threading.Lock()
+
+
+def _take_reader() -> _Reader:
+    with _idle_lock:
+        while _idle:
+            reader = _idle.pop()
+            if reader.proc.poll() is None:
+                return reader
+            reader.stop()
+    return _Reader()
+
+
+def _give_back(reader: _Reader) -> None:
+    with _idle_lock:
+        if len(_idle) < _IDLE_READERS:
+            _idle.append(reader)
+            return
+    reader.stop()
+
+
+def read_recording_safely(path: str | Path, *, timeout_s: float = SAFE_TIMEOUT_S,
+                          memory_mb: int = SAFE_MEMORY_MB) -> SceneRun:
+    """`read_recording` in a child process, for files from anywhere (uploads, the command line).
+
+    Rerun's reader is Rust: a damaged file can make it panic and abort the whole process, or
+    loop. Here a crash, a hang (longer than `timeout_s`) or a read that needs more than
+    `memory_mb` MB of memory costs only the child; each becomes a `RecordingError` with a
+    one-line message naming the file, and the caller carries on. Readers are fresh interpreters
+    (about a second to start), kept warm between reads; safe to call from several threads.
+    """
+    path = Path(path)
+    if not timeout_s > 0:
+        raise ValueError(f"timeout_s must be positive, got {timeout_s}")
+    if not memory_mb > 0:
+        raise ValueError(f"memory_mb must be positive, got {memory_mb}")
+    if not path.exists():
+        raise _fail(path, "no such file")
+    if not path.is_file():
+        raise _fail(path, "not a file")
+    reader = _take_reader()
+    kind, value = "failed", "the reader stopped"
+    try:
+        kind, value = reader.read(path.absolute(), timeout_s, memory_mb)
+    finally:
+        if kind == "failed":
+            reader.stop()
+            _give_back(_Reader())  # warm up the next one while the caller reports this one
+        else:
+            _give_back(reader)
+    if kind == "ok":
+        return value
+    if kind == "error":
+        raise RecordingError(" ".join(str(value).split()))
+    raise _fail(path, " ".join(str(value).split()))
+
+
+@atexit.register
+def _stop_idle_readers() -> None:
+    with _idle_lock:
+        while _idle:
+            _idle.pop().stop()

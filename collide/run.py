@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -146,10 +148,34 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     # A step chosen for tol lands friction mode changes to a hundredth of it (their error is
     # about that much); a given step lands them as closely as they can be.
     event_tol = np.where(auto_used, np.maximum(EDGE_TOL, 0.01 * tols), EDGE_TOL)
-    result = simulate(model, state, integrator=integ, dt=dt_arr, duration=duration, tail=tail,
-                      record=record, max_steps=max_steps, event_tol=event_tol, auto=np.array(auto_used),
-                      omega_h=omega_h)
+    # With no contact possible (one sphere, no walls) the stability limit and the steps per
+    # contact are a division by a zero frequency: infinite by design, nothing to warn about (and
+    # `check_finite` below still refuses a result that is not finite).
+    contactless = model.n_bodies < 2 and not model.n_walls
+    with np.errstate(divide="ignore") if contactless else contextlib.nullcontext():
+        result = simulate(model, state, integrator=integ, dt=dt_arr, duration=duration, tail=tail,
+                          record=record, max_steps=max_steps, event_tol=event_tol, auto=np.array(auto_used),
+                          omega_h=omega_h)
+    check_finite(result, scenes)
     return SceneRun(list(scenes), result, dt, [float(x) for x in tols], estimate, auto_used)
+
+
+def check_finite(result: RunResult, scenes: list[Scene]) -> None:
+    """Refuse a run whose final state holds a non-finite number: it is no result (an overflowing
+    free flight would otherwise be printed as one). Names the first such member, body and field."""
+    final = result.final
+    fields = {"position": final.s, "velocity": final.v, "spin": final.w, "orientation": final.q}
+    for b, scene in enumerate(scenes):
+        if not math.isfinite(float(final.t[b])) or not math.isfinite(float(final.work[b])):
+            raise RunError(f"{scene.name}: the run ended with a non-finite time or dissipated work; "
+                           "no result to report")
+        for what, values in fields.items():
+            bad = ~np.isfinite(values[b]).all(axis=-1) if values.shape[-1] else np.zeros(values.shape[1], bool)
+            if bad.any():
+                body = scene.bodies[int(np.argmax(bad))].name
+                raise RunError(f"{scene.name}: body.{body}'s final {what} is not finite (at t = "
+                               f"{float(final.t[b]):.6g} s): float64 overflowed; use a shorter duration or "
+                               "smaller values")
 
 
 def run_scene(scene: Scene, **kwargs) -> SceneRun:

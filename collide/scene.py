@@ -19,6 +19,13 @@ from typing import Any
 INTEGRATORS = ("seed", "verlet", "yoshida4", "kahan6")
 DEFAULT_INTEGRATOR = "kahan6"
 DEFAULT_TOL = 1e-6
+# Every number of a scene is at most this large in magnitude, and every positive quantity (mass,
+# radius, k, dt, ...) at least its inverse: the physics squares and multiplies them (energies,
+# angular momenta, k m, the residuals' norms), and products of a few such numbers must stay far
+# inside float64's 1.8e308.
+MAX_MAGNITUDE = 1e30
+MIN_POSITIVE = 1.0 / MAX_MAGNITUDE
+MAX_DEPTH = 8  # tables and arrays nested deeper than this are no scene (a scene needs 4)
 
 
 class SceneError(ValueError):
@@ -191,9 +198,27 @@ def read_raw(source: str | Path) -> tuple[dict, str]:
 
 def _parse_toml(text: str, where: str) -> dict:
     try:
-        return tomllib.loads(text)
+        raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{where}: not valid TOML: {exc}") from None
+    except RecursionError:  # tomllib recurses once per nested array or inline table
+        raise SceneError(f"{where}: arrays or tables nested too deeply (a scene needs at most "
+                         f"{MAX_DEPTH} levels)") from None
+    _check_depth(raw, where)
+    return raw
+
+
+def _check_depth(value: Any, where: str) -> None:
+    """Refuse values nested deeper than MAX_DEPTH (checked without recursion: the copies and
+    checks that follow recurse)."""
+    stack = [(value, 1)]
+    while stack:
+        item, depth = stack.pop()
+        if depth > MAX_DEPTH:
+            raise SceneError(f"{where}: arrays or tables nested more than {MAX_DEPTH} levels deep; "
+                             "no scene key takes that")
+        children = item.values() if isinstance(item, dict) else item if isinstance(item, list) else ()
+        stack.extend((child, depth + 1) for child in children if isinstance(child, (dict, list)))
 
 
 def load_scene(source: str | Path, overrides: list[str] | None = None) -> Scene:
@@ -212,11 +237,17 @@ _COMPONENTS = {"x": 0, "y": 1, "z": 2}
 def parse_value(text: str) -> Any:
     """A value as TOML would read it; bare words (`auto`, `seed`) stay strings."""
     try:
-        return tomllib.loads(f"v = {text}")["v"]
+        value = tomllib.loads(f"v = {text}")["v"]
+    except RecursionError:
+        raise SceneError(f"value '{text[:40]}...': arrays nested too deeply (a scene needs at most "
+                         f"{MAX_DEPTH} levels)") from None
     except tomllib.TOMLDecodeError:
         if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.\-]*", text.strip()):
             return text.strip()
-        raise SceneError(f"cannot read value '{text}' (use TOML syntax, e.g. 0.3 or [1, 0])") from None
+        shown = text if len(text) <= 60 else text[:57] + "..."
+        raise SceneError(f"cannot read value '{shown}' (use TOML syntax, e.g. 0.3 or [1, 0])") from None
+    _check_depth(value, f"value '{text if len(text) <= 60 else text[:57] + '...'}'")
+    return value
 
 
 def split_override(item: str) -> tuple[str, str]:
@@ -263,6 +294,10 @@ def set_path(raw: dict, key: str, value: Any) -> None:
     if len(rest) == 2 and rest[1] in _COMPONENTS and isinstance(table.get(rest[0]), list):
         _set_component(table[rest[0]], rest[1], value, key)
         return
+    if len(rest) == 2 and rest[1] == "x" and isinstance(table.get(rest[0]), (int, float)) \
+            and not isinstance(table.get(rest[0]), bool):
+        table[rest[0]] = value  # a 1D scene's vector is a plain number: its only component is x
+        return
     for part in rest[:-1]:
         nxt = table.setdefault(part, {})
         if not isinstance(nxt, dict):
@@ -288,16 +323,34 @@ _BODY_KEYS = {"name", "mass", "radius", "inertia", "position", "velocity", "spin
 _WALL_KEYS = {"point", "normal"}
 
 
+def _shown(value: Any) -> str:
+    """A value as an error message shows it (a 400-digit integer is not printed whole)."""
+    text = repr(value)
+    return text if len(text) <= 40 else f"{text[:12]}...{text[-6:]} ({len(text)} characters)"
+
+
 def _number(value: Any, key: str, *, positive: bool = False, nonneg: bool = False) -> float:
+    """A finite float within MAX_MAGNITUDE (and at least MIN_POSITIVE if positive)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f"{key}: expected a number, got {value!r}")
-    number = float(value)
-    if not math.isfinite(number):
-        raise SceneError(f"{key}: must be finite, got {value!r}")
+        raise SceneError(f"{key}: expected a number, got {_shown(value)}")
+    try:
+        number = float(value)
+    except OverflowError:  # an integer beyond float64
+        number = math.inf
+    if math.isnan(number):
+        raise SceneError(f"{key}: must be finite, got {_shown(value)}")
     if positive and number <= 0:
-        raise SceneError(f"{key}: must be positive, got {value!r}")
+        raise SceneError(f"{key}: must be positive, got {_shown(value)}")
     if nonneg and number < 0:
-        raise SceneError(f"{key}: must not be negative, got {value!r}")
+        raise SceneError(f"{key}: must not be negative, got {_shown(value)}")
+    if not abs(number) <= MAX_MAGNITUDE:
+        what = "must be finite" if isinstance(value, float) and math.isinf(value) else \
+            f"out of range (at most {MAX_MAGNITUDE:.0e} in magnitude, so that the physics can square and " \
+            "multiply it in float64)"
+        raise SceneError(f"{key}: {what}, got {_shown(value)}")
+    if positive and number < MIN_POSITIVE:
+        raise SceneError(f"{key}: too small (at least {MIN_POSITIVE:.0e}, so that the physics can divide by "
+                         f"it in float64), got {_shown(value)}")
     return number
 
 
@@ -305,7 +358,7 @@ def _vector(value: Any, key: str, length: int) -> tuple[float, ...]:
     if length == 1 and not isinstance(value, list):
         return (_number(value, key),)
     if not isinstance(value, list):
-        raise SceneError(f"{key}: expected a list of {length} numbers, got {value!r}")
+        raise SceneError(f"{key}: expected a list of {length} numbers, got {_shown(value)}")
     if len(value) != length:
         raise SceneError(f"{key}: expected {length} component(s), got {len(value)}")
     return tuple(_number(v, f"{key}[{i}]") for i, v in enumerate(value))
@@ -316,24 +369,25 @@ def _check_keys(table: Any, allowed: set[str], where: str) -> None:
         raise SceneError(f"{where}: expected a table")
     unknown = sorted(set(table) - allowed)
     if unknown:
-        raise SceneError(f"{where}: unknown key '{unknown[0]}' (allowed: {', '.join(sorted(allowed))})")
+        raise SceneError(f"{where}: unknown key {_shown(unknown[0])} (allowed: {', '.join(sorted(allowed))})")
 
 
 def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
     """Validate a raw TOML table into a `Scene`; raise `SceneError` naming the bad key."""
     _check_keys(raw, _TOP_KEYS, "scene")
+    _check_depth(raw, "scene")
     dim = raw.get("dim", 2)
-    if dim not in (1, 2, 3) or isinstance(dim, bool):
-        raise SceneError(f"dim: must be 1, 2 or 3, got {dim!r}")
+    if isinstance(dim, bool) or not isinstance(dim, int) or dim not in (1, 2, 3):
+        raise SceneError(f"dim: must be the whole number 1, 2 or 3, got {_shown(dim)}")
     name = raw.get("name", default_name)
     if not isinstance(name, str) or not name:
-        raise SceneError(f"name: expected a non-empty string, got {name!r}")
+        raise SceneError(f"name: expected a non-empty string, got {_shown(name)}")
 
     dt_raw = raw.get("dt", "auto")
     dt: float | str = "auto" if dt_raw == "auto" else _number(dt_raw, "dt", positive=True)
     integrator = raw.get("integrator", DEFAULT_INTEGRATOR)
     if integrator not in INTEGRATORS:
-        raise SceneError(f"integrator: unknown '{integrator}' (choose from {', '.join(INTEGRATORS)})")
+        raise SceneError(f"integrator: unknown {_shown(integrator)} (choose from {', '.join(INTEGRATORS)})")
     duration = raw.get("duration")
     duration = None if duration is None else _number(duration, "duration", positive=True)
     tail = raw.get("tail")
@@ -346,10 +400,10 @@ def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
     _check_keys(contact_raw, _CONTACT_KEYS, "contact")
     model = contact_raw.get("model", "linear")
     if model != "linear":
-        raise SceneError(f"contact.model: unknown '{model}' (only 'linear')")
+        raise SceneError(f"contact.model: unknown {_shown(model)} (only 'linear')")
     lever = contact_raw.get("lever", "contact")
     if lever not in ("contact", "seed"):
-        raise SceneError(f"contact.lever: must be 'contact' or 'seed', got {lever!r}")
+        raise SceneError(f"contact.lever: must be 'contact' or 'seed', got {_shown(lever)}")
     contact = Contact(
         model=model,
         k=_number(contact_raw.get("k", 1500.0), "contact.k", positive=True),
@@ -368,7 +422,7 @@ def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
         _check_keys(b, _BODY_KEYS, where)
         bname = b.get("name", f"ball{index + 1}")
         if not isinstance(bname, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_\-]*", bname):
-            raise SceneError(f"{where}.name: expected a name of letters, digits, _ or -, got {bname!r}")
+            raise SceneError(f"{where}.name: expected a name of letters, digits, _ or -, got {_shown(bname)}")
         where = f"body.{bname}"
         for required in ("mass", "radius", "position"):
             if required not in b:
@@ -382,7 +436,7 @@ def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
             inertia = 2.0 / 3.0 * mass * radius**2
         else:
             if isinstance(inertia_raw, str):
-                raise SceneError(f"{where}.inertia: 'solid', 'shell' or a number, got {inertia_raw!r}")
+                raise SceneError(f"{where}.inertia: 'solid', 'shell' or a number, got {_shown(inertia_raw)}")
             inertia = _number(inertia_raw, f"{where}.inertia", positive=True)
         position = _vector(b["position"], f"{where}.position", dim)
         velocity = _vector(b.get("velocity", [0.0] * dim if dim > 1 else 0.0), f"{where}.velocity", dim)

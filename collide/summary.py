@@ -11,6 +11,7 @@ import numpy as np
 from collide import diagnostics as dg
 from collide.model import Model, State
 from collide.run import SceneRun
+from collide.stepper import RunError
 
 
 def _finite_or_none(x: float) -> float | None:
@@ -35,7 +36,7 @@ def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
         bodies.append(body)
     log = r.contacts
     max_overlap = float(log.max_overlap[member])
-    return {
+    summary = {
         "scene": scene.name,
         "dim": scene.dim,
         "integrator": r.integrator,
@@ -68,6 +69,20 @@ def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
         },
         "warnings": list(r.warnings),
     }
+    _refuse_non_finite(summary, scene.name)
+    return summary
+
+
+def _refuse_non_finite(value: Any, scene: str, where: str = "") -> None:
+    """A non-finite number is no result: refuse it (JSON would print `Infinity`, which is not JSON)."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _refuse_non_finite(item, scene, f"{where}.{key}" if where else str(key))
+    elif isinstance(value, list):
+        for i, item in enumerate(value):
+            _refuse_non_finite(item, scene, f"{where}[{i}]")
+    elif isinstance(value, float) and not math.isfinite(value):
+        raise RunError(f"{scene}: the result's {where} is {value} (float64 overflowed); no result to report")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,0 +1,129 @@
+"""The larger fuzz run of issue 14: thousands of generated command lines and hundreds of damaged
+recordings, with the counts printed (the README quotes them).
+
+    python scripts/fuzz.py [--cases 2000] [--recordings 200] [--seed 14]
+
+Command lines come from tests/fuzz_cases.py (the same generator as the test suite's fuzz, more
+cases) and run in this process, as the console script runs them. Each must exit 0 with a finite
+JSON summary and nothing on stderr, or exit non-zero with one line `error: ...`: no traceback,
+warning, internal error or hang. Damaged recordings are truncated and bit-flipped copies of a
+real one, read with `read_recording_safely`: each must read back equal to the original or be
+refused with one `RecordingError` line. Exits 1 if anything broke the contract.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from tests.fuzz_cases import cases, check_outcome, run_case  # noqa: E402
+
+
+def fuzz_command_lines(seed: int, count: int) -> int:
+    outcomes: collections.Counter[str] = collections.Counter()
+    broken: list[str] = []
+    slowest = (0.0, "")
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for case in cases(seed, count, folder):
+            began = time.perf_counter()
+            outcome = run_case(case, folder)
+            took = time.perf_counter() - began
+            slowest = max(slowest, (took, " ".join(case.argv)[:160]))
+            problem = check_outcome(case, outcome)
+            if problem:
+                outcomes["broke the contract"] += 1
+                broken.append(f"case {case.number}: {problem}\n    collide {' '.join(case.argv)[:400]}")
+            elif outcome.code == 0:
+                outcomes["ran (exit 0, finite JSON)"] += 1
+            else:
+                outcomes[f"refused in one line (exit {outcome.code})"] += 1
+    print(f"command lines: {count} cases (seed {seed}) in {time.perf_counter() - started:.0f} s")
+    for what, n in outcomes.items():
+        print(f"  {what}: {n}")
+    print(f"  slowest case: {slowest[0]:.1f} s ({slowest[1]})")
+    for line in broken[:40]:
+        print("  " + line)
+    return len(broken)
+
+
+def fuzz_recordings(seed: int, count: int) -> int:
+    import random
+
+    import numpy as np
+
+    from collide.recording import RecordingError, read_recording_safely, write_recording
+    from collide.run import run_scene
+    from collide.scene import load_scene
+
+    rng = random.Random(seed)
+    outcomes: collections.Counter[str] = collections.Counter()
+    for what in ("refused (one RecordingError line)", "  of which Rerun's reader crashed (in the child process)",
+                 "read back unchanged (the damage hit what is only drawn)"):
+        outcomes[what] = 0
+    broken: list[str] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        run = run_scene(load_scene("demo-bonus"))
+        data = write_recording(run, folder / "original.rrd").read_bytes()
+        traj = run.result.trajectory
+        for n in range(count):
+            damaged = bytearray(data)
+            if n % 4 == 0:
+                damaged = damaged[:rng.randrange(len(data))]
+                how = "truncated"
+            else:
+                flips = rng.choice([1, 1, 2, 5, 20])
+                for _ in range(flips):
+                    damaged[rng.randrange(len(damaged))] ^= 1 << rng.randrange(8)
+                how = f"{flips} bit flip(s)"
+            path = folder / f"damaged{n}.rrd"
+            path.write_bytes(bytes(damaged))
+            try:
+                back = read_recording_safely(path, timeout_s=30)
+            except RecordingError as exc:
+                text = str(exc)
+                if "\n" in text or "Traceback" in text:
+                    broken.append(f"{how}: a RecordingError of several lines")
+                outcomes["refused (one RecordingError line)"] += 1
+                outcomes["  of which Rerun's reader crashed (in the child process)"] += "crashed" in text
+                continue
+            except Exception as exc:  # anything else escaping is a broken contract
+                broken.append(f"{how}: {type(exc).__name__}: {exc}")
+                continue
+            same = all(np.array_equal(getattr(back.result.trajectory, f), getattr(traj, f), equal_nan=True)
+                       for f in ("knots", "records", "intervals"))
+            if same:
+                outcomes["read back unchanged (the damage hit what is only drawn)"] += 1
+            else:
+                broken.append(f"{how}: read back with changed data and no error")
+    print(f"recordings: {count} damaged copies of demo-bonus (seed {seed})")
+    for what, n in outcomes.items():
+        print(f"  {what}: {n}")
+    for line in broken[:20]:
+        print("  " + line)
+    return len(broken)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cases", type=int, default=2000)
+    parser.add_argument("--recordings", type=int, default=200)
+    parser.add_argument("--seed", type=int, default=14)
+    args = parser.parse_args()
+    broken = fuzz_command_lines(args.seed, args.cases)
+    if args.recordings:
+        broken += fuzz_recordings(args.seed, args.recordings)
+    print(f"broke the contract: {broken}")
+    sys.exit(1 if broken else 0)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,91 @@
+"""`read_recording_safely`: a recording that crashes, hangs or floods Rerun's reader costs a
+child process, never the caller, and becomes one `RecordingError` line."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from collide.recording import RecordingError, read_recording, read_recording_safely, write_recording
+from collide.run import run_scene
+from collide.scene import load_scene
+
+DATA = Path(__file__).parent / "data"
+# demo-bonus written by collide, then one bit flipped (byte 142732, 0x00 -> 0x01): rerun-sdk
+# 0.41's reader panics on it ("Type <UNKNOWN ..> not supported") and aborts the process.
+ABORTS = DATA / "bitflip-aborts-reader.rrd"
+
+
+@pytest.fixture(scope="module")
+def good(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return write_recording(run_scene(load_scene("demo-bonus")), tmp_path_factory.mktemp("rrd") / "bonus.rrd")
+
+
+def test_plain_reader_aborts_on_the_damaged_file() -> None:
+    # The reason for the child process: in-process, this file kills Python (SIGABRT).
+    code = f"from collide.recording import read_recording; read_recording({str(ABORTS)!r})"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == -6, out.stderr[-500:]
+
+
+def test_damaged_file_is_one_line_recording_error() -> None:
+    with pytest.raises(RecordingError) as info:
+        read_recording_safely(ABORTS)
+    message = str(info.value)
+    assert "\n" not in message and str(ABORTS) in message
+    assert "crashed" in message and "SIGABRT" in message
+    assert isinstance(info.value, ValueError)
+
+
+def test_good_file_reads_as_read_recording(good: Path) -> None:
+    safe, plain = read_recording_safely(good), read_recording(good)
+    assert safe.scene == plain.scene
+    np.testing.assert_array_equal(safe.result.trajectory.s, plain.result.trajectory.s)
+    np.testing.assert_array_equal(safe.result.final.v, plain.result.final.v)
+    # The reader survives a crash on another file and reads again.
+    with pytest.raises(RecordingError):
+        read_recording_safely(ABORTS)
+    assert read_recording_safely(good).scene == plain.scene
+
+
+def test_errors_of_the_plain_reader_pass_through(tmp_path: Path) -> None:
+    text = tmp_path / "notes.rrd"
+    text.write_text("not a recording")
+    with pytest.raises(RecordingError, match="not a Rerun recording"):
+        read_recording_safely(text)
+    with pytest.raises(RecordingError, match="no such file"):
+        read_recording_safely(tmp_path / "missing.rrd")
+    with pytest.raises(RecordingError, match="not a file"):
+        read_recording_safely(tmp_path)
+
+
+def test_time_and_memory_limits_stop_the_child(good: Path) -> None:
+    with pytest.raises(RecordingError, match="longer than 1e-06 s"):
+        read_recording_safely(good, timeout_s=1e-6)
+    # Any reader needs more than 1 MB (Python alone is about 10): stopped, one line.
+    with pytest.raises(RecordingError, match="more than 1 MB"):
+        read_recording_safely(good, memory_mb=1)
+    assert read_recording_safely(good).scene.name == "demo-bonus"
+
+
+def test_reads_from_several_threads(good: Path) -> None:
+    results: list[object] = []
+
+    def read(path: Path) -> None:
+        try:
+            results.append(read_recording_safely(path).scene.name)
+        except RecordingError as exc:
+            results.append(exc)
+
+    threads = [threading.Thread(target=read, args=(p,)) for p in (good, ABORTS, good)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert sorted(map(str, results))[-2:] == ["demo-bonus", "demo-bonus"]
+    assert sum(isinstance(r, RecordingError) for r in results) == 1
