@@ -48,7 +48,7 @@ def billiards_break() -> str:
     lines = ['name = "billiards-break"',
              'description = "A cue ball at 6 m/s into a tight 15-ball rack (2D, seen from above), friction '
              'between the balls (mu = 0.1)."',
-             "dim = 2", 'dt = "auto"', 'integrator = "kahan6"', "tol = 1e-6", "",
+             "dim = 2", 'dt = "auto"', 'integrator = "kahan6"', "tol = 1e-7", "",
              "[contact]", "k = 1e7", "mu = 0.1", ""]
     lines += _body("cue", M_POOL, R_POOL, [0.0, 0.0], [6.0, 0.0])
     for n, (x, y) in enumerate(_rack(0.5, R_POOL)):

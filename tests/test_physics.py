@@ -253,3 +253,24 @@ def test_gas_box_builtin_keeps_its_energy_and_stays_in_the_box():
     for wall in scene.walls:
         height = (s - np.asarray(wall.point)) @ np.asarray(wall.normal)
         assert (height > 0.5 * radius).all()  # nobody through a wall
+
+
+def test_billiards_break_builtin_balances_energy_with_friction():
+    """Friction takes energy; kinetic energy plus the dissipated work stays what it was, to the
+    scene's tolerance (relative), and the run says nothing is off."""
+    scene = load_scene("billiards-break")
+    r = run_scene(scene, record=False).result
+    assert r.final.work[0] > 0  # friction did work: the balance is not trivially kinetic
+    assert dg.residuals(r).energy[0] < 10 * scene.tol
+    assert not r.warnings
+
+
+def test_an_energy_balance_far_off_the_tolerance_is_a_warning():
+    """The run's own check: a balance residual beyond 100 tol is reported, never silent."""
+    from collide.run import balance_warnings
+    scene = load_scene("demo-bonus")
+    r = run_scene(scene, record=False).result
+    residual = dg.residuals(r).energy[0]
+    assert not balance_warnings(r, [scene], np.array([scene.tol]), [True])
+    warned = balance_warnings(r, [scene], np.array([residual / 1000]), [True])
+    assert len(warned) == 1 and "energy balance is off" in warned[0]

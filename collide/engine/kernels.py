@@ -50,6 +50,7 @@ FIXED_POINT = 12  # most iterations of an implicit kick
 WINDOW_STEPS = 64  # a window spans this many steps of the stiffest engaged contact
 ISLAND_SLACK = 4  # ... unless its islands grow past this many times the largest touching cluster
 STALL_LIMIT = 64
+TINY_LIMIT = 20000  # steps in a row under a thousandth of the contact's step
 LATE = 2  # Q_ENG of a contact engaged from a step's start after the step found it pressing
 MAX_RETRIES = 24  # a window redone this often, each 4x shorter, has met a contact it cannot foresee
 NO_CONTACT_TAIL = 1.0  # s: how long a run with no contact at all lasts
@@ -1442,6 +1443,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
     b = np.zeros(2 * nq)
     t = T
     stalled = 0
+    tiny = 0
     restarts = 0
     while t < W and ST[S_STATUS] == OK:
         n_eng = 0
@@ -1537,7 +1539,10 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 FG[F_STATUS_T] = t
                 break
             stalled = stalled + 1 if h == 0.0 else 0
-            if stalled > STALL_LIMIT:
+            # Steps a thousand times shorter than the contact's, on and on, are events piling up
+            # (a Zeno cascade of mode changes): refused, not ground through for hours.
+            tiny = tiny + 1 if h < 1e-3 * dt else 0
+            if stalled > STALL_LIMIT or tiny > TINY_LIMIT:
                 ST[S_STATUS] = STALL
                 FG[F_STATUS_T] = t
                 break
