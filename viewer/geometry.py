@@ -144,7 +144,7 @@ def fit_camera(lo: np.ndarray, hi: np.ndarray, planar: bool, aspect: float = 1.2
         # Distance that fits the box's width (x) and depth (y, foreshortened by the tilt).
         tilt = math.radians(tilt_deg)
         depth = size[1] * math.cos(tilt) + size[2] * math.sin(tilt)
-        dist = 1.15 * max(size[0] / (2 * tan_h), depth / (2 * tan_v))
+        dist = 1.08 * max(size[0] / (2 * tan_h), depth / (2 * tan_v))
         offset = np.array([0.0, -math.sin(tilt), math.cos(tilt)]) * dist
         return CameraFit(tuple(centre + offset), tuple(centre), (0.0, 0.0, 1.0), fov)
     radius = 0.5 * float(np.linalg.norm(size))
@@ -176,3 +176,42 @@ def wall_box(point: np.ndarray, normal: np.ndarray, extent: float, thickness: fl
     wxyz = quat_from_to(np.array([1.0, 0.0, 0.0]), n)
     # In the plane the normal has no z: the box stays upright, `height` tall.
     return centre, wxyz, (thickness, extent, height if planar else extent)
+
+
+def quats_from_z(d: np.ndarray) -> np.ndarray:
+    """Quaternions (K, 4) wxyz turning +z onto each direction of d (K, 3) (any length > 0)."""
+    d = np.asarray(d, float)
+    n = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-300)
+    # q = (1 + z.n, z x n) normalised; z x n = (-n_y, n_x, 0).
+    q = np.stack((1.0 + n[:, 2], -n[:, 1], n[:, 0], np.zeros(len(n))), axis=-1)
+    opposite = q[:, 0] < 1e-9
+    q[opposite] = (0.0, 1.0, 0.0, 0.0)  # -z: half a turn about x
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def rotate(wxyz: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Vectors v (K, 3) (or one (3,)) turned by quaternions wxyz (K, 4)."""
+    w, xyz = wxyz[:, :1], wxyz[:, 1:]
+    v = np.broadcast_to(np.asarray(v, float), xyz.shape)
+    t = 2.0 * np.cross(xyz, v)
+    return v + w * t + np.cross(xyz, t)
+
+
+def cylinder(segments: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """A unit cylinder along +z from z = 0 to 1, radius 1, without caps: vertices, faces."""
+    a = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    ring = np.stack((np.cos(a), np.sin(a)), -1)
+    verts = np.concatenate((np.c_[ring, np.zeros(segments)], np.c_[ring, np.ones(segments)]))
+    i = np.arange(segments)
+    j = (i + 1) % segments
+    faces = np.concatenate((np.stack((i, j, segments + j), -1), np.stack((i, segments + j, segments + i), -1)))
+    return verts, faces.astype(np.uint32)
+
+
+def disc(segments: int = 24) -> tuple[np.ndarray, np.ndarray]:
+    """A unit disc in the xy-plane, facing +z: vertices, faces (a triangle fan)."""
+    a = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    verts = np.concatenate(([[0.0, 0.0, 0.0]], np.stack((np.cos(a), np.sin(a), np.zeros(segments)), -1)))
+    i = np.arange(segments)
+    faces = np.stack((np.zeros(segments, int), 1 + i, 1 + (i + 1) % segments), -1)
+    return verts, faces.astype(np.uint32)
