@@ -437,6 +437,7 @@ class SceneDrawer:
         chains = self._batch.pop("chains", None)
         if chains is not None:
             chains.remove()
+            self._colours = np.zeros((0, 3), np.uint8)  # see _show_chains: resend the spheres' colours
         self._chain_capacity = 0
 
     # ------------------------------------------------------------------------------------------
@@ -552,9 +553,11 @@ class SceneDrawer:
             spheres.batched_colors = colours
             self._colours = colours
         chains = self.options.forces and self.options.chains
-        opacity = CHAIN_OPACITY if chains else (1.0)
+        # See-through spheres only while there are chains to see through them.
+        opacity = CHAIN_OPACITY if chains and len(frame.contact_links().i) else 1.0
         if self._opacity.get(-1) != opacity:
-            spheres.opacity = None if opacity == 1.0 else opacity
+            # Always a number (1.0: opaque), so the batched material switches cleanly.
+            spheres.opacity = opacity
             self._opacity[-1] = opacity
         dots = self._batch.get("dots")
         if dots is not None:
@@ -567,7 +570,7 @@ class SceneDrawer:
             if self.options.shadows:
                 point, normal = self._floor
                 height = (frame.positions - point) @ normal
-                foot = frame.positions - height[:, None] * normal + 1e-3 * view.radius[:, None] * normal
+                foot = frame.positions - height[:, None] * normal + 0.03 * view.radius[:, None] * normal
                 shadows.batched_positions = foot.astype(np.float32)
                 # A blob shadow shrinks and fades as the sphere rises: how far up it is reads at once.
                 lift = np.maximum(height - view.radius, 0.0) / view.radius
@@ -576,8 +579,9 @@ class SceneDrawer:
         if chains:
             self._show_chains(frame)
         elif "chains" in self._batch:
-            self._batch.pop("chains").remove()
-            self._chain_capacity = 0
+            # Hidden, not removed: removing one batched mesh made viser's other batched meshes
+            # vanish until their next update.
+            self._batch["chains"].visible = False
 
     def _show_chains(self, frame: Frame) -> None:
         """Force chains: a cylinder from each body's centre to the other's (or to the wall), its
@@ -592,8 +596,11 @@ class SceneDrawer:
         if k > self._chain_capacity:
             old = self._batch.pop("chains", None)
             if old is not None:
+                # Removing a batched mesh made viser's other batched meshes vanish until their
+                # colours were sent again: resend them with the next frame.
                 old.remove()
-            self._chain_capacity = max(64, 1 << int(np.ceil(np.log2(k))))
+                self._colours = np.zeros((0, 3), np.uint8)
+            self._chain_capacity = max(64, 1 << int(np.ceil(np.log2(max(k, view.max_links)))))
             cv, cf = cylinder(10)
             cap = self._chain_capacity
             self._batch["chains"] = self.scene.add_batched_meshes_simple(
@@ -620,6 +627,8 @@ class SceneDrawer:
             colours[:k] = np.round(np.array(lighter(CHAIN_COLOUR, 0.75)) * (1 - share[:, None]) +
                                    np.array(darker(CHAIN_COLOUR, 0.7)) * share[:, None]).astype(np.uint8)
         chains = self._batch["chains"]
+        if not chains.visible:
+            chains.visible = True
         chains.batched_wxyzs = wxyz.astype(np.float32)
         chains.batched_positions = pos.astype(np.float32)
         chains.batched_scales = scales.astype(np.float32)

@@ -33,6 +33,7 @@ from collide.stepper import RunError
 from viewer import ensemble as ens
 from viewer import files
 from viewer.exports import png_bytes, run_csv
+from viewer.frames import FramesRun
 from viewer.geometry import fit_camera
 from viewer.params import (
     AUTO,
@@ -470,13 +471,23 @@ class Session:
     def _on_show(self, event: viser.GuiEvent) -> None:
         if event.client is None:
             return
-        trails = self.show_trails.value != self.drawer.options.trails
+        self.set_show(forces=self.show_forces.value, velocity=self.show_velocity.value,
+                      momentum=self.show_momentum.value, com=self.show_com.value, trails=self.show_trails.value,
+                      colour_by=self.colour_by.value, chains=self.show_chains.value, shadows=self.show_shadows.value)
+
+    def set_show(self, **options: Any) -> None:
+        """What the 3D view shows (the Show folder): forces, velocity, momentum, com, trails,
+        colour_by, chains, shadows. Keeps the folder's controls in step."""
+        handles = {"forces": self.show_forces, "velocity": self.show_velocity, "momentum": self.show_momentum,
+                   "com": self.show_com, "trails": self.show_trails, "colour_by": self.colour_by,
+                   "chains": self.show_chains, "shadows": self.show_shadows}
         with self._lock:
+            trails = "trails" in options and options["trails"] != self.drawer.options.trails
+            for key, value in options.items():
+                if handles[key].value != value:
+                    handles[key].value = value
             with self.client.atomic():
-                self.drawer.set_options(forces=self.show_forces.value, velocity=self.show_velocity.value,
-                                        momentum=self.show_momentum.value, com=self.show_com.value,
-                                        trails=self.show_trails.value, colour_by=self.colour_by.value,
-                                        chains=self.show_chains.value, shadows=self.show_shadows.value)
+                self.drawer.set_options(**options)
                 if trails and self.view is not None:
                     self.drawer.show_run(self.view)
                     self._draw_frame(cursor=False)
@@ -608,6 +619,29 @@ class Session:
         self._clear_notice()
         self._file_message(f"Replaying **{name}** ({scene.name}). Move a parameter to re-simulate "
                            "from its scene.")
+
+    def show_frames(self, run: FramesRun) -> None:
+        """Replay a run given as frames (many bodies; no parameters to change)."""
+        gui = self.client.gui
+        with self._lock:
+            self.controls = None
+            self.values = {}
+            if self._param_folder is not None:
+                self._param_folder.remove()
+            self._param_handles, self._param_boxes, self._body_picker = {}, {}, None
+            with self._param_parent:
+                self._param_folder = gui.add_folder(None)
+                with self._param_folder:
+                    gui.add_markdown(f"*{run.origin}: {run.n_bodies} bodies replayed, no parameters to change*")
+            label = f"frames: {run.name}"
+            if label not in self.picker.options:
+                self.picker.options = list(self.picker.options) + [label]
+            self.picker.value = label
+            self.balls.visible = False
+            self._ensemble_paths = None
+            self.drawer.show_ghosts(None)
+        self._show_view(run, refit=True)
+        self._clear_notice()
 
     # -- uploads ---------------------------------------------------------------------------------
 
@@ -1032,7 +1066,7 @@ class Session:
         lines = []
         if view is not None:
             tag = " *(preview: coarse step while you drag)*" if view.preview else ""
-            lines.append(f"**{view.scene.name}** · {view.dim}D · {view.origin}{tag}")
+            lines.append(f"**{view.name}** · {view.dim}D · {view.origin}{tag}")
             lines += view.status_lines()
         if self.notes:
             lines += [f"*{n}*" for n in self.notes]
@@ -1073,8 +1107,11 @@ class Session:
     def _play_loop(self) -> None:
         period = 1.0 / FPS
         last = time.perf_counter()
-        while not self._closed.wait(period):
+        deadline = last + period
+        # Frames on a fixed schedule: the wait shrinks by the time the last frame took.
+        while not self._closed.wait(max(0.0, deadline - time.perf_counter())):
             now = time.perf_counter()
+            deadline = max(deadline + period, now)
             elapsed, last = now - last, now
             if not self.playing:
                 continue

@@ -185,6 +185,7 @@ class ViewRun:
         if self.model.n_walls:
             counts = counts + touching[:, n_pairs:].reshape(len(self.times), self.model.n_walls, -1).sum(axis=1)
         self.max_contacts = int(counts.max(initial=0))
+        self.max_links = int(touching.sum(axis=1).max(initial=0))  # contacts at once, at most
         if self.traj.friction_pair is not None:
             fr = dg.contact_series(self.model, self.traj).friction_force
             self.max_friction_force = float(np.max(np.linalg.norm(fr, axis=-1), initial=0.0))
@@ -231,7 +232,7 @@ class ViewRun:
         """Per body at time t: velocity (N, D) m/s, speed (N,), momentum (N, D), kinetic energy
         (N,) J (translational), spin (N, K) rad/s and rotational energy (N,) J."""
         st = self.sample(np.array([self.clamp_time(t)]))
-        return body_values(self.model, st.v[0, 0], st.w[0, 0])
+        return body_values_arrays(self.mass, self.model.inertia[0], st.v[0, 0], st.w[0, 0])
 
     def _as_traj(self, states: State, times: np.ndarray, friction_pair: np.ndarray | None = None,
                  friction_wall: np.ndarray | None = None) -> Trajectory:
@@ -364,6 +365,10 @@ class ViewRun:
     def duration(self) -> float:
         return self.t1 - self.t0
 
+    @property
+    def name(self) -> str:
+        return self.scene.name
+
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Box around every body's path, padded by its radius (m, 3D)."""
         r = self.radius[:, None, None]
@@ -408,14 +413,13 @@ class ViewRun:
         return lines
 
 
-def body_values(model, v: np.ndarray, w: np.ndarray) -> dict[str, np.ndarray]:
-    """`ViewRun.body_values` from velocities (N, D) and spins (N, K) of member 0 of `model`."""
-    mass = model.mass[0]
+def body_values_arrays(mass: np.ndarray, inertia: np.ndarray, v: np.ndarray, w: np.ndarray) -> dict[str, np.ndarray]:
+    """`ViewRun.body_values` from masses (N,), moments of inertia (N,), velocities (N, D) and
+    spins (N, K)."""
     speed = np.linalg.norm(v, axis=-1)
     out = {"velocity": v, "speed": speed, "momentum": mass[:, None] * v, "kinetic": 0.5 * mass * speed**2,
            "spin": w}
-    out["rotational"] = (0.5 * model.inertia[0] * np.sum(w * w, axis=-1) if w.shape[-1]
-                         else np.zeros(len(mass)))
+    out["rotational"] = 0.5 * inertia * np.sum(w * w, axis=-1) if w.shape[-1] else np.zeros(len(mass))
     return out
 
 

@@ -25,12 +25,6 @@ def _num(x: float, scale: float = 0.0) -> str:
     return f"{x:.4g}"
 
 
-def _vec(v: np.ndarray, scale: float) -> str:
-    if len(v) == 1:
-        return _num(float(v[0]), scale)
-    return "(" + ", ".join(_num(float(c), scale) for c in v) + ")"
-
-
 def _direction(v: np.ndarray, scale: float) -> float:
     """Angle of a 2D (or 3D, in its xy projection) velocity from +x, degrees; NaN at rest."""
     if len(v) < 2 or np.hypot(v[0], v[1]) <= 1e-12 * scale:
@@ -64,20 +58,26 @@ def values_markdown(view: ViewRun, t: float) -> str:
         name = view.names[i]
         rows = [f"| **{name}** · {_num(float(view.mass[i]))} kg | before | now | after |", "|---|--:|--:|--:|"]
 
-        def row(label: str, key: str, scale: float, vector: bool = False, i: int = i) -> str:
-            fmt = (lambda c: _vec(c[key][i], scale)) if vector else \
-                (lambda c: _num(float(np.ravel(c[key][i])[0]), scale))
-            return f"| {label} | " + " | ".join(fmt(c) for c in cols) + " |"
+        def row(label: str, key: str, scale: float, i: int = i) -> str:
+            return f"| {label} | " + " | ".join(_num(float(np.ravel(c[key][i])[0]), scale) for c in cols) + " |"
 
-        rows.append(row("velocity (m/s)", "velocity", v_scale, vector=True))
+        def rows_of(label: str, unit: str, key: str, scale: float, i: int = i) -> list[str]:
+            """One row per component (a vector in one cell wraps in a narrow panel)."""
+            width = np.shape(cols[0][key][i])
+            if not width or width[0] == 1:
+                return [row(f"{label} ({unit})", key, scale)]
+            return [f"| {label} {'xyz'[k]} ({unit}) | " + " | ".join(_num(float(c[key][i][k]), scale) for c in cols)
+                    + " |" for k in range(width[0])]
+
+        rows += rows_of("velocity", "m/s", "velocity", v_scale)
         if view.dim > 1:
             rows.append(row("speed (m/s)", "speed", v_scale))
             rows.append("| direction (°) | " + " | ".join(
                 _num(_direction(c["velocity"][i], v_scale)) for c in cols) + " |")
-        rows.append(row("momentum (kg m/s)", "momentum", p_scale, vector=True))
+        rows += rows_of("momentum", "kg m/s", "momentum", p_scale)
         rows.append(row("kinetic energy (J)", "kinetic", e_scale))
         if spins:
-            rows.append(row("spin (rad/s)", "spin", 1.0, vector=view.spin_dim > 1))
+            rows += rows_of("spin", "rad/s", "spin", 1.0)
             rows.append(row("rotational energy (J)", "rotational", e_scale))
         if view.dim > 1:
             angle = deflection_deg(before["velocity"][i], after["velocity"][i], v_scale)
@@ -86,12 +86,18 @@ def values_markdown(view: ViewRun, t: float) -> str:
     if view.n_bodies > n_show:
         blocks.append(f"*(the first {n_show} of {view.n_bodies} bodies; totals below are for all)*")
     total = ["| **all bodies** | before | now | after |", "|---|--:|--:|--:|"]
-    total.append("| momentum (kg m/s) | " + " | ".join(_vec(c["momentum"].sum(axis=0), p_scale) for c in cols) + " |")
+    for k in range(view.dim):
+        axis = f" {'xyz'[k]}" if view.dim > 1 else ""
+        total.append(f"| momentum{axis} (kg m/s) | " + " | ".join(
+            _num(float(c["momentum"].sum(axis=0)[k]), p_scale) for c in cols) + " |")
     total.append("| kinetic energy (J) | " + " | ".join(_num(float(c["kinetic"].sum()), e_scale) for c in cols) + " |")
     if spins:
         total.append("| rotational energy (J) | " + " | ".join(
             _num(float(c["rotational"].sum()), e_scale) for c in cols) + " |")
     com_v = [(view.mass[:, None] * c["velocity"]).sum(axis=0) / view.mass.sum() for c in cols]
-    total.append("| centre of mass velocity (m/s) | " + " | ".join(_vec(v, v_scale) for v in com_v) + " |")
+    for k in range(view.dim):
+        axis = f" {'xyz'[k]}" if view.dim > 1 else ""
+        total.append(f"| centre of mass velocity{axis} (m/s) | " + " | ".join(
+            _num(float(v[k]), v_scale) for v in com_v) + " |")
     blocks.append("\n".join(total))
     return "\n\n".join(blocks)

@@ -141,21 +141,23 @@ def plot(page: Any, prefix: str) -> dict | None:
     return next((p for t, p in plots(page).items() if t.startswith(prefix)), None)
 
 
-def canvas_shot(page: Any) -> bytes:
-    """A screenshot of the 3D canvas (the largest canvas on the page)."""
-    page.evaluate("""() => {
+def canvas_box(page: Any) -> dict:
+    """The 3D canvas's bounding box on the page (x, y, width, height in CSS pixels): the
+    largest canvas."""
+    return page.evaluate("""() => {
         const cs = [...document.querySelectorAll('canvas')];
         cs.sort((a, b) => b.clientWidth * b.clientHeight - a.clientWidth * a.clientHeight);
-        cs.forEach(c => c.removeAttribute('data-test'));
-        cs[0].setAttribute('data-test', 'scene');
+        const r = cs[0].getBoundingClientRect();
+        return {x: r.x, y: r.y, width: r.width, height: r.height};
     }""")
-    return page.locator("canvas[data-test=scene]").screenshot()
 
 
-def canvas_box(page: Any) -> dict:
-    """The 3D canvas's bounding box on the page (x, y, width, height in CSS pixels)."""
-    canvas_shot(page)
-    return page.locator("canvas[data-test=scene]").bounding_box()
+def canvas_shot(page: Any, timeout: float = 120.0) -> bytes:
+    """A screenshot of the 3D canvas. (A clip of the page: a locator screenshot waits for the
+    element to be "stable", which a canvas re-rendering under software GL may never be. Many
+    spheres under software GL take seconds a frame: hence the long timeout.)"""
+    box = canvas_box(page)
+    return page.screenshot(clip=box, animations="allow", timeout=timeout * 1e3)
 
 
 def image(png: bytes) -> np.ndarray:
@@ -195,3 +197,14 @@ def project(camera: Any, points: np.ndarray, width: float, height: float) -> np.
     x = width / 2 + f * (rel @ right) / z
     y = height / 2 - f * (rel @ true_up) / z
     return np.stack((x, y), axis=-1)
+
+
+def group_button(page: Any, handle: Any, option: str) -> Any:
+    """A button of a viser button group (found through the group's label row)."""
+    row = page.locator(f'label[for="{dom_id(handle)}"]').locator(_ROW)
+    return row.get_by_role("button", name=option, exact=True)
+
+
+def hide_notifications(page: Any) -> None:
+    """Hide toasts (viser's "Software WebGL rendering detected" covers the 3D view)."""
+    page.add_style_tag(content=".mantine-Notifications-root{display:none !important}")
