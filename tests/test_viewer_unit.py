@@ -500,3 +500,102 @@ def test_view_refuses_unreadable_input(tmp_path, make, expected):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and expected in lines[0]
     assert proc.stdout == ""
+
+
+# ---------------------------------------------------------------------------------------------
+# Preview, many bodies, colours, exports, reading untrusted recordings
+
+
+def _break_3d(tol: float):
+    """Issue 12's 3D break: a cue ball with top spin into three balls on a floor, friction."""
+    bodies = [{"name": "cue", "mass": 0.17, "radius": 0.028, "position": [0.0, 0.0, 0.028], "velocity": [2.0, 0, 0],
+               "spin": [0.0, 40.0, 0.0]}]
+    for k, (x, y) in enumerate([(0.3, 0.0), (0.35, 0.03), (0.35, -0.03)]):
+        bodies.append({"name": f"b{k + 1}", "mass": 0.17, "radius": 0.028, "position": [x, y, 0.028]})
+    return parse_scene({"name": "break", "dim": 3, "tol": tol, "gravity": [0, 0, -9.81], "duration": 0.2,
+                        "contact": {"k": 1e5, "mu": 0.2}, "body": bodies,
+                        "wall": [{"point": [0, 0, 0], "normal": [0, 0, 1]}]}, "break")
+
+
+@pytest.mark.parametrize("tol", [1e-2, 1e-3])
+def test_a_preview_never_costs_more_than_the_run(tol):
+    """The coarse preview ran Verlet at tol 1e-3 whatever the scene asked: on a 3D break at tol
+    1e-2 that cost more than the real run (issue 12, item 3)."""
+    from collide.run import auto_dt
+    from viewer.session import STAGES, preview_settings
+
+    scene = _break_3d(tol)
+
+    def cost(integrator: str, t: float) -> float:
+        return STAGES[integrator] / float(auto_dt([scene], integrator, np.array([t]))[0][0])
+
+    full = cost(scene.integrator, scene.tol)
+    old = cost("verlet", 1e-3)
+    preview = preview_settings(scene)
+    if tol == 1e-2:
+        assert old >= full  # the defect: the old preview was no cheaper
+    assert preview is not None and preview[1] >= scene.tol
+    assert cost(*preview) < 0.5 * full
+
+
+def test_frames_run_answers_like_a_view():
+    from viewer.frames import settling_pile
+
+    run = settling_pile(200, duration=0.5, fps=20)
+    assert run.positions.shape == (len(run.times), 200, 3) and run.n_bodies == 200
+    f = run.frame(0.33)
+    k = int(np.searchsorted(run.times, 0.33)) - 1
+    x = (0.33 - run.times[k]) / (run.times[k + 1] - run.times[k])
+    assert np.allclose(f.positions, (1 - x) * run.positions[k] + x * run.positions[k + 1])
+    links = f.contact_links()
+    assert len(links.i) and np.all(links.force > 0) and links.counts(200).sum() == 2 * np.sum(links.j >= 0) + np.sum(
+        links.j < 0)
+    # Floor contacts touch the floor; pair contacts lie between the two centres.
+    floor = links.j < 0
+    assert np.allclose(links.point[floor, 2], 0.0)
+    lo, hi = run.bounds()
+    assert lo[2] >= -1e-9 and np.all(hi > lo)
+    assert [s.title for s in run.plots.all] == ["energy", "momentum", "contacts"]
+    assert run.next_step(0.33, 1) == run.times[k + 1] and run.next_step(0.33, -1) == run.times[k]
+    assert run.body_values(0.33)["speed"].shape == (200,)
+
+
+def test_every_body_has_its_own_colour():
+    from viewer.colours import body_colours, colour_map
+
+    colours = body_colours(1000)
+    assert len({tuple(c) for c in colours}) == 1000
+    assert len({tuple(c) for c in colours[:16]}) == 16
+    ramp = colour_map(np.linspace(0, 1, 5), 0.0, 1.0)
+    assert np.all(np.diff(ramp.astype(int).sum(axis=1)) > 0)  # viridis brightens with the value
+    assert np.array_equal(colour_map(np.array([-1.0, 2.0]), 0.0, 1.0), colour_map(np.array([0.0, 1.0]), 0.0, 1.0))
+
+
+def test_csv_export_is_the_cli_layout():
+    from collide.summary import csv_columns, report_csv
+    from viewer.exports import csv_every, png_bytes, run_csv
+
+    run = run_scene(load_scene("demo-bonus"))
+    content, every = run_csv(run)
+    assert every == csv_every(run) and every <= 100 * float(run.result.dt[0])
+    lines = content.decode().splitlines()
+    assert lines[0].split(",") == csv_columns(run.result.model) and len(lines) - 1 >= 200
+    assert content.decode() == report_csv(run, every, "aligned")
+    png = png_bytes(np.zeros((4, 6, 4), np.uint8))
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_untrusted_recordings_are_read_in_a_child(tmp_path):
+    from collide.recording import RecordingError, write_recording
+    from viewer.reading import read_untrusted
+
+    good = write_recording(run_scene(load_scene("demo-1d")), tmp_path / "good.rrd")
+    run = read_untrusted(good)
+    assert run.scene.name == "demo-1d" and run.result.trajectory is not None
+    crash = Path(__file__).parent / "data" / "viewer-reader-crash.rrd"
+    with pytest.raises(RecordingError, match=r"^upload\.rrd: the recording reader (crashed|stopped)"):
+        read_untrusted(crash, name="upload.rrd")
+    (tmp_path / "junk.rrd").write_bytes(b"junk" * 10)
+    with pytest.raises(RecordingError) as info:
+        read_untrusted(tmp_path / "junk.rrd", name="mine.rrd")
+    assert str(info.value).startswith("mine.rrd: ") and str(tmp_path) not in str(info.value)

@@ -285,7 +285,7 @@ class SceneDrawer:
             return ""
         r_mm = float(view.radius.max()) * 1e3
         lines = []
-        if self.options.forces and view.max_normal_force > 0:
+        if self.options.forces and view.max_normal_force > 0 and (self.options.chains or not self.many):
             what = "force chains: normal force between centres, thicker = stronger" if self.many else \
                 f"normal force: {view.max_normal_force:.3g} N peak = {2 * r_mm:.3g} mm arrow"
             lines.append(f"<span style='color:#aa0014'>&#9632;</span> {what}")
@@ -606,7 +606,7 @@ class SceneDrawer:
             self._batch["chains"] = self.scene.add_batched_meshes_simple(
                 "/contact/chains", cv, cf, batched_wxyzs=np.tile([1.0, 0, 0, 0], (cap, 1)),
                 batched_positions=np.zeros((cap, 3)), batched_scales=np.zeros((cap, 3), np.float32),
-                batched_colors=np.tile(CHAIN_COLOUR, (cap, 1)).astype(np.uint8), lod="off",
+                batched_colors=darker(CHAIN_COLOUR, 0.85), lod="off",
                 cast_shadow=False, receive_shadow=False)
         if "chains" not in self._batch:
             return
@@ -615,24 +615,22 @@ class SceneDrawer:
         share = np.sqrt(force / max(view.max_normal_force, 1e-300))
         d = end - start
         lengths = np.linalg.norm(d, axis=-1)
-        wxyz = np.tile([1.0, 0.0, 0.0, 0.0], (cap, 1))
-        pos = np.zeros((cap, 3))
-        scales = np.zeros((cap, 3))
-        colours = np.tile(np.array(CHAIN_COLOUR, np.uint8), (cap, 1))
+        # One colour; the force is in the thickness (per-frame colours cost a quarter of the
+        # message for a thousand links).
+        wxyz = np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (cap, 1))
+        pos = np.zeros((cap, 3), np.float32)
+        scales = np.zeros((cap, 3), np.float32)
         if k:
             wxyz[:k] = quats_from_z(d)
             pos[:k] = start
-            radius = r_min * (0.06 + 0.3 * share)
+            radius = r_min * (0.03 + 0.3 * share)
             scales[:k] = np.stack((radius, radius, lengths), -1)
-            colours[:k] = np.round(np.array(lighter(CHAIN_COLOUR, 0.75)) * (1 - share[:, None]) +
-                                   np.array(darker(CHAIN_COLOUR, 0.7)) * share[:, None]).astype(np.uint8)
         chains = self._batch["chains"]
         if not chains.visible:
             chains.visible = True
-        chains.batched_wxyzs = wxyz.astype(np.float32)
-        chains.batched_positions = pos.astype(np.float32)
-        chains.batched_scales = scales.astype(np.float32)
-        chains.batched_colors = colours
+        chains.batched_wxyzs = wxyz
+        chains.batched_positions = pos
+        chains.batched_scales = scales
 
     def _show_forces(self, frame: Frame) -> None:
         """Normal and friction force at each contact point, on both bodies (action, reaction),

@@ -146,6 +146,7 @@ class Session:
         self._sent_times: deque[float] = deque(maxlen=60)
         self.timings: deque[dict[str, float]] = deque(maxlen=200)  # per drawn run, for benchmarks
         self.frame_times: deque[float] = deque(maxlen=600)  # when each played frame was sent
+        self.frame_costs: deque[float] = deque(maxlen=600)  # s of server work per played frame
         client.camera.on_update(self._on_camera)
         self.drawer = SceneDrawer(client.scene)
         self._build_gui()
@@ -155,6 +156,7 @@ class Session:
         self._upload_ids: dict[str, str] = {}
         self.worker: LatestWorker[Request] = LatestWorker(self._job, on_error=self._job_failed,
                                                           name=f"collide-sim-{client.client_id}")
+        self.fps = FPS  # frames a second the player sends while playing
         self._player = threading.Thread(target=self._play_loop, name=f"collide-play-{client.client_id}",
                                         daemon=True)
         self._player.start()
@@ -464,7 +466,7 @@ class Session:
             rate = self._speed(view)
             if self.slowmo.value and view.in_contact(self.t):
                 rate *= SLOW_MOTION
-            self.seek(self.t + direction * rate / FPS)
+            self.seek(self.t + direction * rate / self.fps)
         else:
             self.seek(view.next_step(self.t, direction))
 
@@ -1105,12 +1107,13 @@ class Session:
         return float(choice.rstrip("x"))
 
     def _play_loop(self) -> None:
-        period = 1.0 / FPS
+        period = 1.0 / self.fps
         last = time.perf_counter()
         deadline = last + period
         # Frames on a fixed schedule: the wait shrinks by the time the last frame took.
         while not self._closed.wait(max(0.0, deadline - time.perf_counter())):
             now = time.perf_counter()
+            period = 1.0 / self.fps
             deadline = max(deadline + period, now)
             elapsed, last = now - last, now
             if not self.playing:
@@ -1133,7 +1136,9 @@ class Session:
                     self.t = t
                     with self.client.atomic():
                         self._draw_frame(cursor=False)
-                    self.frame_times.append(time.perf_counter())
+                    done = time.perf_counter()
+                    self.frame_times.append(done)
+                    self.frame_costs.append(done - now)
             except Exception as exc:  # noqa: BLE001 - a closed tab must not kill the thread noisily
                 if self._closed.is_set():
                     return

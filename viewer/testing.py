@@ -208,3 +208,14 @@ def group_button(page: Any, handle: Any, option: str) -> Any:
 def hide_notifications(page: Any) -> None:
     """Hide toasts (viser's "Software WebGL rendering detected" covers the 3D view)."""
     page.add_style_tag(content=".mantine-Notifications-root{display:none !important}")
+
+
+def scroll_to_text(page: Any, text: str) -> None:
+    """Scroll the GUI so an element holding `text` is in view (plain DOM: no waiting for the
+    page to be idle, which a page drawing many spheres under software GL rarely is)."""
+    page.evaluate("""(text) => {
+        const all = [...document.querySelectorAll('div, p, span')]
+            .filter(e => e.innerText && e.innerText.includes(text));
+        const inner = all.filter(e => ![...e.children].some(c => c.innerText && c.innerText.includes(text)));
+        if (inner.length) inner[0].scrollIntoView({block: 'center'});
+    }""", text)
