@@ -81,11 +81,12 @@ def near(shot: np.ndarray, point: np.ndarray, radius: float) -> np.ndarray:
     return (xs - point[0]) ** 2 + (ys - point[1]) ** 2 <= radius**2
 
 
-def load(page, name: str):
+def load(page, source):
     session = page.session
-    session.load_scene(name)
+    name = source if isinstance(source, str) else source.name
+    session.load_scene(source)
     wait_until(lambda: session.view is not None and session.view.scene.name == name and session.worker.idle(),
-               60, name)
+               120, name)
     page.wait_for_timeout(300)
     return session
 
@@ -159,6 +160,47 @@ def test_typed_value_that_cannot_be_used_is_refused_not_changed(page):
     page.wait_for_function("() => document.body.innerText.includes('15OO')", timeout=10_000)
     page.wait_for_timeout(800)
     assert session.worker.wait_idle(30) and session.view.scene.contact.k == k_before
+
+
+# ---------------------------------------------------------------------------------------------
+# 3. 3D: the normal force is seen, the floor is where the wall is, and there are shadows
+
+
+def test_3d_contact_arrows_floor_and_shadows(page):
+    from collide.scene import parse_scene
+
+    raw = {"name": "floor-2", "dim": 3, "gravity": [0, 0, -9.81], "duration": 0.25, "tol": 1e-3,
+           "contact": {"k": 1e5},
+           "body": [{"name": "ball1", "mass": 0.17, "radius": 0.028, "position": [0, 0.01, 0.028],
+                     "velocity": [1.5, 0, 0]},
+                    {"name": "ball2", "mass": 0.17, "radius": 0.028, "position": [0.2, 0, 0.028]}],
+           "wall": [{"point": [0, 0, 0], "normal": [0, 0, 1]}]}
+    session = load(page, parse_scene(raw, "floor-2"))
+    view, drawer = session.view, session.drawer
+    # The floor: its slab's top face on the wall's plane, the grid on it, shadows on it.
+    floor = session.client.scene.get_handle_by_name("/world/walls/0")
+    assert floor is not None and floor.position[2] + 0.5 * floor.dimensions[0] == pytest.approx(0.0, abs=1e-9)
+    grid = session.client.scene.get_handle_by_name("/world/grid")
+    assert np.abs(grid.points[..., 2]).max() < 1e-3 * view.radius[0] * 10  # on the floor, not under it
+    assert "shadows" in drawer._batch and drawer._batch["shadows"].visible and session.show_shadows.visible
+    # The moment the two balls press hardest on each other.
+    times = np.linspace(view.t0, view.t1, 600)
+    pressed = [max((c.overlap for c in view.frame(t).contacts if c.j is not None), default=0.0) for t in times]
+    t = float(times[int(np.argmax(pressed))])
+    assert max(pressed) > 0
+    session.seek(t)
+    frame = view.frame(t)
+    point = next(c.point for c in frame.contacts if c.j is not None)
+    page.wait_for_timeout(1500)
+
+    def arrows_seen() -> int:
+        shot = image(canvas_shot(page))
+        height, width = shot.shape[:2]
+        px = project(session.client.camera, np.array([point, point + [0.028, 0, 0]]), width, height)
+        r_px = float(np.linalg.norm(px[1] - px[0]))
+        return int((colour_mask(shot, ARROW_RED, 60) & near(shot, px[0], 3 * r_px)).sum())
+
+    wait_until(lambda: arrows_seen() > 30, 30, "the normal-force arrows in front of the spheres")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -395,6 +395,7 @@ class SceneDrawer:
                 scene.add_icosphere(f"{base}/spin/dot", radius=0.16 * r, color=(255, 255, 255),
                                     position=tuple(dot), subdivisions=2, cast_shadow=False)
             self._bodies.append({"frame": frame, "sphere": sphere, "outline": outline, "spin": spin, "r": r})
+        self._add_shadows(view)
 
     def _build_batch(self, view: ViewRun, colours: np.ndarray) -> None:
         scene = self.scene
@@ -412,13 +413,20 @@ class SceneDrawer:
                 "/bodies/dots", dv, df, batched_wxyzs=ident, batched_positions=zeros,
                 batched_scales=(0.22 * view.radius).astype(np.float32), batched_colors=(255, 255, 255),
                 lod="off", cast_shadow=False, receive_shadow=False)
-        if self._floor is not None:
-            dv, df = disc()
-            self._batch["shadows"] = scene.add_batched_meshes_simple(
-                "/bodies/shadows", dv, df, batched_wxyzs=ident, batched_positions=zeros,
-                batched_scales=view.radius.astype(np.float32), batched_colors=(60, 60, 70),
-                batched_opacities=np.full(n, 0.35, np.float32), opacity=1.0, lod="off",
-                cast_shadow=False, receive_shadow=False)
+        self._add_shadows(view)
+
+    def _add_shadows(self, view: ViewRun) -> None:
+        """Blob shadows on the floor (3D scenes with one): a cheap depth cue that works under
+        software GL too."""
+        if self._floor is None:
+            return
+        n = view.n_bodies
+        dv, df = disc()
+        self._batch["shadows"] = self.scene.add_batched_meshes_simple(
+            "/bodies/shadows", dv, df, batched_wxyzs=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
+            batched_positions=np.zeros((n, 3)), batched_scales=view.radius.astype(np.float32),
+            batched_colors=(60, 60, 70), batched_opacities=np.full(n, 0.35, np.float32), opacity=1.0, lod="off",
+            cast_shadow=False, receive_shadow=False)
 
     def _remove_com(self) -> None:
         if self._com is not None:
@@ -522,6 +530,7 @@ class SceneDrawer:
                 self._compressed.discard(i)
         if self.view is not None and self.view.dim < 3:
             self._show_rings(frame, set(cuts))
+        self._show_shadows(frame)
 
     def _show_rings(self, frame: Frame, pressed: set[int]) -> None:
         """The undeformed outline of each sphere in contact (an overlay: see the docstring)."""
@@ -564,24 +573,31 @@ class SceneDrawer:
             dot = np.array([np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4)])
             offset = rotate(frame.wxyz, dot) * view.radius[:, None]
             dots.batched_positions = (frame.positions + offset).astype(np.float32)
-        shadows = self._batch.get("shadows")
-        if shadows is not None:
-            shadows.visible = self.options.shadows
-            if self.options.shadows:
-                point, normal = self._floor
-                height = (frame.positions - point) @ normal
-                foot = frame.positions - height[:, None] * normal + 0.03 * view.radius[:, None] * normal
-                shadows.batched_positions = foot.astype(np.float32)
-                # A blob shadow shrinks and fades as the sphere rises: how far up it is reads at once.
-                lift = np.maximum(height - view.radius, 0.0) / view.radius
-                shadows.batched_scales = (view.radius / (1 + 0.15 * lift)).astype(np.float32)
-                shadows.batched_opacities = (0.45 / (1 + 0.5 * lift)).astype(np.float32)
+        self._show_shadows(frame)
         if chains:
             self._show_chains(frame)
         elif "chains" in self._batch:
             # Hidden, not removed: removing one batched mesh made viser's other batched meshes
             # vanish until their next update.
             self._batch["chains"].visible = False
+
+    def _show_shadows(self, frame: Frame) -> None:
+        shadows = self._batch.get("shadows")
+        if shadows is None or self.view is None:
+            return
+        view = self.view
+        if shadows.visible != self.options.shadows:
+            shadows.visible = self.options.shadows
+        if not self.options.shadows:
+            return
+        point, normal = self._floor
+        height = (frame.positions - point) @ normal
+        foot = frame.positions - height[:, None] * normal + 0.03 * view.radius[:, None] * normal
+        shadows.batched_positions = foot.astype(np.float32)
+        # A blob shadow shrinks and fades as the sphere rises: how far up it is reads at once.
+        lift = np.maximum(height - view.radius, 0.0) / view.radius
+        shadows.batched_scales = (view.radius / (1 + 0.15 * lift)).astype(np.float32)
+        shadows.batched_opacities = (0.45 / (1 + 0.5 * lift)).astype(np.float32)
 
     def _show_chains(self, frame: Frame) -> None:
         """Force chains: a cylinder from each body's centre to the other's (or to the wall), its

@@ -934,7 +934,7 @@ class Session:
                 self._set_contact_slider(view)
                 many = self.drawer.many
                 self.show_chains.visible = many
-                self.show_shadows.visible = many and self.drawer._floor is not None
+                self.show_shadows.visible = self.drawer._floor is not None
                 self._draw_frame(cursor=False)
                 self._show_status()
                 self._show_values()
