@@ -1110,11 +1110,13 @@ class Session:
         period = 1.0 / self.fps
         last = time.perf_counter()
         deadline = last + period
-        # Frames on a fixed schedule: the wait shrinks by the time the last frame took.
+        # Frames on a fixed schedule: the wait shrinks by the time the last frame took, and a
+        # frame that took longer than its period is made up by the next ones (up to a quarter
+        # of a second behind; beyond that the schedule starts afresh).
         while not self._closed.wait(max(0.0, deadline - time.perf_counter())):
             now = time.perf_counter()
             period = 1.0 / self.fps
-            deadline = max(deadline + period, now)
+            deadline = deadline + period if now - deadline < 0.25 else now + period
             elapsed, last = now - last, now
             if not self.playing:
                 continue
