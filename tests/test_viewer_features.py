@@ -77,6 +77,17 @@ def page(browser, app):
     wait_until(lambda: page.session.client.client_id not in app.sessions, 30, "the tab to close")
 
 
+@pytest.fixture
+def half_page(browser, app):
+    """A tab at half the pixels: hundreds of see-through spheres take seconds a frame under
+    software GL. Closed even when the test fails, so it never slows the next ones."""
+    page = open_page(browser, app, width=1280, height=800, query="fixedDpr=0.5")
+    hide_notifications(page)
+    yield page
+    page.close()
+    wait_until(lambda: page.session.client.client_id not in app.sessions, 30, "the tab to close")
+
+
 def load(page, source):
     session = page.session
     name = source if isinstance(source, str) else source.name
@@ -231,12 +242,10 @@ def test_plot_readout_at_the_cursor(page):
 # Many bodies
 
 
-def test_many_spheres_instanced_colour_modes_chains_and_shadows(browser, app):
+def test_many_spheres_instanced_colour_modes_chains_and_shadows(half_page):
     from viewer.frames import settling_pile
 
-    # Half the pixels: hundreds of see-through spheres take seconds a frame under software GL.
-    page = open_page(browser, app, width=1280, height=800, query="fixedDpr=0.5")
-    hide_notifications(page)
+    page = half_page
     session = page.session
     run = settling_pile(300, duration=1.0, fps=30)
     session.show_frames(run)
@@ -268,10 +277,12 @@ def test_many_spheres_instanced_colour_modes_chains_and_shadows(browser, app):
     session.set_show(chains=False)
     assert not drawer._batch["chains"].visible and not session.show_chains.value
     wait_until(lambda: colour_mask(canvas_shot(page), CHAIN, 60).sum() < 0.3 * with_chains, 60, "the chains to go")
-    shot = image(canvas_shot(page))
-    coloured = (shot.max(axis=-1) - shot.min(axis=-1)) > 25  # the spheres; floor and grid are grey
-    assert coloured.sum() > 5000, "the spheres are still drawn once the chains are off"
-    page.close()
+
+    def coloured() -> int:
+        shot = image(canvas_shot(page))
+        return int(((shot.max(axis=-1) - shot.min(axis=-1)) > 25).sum())  # spheres; floor and grid are grey
+
+    wait_until(lambda: coloured() > 5000, 60, "the spheres, still drawn once the chains are off")
 
 
 def test_colour_by_speed_from_the_dropdown(page):
