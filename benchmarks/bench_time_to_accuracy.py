@@ -16,10 +16,9 @@ import statistics
 
 import numpy as np
 
-from collide.model import compile_scenes
+from collide.model import compile_scenes, reference_frequency
 from collide.run import run_scene
 from collide.scene import load_scene
-from collide.stepper import max_frequency
 
 DEMOS = ("demo-1d", "demo-2d-stationary", "demo-2d-moving", "demo-bonus")
 TOLS = (1e-6, 1e-7, 1e-9)
@@ -35,7 +34,7 @@ def main() -> None:
     for name in DEMOS:
         scene = load_scene(name)
         model, _ = compile_scenes([scene])
-        omega = float(max_frequency(model)[0])
+        omega = float(reference_frequency(model)[0])
         ref = run_scene(scene, integrator="kahan6", dt=0.005 / omega, record=False).result
         for tol in TOLS:
             run_scene(scene, integrator=args.integrator, dt="auto", tol=tol, record=False)  # warm-up

@@ -14,10 +14,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from collide.model import compile_scenes
+from collide.model import compile_scenes, reference_frequency
 from collide.run import run_scene
 from collide.scene import Scene
-from collide.stepper import RunError, max_frequency
+from collide.stepper import RunError
 
 INTEGRATOR_ORDER = ("seed", "verlet", "yoshida4", "kahan6")
 # omega dt ladders: decades and half-decades, from each integrator's largest sensible step.
@@ -89,7 +89,7 @@ def work_precision(scene: Scene, integrators: tuple[str, ...] = INTEGRATOR_ORDER
     """Run the ladder. An integrator's ladder stops once a run takes longer than the budget
     (a finer step would only take longer) or its error reaches round-off."""
     model, _ = compile_scenes([scene])
-    omega = float(max_frequency(model)[0])
+    omega = float(reference_frequency(model)[0])
     scale = speed_scale(scene)
     ref_run = run_scene(scene, integrator="kahan6", dt=REFERENCE_OMEGA_DT / omega, record=False).result
     check_run = run_scene(scene, integrator="kahan6", dt=0.5 * REFERENCE_OMEGA_DT / omega, record=False).result

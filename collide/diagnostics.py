@@ -1,7 +1,8 @@
 """Diagnostics of a run: conserved quantities, contacts and residuals (DESIGN sections 2 and 4).
 
 Functions take states with any leading shape (..., B, N, D), so the same code serves a final
-state (B, N, D) and a whole trajectory (S, B, N, D).
+state (B, N, D) and frames of a trajectory (T, 1, N, D). Contacts are lists (C, 2) of body
+pairs (i, j), a wall as j = -1 - wall: nothing here grows with the number of possible pairs.
 """
 
 from __future__ import annotations
@@ -10,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from collide.engine import kernels as kn
 from collide.model import Model, State
-from collide.physics import perp2
 from collide.stepper import RunResult, Trajectory
 
 
@@ -55,26 +56,79 @@ class Conserved:
         return self.total if self.dissipated is None else self.total + self.dissipated
 
 
-def overlaps(model: Model, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Overlap of every pair (..., P) and sphere-wall contact (..., W, N), positive in contact."""
-    d = s[..., model.pair_j, :] - s[..., model.pair_i, :]
+def all_contacts(model: Model) -> np.ndarray:
+    """Every possible contact (C, 2) of a small scene: all pairs, then every sphere on every wall."""
+    i, j = np.triu_indices(model.n_bodies, k=1)
+    walls = [(n, -1 - w) for w in range(model.n_walls) for n in range(model.n_bodies)]
+    out = np.concatenate((np.stack((i, j), axis=1), np.array(walls, dtype=np.int64).reshape(-1, 2)))
+    return out.astype(np.int64)
+
+
+def contacts_near(model: Model, s: np.ndarray, margin: float = 0.0) -> np.ndarray:
+    """Contacts (C, 2) whose gap is at most `margin` (relative to the radii) in any of the
+    states s (..., N, D) of member 0: all of them for a few bodies, a cell grid for many."""
+    if model.n_bodies <= 64:
+        return all_contacts(model)
+    flat = s.reshape(-1, model.n_bodies, model.dim)
+    found = set()
+    radius = model.radius[0]
+    for frame in flat:
+        pos = np.zeros((model.n_bodies, 3))
+        pos[:, :model.dim] = frame
+        pairs = kn.near_pairs(pos, radius, margin * radius + 1e-12 * radius, model.n_bodies, model.dim)
+        found.update(map(tuple, pairs.tolist()))
+    pairs = np.array(sorted(found), dtype=np.int64).reshape(-1, 2)
+    walls = [(n, -1 - w) for w in range(model.n_walls) for n in range(model.n_bodies)]
+    return np.concatenate((pairs, np.array(walls, dtype=np.int64).reshape(-1, 2)))
+
+
+def contact_geometry(model: Model, s: np.ndarray, contacts: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Normal n (from i towards j or into the wall, (..., C, D)), overlap (..., C) and distance
+    (..., C) of the contacts at positions s (..., N, D)."""
+    i, j = contacts[:, 0], contacts[:, 1]
+    pair = j >= 0
+    si = s[..., i, :]
+    jj = np.where(pair, j, 0)
+    d = s[..., jj, :] - si
     dist = np.sqrt(_dot(d, d))
-    pair = model.radius[:, model.pair_i] + model.radius[:, model.pair_j] - dist
-    height = np.einsum("...nd,wd->...wn", s, model.wall_normal) - _dot(model.wall_point, model.wall_normal)[:, None]
-    wall = model.radius[:, None, :] - height
-    return pair, wall
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = d / dist[..., None]
+    r = model.radius[..., i]
+    reach = r + np.where(pair, model.radius[..., jj], 0.0)
+    if model.n_walls:
+        w = np.where(pair, 0, -1 - j)
+        normal = model.wall_normal[w]
+        height = _dot(si - model.wall_point[w], normal)
+        n = np.where(pair[:, None], n, -normal)
+        dist = np.where(pair, dist, height)
+    overlap = reach - dist
+    return n, overlap, dist
+
+
+def stiffness(model: Model, contacts: np.ndarray) -> np.ndarray:
+    """Spring constant (B, C) of each contact."""
+    i, j = contacts[:, 0], contacts[:, 1]
+    k = model.pair_stiffness(i, np.where(j >= 0, j, 0))
+    if model.n_walls:
+        k = np.where(j >= 0, k, model.wall_stiffness()[:, i])
+    return k
 
 
 def conserved(model: Model, t: np.ndarray, s: np.ndarray, v: np.ndarray, w: np.ndarray,
-              work: np.ndarray) -> Conserved:
-    """Energies, momentum, angular momentum about the origin and centre of mass."""
+              work: np.ndarray, contacts: np.ndarray | None = None) -> Conserved:
+    """Energies, momentum, angular momentum about the origin and centre of mass. The spring
+    energy sums over `contacts` (default: every possible contact of a small scene, those near at
+    these states for a large one)."""
     m = model.mass
     kinetic = 0.5 * np.sum(m * _dot(v, v), axis=-1)
     rotational = 0.5 * np.sum(model.inertia * _dot(w, w), axis=-1) if w.shape[-1] else None
-    pair, wall = overlaps(model, s)
-    spring = 0.5 * np.sum(model.k_pair * np.maximum(pair, 0.0) ** 2, axis=-1)
-    if model.n_walls:
-        spring = spring + 0.5 * np.sum(model.k_wall[:, None, :] * np.maximum(wall, 0.0) ** 2, axis=(-1, -2))
+    if contacts is None:
+        contacts = contacts_near(model, s)
+    if len(contacts):
+        _, overlap, _ = contact_geometry(model, s, contacts)
+        spring = 0.5 * np.sum(stiffness(model, contacts) * np.maximum(overlap, 0.0) ** 2, axis=-1)
+    else:
+        spring = np.zeros(kinetic.shape)
     gravitational = None
     if model.gravity is not None:
         gravitational = -np.sum(m * _dot(s, model.gravity[:, None, :]), axis=-1)
@@ -90,7 +144,13 @@ def conserved(model: Model, t: np.ndarray, s: np.ndarray, v: np.ndarray, w: np.n
 
 
 def trajectory_conserved(model: Model, traj: Trajectory) -> Conserved:
-    return conserved(model, traj.t, traj.s, traj.v, traj.w, traj.work)
+    """The conserved quantities at every row of a trajectory (its knot times)."""
+    return conserved(model, traj.t, traj.s, traj.v, traj.w, traj.work, _touched_or_all(model, traj))
+
+
+def _touched_or_all(model: Model, traj: Trajectory) -> np.ndarray:
+    touched = traj.contacts_touched()
+    return all_contacts(model) if model.n_bodies <= 64 else touched
 
 
 def state_conserved(model: Model, state: State) -> Conserved:
@@ -161,14 +221,16 @@ def residuals(result: RunResult) -> Residuals:
 
 @dataclass
 class ContactSeries:
-    """Every contact at every step: pairs first, then sphere-wall contacts (C = P + W N).
+    """The contacts that ever engaged, at T times: C contacts in the order they began.
 
-    overlap (S, B, C) m; compression (S, B, C, 2) m, how much each of the two spheres is
-    compressed (the wall's column is 0); point (S, B, C, D) m; normal_force (S, B, C, D) N and
-    friction_force (S, B, C, D) N, both acting on the first body of the contact.
+    names (C); pairs (C, 2) (j = -1 - wall); overlap (T, 1, C) m; compression (T, 1, C, 2) m,
+    how much each of the two spheres is compressed (the wall's column is 0); point (T, 1, C, D)
+    m; normal_force (T, 1, C, D) N and friction_force (T, 1, C, D) N, both on the contact's
+    first body (friction held over a step: the force of the step that ends at or after t).
     """
 
     names: list[str]
+    pairs: np.ndarray
     overlap: np.ndarray
     compression: np.ndarray
     point: np.ndarray
@@ -176,33 +238,48 @@ class ContactSeries:
     friction_force: np.ndarray | None
 
 
-def contact_series(model: Model, traj: Trajectory) -> ContactSeries:
-    s = traj.s
-    d = s[..., model.pair_j, :] - s[..., model.pair_i, :]
-    dist = np.sqrt(_dot(d, d))
-    n = d / dist[..., None]
-    ri, rj = model.radius[:, model.pair_i], model.radius[:, model.pair_j]
-    overlap = ri + rj - dist
+def contact_series(model: Model, traj: Trajectory, times: np.ndarray | None = None,
+                   states: State | None = None) -> ContactSeries:
+    """Every contact the run had, at `times` (default: the trajectory's rows); `states` may give
+    the bodies there already (from `sample`)."""
+    if times is None:
+        times = traj.t[:, 0]
+    times = np.asarray(times, dtype=float)
+    st = states if states is not None else sample(model, traj, times)
+    contacts = traj.contacts_touched()
+    s = st.s[:, 0]
+    n_t, c = len(times), len(contacts)
+    d = model.dim
+    if c == 0:
+        empty = np.zeros((n_t, 1, 0))
+        return ContactSeries([], contacts, empty, np.zeros((n_t, 1, 0, 2)), np.zeros((n_t, 1, 0, d)),
+                             np.zeros((n_t, 1, 0, d)), None if not model.friction else np.zeros((n_t, 1, 0, d)))
+    n, overlap, _ = contact_geometry(model, s, contacts)
     pressed = np.maximum(overlap, 0.0)
-    # Equal springs in series share the overlap equally.
-    comp = np.stack((0.5 * pressed, 0.5 * pressed), axis=-1)
-    point = s[..., model.pair_i, :] + (ri - 0.5 * pressed)[..., None] * n
-    normal = -(model.k_pair * pressed)[..., None] * n
-    _, wall_overlap = overlaps(model, s)
-    wall_pressed = np.maximum(wall_overlap, 0.0)
-    nw = model.wall_normal[:, None, :]
-    wall_point = s[..., None, :, :] - (model.radius[:, None, :] - wall_pressed)[..., None] * nw
-    wall_normal = (model.k_wall[:, None, :] * wall_pressed)[..., None] * nw
-    lead = s.shape[:-2]
-    flat = (*lead, model.n_walls * model.n_bodies)
-    overlap = np.concatenate((overlap, wall_overlap.reshape(flat)), axis=-1)
-    comp = np.concatenate((comp, np.stack((wall_pressed, np.zeros_like(wall_pressed)), -1).reshape(*flat, 2)), -2)
-    point = np.concatenate((point, wall_point.reshape(*flat, model.dim)), axis=-2)
-    normal = np.concatenate((normal, wall_normal.reshape(*flat, model.dim)), axis=-2)
+    pair = contacts[:, 1] >= 0
+    # Equal springs in series share the overlap; a sphere on a rigid wall takes all of it.
+    first = np.where(pair, 0.5 * pressed, pressed)
+    compression = np.stack((first, np.where(pair, 0.5 * pressed, 0.0)), axis=-1)
+    radius_i = model.radius[0, contacts[:, 0]]
+    point = s[:, contacts[:, 0], :] + (radius_i - first)[..., None] * n
+    normal = -(stiffness(model, contacts)[0] * pressed)[..., None] * n
     friction = None
-    if traj.friction_pair is not None:
-        friction = np.concatenate((traj.friction_pair, traj.friction_wall.reshape(*flat, model.dim)), axis=-2)
-    return ContactSeries(model.contact_names(), overlap, comp, point, normal, friction)
+    if model.friction:
+        friction = np.zeros((n_t, c, d))
+        rec = traj.records
+        for k, (i, j) in enumerate(contacts):
+            mine = rec[(rec[:, kn.R_I] == i) & (rec[:, kn.R_J] == j)]
+            if not len(mine):
+                continue
+            at = np.searchsorted(mine[:, kn.R_T], times, side="left")
+            valid = (at < len(mine)) & (overlap[:, k] >= -1e-9 * (radius_i[k]))
+            at = np.minimum(at, len(mine) - 1)
+            force = mine[at][:, kn.R_FX:kn.R_FX + d]
+            friction[:, k] = np.where(valid[:, None], force, 0.0)
+        friction = friction[:, None]
+    names = [model.contact_name(int(i), int(j)) for i, j in contacts]
+    return ContactSeries(names, contacts, overlap[:, None], compression[:, None], point[:, None],
+                         normal[:, None], friction)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -222,141 +299,96 @@ def _quintic(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return basis, deriv
 
 
-def _spring_accel(model: Model, s: np.ndarray) -> np.ndarray:
-    """Accelerations (T, N, D) from the contact springs alone, for a batch-of-one model."""
-    from collide import physics as ph
+def _turn(q: np.ndarray, w: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """Quaternions q (T, 4) after turning at w (T, 3) for tau (T,) seconds."""
+    rate = np.sqrt(_dot(w, w))
+    half = 0.5 * rate * tau
+    with np.errstate(invalid="ignore", divide="ignore"):
+        axis = np.where(rate[:, None] > 0, w / np.where(rate > 0, rate, 1.0)[:, None], 0.0)
+    dq = np.concatenate((np.cos(half)[:, None], np.sin(half)[:, None] * axis), axis=1)
+    a, b = dq, q
+    return np.stack((a[:, 0] * b[:, 0] - a[:, 1] * b[:, 1] - a[:, 2] * b[:, 2] - a[:, 3] * b[:, 3],
+                     a[:, 0] * b[:, 1] + a[:, 1] * b[:, 0] + a[:, 2] * b[:, 3] - a[:, 3] * b[:, 2],
+                     a[:, 0] * b[:, 2] - a[:, 1] * b[:, 3] + a[:, 2] * b[:, 0] + a[:, 3] * b[:, 1],
+                     a[:, 0] * b[:, 3] + a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1] + a[:, 3] * b[:, 0]), axis=1)
 
-    c = ph.contact_geometry(model, s)
-    fn, fw = ph.normal_forces(model, c)
-    acc = ph.normal_accel(model, c, fn, fw)
-    return acc - model.gravity[:, None, :] if model.gravity is not None else acc
 
-
-def step_accelerations(model: Model, s: np.ndarray, v: np.ndarray, t: np.ndarray,
-                       ) -> tuple[np.ndarray, np.ndarray]:
-    """Accelerations (S-1, N, D) at the start and end of each step: the springs' at the ends'
-    positions, plus a constant rest (friction, gravity) chosen so that the step's velocity change
-    comes out exactly: rest = (v1 - v0) / h - mean spring acceleration (Simpson's rule, the
-    midpoint from a cubic Hermite)."""
-    h = np.diff(t)[:, None, None]
-    spring = _spring_accel(model, s)
-    mid = 0.5 * (s[:-1] + s[1:]) + 0.125 * h * (v[:-1] - v[1:])
-    spring_mid = _spring_accel(model, mid)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        mean = np.where(h > 0, np.diff(v, axis=0) / np.where(h > 0, h, 1.0), 0.0)
-    rest = mean - (spring[:-1] + 4 * spring_mid + spring[1:]) / 6
-    return spring[:-1] + rest, spring[1:] + rest
+def body_knots(traj: Trajectory) -> list[np.ndarray]:
+    """Each body's knots, in time order."""
+    knots = traj.knots
+    order = np.lexsort((np.arange(len(knots)), knots[:, kn.K_T], knots[:, kn.K_BODY]))
+    knots = knots[order]
+    cuts = np.searchsorted(knots[:, kn.K_BODY], np.arange(1, traj.model.n_bodies))
+    return np.split(knots, cuts)
 
 
 def sample(model: Model, traj: Trajectory, times: np.ndarray, member: int = 0) -> State:
-    """States of run `member` at the given times (T,), shaped (T, 1, N, D).
+    """States at the given times (T,), shaped (T, 1, N, D), for a trajectory of one run.
 
-    Inside a free-flight segment the motion is exact (closed form). Inside a contact step,
-    positions and velocities come from a quintic Hermite through both ends' positions,
-    velocities and accelerations (a high-order step takes ten steps per contact: a cubic would
-    make the energy wobble by per cent between them); spins and dissipated work are linear.
-    Every step's end state is returned exactly.
-    """
-    from collide.model import select_model
-
-    t = traj.t[:, member]
-    times = np.clip(np.asarray(times, dtype=float), t[0], t[-1])
-    k = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 2) if len(t) > 1 else \
-        np.zeros(len(times), int)
-    s0, v0, w0 = traj.s[k, member], traj.v[k, member], traj.w[k, member]
-    q0, work0 = traj.q[k, member], traj.work[k, member]
-    if len(t) == 1:
-        return State(times, s0[:, None], v0[:, None], w0[:, None], q0[:, None], work0[:, None])
-    k1 = k + 1
-    h = t[k1] - t[k]
-    tau = times - t[k]
-    free = traj.free[k1, member]
-    tb = tau[:, None, None]
-    # Free flight: exact.
-    s = s0 + v0 * tb
-    v = v0.copy()
-    if model.gravity is not None:
-        g = model.gravity[member][None, None, :]
-        s = s + 0.5 * g * tb * tb
-        v = v0 + g * tb
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x = np.where(h > 0, tau / np.where(h > 0, h, 1.0), 0.0)
-    step = ~free & (h > 0)
-    if step.any():
-        one = select_model(model, member) if model.batch > 1 else model
-        used = np.unique(np.concatenate((k[step], k[step] + 1)))
-        a_start, a_end = step_accelerations(one, traj.s[:, member], traj.v[:, member], t) \
-            if len(used) > 0.5 * len(t) else _local_accelerations(one, traj, member, k[step])
-        ks = k[step]
-        a0, a1 = (a_start[ks], a_end[ks]) if len(a_start) == len(t) - 1 else (a_start, a_end)
-        hs = h[step][:, None, None]
-        basis, deriv = _quintic(x[step])
-        b, d = basis[:, :, None, None], deriv[:, :, None, None]
-        terms = (s0[step], hs * v0[step], hs * hs * a0, hs * hs * a1, hs * traj.v[ks + 1, member],
-                 traj.s[ks + 1, member])
-        s[step] = sum(b[i] * term for i, term in enumerate(terms))
-        v[step] = sum(d[i] * term for i, term in enumerate(terms)) / hs
-    xb = x[:, None, None]
-    w1 = traj.w[k1, member]
-    w = np.where(free[:, None, None], w0, (1 - xb) * w0 + xb * w1)
-    q = _orientation_between(traj.q[k, member], traj.q[k1, member], xb, w0, tau, free)
-    work = (1 - x) * work0 + x * traj.work[k1, member]
+    At a knot the state is exact. Between two knots of a body the motion is closed-form free
+    flight, or one integrator step, rebuilt by a quintic Hermite through both ends' positions,
+    velocities and accelerations (a high-order step takes about ten steps a contact: a cubic would
+    make the energy wobble by per cent between them); spins and dissipated work are linear in
+    a step, orientation turns at the spin."""
+    times = np.asarray(times, dtype=float)
+    n_t, n = len(times), model.n_bodies
+    d, k, qd = model.dim, model.spin_dim, model.orient_dim
+    s = np.zeros((n_t, n, d))
+    v = np.zeros((n_t, n, d))
+    w = np.zeros((n_t, n, k))
+    q = np.zeros((n_t, n, qd))
+    work = np.zeros(n_t)
+    g = np.zeros(3) if model.gravity is None else np.pad(model.gravity[member], (0, 3 - d))
+    for body, knots in enumerate(body_knots(traj)):
+        kt = knots[:, kn.K_T]
+        clipped = np.clip(times, kt[0], kt[-1])
+        at = np.clip(np.searchsorted(kt, clipped, side="right") - 1, 0, max(len(kt) - 2, 0))
+        k0 = knots[at]
+        tau = clipped - k0[:, kn.K_T]
+        s0, v0 = k0[:, kn.K_S:kn.K_S + 3], k0[:, kn.K_V:kn.K_V + 3]
+        pos = s0 + v0 * tau[:, None] + 0.5 * g * tau[:, None] ** 2
+        vel = v0 + g * tau[:, None]
+        spin = k0[:, kn.K_W:kn.K_W + 3].copy()
+        if qd == 4:
+            orient = _turn(k0[:, kn.K_Q:kn.K_Q + 4], spin, tau)
+        else:
+            orient = k0[:, kn.K_Q:kn.K_Q + 4].copy()
+            orient[:, 0] += spin[:, 2] * tau
+        done = k0[:, kn.K_WORK].copy()
+        if len(kt) > 1:
+            k1 = knots[np.minimum(at + 1, len(kt) - 1)]
+            h = k1[:, kn.K_T] - k0[:, kn.K_T]
+            step = (k0[:, kn.K_FREE] == 0.0) & (h > 0)
+            if step.any():
+                hs = h[step][:, None]
+                x = tau[step] / h[step]
+                basis, deriv = _quintic(x)
+                terms = (s0[step], hs * v0[step], hs * hs * k0[step][:, kn.K_AN:kn.K_AN + 3],
+                         hs * hs * k1[step][:, kn.K_A:kn.K_A + 3], hs * k1[step][:, kn.K_V:kn.K_V + 3],
+                         k1[step][:, kn.K_S:kn.K_S + 3])
+                pos[step] = sum(basis[i][:, None] * term for i, term in enumerate(terms))
+                vel[step] = sum(deriv[i][:, None] * term for i, term in enumerate(terms)) / hs
+                xb = x[:, None]
+                spin[step] = (1 - xb) * spin[step] + xb * k1[step][:, kn.K_W:kn.K_W + 3]
+                q0, q1 = k0[step][:, kn.K_Q:kn.K_Q + 4], k1[step][:, kn.K_Q:kn.K_Q + 4]
+                if qd == 4:
+                    q1 = np.where(_dot(q0, q1)[:, None] < 0, -q1, q1)
+                    lerp = (1 - xb) * q0 + xb * q1
+                    orient[step] = lerp / np.linalg.norm(lerp, axis=1, keepdims=True)
+                else:
+                    orient[step] = (1 - xb) * q0 + xb * q1
+                done[step] = (1 - x) * done[step] + x * k1[step][:, kn.K_WORK]
+        s[:, body] = pos[:, :d]
+        v[:, body] = vel[:, :d]
+        if k == 1:
+            w[:, body, 0] = spin[:, 2]
+        elif k == 3:
+            w[:, body] = spin
+        if qd:
+            q[:, body] = orient[:, :qd]
+        work += done
     return State(times, s[:, None], v[:, None], w[:, None], q[:, None], work[:, None])
 
 
-def _local_accelerations(model: Model, traj: Trajectory, member: int, ks: np.ndarray,
-                         ) -> tuple[np.ndarray, np.ndarray]:
-    """`step_accelerations` for the steps ks only (when few samples fall in a long run)."""
-    idx = np.stack((ks, ks + 1), axis=1).ravel()
-    s = traj.s[idx, member].reshape(len(ks), 2, *traj.s.shape[2:])
-    v = traj.v[idx, member].reshape(len(ks), 2, *traj.v.shape[2:])
-    t = traj.t[idx, member].reshape(len(ks), 2)
-    h = (t[:, 1] - t[:, 0])[:, None, None]
-    spring0, spring1 = _spring_accel(model, s[:, 0]), _spring_accel(model, s[:, 1])
-    mid = 0.5 * (s[:, 0] + s[:, 1]) + 0.125 * h * (v[:, 0] - v[:, 1])
-    spring_mid = _spring_accel(model, mid)
-    rest = (v[:, 1] - v[:, 0]) / h - (spring0 + 4 * spring_mid + spring1) / 6
-    return spring0 + rest, spring1 + rest
-
-
-def _orientation_between(q0: np.ndarray, q1: np.ndarray, x: np.ndarray, w0: np.ndarray,
-                         tau: np.ndarray, free: np.ndarray) -> np.ndarray:
-    if q0.shape[-1] == 0:
-        return q0
-    if q0.shape[-1] == 1:
-        return np.where(free[:, None, None], q0 + w0 * tau[:, None, None], (1 - x) * q0 + x * q1)
-    from collide.physics import advance_orientation
-
-    # Quaternions: free flight turns at constant w; inside a short step, normalised lerp.
-    turned = advance_orientation(q0, w0, tau)
-    lerp = (1 - x) * q0 + x * np.where(np.sum(q0 * q1, -1, keepdims=True) < 0, -q1, q1)
-    lerp = lerp / np.linalg.norm(lerp, axis=-1, keepdims=True)
-    return np.where(free[:, None, None], turned, lerp)
-
-
-def frame_times(traj: Trajectory, fps: float, member: int = 0, stride: int = 1) -> np.ndarray:
-    """Times of recording frames: every `stride`-th contact step, plus a steady `fps` in free
-    flight; contact starts and ends are always frames."""
-    t = traj.t[:, member]
-    keep = np.ones(len(t), bool)
-    keep[1:] = t[1:] > t[:-1]
-    t, free = t[keep], traj.free[keep, member]
-    steps = ~free[1:]
-    contact_points = np.zeros(len(t), bool)
-    contact_points[1:] |= steps
-    contact_points[:-1] |= steps
-    idx = np.flatnonzero(contact_points)
-    if stride > 1 and len(idx):
-        # Contact starts and ends stay frames whatever the stride.
-        first = contact_points & ~np.roll(contact_points, 1)
-        last = contact_points & ~np.roll(contact_points, -1)
-        edges = np.flatnonzero(first | last)
-        idx = np.union1d(idx[::stride], edges)
-    grid = np.arange(t[0], t[-1], 1.0 / fps) if fps > 0 else np.empty(0)
-    times = np.union1d(np.union1d(t[idx], grid), [t[0], t[-1]])
-    return times
-
-
-__all__ = ["Conserved", "ContactSeries", "Residuals", "conserved", "contact_series", "frame_times",
-           "overlaps", "perp2", "residuals", "sample", "state_conserved",
-           "trajectory_conserved"]
+__all__ = ["Conserved", "ContactSeries", "Residuals", "conserved", "contact_series", "residuals", "sample",
+           "state_conserved", "trajectory_conserved"]

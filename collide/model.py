@@ -1,26 +1,28 @@
 """Compile scenes into a frozen, batched `Model` and its initial `State`.
 
-Shapes (B = batch, N = bodies, D = dim, K = spin components, P = sphere pairs, W = walls):
+Shapes (B = batch, N = bodies, D = dim, K = spin components, M = materials, W = walls):
 
-=================  ===========  =====================================================
-array              shape        meaning (SI units)
-=================  ===========  =====================================================
-mass, inv_mass     (B, N)       kg, 1/kg
-radius             (B, N)       m
-inertia            (B, N)       kg m^2 (isotropic: spheres)
-k_pair             (B, P)       N/m, springs in series k_i k_j / (k_i + k_j)
-k_wall             (B, N)       N/m, the sphere's own spring (the wall is rigid)
-mu, eps            (B,)         Coulomb coefficient, dead band in m/s
-gravity            (B, D)       m/s^2, or None
-wall_point         (W, D)       m
-wall_normal        (W, D)       outward unit normals
-State.s, State.v   (B, N, D)    m, m/s
-State.w            (B, N, K)    rad/s; K = 0 when nothing can spin, 1 in 2D (about z), 3 in 3D
-State.q            (B, N, Q)    orientation: Q = 0 (no spin), 1 (angle, 2D), 4 (quaternion wxyz)
-State.t, work      (B,)         s; J dissipated by friction
-=================  ===========  =====================================================
+==================  ============  =========================================================
+array               shape         meaning (SI units)
+==================  ============  =========================================================
+mass, inv_mass      (B, N)        kg, 1/kg
+radius              (B, N)        m
+inertia             (B, N)        kg m^2 (isotropic: spheres)
+material            (B, N)        index into the contact tables
+pair_table          (B, M, M, 3)  per pair of materials: k (N/m, springs in series), mu, eps
+wall_table          (B, M, 3)     per material on a wall: k (the sphere's own spring), mu, eps
+k, mu, eps          (B,)          the scene's [contact] values
+gravity             (B, D)        m/s^2, or None
+wall_point          (W, D)        m
+wall_normal         (W, D)        outward unit normals
+State.s, State.v    (B, N, D)     m, m/s
+State.w             (B, N, K)     rad/s; K = 0 when nothing can spin, 1 in 2D (about z), 3 in 3D
+State.q             (B, N, Q)     orientation: Q = 0 (no spin), 1 (angle, 2D), 4 (quaternion wxyz)
+State.t, work       (B,)          s; J dissipated by friction
+==================  ============  =========================================================
 
-A sweep widens only the first axis: `compile_scenes` takes B scenes of the same shape.
+Nothing here grows with the number of pairs: contacts are found as the bodies move. A sweep
+widens only the first axis: `compile_scenes` takes B scenes of the same shape.
 """
 
 from __future__ import annotations
@@ -30,6 +32,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from collide.scene import Scene, SceneError
+
+TABLE_K, TABLE_MU, TABLE_EPS = 0, 1, 2
+KISSING = {1: 2, 2: 6, 3: 12}  # most equal spheres that can touch one sphere at once
 
 
 @dataclass(frozen=True)
@@ -44,10 +49,10 @@ class Model:
     radius: np.ndarray
     inertia: np.ndarray
     inv_inertia: np.ndarray
-    pair_i: np.ndarray
-    pair_j: np.ndarray
-    k_pair: np.ndarray
-    k_wall: np.ndarray
+    material: np.ndarray
+    pair_table: np.ndarray
+    wall_table: np.ndarray
+    k: np.ndarray
     mu: np.ndarray
     eps: np.ndarray
     gravity: np.ndarray | None
@@ -55,19 +60,6 @@ class Model:
     wall_normal: np.ndarray
     friction: bool
     seed_lever: bool
-    pair_to_body_i: np.ndarray
-    pair_to_body_j: np.ndarray
-    # Derived per-pair arrays, precomputed because gathers are slow on small arrays.
-    select_i: np.ndarray  # (P, N): row p picks body i of pair p
-    select_j: np.ndarray
-    pair_diff: np.ndarray  # (P, N): select_j - select_i
-    pair_ri: np.ndarray  # (B, P)
-    pair_rj: np.ndarray
-    pair_reach: np.ndarray  # r_i + r_j
-    pair_inv_mass: np.ndarray  # 1/m_i + 1/m_j
-    pair_inv_inertia_i: np.ndarray  # (B, P)
-    pair_inv_inertia_j: np.ndarray
-    inv_mass_gen: np.ndarray  # (B, N D + N K): 1/m per velocity component, then 1/I per spin one
 
     @property
     def batch(self) -> int:
@@ -78,10 +70,6 @@ class Model:
         return self.mass.shape[1]
 
     @property
-    def n_pairs(self) -> int:
-        return self.pair_i.shape[0]
-
-    @property
     def n_walls(self) -> int:
         return self.wall_point.shape[0]
 
@@ -89,11 +77,19 @@ class Model:
     def orient_dim(self) -> int:
         return {0: 0, 1: 1, 3: 4}[self.spin_dim]
 
-    def contact_names(self) -> list[str]:
-        """Names of every possible contact: pairs first, then sphere-wall contacts."""
-        names = [f"{self.body_names[i]}-{self.body_names[j]}" for i, j in zip(self.pair_i, self.pair_j)]
-        names += [f"{self.body_names[n]}-wall{w}" for w in range(self.n_walls) for n in range(self.n_bodies)]
-        return names
+    def pair_stiffness(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """Spring constant (B, P) of the contacts between bodies i and j (arrays of P)."""
+        b = np.arange(self.batch)[:, None]
+        return self.pair_table[b, self.material[:, i], self.material[:, j], TABLE_K]
+
+    def wall_stiffness(self) -> np.ndarray:
+        """Spring constant (B, N) of each sphere on a wall (its own: the wall is rigid)."""
+        b = np.arange(self.batch)[:, None]
+        return self.wall_table[b, self.material, TABLE_K]
+
+    def contact_name(self, i: int, j: int) -> str:
+        """`ball1-ball2` for a pair, `ball1-wall0` for a sphere on wall 0 (j = -1 - wall)."""
+        return f"{self.body_names[i]}-{self.body_names[j]}" if j >= 0 else f"{self.body_names[i]}-wall{-1 - j}"
 
 
 @dataclass
@@ -129,78 +125,50 @@ def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
                              "(dim, bodies, walls, gravity or spin); batch only same-shaped scenes")
     dim = first.dim
     n = len(first.bodies)
-    friction = any(s.has_friction for s in scenes)
+    b = len(scenes)
     spin_dim = first.spin_dim if any(s.has_spin for s in scenes) else 0
 
     def per_body(attr: str) -> np.ndarray:
-        return np.array([[getattr(b, attr) for b in s.bodies] for s in scenes], dtype=float)
+        return np.array([[getattr(body, attr) for body in s.bodies] for s in scenes], dtype=float)
 
     mass = per_body("mass")
     radius = per_body("radius")
     inertia = per_body("inertia")
-    pair_i, pair_j = np.triu_indices(n, k=1)
     k = np.array([s.contact.k for s in scenes], dtype=float)
-    # Each sphere is a spring of constant k; two in series (DESIGN section 2).
-    k_pair = np.repeat((k * k / (k + k))[:, None], len(pair_i), axis=1)
-    k_wall = np.repeat(k[:, None], n, axis=1)
-    gravity = None
-    if first.gravity is not None:
-        gravity = np.array([s.gravity for s in scenes], dtype=float)
+    mu = np.array([s.contact.mu for s in scenes], dtype=float)
+    eps = np.array([s.contact.eps for s in scenes], dtype=float)
+    # One material: every sphere is a spring of constant k, two in series (DESIGN section 2).
+    pair_table = np.stack((k * k / (k + k), mu, eps), axis=-1).reshape(b, 1, 1, 3)
+    wall_table = np.stack((k, mu, eps), axis=-1).reshape(b, 1, 3)
+    gravity = None if first.gravity is None else np.array([s.gravity for s in scenes], dtype=float)
     walls = first.walls
-    wall_point = np.array([w.point for w in walls], dtype=float).reshape(len(walls), dim)
-    wall_normal = np.array([w.normal for w in walls], dtype=float).reshape(len(walls), dim)
-    incidence_i = np.zeros((n, len(pair_i)))
-    incidence_j = np.zeros((n, len(pair_i)))
-    incidence_i[pair_i, np.arange(len(pair_i))] = 1.0
-    incidence_j[pair_j, np.arange(len(pair_i))] = 1.0
     model = Model(
-        dim=dim, spin_dim=spin_dim, body_names=tuple(b.name for b in first.bodies),
+        dim=dim, spin_dim=spin_dim, body_names=tuple(body.name for body in first.bodies),
         mass=mass, inv_mass=1.0 / mass, radius=radius, inertia=inertia, inv_inertia=1.0 / inertia,
-        pair_i=pair_i, pair_j=pair_j, k_pair=k_pair, k_wall=k_wall,
-        mu=np.array([s.contact.mu for s in scenes], dtype=float),
-        eps=np.array([s.contact.eps for s in scenes], dtype=float),
-        gravity=gravity, wall_point=wall_point, wall_normal=wall_normal,
-        friction=friction, seed_lever=first.contact.lever == "seed",
-        pair_to_body_i=incidence_i, pair_to_body_j=incidence_j,
-        **_pair_arrays(pair_i, pair_j, radius, 1.0 / mass, 1.0 / inertia),
-        inv_mass_gen=np.concatenate((np.repeat(1.0 / mass, dim, axis=1), np.repeat(1.0 / inertia, spin_dim, axis=1)),
-                                    axis=1),
+        material=np.zeros((b, n), dtype=np.int64), pair_table=pair_table, wall_table=wall_table,
+        k=k, mu=mu, eps=eps, gravity=gravity,
+        wall_point=np.array([w.point for w in walls], dtype=float).reshape(len(walls), dim),
+        wall_normal=np.array([w.normal for w in walls], dtype=float).reshape(len(walls), dim),
+        friction=any(s.has_friction for s in scenes), seed_lever=first.contact.lever == "seed",
     )
-    b = len(scenes)
-    s = np.array([[b_.position for b_ in sc.bodies] for sc in scenes], dtype=float).reshape(b, n, dim)
-    v = np.array([[b_.velocity for b_ in sc.bodies] for sc in scenes], dtype=float).reshape(b, n, dim)
+    s = np.array([[body.position for body in sc.bodies] for sc in scenes], dtype=float).reshape(b, n, dim)
+    v = np.array([[body.velocity for body in sc.bodies] for sc in scenes], dtype=float).reshape(b, n, dim)
     if spin_dim:
-        w = np.array([[b_.spin for b_ in sc.bodies] for sc in scenes], dtype=float).reshape(b, n, spin_dim)
+        w = np.array([[body.spin for body in sc.bodies] for sc in scenes], dtype=float).reshape(b, n, spin_dim)
     else:
         w = np.zeros((b, n, 0))
     q = np.zeros((b, n, model.orient_dim))
     if model.orient_dim == 4:
         q[..., 0] = 1.0
-    state = State(t=np.zeros(b), s=s, v=v, w=w, q=q, work=np.zeros(b))
-    return model, state
-
-
-def _pair_arrays(pair_i: np.ndarray, pair_j: np.ndarray, radius: np.ndarray,
-                 inv_mass: np.ndarray, inv_inertia: np.ndarray) -> dict[str, np.ndarray]:
-    n = radius.shape[1]
-    select_i = np.zeros((len(pair_i), n))
-    select_j = np.zeros((len(pair_i), n))
-    select_i[np.arange(len(pair_i)), pair_i] = 1.0
-    select_j[np.arange(len(pair_i)), pair_j] = 1.0
-    return dict(select_i=select_i, select_j=select_j, pair_diff=select_j - select_i,
-                pair_ri=radius[:, pair_i], pair_rj=radius[:, pair_j],
-                pair_reach=radius[:, pair_i] + radius[:, pair_j],
-                pair_inv_mass=inv_mass[:, pair_i] + inv_mass[:, pair_j],
-                pair_inv_inertia_i=inv_inertia[:, pair_i], pair_inv_inertia_j=inv_inertia[:, pair_j])
+    return model, State(t=np.zeros(b), s=s, v=v, w=w, q=q, work=np.zeros(b))
 
 
 def select_model(model: Model, index: int) -> Model:
     """Batch member `index` as a model of batch 1."""
     sl = slice(index, index + 1)
     changes = {name: getattr(model, name)[sl] for name in
-               ("mass", "inv_mass", "radius", "inertia", "inv_inertia", "k_pair", "k_wall", "mu", "eps",
-                "pair_ri", "pair_rj", "pair_reach", "pair_inv_mass", "pair_inv_inertia_i",
-                "pair_inv_inertia_j", "inv_mass_gen")}
+               ("mass", "inv_mass", "radius", "inertia", "inv_inertia", "material", "pair_table", "wall_table",
+                "k", "mu", "eps")}
     if model.gravity is not None:
         changes["gravity"] = model.gravity[sl]
     return replace(model, **changes)
@@ -209,3 +177,47 @@ def select_model(model: Model, index: int) -> Model:
 def select_state(state: State, index: int) -> State:
     sl = slice(index, index + 1)
     return State(state.t[sl], state.s[sl], state.v[sl], state.w[sl], state.q[sl], state.work[sl])
+
+
+def reference_frequency(model: Model) -> np.ndarray:
+    """The stiffest single contact's angular frequency (B,): sqrt(k (1/m_i + 1/m_j)) for the
+    pair of materials and bodies that maximise it, sqrt(k / m) on a wall. The auto step is
+    omega h over it; an island of several contacts steps by its own (stiffer) frequency."""
+    out = np.zeros(model.batch)
+    for b in range(model.batch):
+        inv = model.inv_mass[b]
+        mats = model.material[b]
+        best = 0.0
+        present = np.unique(mats)
+        top: dict[int, np.ndarray] = {int(m): np.sort(inv[mats == m])[::-1][:2] for m in present}
+        for a in present:
+            for c in present:
+                if a > c:
+                    continue
+                if a == c:
+                    if len(top[int(a)]) < 2:
+                        continue
+                    reduced = top[int(a)][0] + top[int(a)][1]
+                else:
+                    reduced = top[int(a)][0] + top[int(c)][0]
+                best = max(best, model.pair_table[b, a, c, TABLE_K] * reduced)
+            if model.n_walls:
+                best = max(best, model.wall_table[b, a, TABLE_K] * top[int(a)][0])
+        out[b] = np.sqrt(best)
+    return out
+
+
+def max_frequency(model: Model) -> np.ndarray:
+    """A bound (B,) on the stiffest frequency contacts can produce together: one pair alone,
+    exactly; otherwise Gershgorin on the mass-symmetrised stiffness matrix, with as many
+    neighbours as can touch a sphere at once (rows k/m_i + k/sqrt(m_i m_j) each, plus walls)."""
+    if model.n_bodies == 2 and not model.n_walls:
+        return reference_frequency(model)
+    z = min(model.n_bodies - 1, KISSING[model.dim])
+    k_pair = model.pair_table[..., TABLE_K].reshape(model.batch, -1).max(axis=1)
+    k_wall = model.wall_table[..., TABLE_K].reshape(model.batch, -1).max(axis=1)
+    lightest = model.mass.min(axis=1)
+    rows = z * k_pair[:, None] * (model.inv_mass + 1.0 / np.sqrt(model.mass * lightest[:, None]))
+    if model.n_walls:
+        rows = rows + model.n_walls * k_wall[:, None] * model.inv_mass
+    return np.sqrt(rows.max(axis=1))

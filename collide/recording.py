@@ -7,9 +7,11 @@ two things:
   markers and trails, contact points with normal and friction force arrows, compression,
   energies, momentum, angular momentum and their residuals, the scene and the run settings, and
   a blueprint (3D view beside the plots);
-- what a program reads back: every integrator step exactly (float64 t, s, v, w, q, work, the
-  free-flight flags and friction forces) under `/collide/steps`, and the run's settings under
-  `/collide/meta`, from which `read_recording` rebuilds the `SceneRun`.
+- what a program reads back: the trajectory exactly (float64 knots: each body's state at the
+  ends of its steps and of its free flight, with its accelerations; each contact's forces at each
+  step; the contact intervals) under `/collide/knots`, `/collide/contact_records` and
+  `/collide/contact_intervals`, and the run's settings under `/collide/meta`, from which
+  `read_recording` rebuilds the `SceneRun`.
 
 Frames: plots (energies, momenta, compression, residuals) are drawn at exact states only:
 every contact step (or every `stride`-th; each contact's first and last step always) and a
@@ -44,8 +46,10 @@ Entity paths (`<b>` a body name, `<c>` a contact such as `ball1-ball2` or `ball1
 /residuals/energy, momentum, angular_momentum  Scalars, relative, as in the JSON summary
 /scene                                        TextDocument: the scene TOML (static)
 /settings                                     TextDocument: run settings (static)
+/world/bodies                                 Points3D: every sphere (scenes of many bodies)
+/world/contacts/points, normal_force          every contact at once (scenes of many contacts)
 /collide/meta                                 AnyValues: settings and shapes for read-back
-/collide/steps                                AnyValues float64: every step, exactly
+/collide/knots, contact_records, ...          AnyValues float64: the trajectory, exactly
 ============================================  ==============================================
 """
 
@@ -69,6 +73,7 @@ import rerun.blueprint as rrb
 from rerun.encodings import Vec3DBatch
 
 from collide import diagnostics as dg
+from collide.engine import kernels as kn
 from collide.model import Model, State, compile_scenes
 from collide.run import SceneRun
 from collide.scene import SceneError, parse_scene
@@ -76,7 +81,9 @@ from collide.stepper import ContactLog, RunResult, Trajectory
 
 APP_ID = "collide"
 FORMAT = "collide-recording"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+MANY_BODIES = 24  # from this many bodies on, one instanced entity draws them all
+MANY_CONTACTS = 24  # from this many contacts on, one entity draws them all (no per-contact plots)
 TIMELINE = "sim_time"
 CONTACT_FRAMES = 100  # least frames across one contact in the 3D view
 
@@ -209,15 +216,23 @@ def _contact_segments(traj: Trajectory) -> np.ndarray:
     return ~traj.free[1:, 0]
 
 
-def frame_times(traj: Trajectory, fps: float, stride: int,
-                contact_frames: int) -> tuple[np.ndarray, np.ndarray]:
+def frame_times(traj: Trajectory, fps: float, stride: int, contact_frames: int,
+                many: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Times of exact frames and of view frames for run 0 of a trajectory.
 
     Exact frames: every `stride`-th contact step (each contact's first and last step always),
     and a steady `fps` inside free flight, where the closed form is exact. View frames add at
     least `contact_frames` evenly spaced frames across each contact, interpolated between steps,
-    so that a contact taken in a few long steps still animates smoothly.
+    so that a contact taken in a few long steps still animates smoothly. With `many` bodies the
+    frames are a steady `fps` throughout (plus the start and end): every body's every step
+    would be too many frames to send or draw.
     """
+    if many:
+        knots = traj.knots[:, kn.K_T]
+        start, end = float(knots.min()), float(knots.max())
+        grid = np.arange(start, end, 1.0 / fps)
+        frames = np.union1d(grid, [start, end])
+        return frames, frames
     t = traj.t[:, 0]
     contact = _contact_segments(traj)
     touches = np.zeros(len(t), bool)
@@ -251,43 +266,32 @@ class _Writer:
         self.rows = 0
         self.calls = 0
         self.spin = self.model.spin_dim > 0 and self.scene.has_spin
-        self.friction = self.traj.friction_pair is not None and self.scene.has_friction
-        self.contact_names = self.model.contact_names()
+        self.friction = self.model.friction and self.scene.has_friction
+        self.many = self.model.n_bodies >= MANY_BODIES
 
     # -- frames ---------------------------------------------------------------------------
 
     def _frames(self, times: np.ndarray) -> _Frames:
         model, traj = self.model, self.traj
         st = dg.sample(model, traj, times, 0)
-        fp = fw = None
-        if traj.friction_pair is not None:
-            # Friction is held over a step: the force of the step that ends at or after a frame.
-            t = traj.t[:, 0]
-            k = np.clip(np.searchsorted(t, times, side="left"), 0, len(t) - 1)
-            held = ~traj.free[k, 0] | (t[k] == times)
-            fp = np.where(held[:, None, None], traj.friction_pair[k, 0], 0.0)[:, None]
-            fw = np.where(held[:, None, None, None], traj.friction_wall[k, 0], 0.0)[:, None]
-        frames = Trajectory(times[:, None], st.s, st.v, st.w, st.q, st.work,
-                            np.zeros_like(st.work, bool), fp, fw)
+        contacts = dg.contact_series(model, traj, times, st)
         state = State(st.t, st.s[:, 0], st.v[:, 0], st.w[:, 0], st.q[:, 0], st.work[:, 0])
         index = rr.TimeColumn(TIMELINE, duration=times)
-        return _Frames(times, state, dg.contact_series(model, frames), index)
+        return _Frames(times, state, contacts, index)
 
     def _prepare(self) -> None:
-        exact, view = frame_times(self.traj, self.fps, self.stride, self.contact_frames)
+        exact, view = frame_times(self.traj, self.fps, self.stride, self.contact_frames, self.many)
         self.exact = self._frames(exact)
-        self.view = self._frames(view)
-        # Contacts that ever happen, judged on every step (a frame could miss a short one).
-        pair, wall = dg.overlaps(self.model, self.traj.s)
-        rows = len(self.traj.t)
-        touched = np.concatenate((pair[:, 0], wall[:, 0].reshape(rows, -1)), axis=1).max(axis=0) > 0
-        self.touched = np.flatnonzero(touched)
-        normal = self.exact.contacts.normal_force[:, 0][:, self.touched]
+        self.view = self.exact if np.array_equal(view, exact) else self._frames(view)
+        # Every contact that ever engaged (from the run's contact intervals: a frame could miss one).
+        self.touched = np.arange(len(self.exact.contacts.names))
+        self.many_contacts = len(self.touched) >= MANY_CONTACTS
+        normal = self.exact.contacts.normal_force[:, 0]
         peak = float(np.max(np.linalg.norm(normal, axis=-1))) if normal.size else 0.0
         # Force arrows: the largest normal force is drawn as long as a sphere's diameter.
         self.force_scale = 2.0 * float(self.model.radius.mean()) / peak if peak > 0 else 1.0
         st = self.exact.state
-        self.conserved = dg.conserved(self.model, st.t, st.s, st.v, st.w, st.work)
+        self.conserved = dg.conserved(self.model, st.t, st.s, st.v, st.w, st.work, self.exact.contacts.pairs)
 
     def _send(self, entity: str, columns: Any, index: rr.TimeColumn) -> None:
         self.rec.send_columns(entity, indexes=[index], columns=columns, strict=True)
@@ -301,9 +305,10 @@ class _Writer:
 
     def _extent(self) -> tuple[np.ndarray, float]:
         """Centre and size of the region the bodies sweep (3D), for the camera and the walls."""
-        s = _pad3(self.traj.s[:, 0])
-        r = self.model.radius[0][None, :, None]
-        lo, hi = (s - r).min(axis=(0, 1)), (s + r).max(axis=(0, 1))
+        knots = self.traj.knots
+        s = _pad3(knots[:, kn.K_S:kn.K_S + self.model.dim])
+        r = self.model.radius[0][knots[:, kn.K_BODY].astype(int)][:, None]
+        lo, hi = (s - r).min(axis=0), (s + r).max(axis=0)
         return 0.5 * (lo + hi), float(max(np.max(hi - lo), 4 * self.model.radius.max()))
 
     def blueprint(self) -> rrb.Blueprint:
@@ -314,7 +319,7 @@ class _Writer:
             # A 1D or 2D scene seen from above its plane, x to the right and y up.
             eye = rrb.EyeControls3D(position=centre + np.array([0.0, 0.0, 1.1 * size]),
                                     look_target=centre, eye_up=[0.0, 1.0, 0.0])
-        overrides = {f"/world/{b}/trail": rrb.VisibleTimeRanges(
+        overrides = {} if self.many else {f"/world/{b}/trail": rrb.VisibleTimeRanges(
             timeline=TIMELINE, start=rrb.TimeRangeBoundary.infinite(),
             end=rrb.TimeRangeBoundary.cursor_relative()) for b in self.model.body_names}
         world = rrb.Spatial3DView(origin="/world", name="3D", eye_controls=eye, overrides=overrides)
@@ -343,10 +348,12 @@ class _Writer:
         if self.spin:
             motion.append(plot("/spin", "spin (rad/s)"))
         plots.append(rrb.Tabs(*motion, active_tab=0) if len(motion) > 1 else motion[0])
-        if len(self.touched):
-            first = self.contact_names[self.touched[0]]
+        if len(self.touched) and not self.many_contacts:
+            first = self.exact.contacts.names[0]
             plots.append(rrb.Tabs(plot(f"/contacts/{first}/compression", f"compression {first} (m)"),
                                   plot("/contacts", "all contacts"), active_tab=0))
+        elif len(self.touched):
+            plots.append(plot("/contacts", "contacts"))
         plots.append(plot("/residuals", "residuals (relative)"))
         return rrb.Blueprint(rrb.Horizontal(left, rrb.Vertical(*plots), column_shares=[3, 2]),
                              rrb.TimePanel(timeline=TIMELINE, state="collapsed"), collapse_panels=True)
@@ -370,7 +377,7 @@ class _Writer:
             self.rec.disconnect()
         last_write.frames = len(self.view.times)
         last_write.exact_frames = len(self.exact.times)
-        last_write.steps = self.traj.n_steps
+        last_write.steps = int(self.result.steps[0])
         last_write.rows = self.rows
         last_write.calls = self.calls
 
@@ -411,6 +418,9 @@ class _Writer:
         return np.stack([foot + h * (i * a + j * b) for i, j in corners])
 
     def _write_bodies(self) -> None:
+        if self.many:
+            self._write_many_bodies()
+            return
         view, exact = self.view, self.exact
         centres = _pad3(view.state.s)  # (T, N, 3)
         for n, name in enumerate(self.model.body_names):
@@ -438,17 +448,31 @@ class _Writer:
             self._static(f"/spin/{name}", rr.SeriesLines(names=names))
             self._send(f"/spin/{name}", rr.Scalars.columns(scalars=exact.state.w[:, n]), exact.index)
 
+    def _write_many_bodies(self) -> None:
+        """Every sphere as an instance of one entity: positions each frame, radii and colours
+        (one per body, the viewer's palette) once."""
+        view = self.view
+        centres = _pad3(view.state.s).astype(np.float32)  # (T, N, 3)
+        n = self.model.n_bodies
+        colors = np.array([_PALETTE[k % len(_PALETTE)] for k in range(n)], dtype=np.uint8)
+        self._static("/world/bodies", rr.Points3D.from_fields(radii=self.model.radius[0].astype(np.float32),
+                                                              colors=colors))
+        cols = rr.Points3D.columns(positions=centres.reshape(-1, 3)).partition(np.full(len(view.times), n))
+        self._send("/world/bodies", cols, view.index)
+
     def _contact_bodies(self, c: int) -> list[str]:
-        model = self.model
-        if c < model.n_pairs:
-            return [model.body_names[model.pair_i[c]], model.body_names[model.pair_j[c]]]
-        return [model.body_names[(c - model.n_pairs) % model.n_bodies]]
+        i, j = self.exact.contacts.pairs[c]
+        names = self.model.body_names
+        return [names[i], names[j]] if j >= 0 else [names[i]]
 
     def _write_contacts(self) -> None:
+        if self.many_contacts:
+            self._write_many_contacts()
+            return
         view, exact = self.view.contacts, self.exact.contacts
         radius = float(self.model.radius.mean())
         for c in self.touched:
-            name = self.contact_names[c]
+            name = exact.names[c]
             bodies = self._contact_bodies(c)
             on = view.overlap[:, 0, c] > 0
             lengths = on.astype(np.int32)
@@ -473,6 +497,24 @@ class _Writer:
             if self.friction:
                 friction = np.linalg.norm(exact.friction_force[:, 0, c], axis=-1)
                 self._send(f"{plot}/friction_force", rr.Scalars.columns(scalars=friction), index)
+
+    def _write_many_contacts(self) -> None:
+        """Every contact at once: points and normal (and friction) force arrows of all contacts
+        pressed at each frame, and how many there are as a plot."""
+        view = self.view.contacts
+        on = view.overlap[:, 0] > 0  # (T, C)
+        lengths = on.sum(axis=1).astype(np.int32)
+        point = _pad3(view.point[:, 0][on])
+        radius = float(self.model.radius.mean())
+        self._static("/world/contacts/points", rr.Points3D.from_fields(colors=[(0, 0, 0)], radii=0.05 * radius))
+        self._send("/world/contacts/points", rr.Points3D.columns(positions=point).partition(lengths), self.view.index)
+        self._arrows("/world/contacts/normal_force", _pad3(view.normal_force[:, 0][on]), point, lengths, 1,
+                     (255, 215, 0))
+        if self.friction and view.friction_force is not None:
+            self._arrows("/world/contacts/friction_force", _pad3(view.friction_force[:, 0][on]), point, lengths, 1,
+                         (255, 64, 160))
+        exact_on = (self.exact.contacts.overlap[:, 0] > 0).sum(axis=1).astype(float)
+        self._send("/contacts/count", rr.Scalars.columns(scalars=exact_on), self.exact.index)
 
     def _arrows(self, entity: str, force: np.ndarray, point: np.ndarray, lengths: np.ndarray,
                 n_bodies: int, color: tuple[int, int, int]) -> None:
@@ -511,21 +553,19 @@ class _Writer:
                 self._send("/residuals/angular_momentum", angular, index)
 
     def _write_steps(self) -> None:
-        """Every step, float64, so `read_recording` restores the run exactly."""
+        """The trajectory exactly, float64, so that `read_recording` restores the run: knots,
+        contact records and contact intervals, each with its row number (order on reading)."""
         traj = self.traj
-        n_steps = traj.n_steps
-        arrays = {"step": np.arange(n_steps, dtype=np.int64), "t": traj.t[:, 0], "s": traj.s[:, 0],
-                  "v": traj.v[:, 0], "w": traj.w[:, 0], "q": traj.q[:, 0], "work": traj.work[:, 0],
-                  "free": traj.free[:, 0]}
-        if self.friction:
-            arrays["friction_pair"] = traj.friction_pair[:, 0]
-            arrays["friction_wall"] = traj.friction_wall[:, 0]
-        cols = []
-        for key, a in arrays.items():
-            width = int(np.prod(a.shape[1:]))
-            if width:
-                cols.append(_any_column(key, a.reshape(n_steps * width), width, n_steps))
-        self._send("/collide/steps", cols, rr.TimeColumn(TIMELINE, duration=traj.t[:, 0]))
+        for entity, table, time_col in (("/collide/knots", traj.knots, kn.K_T),
+                                         ("/collide/contact_records", traj.records, kn.R_T),
+                                         ("/collide/contact_intervals", traj.intervals, kn.V_START)):
+            rows, width = table.shape
+            if rows == 0:
+                continue
+            cols = [_any_column("row", np.arange(rows, dtype=np.int64), 1, rows),
+                    _any_column("values", np.ascontiguousarray(table, dtype=np.float64).reshape(-1), width, rows)]
+            times = np.nan_to_num(table[:, time_col], nan=0.0)
+            self._send(entity, cols, rr.TimeColumn(TIMELINE, duration=times))
 
     def _write_meta(self) -> None:
         r, run, model = self.result, self.run, self.model
@@ -536,7 +576,8 @@ class _Writer:
             "jumps": int(r.jumps[0]), "wall_time_s": float(r.wall_time_s),
             "dt_request": "none" if run.dt_request is None else str(run.dt_request),
             "tol": float(run.tol[0]) if run.tol is not None else float("nan"),
-            "rows": int(self.traj.n_steps), "dim": model.dim, "spin_dim": model.spin_dim,
+            "knots": int(len(self.traj.knots)), "records": int(len(self.traj.records)),
+            "intervals": int(len(self.traj.intervals)), "dim": model.dim, "spin_dim": model.spin_dim,
             "n_bodies": model.n_bodies, "n_walls": model.n_walls, "friction": bool(self.friction),
             "stride": self.stride, "fps": float(self.fps), "contact_frames": self.contact_frames,
             "force_scale": float(self.force_scale), "warnings": list(r.warnings) or None,
@@ -691,36 +732,26 @@ def _rebuild(path: Path, chunks: list, meta: dict[str, Any]) -> SceneRun:
     except (SceneError, tomllib.TOMLDecodeError) as exc:
         raise _fail(path, f"its stored scene is invalid: {exc}") from None
     model, _ = compile_scenes([scene])
-    rows = int(meta["rows"])
     n, d = model.n_bodies, model.dim
     k, q_dim = model.spin_dim, model.orient_dim
-    steps = _columns(chunks, "/collide/steps")
 
-    def column(name: str, width: int, dtype: Any = float) -> np.ndarray:
-        if width == 0:
-            return np.zeros((rows, 0), dtype=dtype)
-        if name not in steps:
-            raise _fail(path, f"incomplete collide recording (step column '{name}' is missing)")
-        flat = _flat(steps[name])
-        if flat.size != rows * width:
-            raise _fail(path, f"incomplete collide recording (step column '{name}' has "
-                              f"{flat.size // max(width, 1)} of {rows} rows)")
-        return flat.reshape(rows, width).astype(dtype, copy=False)
+    def table(entity: str, count: str, width: int) -> np.ndarray:
+        rows = int(meta[count])
+        if rows == 0:
+            return np.zeros((0, width))
+        columns = _columns(chunks, entity)
+        if "values" not in columns or "row" not in columns:
+            raise _fail(path, f"incomplete collide recording ({entity} is missing)")
+        values, order = _flat(columns["values"]), _flat(columns["row"]).astype(np.int64)
+        if values.size != rows * width or order.size != rows:
+            raise _fail(path, f"incomplete collide recording ({entity} has {order.size} of {rows} rows)")
+        out = np.empty((rows, width))
+        out[order] = values.reshape(rows, width)
+        return out
 
-    order = np.argsort(column("step", 1, np.int64)[:, 0], kind="stable")
-
-    def get(name: str, shape: tuple[int, ...], dtype: Any = float) -> np.ndarray:
-        width = int(np.prod(shape))
-        return column(name, width, dtype)[order].reshape(rows, 1, *shape)
-
-    friction = bool(meta.get("friction")) and model.friction
-    traj = Trajectory(
-        t=column("t", 1)[order],
-        s=get("s", (n, d)), v=get("v", (n, d)), w=get("w", (n, k)), q=get("q", (n, q_dim)),
-        work=column("work", 1)[order], free=column("free", 1, bool)[order],
-        friction_pair=get("friction_pair", (model.n_pairs, d)) if friction else None,
-        friction_wall=get("friction_wall", (model.n_walls, n, d)) if friction else None,
-    )
+    traj = Trajectory(table("/collide/knots", "knots", int(kn.NK)),
+                      table("/collide/contact_records", "records", int(kn.NR)),
+                      table("/collide/contact_intervals", "intervals", 4), model)
 
     def state(label: str) -> State:
         def vec(key: str, width: int) -> np.ndarray:
@@ -737,7 +768,7 @@ def _rebuild(path: Path, chunks: list, meta: dict[str, Any]) -> SceneRun:
                        integrator=str(meta["integrator"]), dt=np.array([meta["dt"]], float),
                        steps=np.array([meta["steps"]], np.int64),
                        jumps=np.array([meta["jumps"]], np.int64),
-                       wall_time_s=float(meta["wall_time_s"]), contacts=log, trajectory=traj,
+                       wall_time_s=float(meta["wall_time_s"]), contacts=log, trajectories=[traj],
                        warnings=[str(w) for w in (meta.get("warnings") or [])])
     request = meta.get("dt_request", "none")
     dt_request: float | str | None = None if request == "none" else \

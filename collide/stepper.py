@@ -1,10 +1,9 @@
-"""The run loop: closed-form free flight between contacts, integrator steps during contact.
+"""Running scenes through the compiled engine (`collide.engine.kernels`) and what a run returns.
 
-`simulate` advances B runs in lock step. In each pass a run either jumps in closed form to
-its next contact (or to its end), or takes one integrator step; so the step count follows the
-contact time, not the run time. Integrators with `events` shorten the step that would cross the
-start or end of a contact so that both land exactly on a step; the `seed` integrator keeps the
-report's fixed grid instead (its jumps land on grid points), which is what reproduces its tables.
+`simulate` packs a batch of runs into the kernels' tables, runs each member, and unpacks a
+`RunResult`: final states, counters, contact log and (when recording) a `Trajectory` per member.
+The engine itself (windows, islands, closed-form free flight, event-located steps; the seed's
+fixed grid) is described in `collide/engine/kernels.py` and the README.
 """
 
 from __future__ import annotations
@@ -12,17 +11,16 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
-from collide import friction as fr
-from collide import integrators, pairstep
-from collide import physics as ph
-from collide.integrators import INTEGRATORS, Geometry, Integrator, StepForces, friction_frame, geometry, no_friction
-from collide.model import Model, State, select_model, select_state
+from collide.engine import kernels as kn
+from collide.integrators import INTEGRATORS, Integrator
+from collide.model import Model, State, max_frequency, reference_frequency, select_model, select_state
 
 MAX_STEPS_DEFAULT = 20_000_000
-NO_CONTACT_TAIL = 1.0  # s: how long a run with no contact at all lasts
+EDGE_TOL = float(kn.EDGE_TOL)
 
 
 class RunError(RuntimeError):
@@ -31,43 +29,94 @@ class RunError(RuntimeError):
 
 @dataclass
 class Trajectory:
-    """Every step of B runs. Segment k-1 -> k was closed-form free flight where `free[k]`.
+    """One run's motion, exactly where it is known, plus its contacts.
 
-    t (S, B); s, v (S, B, N, D); w (S, B, N, K); q (S, B, N, Q); work (S, B);
-    friction_pair (S, B, P, D) and friction_wall (S, B, W, N, D) in N, or None without friction.
+    knots (K, kernels.NK): a body's state at a time (the ends of its steps, where free flight
+    starts and ends), with its acceleration just before and after; between two knots of a body
+    the motion is closed-form free flight (the earlier knot's K_FREE) or one integrator step,
+    rebuilt by a quintic Hermite (`diagnostics.sample`). records (R, kernels.NR): each engaged
+    contact at the end of each step (overlap, normal force, friction force on body i, mode).
+    intervals (I, 4): (i, j, start, end) of every contact phase; j = -1 - wall for walls.
+
+    `t`, `s`, `v`, `w`, `q`, `work`, `free` are the rows view: every body at every knot time,
+    (S, 1, ...), as older code and the recording's exact frames read it.
     """
 
-    t: np.ndarray
-    s: np.ndarray
-    v: np.ndarray
-    w: np.ndarray
-    q: np.ndarray
-    work: np.ndarray
-    free: np.ndarray
-    friction_pair: np.ndarray | None = None
-    friction_wall: np.ndarray | None = None
+    knots: np.ndarray
+    records: np.ndarray
+    intervals: np.ndarray
+    model: Model = field(repr=False)
+
+    @property
+    def knot_times(self) -> np.ndarray:
+        return np.unique(self.knots[:, kn.K_T])
 
     @property
     def n_steps(self) -> int:
-        return self.t.shape[0]
+        return len(self.knot_times)
 
-    def member(self, b: int) -> Trajectory:
-        """Run b alone, without the repeated rows that lock-step added after it ended."""
-        t = self.t[:, b]
-        keep = np.ones(len(t), bool)
-        keep[1:] = t[1:] > t[:-1]
+    @cached_property
+    def _rows(self):
+        from collide.diagnostics import sample
 
-        def pick(x: np.ndarray | None) -> np.ndarray | None:
-            return None if x is None else x[keep, b][:, None]
+        times = self.knot_times
+        return times, sample(self.model, self, times)
 
-        return Trajectory(t[keep][:, None], pick(self.s), pick(self.v), pick(self.w), pick(self.q),
-                          pick(self.work), pick(self.free), pick(self.friction_pair),
-                          pick(self.friction_wall))
+    @property
+    def t(self) -> np.ndarray:
+        return self._rows[0][:, None]
+
+    @property
+    def s(self) -> np.ndarray:
+        return self._rows[1].s
+
+    @property
+    def v(self) -> np.ndarray:
+        return self._rows[1].v
+
+    @property
+    def w(self) -> np.ndarray:
+        return self._rows[1].w
+
+    @property
+    def q(self) -> np.ndarray:
+        return self._rows[1].q
+
+    @property
+    def work(self) -> np.ndarray:
+        return self._rows[1].work
+
+    @cached_property
+    def free(self) -> np.ndarray:
+        """(S, 1): the segment that ends at row k was free flight for every body."""
+        times = self.knot_times
+        stepped = np.zeros(len(times), bool)
+        knots = self.knots
+        for body in range(self.model.n_bodies):
+            mine = knots[knots[:, kn.K_BODY] == body]
+            steps = mine[:-1, kn.K_FREE] == 0.0
+            ends = np.searchsorted(times, mine[1:, kn.K_T])
+            starts = np.searchsorted(times, mine[:-1, kn.K_T])
+            for a, b in zip(starts[steps], ends[steps]):
+                stepped[a + 1:b + 1] = True
+        free = ~stepped
+        free[0] = True
+        return free[:, None]
+
+    def contacts_touched(self) -> np.ndarray:
+        """(C, 2) every contact that was ever engaged, in the order they began: (i, j) with
+        j = -1 - wall."""
+        if not len(self.intervals):
+            return np.zeros((0, 2), np.int64)
+        pairs = self.intervals[:, :2].astype(np.int64)
+        _, first = np.unique(pairs, axis=0, return_index=True)
+        return pairs[np.sort(first)]
 
 
 @dataclass
 class ContactLog:
-    """Per run (B,): first contact start, last contact end, total contact time, max overlap."""
+    """Per run (B,): first contact start, last contact end, time in contact (any contact
+    engaged), largest overlap, and the number of contacts that began."""
 
     first_start: np.ndarray
     last_end: np.ndarray
@@ -89,109 +138,105 @@ class RunResult:
     jumps: np.ndarray
     wall_time_s: float
     contacts: ContactLog
-    trajectory: Trajectory | None = None
+    trajectories: list[Trajectory] | None = None
     warnings: list[str] = field(default_factory=list)
+    dt_min: np.ndarray | None = None  # (B,) the smallest step any island took
+    windows: np.ndarray | None = None  # (B,) windows of islands the run took
 
     @property
     def batch_size(self) -> int:
         return self.model.batch
 
+    @property
+    def trajectory(self) -> Trajectory | None:
+        """Member 0's trajectory (a batch of one's), or None when not recorded."""
+        return self.trajectories[0] if self.trajectories else None
+
     def member(self, index: int) -> RunResult:
-        """Batch member `index` as a run of batch 1 (its trajectory without lock-step padding)."""
-        def pick(x: np.ndarray) -> np.ndarray:
-            return x[index:index + 1]
+        """Batch member `index` as a run of batch 1."""
+        def pick(x: np.ndarray | None) -> np.ndarray | None:
+            return None if x is None else x[index:index + 1]
 
         log = ContactLog(*(pick(getattr(self.contacts, f)) for f in
                            ("first_start", "last_end", "duration", "max_overlap", "count")))
+        trajectories = None
+        if self.trajectories is not None:
+            traj = self.trajectories[index]
+            trajectories = [Trajectory(traj.knots, traj.records, traj.intervals, select_model(self.model, index))]
         return RunResult(select_model(self.model, index), select_state(self.initial, index),
-                         select_state(self.final, index), self.integrator, pick(self.dt),
-                         pick(self.steps), pick(self.jumps), self.wall_time_s, log,
-                         None if self.trajectory is None else self.trajectory.member(index),
-                         list(self.warnings))
+                         select_state(self.final, index), self.integrator, pick(self.dt), pick(self.steps),
+                         pick(self.jumps), self.wall_time_s, log, trajectories, list(self.warnings),
+                         pick(self.dt_min), pick(self.windows))
 
 
 # ---------------------------------------------------------------------------------------------
-# Stability
+# Before a run: refuse what cannot be trusted
 
 
-def contact_frequencies(model: Model) -> tuple[np.ndarray, np.ndarray]:
-    """Angular frequency of each pair spring (B, P) and each sphere-wall spring (B, N)."""
-    inv_reduced = model.inv_mass[:, model.pair_i] + model.inv_mass[:, model.pair_j]
-    pair = np.sqrt(model.k_pair * inv_reduced)
-    wall = np.sqrt(model.k_wall * model.inv_mass) if model.n_walls else np.zeros((model.batch, 0))
-    return pair, wall
-
-
-def max_frequency(model: Model) -> np.ndarray:
-    """The stiffest frequency (B,) the contacts can produce, all engaged at once.
-
-    One pair alone: exactly sqrt(k_eff (1/m_i + 1/m_j)). Otherwise (chains, walls) a
-    Gershgorin bound on the mass-symmetrised stiffness matrix M^-1/2 K M^-1/2, whose rows hold
-    k/m_i on the diagonal and k/sqrt(m_i m_j) off it: exact for a uniform chain's fastest mode.
-    """
-    pair, wall = contact_frequencies(model)
-    if model.n_bodies == 2 and not model.n_walls:
-        return pair.max(axis=1, initial=0.0)
-    mi = model.mass[:, model.pair_i]
-    mj = model.mass[:, model.pair_j]
-    cross = model.k_pair / np.sqrt(mi * mj)
-    rows = (model.select_i.T @ (model.k_pair / mi + cross)[..., None])[..., 0] + \
-        (model.select_j.T @ (model.k_pair / mj + cross)[..., None])[..., 0]
-    if model.n_walls:
-        rows = rows + model.n_walls * model.k_wall / model.mass
-    return np.sqrt(rows.max(axis=1))
-
-
-def energy_bounds(model: Model, state: State) -> tuple[np.ndarray, np.ndarray]:
-    """Upper bounds on the overlap each pair (B, P) and wall contact (B, N) can reach.
-
-    All the energy in the centre-of-mass frame could end up in one pair's spring; against a
-    wall, all the energy could. Gravity adds what a fall over the run could release (ignored
-    here without a fixed duration).
-    """
-    ke = ph.kinetic_energy(model, state.v, state.w)
-    total_mass = model.mass.sum(axis=1)
+def approach_bound(model: Model, state: State) -> np.ndarray:
+    """A bound (B,) on the normal approach speed a contact can reach: twice the fastest centre
+    speed relative to the centre of mass (spin adds no normal approach), plus a fall under
+    gravity onto a wall from the highest start."""
     p = np.einsum("bn,bnd->bd", model.mass, state.v)
-    ke_com = ke - 0.5 * np.sum(p * p, -1) / total_mass
-    pair = np.sqrt(2 * np.maximum(ke_com, 0.0)[:, None] / model.k_pair)
-    wall = np.sqrt(2 * ke[:, None] / model.k_wall) if model.n_walls else np.zeros((model.batch, 0))
-    return pair, wall
+    com = p / model.mass.sum(axis=1)[:, None]
+    with np.errstate(over="ignore", invalid="ignore"):
+        rel = np.sqrt(((state.v - com[:, None, :]) ** 2).sum(-1)).max(axis=1)
+        speed = 2.0 * rel
+        if model.gravity is not None and model.n_walls:
+            height = np.einsum("bnd,wd->bwn", state.s, model.wall_normal) - \
+                (model.wall_point * model.wall_normal).sum(-1)[None, :, None]
+            into = np.maximum(-np.einsum("bd,wd->bw", model.gravity, model.wall_normal), 0.0)
+            fall = np.sqrt(2.0 * into[:, :, None] * np.maximum(height, 0.0)).max(axis=(1, 2))
+            speed = speed + fall + np.sqrt((state.v ** 2).sum(-1)).max(axis=1)
+    return speed
 
 
-def check_run(model: Model, state: State, dt: np.ndarray, integrator: Integrator,
-              max_steps: int) -> list[str]:
-    """Refuse a step the integrator cannot keep stable, a contact so soft the spheres pass
+def check_run(model: Model, state: State, dt: np.ndarray, integrator: Integrator, max_steps: int,
+              auto: np.ndarray) -> list[str]:
+    """Refuse a step the integrator cannot keep stable, a contact so soft the spheres would pass
     through each other, or a run that would take too many steps. Returns warnings."""
     warnings: list[str] = []
-    pair_w, wall_w = contact_frequencies(model)
     omega = max_frequency(model)
     limit = integrator.stability / omega
-    bad = dt > limit
+    bad = (dt > limit) & ~auto
     if bad.any():
         b = int(np.argmax(bad))
         raise RunError(f"dt = {dt[b]:.3g} s is beyond the stability limit of '{integrator.name}' "
                        f"for this contact (omega = {omega[b]:.4g} rad/s); the largest safe step is "
                        f"{limit[b]:.3g} s (use --dt auto to choose one)")
-    pair_d, wall_d = energy_bounds(model, state)
-    reach = model.radius[:, model.pair_i] + model.radius[:, model.pair_j]
-    if model.n_pairs and (pair_d >= reach).any():
-        b, p = np.unravel_index(np.argmax(pair_d / reach), pair_d.shape)
-        names = model.contact_names()[p]
-        raise RunError(f"contact.k = {model.k_pair[b, p] * 2:.4g} N/m is too soft for {names}: the "
-                       f"overlap could reach {pair_d[b, p]:.3g} m, beyond the distance between "
-                       f"centres at touch ({reach[b, p]:.3g} m); the spheres would pass through "
-                       "each other. Use a stiffer contact.k")
-    if model.n_walls and (wall_d >= model.radius).any():
-        b, n = np.unravel_index(np.argmax(wall_d / model.radius), wall_d.shape)
-        raise RunError(f"contact.k = {model.k_wall[b, n]:.4g} N/m is too soft for body "
-                       f"{model.body_names[n]} on a wall: the overlap could reach {wall_d[b, n]:.3g} m, "
-                       f"more than its radius; it would pass through the wall. Use a stiffer contact.k")
-    small = np.minimum(model.radius[:, model.pair_i], model.radius[:, model.pair_j])
-    if model.n_pairs and (pair_d > small).any():
-        warnings.append("the contact is soft: an overlap could exceed the smaller radius")
-    # Steps one contact takes; the slowest spring sets the longest contact.
-    slowest = np.minimum(pair_w.min(axis=1, initial=np.inf), wall_w.min(axis=1, initial=np.inf))
-    per_contact = math.pi / (slowest * dt)
+    # Pass-through: the overlap a head-on approach at the bound would reach, against the
+    # distance between centres at touch (the stiffest wall: the sphere's own radius).
+    speed = approach_bound(model, state)
+    k_pair = model.pair_table[..., 0].reshape(model.batch, -1).min(axis=1)
+    heavy = np.sort(model.mass, axis=1)[:, -2:] if model.n_bodies > 1 else model.mass
+    reduced = heavy.prod(axis=1) / heavy.sum(axis=1) if model.n_bodies > 1 else model.mass[:, 0]
+    with np.errstate(over="ignore", invalid="ignore"):
+        overlap = speed * np.sqrt(reduced / k_pair)
+    reach = 2.0 * model.radius.min(axis=1)
+    if model.n_bodies > 1 and not np.all(np.isfinite(overlap)):
+        raise RunError("the speeds are too large to judge whether the spheres would pass through each other "
+                       "(the bound overflows); use smaller velocities")
+    if model.n_bodies > 1 and (overlap >= reach).any():
+        b = int(np.argmax(overlap / reach))
+        raise RunError(f"contact.k = {model.k[b]:.4g} N/m is too soft: the overlap could reach {overlap[b]:.3g} m, "
+                       f"beyond the distance between centres at touch ({reach[b]:.3g} m); the spheres would pass "
+                       "through each other. Use a stiffer contact.k")
+    if model.n_walls:
+        k_wall = model.wall_table[..., 0].reshape(model.batch, -1).min(axis=1)
+        with np.errstate(over="ignore", invalid="ignore"):
+            wall_overlap = speed * np.sqrt(model.mass.max(axis=1) / k_wall)
+        if not np.all(np.isfinite(wall_overlap)):
+            raise RunError("the speeds are too large to judge whether a sphere would pass through a wall "
+                           "(the bound overflows); use smaller velocities")
+        if (wall_overlap >= model.radius.min(axis=1)).any():
+            b = int(np.argmax(wall_overlap / model.radius.min(axis=1)))
+            raise RunError(f"contact.k = {model.k[b]:.4g} N/m is too soft for a sphere on a wall: the overlap could "
+                           f"reach {wall_overlap[b]:.3g} m, more than its radius; it would pass through the wall. "
+                           "Use a stiffer contact.k")
+    slowest = reference_frequency(model)
+    slowest = np.where(slowest > 0, slowest, np.inf)
+    per_contact = math.pi / (np.sqrt(k_pair / model.mass.max(axis=1)) * dt) if model.n_bodies > 1 else \
+        math.pi / (slowest * dt)
     if (per_contact > max_steps).any():
         b = int(np.argmax(per_contact))
         raise RunError(f"dt = {dt[b]:.3g} s is so small that one contact would take "
@@ -200,419 +245,151 @@ def check_run(model: Model, state: State, dt: np.ndarray, integrator: Integrator
 
 
 # ---------------------------------------------------------------------------------------------
-# Events
+# The run
 
 
-def _hermite_root(d0: np.ndarray, d1: np.ndarray, r0: np.ndarray, r1: np.ndarray) -> np.ndarray:
-    """Root in (0, 1) of the cubic Hermite through (0, d0, r0) and (1, d1, r1); r in per-step units.
-    Safeguarded Newton on the cubic in Horner form, kept inside the bracket."""
-    if d0.size == 1:  # one run, one contact: the same iteration in floats
-        return np.full(d0.shape, _hermite_root_1(float(d0.flat[0]), float(d1.flat[0]), float(r0.flat[0]),
-                                                 float(r1.flat[0])))
-    c2 = 3.0 * (d1 - d0) - 2.0 * r0 - r1
-    c3 = 2.0 * (d0 - d1) + r0 + r1
-    theta = np.clip(d0 / np.where(d0 != d1, d0 - d1, 1.0), 0.0, 1.0)
-    lo, hi = np.zeros_like(theta), np.ones_like(theta)
-    positive = d0 > 0
-    bracketed = positive != (d1 > 0)  # the others have no root to find: they do not hold it up
-    for _ in range(60):  # Newton converges in a few; bisection bounds the rest
-        p = d0 + theta * (r0 + theta * (c2 + theta * c3))
-        dp = r0 + theta * (2.0 * c2 + 3.0 * c3 * theta)
-        same = (p > 0) == positive
-        lo = np.where(same, theta, lo)
-        hi = np.where(same, hi, theta)
-        newton = theta - p / np.where(dp != 0, dp, np.inf)
-        step = np.where((newton >= lo) & (newton <= hi), newton, 0.5 * (lo + hi))
-        done = np.abs(step - theta)[bracketed].max(initial=0.0) <= 1e-15
-        theta = step
-        if done:
-            break
-    return theta
-
-def _hermite_root_1(d0: float, d1: float, r0: float, r1: float) -> float:
-    """`_hermite_root` for one cubic."""
-    c2 = 3.0 * (d1 - d0) - 2.0 * r0 - r1
-    c3 = 2.0 * (d0 - d1) + r0 + r1
-    theta = min(max(d0 / (d0 - d1 if d0 != d1 else 1.0), 0.0), 1.0)
-    if (d0 > 0) == (d1 > 0):
-        return theta  # no root to find
-    lo, hi = 0.0, 1.0
-    positive = d0 > 0
-    for _ in range(60):
-        p = d0 + theta * (r0 + theta * (c2 + theta * c3))
-        dp = r0 + theta * (2.0 * c2 + 3.0 * c3 * theta)
-        if (p > 0) == positive:
-            lo = theta
-        else:
-            hi = theta
-        newton = theta - p / dp if dp != 0 else math.inf
-        step = newton if lo <= newton <= hi else 0.5 * (lo + hi)
-        done = abs(step - theta) <= 1e-15
-        theta = step
-        if done:
-            break
-    return theta
+def _pad3(x: np.ndarray) -> np.ndarray:
+    out = np.zeros(x.shape[:-1] + (3,))
+    out[..., :x.shape[-1]] = x
+    return out
 
 
-def _scaled_overlaps(model: Model, state: State, g: Geometry) -> tuple[np.ndarray, np.ndarray]:
-    """Overlaps and their rates (B, C), pairs then walls, relative to the touching distance."""
-    c = g.c
-    rate_pair, rate_wall = ph.contact_rates(model, state, c)
-    reach = model.pair_reach
-    if not model.n_walls:
-        return c.overlap / reach, rate_pair / reach
-    radius = np.tile(model.radius, (1, model.n_walls))
-    b = model.batch
-    d = np.concatenate((c.overlap / reach, c.wall_overlap.reshape(b, -1) / radius), axis=1)
-    r = np.concatenate((rate_pair / reach, rate_wall.reshape(b, -1) / radius), axis=1)
-    return d, r
+def kernel_inputs(model: Model, state: State, b: int) -> tuple:
+    """Member b's body table G, contact tables and walls, gravity, as the kernels take them."""
+    n = model.n_bodies
+    G = np.zeros((n, int(kn.NG)))
+    G[:, kn.G_S:kn.G_S + 3] = _pad3(state.s[b])
+    G[:, kn.G_V:kn.G_V + 3] = _pad3(state.v[b])
+    if model.spin_dim == 1:
+        G[:, kn.G_W + 2] = state.w[b, :, 0]
+        G[:, kn.G_Q] = state.q[b, :, 0]
+    elif model.spin_dim == 3:
+        G[:, kn.G_W:kn.G_W + 3] = state.w[b]
+        G[:, kn.G_Q:kn.G_Q + 4] = state.q[b]
+    G[:, kn.G_TB] = state.t[b]
+    G[:, kn.G_IM] = model.inv_mass[b]
+    G[:, kn.G_II] = model.inv_inertia[b] if model.spin_dim else 0.0
+    G[:, kn.G_R] = model.radius[b]
+    G[:, kn.G_M] = model.mass[b]
+    G[:, kn.G_I] = model.inertia[b]
+    G[:, kn.G_MAT] = model.material[b]
+    tables = (np.ascontiguousarray(model.pair_table[b]), np.ascontiguousarray(model.wall_table[b]))
+    WP = np.zeros((model.n_walls, 6))
+    if model.n_walls:
+        WP[:, :3] = _pad3(model.wall_point)
+        WP[:, 3:] = _pad3(model.wall_normal)
+    grav = _pad3(model.gravity[b]) if model.gravity is not None else np.zeros(3)
+    return G, tables, WP, grav
 
 
-def _mode_events(model: Model, state: State, g: Geometry, scale: np.ndarray, rates: bool = False):
-    """The friction modes' event values (and rates) at a geometry, or None without friction."""
-    if g.modes is None:
-        return None
-    if g.speeds is not None:  # computed by the step that ended here
-        values, slopes = g.speeds
-        return (values / scale[:, None], slopes / scale[:, None]) if rates else values / scale[:, None]
-    acc = ph.normal_accel(model, g.c, g.fn, g.fw)
-    return fr.frame_events(model, friction_frame(model, g), state, acc, scale, rates, g.engaged)
-
-
-def step_with_events(model: Model, integrator: Integrator, state: State, h: np.ndarray,
-                     start: Geometry, scale: np.ndarray) -> tuple[State, StepForces, Geometry, np.ndarray]:
-    """One step; where an event would happen inside it, shorten it to land there.
-
-    Events: a contact starts or ends (overlap crosses zero: located with a cubic Hermite
-    through both ends of the trial step), or a contact's friction mode must change (a mode
-    event function crosses zero: located by a bracketing secant, the Illinois method). Each
-    refinement re-steps from the start with a shorter step.
-    """
-    new, forces, end = integrator.step(model, state, h, start)
-    if not integrator.events:
-        return new, forces, end, h
-    d0, r0 = _scaled_overlaps(model, state, start)
-    e0 = start.events if start.events is not None else _mode_events(model, state, start, scale)
-    mode_tol = 0.5 * fr.EDGE_TOL
-    live = None if e0 is None else e0 > mode_tol  # a mode entered on its own boundary is not watched
-    b = model.batch
-    rows = np.arange(b)
-    h_full = np.where(h != 0, h, 1.0)
-    pending = np.zeros(b, bool)  # a mode event is bracketed
-    col = np.zeros(b, int)  # the event function being solved for
-    lo, hi = np.zeros(b), np.ones(b)
-    f_lo, f_hi = np.zeros(b), np.zeros(b)
-    # The two trials before the latest (fraction of h, value): interpolation through the latest
-    # points converges fastest; the bracket keeps it safe.
-    t1, f1 = np.full(b, np.nan), np.full(b, np.nan)
-    t2, f2 = np.full(b, np.nan), np.full(b, np.nan)
-    # The shortest trial that crossed a contact's start or end (fraction, overlaps and rates at
-    # its end): a re-step that falls just short of the crossing refines between the two.
-    past = np.full(b, np.inf)
-    d_past, r_past = np.zeros_like(d0), np.zeros_like(r0)
-    accepted = np.zeros(b, bool)
-    shortest = np.where(h != 0, 16 * np.spacing(np.abs(state.t) + np.abs(h)), 0.0)
-    for _ in range(30):
-        frac = h / h_full
-        d1, r1 = _scaled_overlaps(model, new, end)
-        tol = ph.TOUCH_TOL
-        crossing = ((d0 > tol) & (d1 < -tol)) | ((d0 < -tol) & (d1 > tol))
-        theta = np.full(b, np.inf)  # where to re-step to; inf: accept this trial
-        if crossing.any():
-            root = _hermite_root(d0, d1, r0 * h[:, None], r1 * h[:, None])
-            first = np.where(crossing, root, np.inf).min(axis=1)
-            theta = np.full(b, np.inf)
-            np.multiply(first, frac, out=theta, where=np.isfinite(first))
-            crossed = crossing.any(axis=1) & (frac < past)
-            past = np.where(crossed, frac, past)
-            d_past = np.where(crossed[:, None], d1, d_past)
-            r_past = np.where(crossed[:, None], r1, r_past)
-        short = np.isfinite(past) & (frac < past) & ~crossing.any(axis=1)
-        if short.any():
-            # Fell short: the crossing lies between this trial's end and the shorter crossing one.
-            gap = np.where(short, past - frac, 0.0)
-            ahead = ((d1 > tol) & (d_past < -tol)) | ((d1 < -tol) & (d_past > tol))
-            root = _hermite_root(d1, d_past, r1 * (gap * h_full)[:, None], r_past * (gap * h_full)[:, None])
-            first = np.where(ahead, root, np.inf).min(axis=1)
-            found = short & np.isfinite(first)
-            theta = np.where(found, frac + np.where(found, first, 0.0) * gap, theta)
-        if e0 is not None:
-            e1, rate1 = _mode_events(model, new, end, scale, True)
-            beyond = live & (e1 < -mode_tol)
-            fresh = beyond.any(axis=1) & ~pending
-            if fresh.any():
-                # The function that crosses first (by linear estimate) is the one to solve for.
-                guess = np.where(beyond, e0 / np.where(beyond, e0 - e1, 1.0), np.inf)
-                col = np.where(fresh, guess.argmin(axis=1), col)
-                lo = np.where(fresh, 0.0, lo)
-                f_lo = np.where(fresh, e0[rows, col], f_lo)
-                pending = pending | fresh
-                hi = np.where(fresh, frac, hi)
-                f_hi = np.where(fresh, e1[rows, col], f_hi)
-                t1, f1 = np.where(fresh, 0.0, t1), np.where(fresh, e0[rows, col], f1)
-                t2, f2 = np.where(fresh, np.nan, t2), np.where(fresh, np.nan, f2)
-            f = e1[rows, col]
-            update = pending & ~fresh
-            if update.any():
-                # Keep the bracket [lo, hi] around the root of the critical function.
-                hi = np.where(update & (f < 0), frac, hi)
-                f_hi = np.where(update & (f < 0), f, f_hi)
-                lo = np.where(update & (f >= 0), frac, lo)
-                f_lo = np.where(update & (f >= 0), f, f_lo)
-            others_fine = ~(beyond & (np.arange(e1.shape[1])[None, :] != col[:, None])).any(axis=1)
-            landed = pending & (np.abs(f) <= mode_tol) & others_fine
-            pending = pending & ~landed
-            # A mode change landed short of a contact crossing: it comes first; stop here.
-            theta = np.where(landed & short, np.inf, theta)
-            if pending.any():
-                estimate = _bracketed_root(lo, f_lo, hi, f_hi, (t2, f2), (t1, f1), (frac, f))
-                # Slide and band events have analytic rates: a cubic Hermite through both ends of
-                # the first trial, then Newton from the latest trial, kept inside the bracket.
-                slope = rate1[rows, col] * h_full
-                if fresh.any():
-                    rate0 = _mode_events(model, state, start, scale, True)[1]
-                    s0 = rate0[rows, col] * h
-                    known = fresh & np.isfinite(s0) & np.isfinite(slope)
-                    if known.any():
-                        cubic = _hermite_root(e0[rows, col][:, None], f[:, None], s0[:, None],
-                                              (slope * frac)[:, None])[:, 0] * frac
-                        estimate = np.where(known, cubic, estimate)
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    newton = frac - f / slope
-                usable = update & np.isfinite(newton) & (newton > lo) & (newton < hi)
-                estimate = np.where(usable, newton, estimate)
-                theta = np.where(pending, np.minimum(theta, estimate), theta)
-                t2, f2 = np.where(pending, t1, t2), np.where(pending, f1, f2)
-                t1, f1 = np.where(pending, frac, t1), np.where(pending, f, f1)
-        # A run that accepted its trial keeps it while others refine theirs (its trial is taken
-        # again unchanged, but the bookkeeping above has moved on).
-        redo = np.isfinite(theta) & (np.abs(theta - frac) > 1e-12 * np.maximum(frac, 1e-300)) & ~accepted
-        accepted = accepted | ~redo
-        if not redo.any():
-            break
-        # Never shorter than a few ticks of the clock: an event closer than that is taken as
-        # passed (by under 1e-15 s of a 0.1 s run), or the step would not move the time at all.
-        h = np.where(redo, np.maximum(h_full * np.maximum(theta, 1e-12), shortest), h)
-        new, forces, end = integrator.step(model, state, h, start)
-    return new, forces, end, h
-
-
-def _bracketed_root(lo: np.ndarray, f_lo: np.ndarray, hi: np.ndarray, f_hi: np.ndarray,
-                    older: tuple, previous: tuple, latest: tuple) -> np.ndarray:
-    """Next estimate of a root bracketed in [lo, hi] (f_lo >= 0 > f_hi), from the latest three
-    trials (t, f): inverse quadratic interpolation through them (exact for the quadratic onset
-    of an event at a tangency), else the secant through the latest two; where that falls outside
-    the bracket, false position on it, nudged off its ends, or bisection."""
-    (a, fa), (b, fb), (c, fc) = older, previous, latest
-    with np.errstate(divide="ignore", invalid="ignore"):
-        iqi = (a * fb * fc / ((fa - fb) * (fa - fc)) + b * fa * fc / ((fb - fa) * (fb - fc))
-               + c * fa * fb / ((fc - fa) * (fc - fb)))
-        secant = c - fc * (c - b) / (fc - fb)
-        estimate = np.where(np.isfinite(iqi) & (iqi > lo) & (iqi < hi), iqi, secant)
-        width = hi - lo
-        position = lo + width * f_lo / (f_lo - f_hi)
-        position = np.where(np.isfinite(position), np.clip(position, lo + 0.01 * width, hi - 0.01 * width),
-                            0.5 * (lo + hi))
-        inside = np.isfinite(estimate) & (estimate > lo) & (estimate < hi)
-    return np.where(inside, estimate, position)
-
-def _active(model: Model, state: State, g: Geometry) -> np.ndarray:
-    pair, wall = ph.active_contacts(model, state, g.c)
-    return pair.any(axis=1) | wall.any(axis=(1, 2))
-
-
-# ---------------------------------------------------------------------------------------------
-# The loop
-
-
-def _masked(new: State, old: State, keep_old: np.ndarray) -> State:
-    """Runs where keep_old is set keep their old state (a no-op step for finished runs)."""
-    if not keep_old.any():
-        return new
-    k3 = keep_old[:, None, None]
-    return State(np.where(keep_old, old.t, new.t), np.where(k3, old.s, new.s), np.where(k3, old.v, new.v),
-                 np.where(k3, old.w, new.w), np.where(k3, old.q, new.q),
-                 np.where(keep_old, old.work, new.work))
-
-
-def default_tail(contacts: ContactLog) -> np.ndarray:
-    """After the last separation, keep going long enough to see the bodies part."""
-    span = contacts.last_end - contacts.first_start
-    tail = np.maximum(2.0 * span, 0.1 * contacts.last_end)
-    return np.where(np.isfinite(tail), tail, NO_CONTACT_TAIL)
+def unpack_state(model: Model, G: np.ndarray, t: float) -> tuple:
+    """s, v, w, q of one member from its final body table."""
+    d = model.dim
+    s, v = G[:, kn.G_S:kn.G_S + d].copy(), G[:, kn.G_V:kn.G_V + d].copy()
+    if model.spin_dim == 1:
+        w, q = G[:, kn.G_W + 2:kn.G_W + 3].copy(), G[:, kn.G_Q:kn.G_Q + 1].copy()
+    elif model.spin_dim == 3:
+        w, q = G[:, kn.G_W:kn.G_W + 3].copy(), G[:, kn.G_Q:kn.G_Q + 4].copy()
+    else:
+        w, q = np.zeros((model.n_bodies, 0)), np.zeros((model.n_bodies, 0))
+    return s, v, w, q
 
 
 def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
              duration: np.ndarray | None = None, tail: np.ndarray | None = None,
              record: bool = True, max_steps: int = MAX_STEPS_DEFAULT,
-             event_tol: np.ndarray | float = fr.EDGE_TOL) -> RunResult:
+             event_tol: np.ndarray | float = EDGE_TOL, auto: np.ndarray | None = None,
+             omega_h: np.ndarray | None = None) -> RunResult:
     """Run B scenes to their end. `duration` and `tail` are (B,) with NaN meaning 'not set'.
-    `event_tol` (relative to the fastest initial speed): how close a friction mode change must
-    land (the slip to the band's edge, a stuck contact's force to its limits)."""
+    `dt` (B,) is the step; where `auto` is set each island steps by omega_h over its own stiffest
+    frequency instead (dt is then the step of the stiffest single contact). `event_tol`
+    (relative to the fastest initial speed): how close a friction mode change must land."""
     integ = INTEGRATORS[integrator]
-    b = model.batch
-    dt = np.broadcast_to(np.asarray(dt, dtype=float), (b,)).copy()
-    warnings = check_run(model, initial, dt, integ, max_steps)
-    t_end = np.full(b, np.inf) if duration is None else np.where(np.isnan(duration), np.inf, duration)
-    tail_set = np.full(b, np.nan) if tail is None else np.asarray(tail, dtype=float)
-    state = initial.copy()
-    done = np.zeros(b, bool)
-    steps = np.zeros(b, dtype=np.int64)
-    jumps = np.zeros(b, dtype=np.int64)
-    log = ContactLog(np.full(b, np.nan), np.full(b, np.nan), np.zeros(b), np.zeros(b), np.zeros(b, np.int64))
-    in_contact = np.zeros(b, bool)
-    contact_began = np.zeros(b)
-    zero_forces = no_friction(model)
-    rows: list[tuple] = []
-
-    def snapshot(s: State, free: np.ndarray, forces: StepForces) -> None:
-        if record:
-            # Lock-step rows repeat runs that did not move; `free` marks them as zero-length.
-            rows.append((s.t, s.s, s.v, s.w, s.q, s.work, free, forces.pair, forces.wall))
-
-    snapshot(state, np.ones(b, bool), zero_forces)
-    # Scale of the friction events: the fastest body at the start (at least the band), times the
-    # tolerance asked for over the one the events are located to.
-    speed = np.maximum(np.sqrt(np.max(np.sum(initial.v ** 2, -1), axis=1)), 10 * model.eps + 1e-300)
-    scale = speed * np.broadcast_to(np.asarray(event_tol, dtype=float), (b,)) / fr.EDGE_TOL
+    b_count = model.batch
+    dt = np.broadcast_to(np.asarray(dt, dtype=float), (b_count,)).copy()
+    auto = np.zeros(b_count, bool) if auto is None else np.broadcast_to(np.asarray(auto, bool), (b_count,))
+    if omega_h is None:
+        omega_h = dt * reference_frequency(model)
+    omega_h = np.broadcast_to(np.asarray(omega_h, dtype=float), (b_count,))
+    warnings = check_run(model, initial, dt, integ, max_steps, auto if integ.events else np.zeros(b_count, bool))
+    duration = np.full(b_count, np.nan) if duration is None else np.asarray(duration, dtype=float)
+    tail = np.full(b_count, np.nan) if tail is None else np.asarray(tail, dtype=float)
+    event_tol = np.broadcast_to(np.asarray(event_tol, dtype=float), (b_count,))
+    weights = np.asarray(integ.weights, dtype=float)
+    finals = []
+    trajectories = [] if record else None
+    stats = np.zeros((b_count, int(kn.NS)), np.int64)
+    figures = np.zeros((b_count, int(kn.NF)))
+    logs = np.zeros((b_count, 5))
     started = time.perf_counter()
-    passes = 0
-    while not done.all():
-        tau = ph.time_to_contact(model, state)
-        contact = (tau == 0.0) & ~done
-        if not integ.events:
-            # The seed integrator only sees contact on its grid: step when it begins within one.
-            t_next = state.t + dt
-            contact = contact | (~done & (tau < dt) & (t_next <= t_end * (1 + 1e-15)))
-        # Contact bookkeeping: starts and ends, for the summary and the tail.
-        began = contact & ~in_contact
-        ended = ~contact & in_contact & ~done
-        log.first_start = np.where(began & np.isnan(log.first_start), state.t, log.first_start)
-        contact_began = np.where(began, state.t, contact_began)
-        log.count += began
-        log.last_end = np.where(ended, state.t, log.last_end)
-        log.duration += np.where(ended, state.t - contact_began, 0.0)
-        in_contact = contact
-        if ended.any():
-            _check_energy(model, initial, state, ended, dt, integ)
-
-        free = ~contact & ~done
-        # A free run with no contact ahead ends a tail after its last contact.
-        ending = free & np.isinf(tau) & np.isinf(t_end)
-        if ending.any():
-            tails = np.where(np.isnan(tail_set), default_tail(log), tail_set)
-            if not integ.events:
-                tails = np.ceil(tails / dt) * dt
-            t_end = np.where(ending, state.t + tails, t_end)
-        to_contact = tau if integ.events else np.floor(tau / dt) * dt
-        if free.any():
-            jump = np.where(free, np.minimum(to_contact, t_end - state.t), 0.0)
-            state = _masked(ph.free_flight(model, state, jump), state, ~free)
-            jumps += free
-            snapshot(state, free, zero_forces)
-        if contact.any():
-            state, passes = _contact_phase(model, integ, state, contact, dt, t_end, steps, log,
-                                           snapshot, passes, max_steps, scale)
-        done = done | (state.t >= t_end * (1 - 1e-15))
-    wall_time = time.perf_counter() - started
-    # A contact still pressing at the end (resting on a wall) counts up to the end.
-    log.duration += np.where(in_contact, state.t - contact_began, 0.0)
-    trajectory = None
-    if record:
-        trajectory = Trajectory(*(np.stack(col) for col in zip(*rows)))
-        if not model.friction:
-            trajectory.friction_pair = trajectory.friction_wall = None
-    return RunResult(model=model, initial=initial, final=state, integrator=integrator, dt=dt,
-                     steps=steps, jumps=jumps, wall_time_s=wall_time, contacts=log,
-                     trajectory=trajectory, warnings=warnings)
-
-
-def _contact_phase(model: Model, integ: Integrator, state: State, contact: np.ndarray, dt: np.ndarray,
-                   t_end: np.ndarray, steps: np.ndarray, log: ContactLog, snapshot, passes: int,
-                   max_steps: int, scale: np.ndarray) -> tuple[State, int]:
-    """Step the runs in `contact` until one of them leaves contact or reaches its end."""
-    g = _engage(model, integ, state, geometry(model, state.s), scale)
-    not_stepping = ~contact
-    all_stepping = not not_stepping.any()
-    free_flags = np.zeros(model.batch, bool) | not_stepping
-    stalled = 0
-    while True:
-        passes += 1
-        if passes > max_steps:
-            raise RunError(f"the run did not end within {max_steps} steps; set a duration or a larger dt")
-        h = np.where(contact, np.minimum(dt, t_end - state.t), 0.0)
-        before = state.t
-        new, forces, g, h = step_with_events(model, integ, state, h, g, scale)
-        stalled = stalled + 1 if (contact & (new.t == before)).any() else 0
-        if stalled > 64:
-            raise RunError(f"the run stopped advancing at t = {float(before.max()):.6g} s (events closer than the "
-                           "clock resolves); report this scene, or try a looser --tol or a given --dt")
-        g = _engage(model, integ, new, g, scale)
-        state = new if all_stepping else _masked(new, state, not_stepping)
-        steps += contact
-        snapshot(state, free_flags, forces)
-        d = g.c.overlap
-        log.max_overlap = np.maximum(log.max_overlap, d.max(axis=1, initial=0.0))
-        if model.n_walls:
-            log.max_overlap = np.maximum(log.max_overlap, g.c.wall_overlap.max(axis=(1, 2), initial=0.0))
-        if passes % 256 == 0 and not (np.isfinite(state.s).all() and np.isfinite(state.v).all()):
-            _non_finite(model, integ, state)
-        active = _active(model, state, g) if integ.events else _active_seed(model, state, g, dt)
-        if ((contact & active & (state.t < t_end * (1 - 1e-15))) != contact).any():
-            if not (np.isfinite(state.s).all() and np.isfinite(state.v).all()):
-                _non_finite(model, integ, state)
-            return state, passes
-
-
-def _engage(model: Model, integ: Integrator, state: State, g: Geometry, scale: np.ndarray) -> Geometry:
-    """Geometry whose engaged contacts are those pressing or touching and approaching now, with
-    the friction mode of each decided from the state (events land exactly on mode changes)."""
-    if not integ.events:
-        return g  # the seed's own law: springs clamped at zero overlap, explicit friction
-    pair, wall = ph.active_contacts(model, state, g.c)
-    engaged = ph.Engaged(pair.astype(float), wall.astype(float))
-    same = g.engaged is not None and np.array_equal(engaged.pair, g.engaged.pair) and \
-        np.array_equal(engaged.wall, g.engaged.wall)
-    if not same:
-        g = geometry(model, state.s, engaged)
-    if model.friction:
-        if integrators.SCALAR_PAIRS and pairstep.applies(model):
-            g.modes, g.speeds = pairstep.decide(model, state, bool(engaged.pair[0, 0] > 0), float(scale[0]))
-            g.frame, g.events = None, g.speeds[0] / scale[:, None]
+    for b in range(b_count):
+        G, tables, WP, grav = kernel_inputs(model, initial, b)
+        spin = model.spin_dim > 0
+        friction = bool(model.friction and model.mu[b] > 0 and model.dim > 1)
+        fl = np.array([spin, friction, model.seed_lever, model.dim < 3, record, bool(auto[b]) and integ.events,
+                       max_steps, model.dim], dtype=np.int64)
+        speed = max(float(np.sqrt((initial.v[b] ** 2).sum(-1)).max()), 10 * float(model.eps[b]) + 1e-300)
+        t_end = duration[b] if np.isfinite(duration[b]) else np.inf
+        fp = np.array([dt[b], omega_h[b], t_end, tail[b], speed * event_tol[b] / EDGE_TOL])
+        if integ.events:
+            t, knots, recs, ivals, st, fg = kn.simulate(G, tables, WP, grav, weights, fl, fp)
         else:
-            rows = fr.contact_rows(model, g.c, g.fn, g.fw)
-            acc = ph.normal_accel(model, g.c, g.fn, g.fw)
-            g.frame, g.events = fr.decide_modes(model, rows, state, acc, engaged, scale)
-            g.modes, g.speeds = g.frame.modes, None
-    return g
+            t, knots, recs, ivals, st, fg = kn.seed_run(G, tables, WP, grav, fl, fp)
+        _check_status(model, b, st, fg, dt, integ)
+        finals.append((t, G, float(G[:, kn.G_WK].sum())))
+        stats[b], figures[b] = st, fg
+        logs[b] = _contact_log(ivals, t)
+        if record:
+            trajectories.append(Trajectory(knots, recs, ivals, select_model(model, b)))
+    wall_time = time.perf_counter() - started
+    parts = [unpack_state(model, G, t) for t, G, _ in finals]
+    final = State(np.array([t for t, _, _ in finals]), np.stack([p[0] for p in parts]),
+                  np.stack([p[1] for p in parts]), np.stack([p[2] for p in parts]),
+                  np.stack([p[3] for p in parts]), initial.work + np.array([w for _, _, w in finals]))
+    log = ContactLog(logs[:, 0], logs[:, 1], logs[:, 2], logs[:, 3] * 0 + figures[:, kn.F_MAX_OVERLAP],
+                     stats[:, kn.S_CONTACTS].copy())
+    dt_min = np.where(np.isfinite(figures[:, kn.F_DT_MIN]), figures[:, kn.F_DT_MIN], dt)
+    return RunResult(model=model, initial=initial, final=final, integrator=integrator, dt=dt,
+                     steps=stats[:, kn.S_STEPS].copy(), jumps=stats[:, kn.S_WINDOWS].copy(),
+                     wall_time_s=wall_time, contacts=log, trajectories=trajectories, warnings=warnings,
+                     dt_min=dt_min, windows=stats[:, kn.S_WINDOWS].copy())
 
 
-def _active_seed(model: Model, state: State, g: Geometry, dt: np.ndarray) -> np.ndarray:
-    """On the seed's grid a run stays in its contact phase while anything overlaps."""
-    return (g.c.overlap > 0).any(axis=1) | (g.c.wall_overlap > 0).any(axis=(1, 2))
+def _contact_log(ivals: np.ndarray, t_end: float) -> np.ndarray:
+    """first start, last end, time with any contact engaged, (overlap filled in later), count."""
+    if not len(ivals):
+        return np.array([np.nan, np.nan, 0.0, 0.0, 0.0])
+    start, end = ivals[:, kn.V_START], np.where(np.isnan(ivals[:, kn.V_END]), t_end, ivals[:, kn.V_END])
+    order = np.argsort(start)
+    total, cur_a, cur_b = 0.0, start[order[0]], end[order[0]]
+    for a, b in zip(start[order[1:]], end[order[1:]]):
+        if a > cur_b:
+            total += cur_b - cur_a
+            cur_a, cur_b = a, b
+        else:
+            cur_b = max(cur_b, b)
+    total += cur_b - cur_a
+    return np.array([start.min(), end.max(), total, 0.0, float(len(ivals))])
 
 
-def _non_finite(model: Model, integ: Integrator, state: State) -> None:
-    bad = int(np.argmax(~(np.isfinite(state.v).all(axis=(1, 2)) & np.isfinite(state.s).all(axis=(1, 2)))))
-    raise RunError(f"non-finite numbers at t = {state.t[bad]:.6g} s: the step is unstable; "
-                   f"try a smaller dt (largest safe step {_safe_step(model, integ)[bad]:.3g} s)")
-
-
-def _safe_step(model: Model, integ: Integrator) -> np.ndarray:
-    return integ.stability / max_frequency(model)
-
-
-def _check_energy(model: Model, initial: State, state: State, members: np.ndarray, dt: np.ndarray,
-                  integ: Integrator) -> None:
-    """Stop a run whose energy has grown far beyond its start: the step is unstable."""
-    e0 = ph.kinetic_energy(model, initial.v, initial.w)
-    e1 = ph.kinetic_energy(model, state.v, state.w)
-    if model.gravity is not None:
-        e0 = e0 - np.einsum("bn,bnd,bd->b", model.mass, initial.s, model.gravity)
-        e1 = e1 - np.einsum("bn,bnd,bd->b", model.mass, state.s, model.gravity)
-    grown = members & (e1 - e0 > 0.5 * np.abs(e0) + 1e-300)
-    if grown.any():
-        b = int(np.argmax(grown))
-        raise RunError(f"energy grew from {e0[b]:.4g} J to {e1[b]:.4g} J during a contact at "
-                       f"dt = {dt[b]:.3g} s: the step is unstable; the largest safe step is "
-                       f"{_safe_step(model, integ)[b]:.3g} s")
+def _check_status(model: Model, b: int, st: np.ndarray, fg: np.ndarray, dt: np.ndarray, integ: Integrator) -> None:
+    """Turn a kernel's status into a RunError naming the cause."""
+    status = int(st[kn.S_STATUS])
+    if status == kn.OK:
+        return
+    safe = integ.stability / max_frequency(model)[b]
+    at = f"t = {fg[kn.F_STATUS_T]:.6g} s"
+    if status == kn.NONFINITE:
+        raise RunError(f"non-finite numbers at {at}: the step is unstable; try a smaller dt "
+                       f"(largest safe step {safe:.3g} s)")
+    if status == kn.ENERGY:
+        raise RunError(f"energy grew from {fg[kn.F_STATUS_A]:.4g} J to {fg[kn.F_STATUS_B]:.4g} J during a contact "
+                       f"at dt = {dt[b]:.3g} s: the step is unstable; the largest safe step is {safe:.3g} s")
+    if status == kn.STALL:
+        raise RunError(f"the run stopped advancing at {at} (events closer than the clock resolves); report this "
+                       "scene, or try a looser --tol or a given --dt")
+    if status == kn.MAXSTEPS:
+        raise RunError(f"the run did not end within {int(st[kn.S_STEPS])} steps; set a duration or a larger dt")
+    if status == kn.SINGULAR:
+        raise RunError(f"the stuck contacts' friction could not be solved at {at} (a singular hold system)")
+    raise RunError(f"the engine stopped with status {status} at {at}")

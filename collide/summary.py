@@ -106,14 +106,19 @@ def _per_body_energy(model: Model, st: State) -> np.ndarray:
     energy = 0.5 * model.mass * np.sum(st.v * st.v, -1)
     if st.w.shape[-1]:
         energy = energy + 0.5 * model.inertia * np.sum(st.w * st.w, -1)
-    pair, wall = dg.overlaps(model, st.s)
-    # Each sphere of a pair is a spring of constant k compressed by half the overlap.
-    k = 2 * model.k_pair
-    half = 0.5 * np.maximum(pair, 0.0)
-    own = 0.5 * k * half * half
-    energy = energy + np.einsum("...p,np->...n", own, model.pair_to_body_i + model.pair_to_body_j)
-    if model.n_walls:
-        energy = energy + 0.5 * np.sum(model.k_wall[:, None, :] * np.maximum(wall, 0.0) ** 2, axis=-2)
+    contacts = dg.contacts_near(model, st.s)
+    if len(contacts):
+        _, overlap, _ = dg.contact_geometry(model, st.s, contacts)
+        pressed = np.maximum(overlap, 0.0)
+        k = dg.stiffness(model, contacts)
+        pair = contacts[:, 1] >= 0
+        # Each sphere of a pair is a spring of constant 2 k_eff compressed by half the overlap
+        # (half the pair's energy each); on a rigid wall the sphere takes all of it.
+        own = np.where(pair, 0.25, 0.5) * k * pressed * pressed
+        for c, (i, j) in enumerate(contacts):
+            energy[..., i] += own[..., c]
+            if j >= 0:
+                energy[..., j] += own[..., c]
     return energy
 
 

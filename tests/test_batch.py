@@ -17,7 +17,6 @@ from collide import batch as lib
 from collide.batch import BatchError, parse_sweep, parse_vary, plan_batch, read_summary, run_batch
 from collide.run import run_scene
 from collide.scene import SceneError, load_scene
-from tests.test_physics import numpy_pairs
 
 COLLIDE = Path(sys.executable).parent / "collide"
 
@@ -116,8 +115,7 @@ def test_sweep_rows_equal_single_runs(tmp_path: Path) -> None:
     outcome = lib.outcome_columns(plan.specs[0].scene)
     for spec, row in zip(plan.specs, read_summary(tmp_path / "s.csv")[1]):
         overrides = [f"{k}={v!r}" for k, v in spec.params.items()]
-        with numpy_pairs():  # the same numpy stepper as the batch (see test_physics.batch_and_singles)
-            single = run_scene(load_scene("demo-bonus", overrides), record=False).result
+        single = run_scene(load_scene("demo-bonus", overrides), record=False).result
         expected = []
         for n in range(2):
             expected += list(single.final.v[0, n]) + [single.final.w[0, n, 0]]

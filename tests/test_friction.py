@@ -1,104 +1,100 @@
-"""The friction modes' kinematics: the hold rate against a finite difference of the slip, its
-slope in the impulse, and the order the compositions keep with friction."""
+"""The friction modes' kinematics: the hold rate against a finite difference of the slip, and
+the order the compositions keep with friction, in the plane and out of it."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from collide import friction as fr
-from collide import physics as ph
 from collide.accuracy import outcome, speed_scale
-from collide.integrators import geometry
-from collide.model import compile_scenes
+from collide.engine import kernels as kn
+from collide.model import compile_scenes, reference_frequency
 from collide.run import run_scene
 from collide.scene import load_scene, parse_scene
-from collide.stepper import max_frequency
 
 
-def pressed_pair(dim: int, lever: str, wall: bool):
-    """Two spinning spheres pressed together (and onto a wall), every contact forced to stick,
-    with a 3D friction direction off the slip's so that it turns with the normal."""
-    def vec(*x: float) -> list[float]:
-        return list(x[:dim])
-
-    spins = ([3.0], [-5.0]) if dim == 2 else ([1.0, -2.0, 3.0], [0.5, 2.0, -1.0])
-    raw = {"dim": dim, "contact": {"k": 1500.0, "mu": 0.5, "lever": lever},
-           "body": [{"name": "a", "mass": 0.03, "radius": 0.03, "position": vec(0.0, 0.5, 0.0),
-                     "velocity": vec(1.0, 0.3, -0.2), "spin": spins[0]},
-                    {"name": "b", "mass": 0.02, "radius": 0.025, "position": vec(0.5, 0.5, 0.0),
-                     "velocity": vec(-1.0, 0.5, 0.4), "spin": spins[1]}]}
+def pressed_island(dim: int, seed: bool, wall: bool):
+    """Two spinning spheres pressed together (and the first onto a wall), as an island's tables."""
+    rng = np.random.default_rng(3)
+    X = np.zeros((2, int(kn.NX)))
+    X[0, kn.X_S:kn.X_S + 3] = [0.0, 0.031, 0.01]
+    X[1, kn.X_S:kn.X_S + 3] = [0.04, 0.0, 0.0]
+    X[:, kn.X_V:kn.X_V + 3] = rng.normal(size=(2, 3))
+    X[:, kn.X_W:kn.X_W + 3] = rng.normal(size=(2, 3)) * 5
+    if dim == 2:
+        X[:, kn.X_S + 2] = X[:, kn.X_V + 2] = 0.0
+        X[:, kn.X_W] = X[:, kn.X_W + 1] = 0.0
+    mass, radius = np.array([0.03, 0.02]), np.array([0.03, 0.025])
+    X[:, kn.X_M], X[:, kn.X_IM], X[:, kn.X_R] = mass, 1 / mass, radius
+    X[:, kn.X_I] = 0.4 * mass * radius**2
+    X[:, kn.X_II] = 1 / X[:, kn.X_I]
+    nc = 2 if wall else 1
+    C = np.zeros((nc, int(kn.NC)))
+    CI = np.zeros((nc, int(kn.NCI)), np.int64)
+    CI[0, :4] = [0, 1, 0, 1]
+    C[0, kn.C_K], C[0, kn.C_REACH] = 750.0, radius.sum()
+    WP = np.zeros((1, 6))
     if wall:
-        raw["wall"] = [{"point": vec(0.0, -1.0, 0.0), "normal": vec(0.0, 1.0, 0.0)}]
-    model, state = compile_scenes([parse_scene(raw)])
-    state.s[0, 0] = np.array([0.0, 0.031, 0.01])[:dim]  # overlapping each other (and the wall)
-    state.s[0, 1] = np.array([0.04, 0.0, 0.0])[:dim]
-    if wall:
-        model.wall_point[0] = np.array([0.0, 0.0025, 0.0])[:dim]
-    c = ph.contact_geometry(model, state.s)
-    engaged = ph.Engaged((c.overlap > 0).astype(float), (c.wall_overlap > 0).astype(float))
-    g = geometry(model, state.s, engaged)
-    acc = ph.normal_accel(model, g.c, g.fn, g.fw)
-    rows = fr.contact_rows(model, g.c, g.fn, g.fw)
-    frame, _ = fr.decide_modes(model, rows, state, acc, engaged, np.array([2.0]))
-    modes = frame.modes
-    live = np.concatenate((engaged.pair, engaged.wall.reshape(1, -1)), axis=1) > 0
-    modes.mode[:] = np.where(live, fr.STICK, fr.BAND)
-    if dim == 3:
-        modes.entry = modes.entry + 0.3 * np.array([0.0, 0.0, 1.0])
-    return model, state, engaged, modes, live[0]
+        WP[0] = [0.0, 0.0025, 0.0, 0.0, 1.0, 0.0]
+        CI[1, :4] = [0, -1, 0, -1]
+        C[1, kn.C_K], C[1, kn.C_REACH] = 1500.0, radius[0]
+    return X, C, CI, WP, nc, np.array([0.0, -9.81, 0.0])
 
 
-def along(model, s, vel, engaged, modes):
-    g = geometry(model, s, engaged)
-    frame = fr.geometry_frame(model, g.c, g.fn, g.fw, modes)
-    return np.add.reduce(fr.slip(model, frame.rows, vel) * frame.unit, -1)
+def slips(X, C, CI, WP, nc, seed, spin=1):
+    kn.geometry(X, C, CI, nc, WP, seed)
+    return np.array([kn.slip(X, C, CI, c, kn.X_V, kn.X_W, spin) for c in range(nc)])
 
 
 @pytest.mark.parametrize("dim", [2, 3])
-@pytest.mark.parametrize("lever", ["seed", "contact"])
+@pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("wall", [False, True])
-def test_hold_rate_is_the_slip_rate_without_friction(dim, lever, wall):
-    model, state, engaged, modes, live = pressed_pair(dim, lever, wall)
-    g = geometry(model, state.s, engaged)
-    acc = ph.normal_accel(model, g.c, g.fn, g.fw)
-    frame = fr.geometry_frame(model, g.c, g.fn, g.fw, modes)
-    vel = np.concatenate((state.v.reshape(1, -1), state.w.reshape(1, -1)), axis=1)
-    rate, slope = fr.hold_rate(model, frame, vel, acc)
-    # Central difference along the frictionless motion (spins do not change without friction).
+def test_hold_rate_is_the_slip_rate_without_friction(dim, seed, wall):
+    """G (`kernels.slip_rate` under springs and gravity) is the tangential part of the slip's
+    rate of change along the frictionless motion: checked by a central difference."""
+    X, C, CI, WP, nc, grav = pressed_island(dim, seed, wall)
+    seed = np.int64(seed)
+    kn.geometry(X, C, CI, nc, WP, seed)
+    kn.springs(X, C, CI, 2, nc, grav)
+    assert (C[:nc, kn.C_DELTA] > 0).all()  # really pressed: the springs act
+    rate = np.array([kn.slip_rate(X, C, CI, c, kn.X_V, kn.X_W, kn.X_A, kn.X_L, np.int64(1), seed, np.int64(1))
+                     for c in range(nc)])
+    acc = X[:, kn.X_A:kn.X_A + 3].copy()
     h = 1e-6
-    gen_acc = np.concatenate((acc.reshape(1, -1), np.zeros((1, state.w[0].size))), axis=1)
-    ahead = along(model, state.s + h * state.v + 0.5 * h * h * acc, vel + h * gen_acc, engaged, modes)
-    behind = along(model, state.s - h * state.v + 0.5 * h * h * acc, vel - h * gen_acc, engaged, modes)
-    numeric = (ahead - behind) / (2 * h)
+    ends = []
+    for sign in (1.0, -1.0):
+        Y = X.copy()
+        Y[:, kn.X_S:kn.X_S + 3] += sign * h * X[:, kn.X_V:kn.X_V + 3] + 0.5 * h * h * acc
+        Y[:, kn.X_V:kn.X_V + 3] += sign * h * acc
+        ends.append(slips(Y, C.copy(), CI, WP, nc, seed))
+    numeric = (ends[0] - ends[1]) / (2 * h)
+    kn.geometry(X, C, CI, nc, WP, seed)
+    n = C[:nc, kn.C_N:kn.C_N + 3]
+    tangential = numeric - np.sum(numeric * n, axis=1, keepdims=True) * n
     # Truncation h^2 |third derivative| and rounding 1e-16 |slip| / h: both below 1e-7 relative.
-    assert rate[0, live] == pytest.approx(numeric[0, live], rel=1e-7, abs=1e-7 * np.abs(numeric).max())
-    # G is affine in the contact's own impulse: its slope from a finite impulse is exact.
-    for contact in np.nonzero(live)[0]:
-        lam = np.zeros(rate.shape)
-        lam[0, contact] = 1e-4
-        coords = (lam[..., None] * frame.unit).reshape(1, 1, -1)
-        moved = vel - model.inv_mass_gen * (coords @ frame.rows.impulse_rows)[:, 0]
-        finite = (fr.hold_rate(model, frame, moved, acc)[0][0, contact] - rate[0, contact]) / 1e-4
-        assert slope[0, contact] == pytest.approx(finite, rel=1e-8, abs=1e-6)
+    assert rate == pytest.approx(tangential, rel=1e-7, abs=1e-7 * np.abs(tangential).max())
+    assert np.abs(rate).max() > 1.0  # not vacuous
+
+
+def _order(scene, fractions=(0.4, 0.2)):
+    omega = float(reference_frequency(compile_scenes([scene])[0])[0])
+    reference = outcome(run_scene(scene, dt=0.01 / omega, record=False).result)
+    errors = [np.abs(outcome(run_scene(scene, dt=x / omega, record=False).result) - reference).max()
+              / speed_scale(scene) for x in fractions]
+    return errors, np.log2(errors[0] / errors[1])
 
 
 def test_friction_keeps_sixth_order():
     """The bonus demo slides, sticks on the band's edge, leaves it and slides again: kahan6 keeps
     its order through all of it, because a stuck contact is held symmetrically."""
-    scene = load_scene("demo-bonus")
-    model, _ = compile_scenes([scene])
-    omega = float(max_frequency(model)[0])
-    reference = outcome(run_scene(scene, dt=0.01 / omega, record=False).result)
-    errors = [np.abs(outcome(run_scene(scene, dt=x / omega, record=False).result) - reference).max()
-              / speed_scale(scene) for x in (0.4, 0.2)]
-    order = np.log2(errors[0] / errors[1])
+    errors, order = _order(load_scene("demo-bonus"))
     assert errors[1] < 1e-8
     assert order > 5.0
 
 
 def tilted_bonus(**changes) -> dict:
-    """The bonus demo in 3D with the first ball thrown and both spinning out of the plane."""
+    """The bonus demo in 3D with the first ball thrown and both spinning out of the plane: the
+    slip turns as the contact goes on."""
     raw = {"name": "tilted", "dim": 3, "contact": {"k": 1500.0, "mu": 0.5, "lever": "seed"},
            "body": [{"name": "ball1", "mass": 0.0254, "radius": 0.03021, "position": [0.0, 0.01, 0.0],
                      "velocity": [1.0, 0.0, 0.3], "spin": [2.0, -1.0, 3.0]},
@@ -108,43 +104,43 @@ def tilted_bonus(**changes) -> dict:
     return raw
 
 
-def test_error_regime_knows_when_friction_leaves_the_plane():
-    from collide.run import error_regime
+def test_bonus_demo_in_any_plane_is_the_2d_run():
+    """No preferred axes: the bonus demo turned as a whole into a tilted plane takes the same
+    steps as in z = 0 and gives the turned 2D answer."""
+    raw2 = load_scene("demo-bonus").source
+    axis = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    turn = np.eye(3) + np.sin(0.7) * k + (1 - np.cos(0.7)) * k @ k
 
-    assert error_regime(load_scene("demo-bonus")) == "friction"
-    assert error_regime(load_scene("demo-2d-moving")) == "smooth"
-    flat = tilted_bonus()
-    flat["body"][0].update(velocity=[1.0, 0.0, 0.0], spin=[0.0, 0.0, 3.0])
-    flat["body"][1].update(spin=[0.0, 0.0, -5.0])
-    assert error_regime(parse_scene(flat)) == "friction"
-    assert error_regime(parse_scene(tilted_bonus())) == "friction-3d"
+    def turned(v2):
+        return (turn @ np.array([v2[0], v2[1], 0.0])).tolist()
 
-
-def test_friction_out_of_the_plane_meets_its_first_order_estimate():
-    """The estimate is honest out of the plane (first order), and a tol that would take minutes
-    is refused with the tol that is reachable."""
-    from collide.stepper import RunError
-
-    scene = parse_scene(tilted_bonus())
-    with pytest.raises(RunError, match="first order"):
-        run_scene(scene, tol=1e-6, record=False)
-    model, _ = compile_scenes([scene])
-    omega = float(max_frequency(model)[0])
-    reference = outcome(run_scene(scene, dt=0.005 / omega, record=False).result)
-    run = run_scene(scene, tol=1e-3, record=False)
-    error = np.abs(outcome(run.result) - reference).max() / speed_scale(scene)
-    assert run.error_estimate[0] == pytest.approx(1e-3)
-    assert error <= 1e-3
+    raw3 = dict(raw2, dim=3, body=[dict(b, position=turned(b["position"]), velocity=turned(b["velocity"]),
+                                        spin=(turn @ np.array([0.0, 0.0, b["spin"]])).tolist())
+                                   for b in raw2["body"]])
+    flat = run_scene(parse_scene(raw2), record=False).result
+    tilted = run_scene(parse_scene(raw3), record=False).result
+    back = tilted.final.v[0] @ turn
+    assert back[:, :2] == pytest.approx(flat.final.v[0], abs=1e-9)
+    assert np.abs(back[:, 2]).max() < 1e-12
+    assert int(tilted.steps[0]) == int(flat.steps[0])
 
 
-@pytest.mark.parametrize("scalar", [True, False])
-def test_stiff_friction_at_a_tight_tolerance_does_not_stall(monkeypatch, scalar):
+@pytest.mark.xfail(strict=True, reason="issue 10: where a slip meets the band's edge off its hold force's "
+                   "direction (3D), the edge's micro-dynamics (band excursions of ~0.1 us) land differently with "
+                   "the step, by 3e-7 to 6e-6 of the speed, so the order is lost below that")
+def test_friction_out_of_the_plane_keeps_the_order():
+    """Out of the plane the sliding friction follows the slip as it turns and a stuck contact is
+    held in both tangent directions: kahan6 should keep (nearly) its sixth order."""
+    errors, order = _order(parse_scene(tilted_bonus()))
+    assert errors[1] < 1e-7
+    assert order > 4.5
+
+
+def test_stiff_friction_at_a_tight_tolerance_does_not_stall():
     """At k = 1e12 N/m a stick-to-slide change came due closer than the clock resolves at
     t = 0.147 s (2.8e-17 s): the step to it did not move the time, and the run stalled. Such an
-    event is now taken as passed (by under 1e-15 s)."""
-    from collide import integrators
-
-    monkeypatch.setattr(integrators, "SCALAR_PAIRS", scalar)
+    event is taken as passed (by under 1e-15 s)."""
     run = run_scene(load_scene("demo-bonus", ["contact.k=1e12"]), tol=1e-9, record=False)
     assert int(run.result.steps[0]) < 60
     reference = run_scene(load_scene("demo-bonus", ["contact.k=1e12"]), tol=1e-11, record=False)

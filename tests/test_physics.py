@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import contextlib
 import math
 
 import numpy as np
 import pytest
 
 from collide import diagnostics as dg
-from collide import friction, integrators, physics
+from collide import stepper
+from collide.engine import kernels
 from collide.run import run_scene, run_scenes
 from collide.scene import builtin_names, load_scene, parse_scene
 
@@ -153,23 +153,10 @@ def test_step_count_follows_contact_not_distance():
 
 
 def batch_and_singles(scenes: list) -> list[tuple]:
-    """(batch member, single run) final results for each scene, from one batched call. The single
-    runs go through the same numpy stepper (`integrators.SCALAR_PAIRS` off): one stepper serves
-    both; `tests/test_pairstep.py` checks the plain-float path against it."""
+    """(batch member, single run) final results for each scene, from one batched call: the
+    batch runs each member through the same compiled kernel as a single run."""
     batch = run_scenes(scenes, record=False).result
-    with numpy_pairs():
-        return [(batch.member(b), run_scene(scene, record=False).result) for b, scene in enumerate(scenes)]
-
-
-@contextlib.contextmanager
-def numpy_pairs():
-    """Single runs of two spheres through the numpy kernels rather than `collide.pairstep`."""
-    saved = integrators.SCALAR_PAIRS
-    integrators.SCALAR_PAIRS = False
-    try:
-        yield
-    finally:
-        integrators.SCALAR_PAIRS = saved
+    return [(batch.member(b), run_scene(scene, record=False).result) for b, scene in enumerate(scenes)]
 
 
 def test_batch_equals_single_runs():
@@ -189,18 +176,21 @@ def test_batch_with_different_contact_times_equals_single_runs():
 
 
 def test_frictionless_scene_computes_no_friction(monkeypatch):
-    """Leave out what a scene does not need: no friction call, no angular state, 1D arrays."""
+    """Leave out what a scene does not need: the engine is told there is no friction and no spin
+    (so it computes neither), and the results carry no angular state and 1D arrays."""
+    seen = []
+    run_kernel = kernels.simulate
 
-    def forbidden(*args, **kwargs):
-        raise AssertionError("friction computed in a frictionless scene")
+    def spy(G, tables, WP, grav, weights, fl, fp):
+        seen.append((int(fl[kernels.FL_FRICTION]), int(fl[kernels.FL_SPIN])))
+        return run_kernel(G, tables, WP, grav, weights, fl, fp)
 
-    monkeypatch.setattr(friction, "kick_frame", forbidden)
-    monkeypatch.setattr(friction, "decide_modes", forbidden)
-    monkeypatch.setattr(physics, "coulomb_explicit", forbidden)
+    monkeypatch.setattr(stepper.kn, "simulate", spy)
     r = run_scene(load_scene("demo-1d")).result
+    assert seen == [(0, 0)]
     assert r.model.dim == 1 and r.final.s.shape == (1, 2, 1)
     assert r.final.w.shape == (1, 2, 0) and r.trajectory.q.shape[-1] == 0
-    assert r.trajectory.friction_pair is None
+    assert dg.contact_series(r.model, r.trajectory).friction_force is None
     r2 = run_scene(load_scene("demo-2d-moving"), integrator="seed", dt=1e-5).result
     assert r2.model.spin_dim == 0
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -517,25 +518,24 @@ def _break_3d(tol: float):
                         "wall": [{"point": [0, 0, 0], "normal": [0, 0, 1]}]}, "break")
 
 
-@pytest.mark.parametrize("tol", [1e-2, 1e-3])
-def test_a_preview_never_costs_more_than_the_run(tol):
-    """The coarse preview ran Verlet at tol 1e-3 whatever the scene asked: on a 3D break at tol
-    1e-2 that cost more than the real run (issue 12, item 3)."""
+@pytest.mark.parametrize("integrator, tol", [("verlet", 1e-2), ("kahan6", 1e-2), ("kahan6", 1e-3)])
+def test_a_preview_never_costs_more_than_the_run(integrator, tol):
+    """The coarse preview ran Verlet at tol 1e-3 whatever the scene asked: for a scene that asks
+    less than that it cost more than the real run (issue 12, item 3: a 3D break took 41-54 s a
+    slider change). Now a preview is used only when it costs less than half the run."""
     from collide.run import auto_dt
     from viewer.session import STAGES, preview_settings
 
-    scene = _break_3d(tol)
+    scene = replace(_break_3d(tol), integrator=integrator)
 
-    def cost(integrator: str, t: float) -> float:
-        return STAGES[integrator] / float(auto_dt([scene], integrator, np.array([t]))[0][0])
+    def cost(name: str, t: float) -> float:
+        return STAGES[name] / float(auto_dt([scene], name, np.array([t]))[0][0])
 
     full = cost(scene.integrator, scene.tol)
-    old = cost("verlet", 1e-3)
+    if integrator == "verlet":
+        assert cost("verlet", 1e-3) > full  # the old preview
     preview = preview_settings(scene)
-    if tol == 1e-2:
-        assert old >= full  # the defect: the old preview was no cheaper
-    assert preview is not None and preview[1] >= scene.tol
-    assert cost(*preview) < 0.5 * full
+    assert preview is None or (preview[1] >= scene.tol and cost(*preview) < 0.5 * full)
 
 
 def test_frames_run_answers_like_a_view():

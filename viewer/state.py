@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from collide import diagnostics as dg
+from collide.engine import kernels as kn
 from collide.model import State
 from collide.run import SceneRun
 from collide.stepper import Trajectory
@@ -177,18 +178,20 @@ class ViewRun:
         res = dg.residuals(result)
         self.residuals = {"energy": float(res.energy[0]), "momentum": float(res.momentum[0]),
                           "angular_momentum": float(res.angular_momentum[0])}
-        series = dg.contact_series(self.model, self._as_traj(states, self.times))
+        series = dg.contact_series(self.model, self.traj, self.times, states)
         self.max_normal_force = float(np.max(np.linalg.norm(series.normal_force, axis=-1), initial=0.0))
-        touching = (series.overlap[:, 0] > ROUND_OFF * float(self.radius.max())).astype(float)  # (T, C)
-        n_pairs = self.model.n_pairs
-        counts = touching[:, :n_pairs] @ (self.model.pair_to_body_i + self.model.pair_to_body_j).T
-        if self.model.n_walls:
-            counts = counts + touching[:, n_pairs:].reshape(len(self.times), self.model.n_walls, -1).sum(axis=1)
+        touching = series.overlap[:, 0] > ROUND_OFF * float(self.radius.max())  # (T, C)
+        counts = np.zeros((len(self.times), self.n_bodies))
+        for c, (i, j) in enumerate(series.pairs):
+            counts[:, i] += touching[:, c]
+            if j >= 0:
+                counts[:, j] += touching[:, c]
         self.max_contacts = int(counts.max(initial=0))
         self.max_links = int(touching.sum(axis=1).max(initial=0))  # contacts at once, at most
-        if self.traj.friction_pair is not None:
-            fr = dg.contact_series(self.model, self.traj).friction_force
-            self.max_friction_force = float(np.max(np.linalg.norm(fr, axis=-1), initial=0.0))
+        records = self.traj.records
+        if self.model.friction and len(records):
+            force = records[:, kn.R_FX:kn.R_FX + self.dim]
+            self.max_friction_force = float(np.max(np.linalg.norm(force, axis=-1), initial=0.0))
         else:
             self.max_friction_force = 0.0
         self.contact_windows = self._contact_windows()
@@ -234,24 +237,6 @@ class ViewRun:
         st = self.sample(np.array([self.clamp_time(t)]))
         return body_values_arrays(self.mass, self.model.inertia[0], st.v[0, 0], st.w[0, 0])
 
-    def _as_traj(self, states: State, times: np.ndarray, friction_pair: np.ndarray | None = None,
-                 friction_wall: np.ndarray | None = None) -> Trajectory:
-        n = len(times)
-        return Trajectory(np.asarray(times)[:, None], states.s, states.v, states.w, states.q,
-                          states.work, np.zeros((n, 1), bool), friction_pair, friction_wall)
-
-    def _friction_at(self, times: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """Friction in effect at each time: the force of the contact step that contains it."""
-        traj = self.traj
-        if traj.friction_pair is None:
-            return None, None
-        t = traj.t[:, 0]
-        k = np.clip(np.searchsorted(t, times, side="left"), 1, len(t) - 1)
-        on = ~traj.free[k, 0]
-        pair = traj.friction_pair[k, 0] * on[:, None, None]
-        wall = traj.friction_wall[k, 0] * on[:, None, None, None] if traj.friction_wall is not None else None
-        return pair[:, None], None if wall is None else wall[:, None]
-
     def frame(self, t: float) -> Frame:
         """Bodies and active contacts at time t (clamped to the run)."""
         t = self.clamp_time(t)
@@ -260,23 +245,20 @@ class ViewRun:
         positions = embed3(st.s[0, 0])
         velocities = embed3(st.v[0, 0])
         wxyz = orientation_wxyz(st.q[0, 0])
-        fp, fw = self._friction_at(times)
-        series = dg.contact_series(self.model, self._as_traj(st, times, fp, fw))
+        series = dg.contact_series(self.model, self.traj, times, st)
         contacts = []
-        n_pairs = self.model.n_pairs
         for c, name in enumerate(series.names):
             overlap = float(series.overlap[0, 0, c])
             # Spheres that touch only to round-off (an overlap of 1e-17 m) are not in contact.
             if overlap <= ROUND_OFF * float(self.radius.max()):
                 continue
-            if c < n_pairs:
-                i, j = int(self.model.pair_i[c]), int(self.model.pair_j[c])
+            i, j = (int(x) for x in series.pairs[c])
+            if j >= 0:
                 d = positions[j] - positions[i]
                 normal = d / np.linalg.norm(d)
             else:
-                w, i = divmod(c - n_pairs, self.n_bodies)
+                normal = -embed3(self.model.wall_normal[-1 - j])
                 j = None
-                normal = -embed3(self.model.wall_normal[w])
             friction = None
             if series.friction_force is not None:
                 friction = embed3(series.friction_force[0, 0, c])
@@ -291,7 +273,8 @@ class ViewRun:
     # Plots
 
     def _make_plots(self, states: State) -> PlotData:
-        con = dg.conserved(self.model, states.t, states.s, states.v, states.w, states.work)
+        series = dg.contact_series(self.model, self.traj, self.times, states)
+        con = dg.conserved(self.model, states.t, states.s, states.v, states.w, states.work, series.pairs)
         energy = {"kinetic": con.kinetic[:, 0]}
         if con.rotational is not None:
             energy["rotational"] = con.rotational[:, 0]
@@ -327,7 +310,6 @@ class ViewRun:
             angular = _conserved_series("angular momentum", "kg m²/s",
                                         {f"L{a}": values[:, c] for c, a in enumerate(comps)},
                                         float(np.max(arm, initial=0.0)))
-        series = dg.contact_series(self.model, self._as_traj(states, self.times))
         compression = {}
         for c, name in enumerate(series.names):
             comp = series.compression[:, 0, c, 0]

@@ -1,0 +1,2089 @@
+"""The compiled engine: contact mechanics, friction modes, events, islands and the run loop.
+
+One module of small numba functions over a few packed arrays, because numba's compile time
+grows with the number of arguments, array accesses and specialisations (measured: a function
+of 200 array statements compiles in 10-20 s here; the same code split and packed, in a tenth
+of that) and its cache loads in proportion to the code. Everything is 3D inside: a 1D or 2D
+scene lives in the z = 0 plane with spin about z, so one path serves every dimension.
+
+Tables (float64 unless noted; columns named by the constants below):
+
+====  ===========  ========================================================================
+name  shape        rows, columns
+====  ===========  ========================================================================
+G     (N, NG)      bodies: state s, v, w, q at base time tb; dissipated work share; 1/m,
+                   1/I, radius, m, I, material
+GI    (N, 2) int   bodies: local row in the running island (-1), last knot row
+X     (A, NX)      an island's bodies: state, start state, accelerations, scratch; constants
+XI    (A,) int     an island's bodies: global row
+C     (K, NC)      an island's engaged contacts: normal, overlap, arms, normal force,
+                   parameters, held slip direction, friction force, tangent basis
+CI    (K, NCI) int contacts: local i, local j (or -1 - wall), global i, global j, mode, ...
+Q     (K, 3) int   an island's candidate contacts: global i, j (or -1 - wall), engaged
+QF    (K, NQF)     candidates: touching distance, overlaps and rates at trial ends
+E     (2K, 4)      friction mode events: values and rates at a step's start and end
+WP    (W, 6)       walls: a point and the outward unit normal
+====  ===========  ========================================================================
+
+Friction (the report's law as dt -> 0; README "Friction as events"): slide: mu F_n against the
+slip; band: none; stick: the force that holds the slip on the band's edge, for all stuck
+contacts of an island together (a stuck contact's hold force depends on its neighbours'). Slide
+and stick forces depend on the velocities, so a substep's closing kick is implicit (a fixed
+point, a few iterations) and the next one's opening kick explicit: each substep is symmetric
+and the compositions keep their order in every mode, in 3D as in 2D.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from collide.engine.tier import jit
+
+BAND, SLIDE, STICK = 0, 1, 2
+EDGE_TOL = 1e-9  # relative to the speed scale: how close to the band's edge counts as on it
+MODE_TOL = 0.5 * EDGE_TOL
+STICK_SCALE = 1e-3  # s: turns a friction force into a slip change, to compare with EDGE_TOL
+TOUCH_TOL = 1e-12  # relative overlap below which spheres count as just touching
+FIXED_POINT = 12  # most iterations of an implicit kick
+WINDOW_STEPS = 64  # a window spans this many steps of the stiffest engaged contact
+STALL_LIMIT = 64
+NO_CONTACT_TAIL = 1.0  # s: how long a run with no contact at all lasts
+EPS64 = 2.220446049250313e-16
+
+# G: bodies.
+G_S, G_V, G_W, G_Q, G_TB, G_WK, G_IM, G_II, G_R, G_M, G_I, G_MAT = 0, 3, 6, 9, 13, 14, 15, 16, 17, 18, 19, 20
+NG = 21
+GI_LOC, GI_KNOT = 0, 1
+# X: an island's bodies.
+X_S, X_V, X_W, X_Q = 0, 3, 6, 9
+X_S0, X_V0, X_W0, X_Q0 = 13, 16, 19, 22
+X_A, X_F, X_L, X_V1, X_W1, X_T, X_UA, X_UL, X_FO, X_VB, X_WB = 26, 29, 32, 35, 38, 41, 44, 47, 50, 53, 56
+X_IM, X_II, X_R, X_M, X_I = 59, 60, 61, 62, 63
+NX = 64
+# C / CI: an island's engaged contacts.
+C_N, C_DELTA, C_DIST, C_LIF, C_LJF, C_LIS, C_LJS, C_FN = 0, 3, 4, 5, 6, 7, 8, 9
+C_K, C_MU, C_EPS, C_REACH, C_HELD, C_FF, C_B = 10, 11, 12, 13, 14, 17, 20
+NC = 26
+CI_I, CI_J, CI_GI, CI_GJ, CI_MODE, CI_Q, CI_EDGE = 0, 1, 2, 3, 4, 5, 6
+NCI = 7
+# Q / QF: an island's candidate contacts.
+Q_I, Q_J, Q_ENG = 0, 1, 2
+QF_REACH, QF_D0, QF_R0, QF_D1, QF_R1, QF_DP, QF_RP = 0, 1, 2, 3, 4, 5, 6
+NQF = 7
+E_V0, E_R0, E_V1, E_R1 = 0, 1, 2, 3
+# Settings: flags (int) and figures (float).
+FL_SPIN, FL_FRICTION, FL_SEED, FL_PLANAR, FL_RECORD, FL_AUTO, FL_MAXSTEPS, FL_DIM = range(8)
+NFL = 8
+FP_DT, FP_OMEGA_H, FP_TEND, FP_TAIL, FP_SCALE = range(5)
+NFP = 5
+# Contact parameter tables: pairs (M, M, NP), walls (M, NP).
+TP_K, TP_MU, TP_EPS = range(3)
+# Records.
+# Knots: a body's exact state at a time, with its acceleration just before (K_A) and just after
+# (K_AN): a friction mode change or the seed's per-step forces make it jump there.
+K_T, K_BODY, K_FREE, K_S, K_V, K_W, K_Q, K_A, K_AN, K_WORK = 0, 1, 2, 3, 6, 9, 12, 16, 19, 22
+NK = 23
+R_T, R_I, R_J, R_DELTA, R_FN, R_FX, R_FY, R_FZ, R_MODE = range(9)
+NR = 9
+V_I, V_J, V_START, V_END = range(4)
+CN_KNOTS, CN_RECS, CN_IVALS, CN_OPEN = range(4)
+S_STEPS, S_WINDOWS, S_STATUS, S_CONTACTS, S_RETRIES = range(5)
+NS = 5
+F_MAX_OVERLAP, F_DT_MIN, F_STATUS_T, F_STATUS_A, F_STATUS_B = range(5)
+NF = 5
+OK, NONFINITE, ENERGY, STALL, MAXSTEPS, SINGULAR = range(6)
+YES, NO = 1, 0
+# Numba compiles one specialisation per literal int an argument is called with: as numpy ints
+# these constants are plain int64 to it, and every function compiles once.
+for _name, _value in list(globals().items()):
+    if _name.isupper() and type(_value) is int:
+        globals()[_name] = np.int64(_value)
+
+
+# ---------------------------------------------------------------------------------------------
+# Contact mechanics of an island
+
+
+@jit
+def geometry(X, C, CI, nc, WP, seed):
+    """Normals, overlaps, lever arms and spring forces of the engaged contacts at X's positions.
+
+    Engaged contacts use the spring law unclamped, so that a substep straying just outside the
+    contact sees a smooth force; the contact's start and end are located events."""
+    for c in range(nc):
+        i = CI[c, CI_I]
+        j = CI[c, CI_J]
+        r = X[i, X_R]
+        if j >= 0:
+            dx = X[j, X_S] - X[i, X_S]
+            dy = X[j, X_S + 1] - X[i, X_S + 1]
+            dz = X[j, X_S + 2] - X[i, X_S + 2]
+            dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+            C[c, C_N] = dx / dist
+            C[c, C_N + 1] = dy / dist
+            C[c, C_N + 2] = dz / dist
+            delta = C[c, C_REACH] - dist
+            # Equal springs in series share the overlap: each sphere is pressed by half of it.
+            C[c, C_LIF] = r - 0.5 * delta
+            C[c, C_LJF] = X[j, X_R] - 0.5 * delta
+            C[c, C_LIS] = r if seed else C[c, C_LIF]
+            C[c, C_LJS] = X[j, X_R] if seed else C[c, C_LJF]
+        else:
+            k = -1 - j
+            dist = ((X[i, X_S] - WP[k, 0]) * WP[k, 3] + (X[i, X_S + 1] - WP[k, 1]) * WP[k, 4]
+                    + (X[i, X_S + 2] - WP[k, 2]) * WP[k, 5])
+            C[c, C_N] = -WP[k, 3]
+            C[c, C_N + 1] = -WP[k, 4]
+            C[c, C_N + 2] = -WP[k, 5]
+            delta = r - dist
+            C[c, C_LIF] = r - delta  # the wall is rigid: the sphere takes all of the overlap
+            C[c, C_LJF] = 0.0
+            C[c, C_LIS] = r if seed else C[c, C_LIF]
+            C[c, C_LJS] = 0.0
+        C[c, C_DELTA] = delta
+        C[c, C_DIST] = dist
+        C[c, C_FN] = C[c, C_K] * delta
+
+
+@jit
+def springs(X, C, CI, na, nc, grav):
+    """Accelerations X_A from the springs and gravity."""
+    for a in range(na):
+        for d in range(3):
+            X[a, X_FO + d] = 0.0
+    for c in range(nc):
+        i = CI[c, CI_I]
+        j = CI[c, CI_J]
+        for d in range(3):
+            f = C[c, C_FN] * C[c, C_N + d]
+            X[i, X_FO + d] -= f
+            if j >= 0:
+                X[j, X_FO + d] += f
+    for a in range(na):
+        for d in range(3):
+            X[a, X_A + d] = X[a, X_FO + d] * X[a, X_IM] + grav[d]
+
+
+@jit
+def slip(X, C, CI, c, vc, wc, spin):
+    """Slip of i's surface relative to j's (or the wall's) at contact c, at the velocities in
+    columns vc, wc: P_t (v_i - v_j) + (l_i w_i + l_j w_j) x n, with the slip lever arms."""
+    i = CI[c, CI_I]
+    j = CI[c, CI_J]
+    nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+    rx, ry, rz = X[i, vc], X[i, vc + 1], X[i, vc + 2]
+    if j >= 0:
+        rx -= X[j, vc]
+        ry -= X[j, vc + 1]
+        rz -= X[j, vc + 2]
+    rn = rx * nx + ry * ny + rz * nz
+    sx, sy, sz = rx - rn * nx, ry - rn * ny, rz - rn * nz
+    if spin:
+        li = C[c, C_LIS]
+        lx, ly, lz = li * X[i, wc], li * X[i, wc + 1], li * X[i, wc + 2]
+        if j >= 0:
+            lj = C[c, C_LJS]
+            lx += lj * X[j, wc]
+            ly += lj * X[j, wc + 1]
+            lz += lj * X[j, wc + 2]
+        sx += ly * nz - lz * ny
+        sy += lz * nx - lx * nz
+        sz += lx * ny - ly * nx
+    return sx, sy, sz
+
+
+@jit
+def slip_rate(X, C, CI, c, vc, wc, ac, lc, spin, seed, velocity_terms):
+    """Rate of change of contact c's tangential slip at velocities (vc, wc) under linear and
+    angular accelerations in columns (ac, lc); the hold rate G when those leave out stuck
+    friction. Without `velocity_terms`, only the accelerations' part.
+
+    G = P_t (a_i - a_j) - n' (n . (v_i - v_j)) + (l_i' w_i + l_j' w_j) x n + (l_i alpha_i +
+    l_j alpha_j) x n + (L . n)(n x n'), with L = l_i w_i + l_j w_j, the line of centres turning
+    at n' = -P_t (v_i - v_j) / dist (a wall's normal does not turn), and with the contact lever
+    the arms shortening as the overlap grows (pairs l' = -delta' / 2 each, a wall l' = -delta')."""
+    i = CI[c, CI_I]
+    j = CI[c, CI_J]
+    nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+    ax, ay, az = X[i, ac], X[i, ac + 1], X[i, ac + 2]
+    if j >= 0:
+        ax -= X[j, ac]
+        ay -= X[j, ac + 1]
+        az -= X[j, ac + 2]
+    an = ax * nx + ay * ny + az * nz
+    gx, gy, gz = ax - an * nx, ay - an * ny, az - an * nz
+    px, py, pz = 0.0, 0.0, 0.0  # l_i alpha_i + l_j alpha_j (+ l' w terms)
+    li, lj = C[c, C_LIS], C[c, C_LJS]
+    if spin:
+        px, py, pz = li * X[i, lc], li * X[i, lc + 1], li * X[i, lc + 2]
+        if j >= 0:
+            px += lj * X[j, lc]
+            py += lj * X[j, lc + 1]
+            pz += lj * X[j, lc + 2]
+    if velocity_terms:
+        rx, ry, rz = X[i, vc], X[i, vc + 1], X[i, vc + 2]
+        if j >= 0:
+            rx -= X[j, vc]
+            ry -= X[j, vc + 1]
+            rz -= X[j, vc + 2]
+        rn = rx * nx + ry * ny + rz * nz
+        tx, ty, tz = 0.0, 0.0, 0.0  # n'
+        if j >= 0:
+            inv = 1.0 / C[c, C_DIST]
+            tx, ty, tz = -(rx - rn * nx) * inv, -(ry - rn * ny) * inv, -(rz - rn * nz) * inv
+            gx -= tx * rn
+            gy -= ty * rn
+            gz -= tz * rn
+        if spin:
+            lx, ly, lz = li * X[i, wc], li * X[i, wc + 1], li * X[i, wc + 2]
+            if j >= 0:
+                lx += lj * X[j, wc]
+                ly += lj * X[j, wc + 1]
+                lz += lj * X[j, wc + 2]
+            if not seed:
+                # Arms shorten as the overlap grows: pairs by half its rate each, a wall by all.
+                ld = -0.5 * rn if j >= 0 else -rn
+                px += ld * X[i, wc]
+                py += ld * X[i, wc + 1]
+                pz += ld * X[i, wc + 2]
+                if j >= 0:
+                    px += ld * X[j, wc]
+                    py += ld * X[j, wc + 1]
+                    pz += ld * X[j, wc + 2]
+            ln = lx * nx + ly * ny + lz * nz
+            gx += ln * (ny * tz - nz * ty)
+            gy += ln * (nz * tx - nx * tz)
+            gz += ln * (nx * ty - ny * tx)
+    if spin:
+        gx += py * nz - pz * ny
+        gy += pz * nx - px * nz
+        gz += px * ny - py * nx
+    return gx, gy, gz
+
+
+@jit
+def response(X, C, CI, c, spin):
+    """K: the change of contact c's slip per unit tangential impulse on it, the same in every
+    tangent direction for spheres: 1/m_i + 1/m_j + l_i a_i / I_i + l_j a_j / I_j."""
+    i = CI[c, CI_I]
+    j = CI[c, CI_J]
+    k = X[i, X_IM]
+    if spin:
+        k += C[c, C_LIS] * C[c, C_LIF] * X[i, X_II]
+    if j >= 0:
+        k += X[j, X_IM]
+        if spin:
+            k += C[c, C_LJS] * C[c, C_LJF] * X[j, X_II]
+    return k
+
+
+@jit
+def add_force(X, C, CI, c, fx, fy, fz, ac, lc, spin):
+    """Add to columns (ac, lc) the accelerations of friction force f on i (and -f on j) at
+    contact c: torques l_i (n x f) on i and l_j (n x f) on j (both arms reach the contact)."""
+    i = CI[c, CI_I]
+    j = CI[c, CI_J]
+    X[i, ac] += fx * X[i, X_IM]
+    X[i, ac + 1] += fy * X[i, X_IM]
+    X[i, ac + 2] += fz * X[i, X_IM]
+    if j >= 0:
+        X[j, ac] -= fx * X[j, X_IM]
+        X[j, ac + 1] -= fy * X[j, X_IM]
+        X[j, ac + 2] -= fz * X[j, X_IM]
+    if spin:
+        nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+        cx, cy, cz = ny * fz - nz * fy, nz * fx - nx * fz, nx * fy - ny * fx
+        s = C[c, C_LIF] * X[i, X_II]
+        X[i, lc] += s * cx
+        X[i, lc + 1] += s * cy
+        X[i, lc + 2] += s * cz
+        if j >= 0:
+            s = C[c, C_LJF] * X[j, X_II]
+            X[j, lc] += s * cx
+            X[j, lc + 1] += s * cy
+            X[j, lc + 2] += s * cz
+
+
+@jit
+def set_basis(C, c):
+    """Two unit tangents (e1, e2 = n x e1) of contact c's normal; in the z = 0 plane, e1 lies in
+    it (a 2D scene's tangent)."""
+    nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+    if abs(nz) < 0.9:
+        ex, ey, ez = -ny, nx, 0.0
+    else:
+        ex, ey, ez = 0.0, nz, -ny
+    m = math.sqrt(ex * ex + ey * ey + ez * ez)
+    ex, ey, ez = ex / m, ey / m, ez / m
+    C[c, C_B], C[c, C_B + 1], C[c, C_B + 2] = ex, ey, ez
+    C[c, C_B + 3], C[c, C_B + 4], C[c, C_B + 5] = ny * ez - nz * ey, nz * ex - nx * ez, nx * ey - ny * ex
+
+
+@jit
+def solve(A, b, m):
+    """Solve A[:m, :m] x = b[:m] in place (Gaussian elimination, partial pivoting); b holds x.
+    Returns False if A is singular."""
+    for k in range(m):
+        p = k
+        for r in range(k + 1, m):
+            if abs(A[r, k]) > abs(A[p, k]):
+                p = r
+        if A[p, k] == 0.0:
+            return False
+        if p != k:
+            for col in range(m):
+                A[k, col], A[p, col] = A[p, col], A[k, col]
+            b[k], b[p] = b[p], b[k]
+        for r in range(k + 1, m):
+            f = A[r, k] / A[k, k]
+            if f != 0.0:
+                for col in range(k, m):
+                    A[r, col] -= f * A[k, col]
+                b[r] -= f * b[k]
+    for k in range(m - 1, -1, -1):
+        s = b[k]
+        for col in range(k + 1, m):
+            s -= A[k, col] * b[col]
+        b[k] = s / A[k, k]
+    return True
+
+
+@jit
+def hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed):
+    """Solve W f = b for the stuck contacts `stuck[:m]` (b in tangent coordinates, 2 per contact):
+    W's block (c, d) is the rate of change of c's slip per unit friction force at d. A single
+    contact's block is K times the identity; contacts that share a body couple. Adds the forces
+    f (as accelerations) to X_UA/X_UL; they are also left in b. Returns False if singular."""
+    if m == 1:
+        k = response(X, C, CI, stuck[0], spin)
+        b[0] /= k
+        b[1] /= k
+    else:
+        for col in range(2 * m):
+            d = stuck[col // 2]
+            e = C_B + 3 * (col % 2)
+            for a in range(na):
+                for x in range(3):
+                    X[a, X_UA + x] = 0.0
+                    X[a, X_UL + x] = 0.0
+            add_force(X, C, CI, d, C[d, e], C[d, e + 1], C[d, e + 2], X_UA, X_UL, spin)
+            for row in range(0, 2 * m, 2):
+                c = stuck[row // 2]
+                gx, gy, gz = slip_rate(X, C, CI, c, X_V, X_W, X_UA, X_UL, spin, seed, NO)
+                A[row, col] = gx * C[c, C_B] + gy * C[c, C_B + 1] + gz * C[c, C_B + 2]
+                A[row + 1, col] = gx * C[c, C_B + 3] + gy * C[c, C_B + 4] + gz * C[c, C_B + 5]
+        if not solve(A, b, 2 * m):
+            return False
+    for a in range(na):
+        for x in range(3):
+            X[a, X_UA + x] = 0.0
+            X[a, X_UL + x] = 0.0
+    for k in range(m):
+        c = stuck[k]
+        f1, f2 = b[2 * k], b[2 * k + 1]
+        add_force(X, C, CI, c, f1 * C[c, C_B] + f2 * C[c, C_B + 3], f1 * C[c, C_B + 1] + f2 * C[c, C_B + 4],
+                  f1 * C[c, C_B + 2] + f2 * C[c, C_B + 5], X_UA, X_UL, spin)
+    return True
+
+
+@jit
+def slide_direction(X, C, CI, c, vc, wc, spin, span):
+    """The slip that sliding friction opposes at contact c, for the velocities in (vc, wc).
+
+    `span` > 0: those velocities already hold this contact's own friction impulse over `span`
+    seconds (C_FF), which is taken back out: the implicit kick's slip at the end is parallel to the
+    slip before the contact's own impulse (s1 = s0 - span K mu F_n s1 / |s1|), so the direction is
+    exact whatever the step (a fixed point on it would diverge once span K mu F_n > |slip|).
+
+    While the slip's component a along the way it slid at the step's start (held) is above eps / 2,
+    that slip itself, so friction follows the slip as it turns; below, the slip shifted along held
+    by phi(a) - a, phi(a) = eps / 4 + a^2 / eps (C^1 at eps / 2), so that a trial step overshooting
+    the mode's boundary (a slip reversing through the band) still sees a smooth force. In the
+    plane this is the held side of the tangent, whatever the slip."""
+    sx, sy, sz = slip(X, C, CI, c, vc, wc, spin)
+    if span != 0.0:
+        k = span * response(X, C, CI, c, spin)
+        sx, sy, sz = sx - k * C[c, C_FF], sy - k * C[c, C_FF + 1], sz - k * C[c, C_FF + 2]
+    hx, hy, hz = C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2]
+    a = sx * hx + sy * hy + sz * hz
+    eps = C[c, C_EPS]
+    if a >= 0.5 * eps:
+        return sx, sy, sz
+    shift = 0.25 * eps + a * a / max(eps, 1e-300) - a
+    sx, sy, sz = sx + shift * hx, sy + shift * hy, sz + shift * hz
+    nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+    sn = sx * nx + sy * ny + sz * nz
+    return sx - sn * nx, sy - sn * ny, sz - sn * nz
+
+
+@jit
+def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span):
+    """Friction forces (C_FF, on body i) of every contact at the velocities in columns (vc, wc),
+    by mode, and their accelerations (X_F, X_L); X_A holds everything else's. Stuck contacts'
+    slips stop changing: W f = -G, with G their slip rates under every other force. `span`: the
+    velocities already hold the forces now in C_FF over that many seconds (see
+    `slide_direction`); 0 when they hold none."""
+    spin, seed = fl[FL_SPIN], fl[FL_SEED]
+    for a in range(na):
+        for d in range(3):
+            X[a, X_F + d] = 0.0
+            X[a, X_L + d] = 0.0
+    m = 0
+    for c in range(nc):
+        if CI[c, CI_MODE] == SLIDE:
+            sx, sy, sz = slide_direction(X, C, CI, c, vc, wc, spin, span)
+            mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+            C[c, C_FF] = 0.0
+            C[c, C_FF + 1] = 0.0
+            C[c, C_FF + 2] = 0.0
+            if mag > 0.0:
+                f = -C[c, C_MU] * C[c, C_FN] / mag
+                C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2] = f * sx, f * sy, f * sz
+                add_force(X, C, CI, c, f * sx, f * sy, f * sz, X_F, X_L, spin)
+        else:
+            C[c, C_FF] = 0.0
+            C[c, C_FF + 1] = 0.0
+            C[c, C_FF + 2] = 0.0
+            if CI[c, CI_MODE] == STICK:
+                stuck[m] = c
+                m += 1
+    if m == 0:
+        return True
+    for a in range(na):
+        for d in range(3):
+            X[a, X_T + d] = X[a, X_A + d] + X[a, X_F + d]
+    for k in range(m):
+        c = stuck[k]
+        set_basis(C, c)
+        gx, gy, gz = slip_rate(X, C, CI, c, vc, wc, X_T, X_L, spin, seed, YES)
+        b[2 * k] = -(gx * C[c, C_B] + gy * C[c, C_B + 1] + gz * C[c, C_B + 2])
+        b[2 * k + 1] = -(gx * C[c, C_B + 3] + gy * C[c, C_B + 4] + gz * C[c, C_B + 5])
+    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed):
+        return False
+    for k in range(m):
+        c = stuck[k]
+        f1, f2 = b[2 * k], b[2 * k + 1]
+        for d in range(3):
+            C[c, C_FF + d] = f1 * C[c, C_B + d] + f2 * C[c, C_B + 3 + d]
+    for a in range(na):
+        for d in range(3):
+            X[a, X_F + d] += X[a, X_UA + d]
+            X[a, X_L + d] += X[a, X_UL + d]
+    return True
+
+
+@jit
+def kinetic_drop(X, na, vc, wc, vd, wd, spin):
+    """Kinetic energy lost going from the velocities in (vc, wc) to those in (vd, wd)."""
+    e = 0.0
+    for a in range(na):
+        for d in range(3):
+            e += 0.5 * X[a, X_M] * (X[a, vc + d] * X[a, vc + d] - X[a, vd + d] * X[a, vd + d])
+            if spin:
+                e += 0.5 * X[a, X_I] * (X[a, wc + d] * X[a, wc + d] - X[a, wd + d] * X[a, wd + d])
+    return e
+
+
+@jit
+def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl):
+    """The kicks at one geometry between two Verlet substeps, on (X_V, X_W): the close of one
+    (springs over h_end, then friction at the end velocities: implicit) and the opening of the
+    next (friction at those velocities, then springs over h_start); either span may be 0.
+    Returns (work dissipated, ok); friction forces at the closing velocities stay in C_FF."""
+    spin = fl[FL_SPIN]
+    work = 0.0
+    if h_end != 0.0:
+        for a in range(na):
+            for d in range(3):
+                X[a, X_V + d] += h_end * X[a, X_A + d]
+                X[a, X_V1 + d] = X[a, X_V + d]
+                X[a, X_W1 + d] = X[a, X_W + d]
+        for it in range(FIXED_POINT):
+            # The first pass sees no friction yet in V1; later ones take each contact's own back out.
+            if not friction(X, C, CI, na, nc, X_V1, X_W1, stuck, A, b, fl, h_end if it > 0 else 0.0):
+                return work, False
+            change = 0.0
+            size = 0.0
+            for a in range(na):
+                for d in range(3):
+                    nv = X[a, X_V + d] + h_end * X[a, X_F + d]
+                    nw = X[a, X_W + d] + h_end * X[a, X_L + d]
+                    change = max(change, abs(nv - X[a, X_V1 + d]), abs(nw - X[a, X_W1 + d]) * X[a, X_R])
+                    size = max(size, abs(nv), abs(nw) * X[a, X_R])
+                    X[a, X_V1 + d] = nv
+                    X[a, X_W1 + d] = nw
+            if change <= 4.0 * EPS64 * size:
+                break
+        work += kinetic_drop(X, na, X_V, X_W, X_V1, X_W1, spin)
+        for a in range(na):
+            for d in range(3):
+                X[a, X_V + d] = X[a, X_V1 + d]
+                X[a, X_W + d] = X[a, X_W1 + d]
+    elif not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0):
+        return work, False
+    if h_start != 0.0:
+        for a in range(na):
+            for d in range(3):
+                X[a, X_VB + d] = X[a, X_V + d] + h_start * X[a, X_F + d]
+                X[a, X_WB + d] = X[a, X_W + d] + h_start * X[a, X_L + d]
+        work += kinetic_drop(X, na, X_V, X_W, X_VB, X_WB, spin)
+        for a in range(na):
+            for d in range(3):
+                X[a, X_V + d] = X[a, X_VB + d] + h_start * X[a, X_A + d]
+                X[a, X_W + d] = X[a, X_WB + d]
+    return work, True
+
+
+@jit
+def settle(X, C, CI, na, nc, stuck, A, b, fl):
+    """Put stuck slips on the band's edge, at eps along their held direction (carried onto the
+    tangent plane), with the impulses that do exactly that, solved together. Returns (work,
+    ok)."""
+    spin, seed = fl[FL_SPIN], fl[FL_SEED]
+    m = 0
+    for c in range(nc):
+        if CI[c, CI_MODE] == STICK:
+            stuck[m] = c
+            m += 1
+    if m == 0:
+        return 0.0, True
+    for k in range(m):
+        c = stuck[k]
+        set_basis(C, c)
+        nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+        hx, hy, hz = C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2]
+        hn = hx * nx + hy * ny + hz * nz
+        hx, hy, hz = hx - hn * nx, hy - hn * ny, hz - hn * nz
+        hm = math.sqrt(hx * hx + hy * hy + hz * hz)
+        if hm > 0.0:
+            hm = C[c, C_EPS] / hm
+        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
+        # A friction impulse changes the slip as its force changes the slip's rate: W J = s* - s.
+        dx, dy, dz = hm * hx - sx, hm * hy - sy, hm * hz - sz
+        b[2 * k] = dx * C[c, C_B] + dy * C[c, C_B + 1] + dz * C[c, C_B + 2]
+        b[2 * k + 1] = dx * C[c, C_B + 3] + dy * C[c, C_B + 4] + dz * C[c, C_B + 5]
+    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed):
+        return 0.0, False
+    for a in range(na):
+        for d in range(3):
+            X[a, X_VB + d] = X[a, X_V + d] + X[a, X_UA + d]
+            X[a, X_WB + d] = X[a, X_W + d] + X[a, X_UL + d]
+    work = kinetic_drop(X, na, X_V, X_W, X_VB, X_WB, spin)
+    for a in range(na):
+        for d in range(3):
+            X[a, X_V + d] = X[a, X_VB + d]
+            X[a, X_W + d] = X[a, X_WB + d]
+    return work, True
+
+
+@jit
+def turn(q, w0, w1, w2, tau, planar):
+    """Orientation q (4,) after turning at constant w for tau seconds (exact for a free sphere);
+    in the plane q[0] is the angle about z."""
+    if planar:
+        q[0] += w2 * tau
+        return
+    rate = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    if rate == 0.0 or tau == 0.0:
+        return
+    half = 0.5 * rate * tau
+    s = math.sin(half) / rate
+    dw, dx, dy, dz = math.cos(half), s * w0, s * w1, s * w2
+    a, b, c, d = q[0], q[1], q[2], q[3]
+    q[0] = dw * a - dx * b - dy * c - dz * d
+    q[1] = dw * b + dx * a + dy * d - dz * c
+    q[2] = dw * c - dx * d + dy * a + dz * b
+    q[3] = dw * d + dx * c - dy * b + dz * a
+
+
+@jit
+def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl):
+    """One step of h from the start state (X_S0...): a symmetric composition of Verlet
+    (kick-drift-kick) substeps gamma h (`weights`); the kicks between two substeps share one
+    geometry. After the whole step stuck slips go back on the band's edge. The end state is left
+    in (X_S...) with its geometry in C and its accelerations in X_A, X_F. Returns (work, ok)."""
+    spin, fric, seed, planar = fl[FL_SPIN], fl[FL_FRICTION], fl[FL_SEED], fl[FL_PLANAR]
+    for a in range(na):
+        for d in range(13):
+            X[a, X_S + d] = X[a, X_S0 + d]
+    geometry(X, C, CI, nc, WP, seed)
+    springs(X, C, CI, na, nc, grav)
+    n = weights.shape[0]
+    work = 0.0
+    ok = True
+    first = 0.5 * weights[0] * h
+    if fric:
+        work, ok = kick(X, C, CI, na, nc, 0.0, first, stuck, A, b, fl)
+    else:
+        for a in range(na):
+            for d in range(3):
+                X[a, X_V + d] += first * X[a, X_A + d]
+    for k in range(n):
+        hk = weights[k] * h
+        for a in range(na):
+            for d in range(3):
+                X[a, X_S + d] += X[a, X_V + d] * hk
+            if spin:
+                turn(X[a, X_Q:X_Q + 4], X[a, X_W], X[a, X_W + 1], X[a, X_W + 2], hk, planar)
+        geometry(X, C, CI, nc, WP, seed)
+        springs(X, C, CI, na, nc, grav)
+        close = 0.5 * hk
+        opening = 0.5 * weights[k + 1] * h if k + 1 < n else 0.0
+        if fric:
+            done, good = kick(X, C, CI, na, nc, close, opening, stuck, A, b, fl)
+            work += done
+            ok = ok and good
+        else:
+            # Two adds, as with friction: a sweep mixing mu = 0 with mu > 0 matches single runs.
+            for a in range(na):
+                for d in range(3):
+                    X[a, X_V + d] += close * X[a, X_A + d]
+                    if opening != 0.0:
+                        X[a, X_V + d] += opening * X[a, X_A + d]
+    if fric:
+        done, good = settle(X, C, CI, na, nc, stuck, A, b, fl)
+        work += done
+        ok = ok and good
+    return work, ok
+
+
+# ---------------------------------------------------------------------------------------------
+# Friction modes and their events
+
+
+@jit
+def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale):
+    """Friction mode event values (2C) into E[:, vcol] and their rates into E[:, rcol], in speed
+    units over `scale`, at the state in X (geometry in C, X_A set). Slide: |slip| - eps; band:
+    eps - |slip|; stick: the margin to mu F_n and the hold force's component against the held
+    slip, as the slip change they would make over STICK_SCALE (rates NaN: no closed form).
+    Leaves the friction forces in C_FF. Returns False if the hold system is singular."""
+    spin, seed = fl[FL_SPIN], fl[FL_SEED]
+    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0):
+        return False
+    for a in range(na):
+        for d in range(3):
+            X[a, X_T + d] = X[a, X_A + d] + X[a, X_F + d]
+    for c in range(nc):
+        second = nc + c
+        if CI[c, CI_MODE] == STICK:
+            k = response(X, C, CI, c, spin) * STICK_SCALE / scale
+            fx, fy, fz = C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2]
+            fmag = math.sqrt(fx * fx + fy * fy + fz * fz)
+            E[c, vcol] = (C[c, C_MU] * C[c, C_FN] - fmag) * k
+            E[second, vcol] = -(fx * C[c, C_HELD] + fy * C[c, C_HELD + 1] + fz * C[c, C_HELD + 2]) * k
+            E[c, rcol] = math.nan
+            E[second, rcol] = math.nan
+            continue
+        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
+        gx, gy, gz = slip_rate(X, C, CI, c, X_V, X_W, X_T, X_L, spin, seed, YES)
+        if CI[c, CI_MODE] == SLIDE:
+            # |slip| - eps, with |slip| counted negative once the slip points against the way it
+            # slid at the step's start: a slip reversing through the band within a step then
+            # still changes sign, and one that turns as it slows lands where |slip| = eps.
+            hx, hy, hz = C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2]
+            mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+            sign = 1.0 if sx * hx + sy * hy + sz * hz >= 0 else -1.0
+            E[c, vcol] = (sign * mag - C[c, C_EPS]) / scale
+            E[c, rcol] = sign * (sx * gx + sy * gy + sz * gz) / mag / scale if mag > 0 else 0.0
+            E[second, vcol] = 1.0
+            E[second, rcol] = 0.0
+        else:
+            # Any edge: eps - |slip| (|slip|' = slip . slip' / |slip|, friction included); it
+            # starts at zero when the band is entered from its edge, so the far edge is watched
+            # too: eps + the slip along its direction at the step's start.
+            mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+            hx, hy, hz = C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2]
+            E[c, vcol] = (C[c, C_EPS] - mag) / scale
+            E[c, rcol] = -(sx * gx + sy * gy + sz * gz) / mag / scale if mag > 0 else 0.0
+            E[second, vcol] = (C[c, C_EPS] + sx * hx + sy * hy + sz * hz) / scale
+            E[second, rcol] = (gx * hx + gy * hy + gz * hz) / scale
+    return True
+
+
+@jit
+def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
+    """Modes of the engaged contacts at this state (at a phase start and after every step).
+
+    Outside the band: slide; inside: band; on its edge (within the event tolerance, so that a
+    step landed on a mode change switches): stick if the force that holds the slip there (solved
+    with the other stuck contacts) is within mu F_n and against the slip, else slide (beyond
+    mu F_n) or band (not against it). A stuck slip is held along its hold force's reverse; in 3D
+    a slip that reaches the edge off that direction is turned onto it (the limit of the fast
+    turning along the edge that the law gives there). Returns (work dissipated, ok)."""
+    spin, planar = fl[FL_SPIN], fl[FL_PLANAR]
+    tol = EDGE_TOL * scale
+    for c in range(nc):
+        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
+        mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+        if mag > 0:
+            C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2] = sx / mag, sy / mag, sz / mag
+        CI[c, CI_EDGE] = 0
+        if abs(mag - C[c, C_EPS]) <= tol:
+            CI[c, CI_MODE] = STICK
+            CI[c, CI_EDGE] = 1
+        elif mag > C[c, C_EPS]:
+            CI[c, CI_MODE] = SLIDE
+        else:
+            CI[c, CI_MODE] = BAND
+    for _ in range(nc + 1):
+        if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0):
+            return 0.0, False
+        changed = False
+        for c in range(nc):
+            if CI[c, CI_MODE] != STICK:
+                continue
+            force_tol = tol / (response(X, C, CI, c, spin) * STICK_SCALE)
+            fx, fy, fz = C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2]
+            fmag = math.sqrt(fx * fx + fy * fy + fz * fz)
+            need = -(fx * C[c, C_HELD] + fy * C[c, C_HELD + 1] + fz * C[c, C_HELD + 2])
+            if not planar and need > 0:
+                need = fmag
+            if need <= force_tol:
+                CI[c, CI_MODE] = BAND
+                changed = True
+            elif fmag >= C[c, C_MU] * C[c, C_FN] - force_tol:
+                CI[c, CI_MODE] = SLIDE
+                changed = True
+            if not planar and fmag > 0 and CI[c, CI_MODE] != BAND:
+                C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2] = -fx / fmag, -fy / fmag, -fz / fmag
+        if not changed:
+            break
+    # Stuck slips onto the edge along their held direction; in 3D an edge contact that slides on
+    # starts along its hold force's reverse: its slip is turned there with the stuck ones.
+    for c in range(nc):
+        if not planar and CI[c, CI_EDGE] == 1 and CI[c, CI_MODE] == SLIDE:
+            CI[c, CI_MODE] = STICK
+            CI[c, CI_EDGE] = 2
+    work, ok = settle(X, C, CI, na, nc, stuck, A, b, fl)
+    for c in range(nc):
+        if CI[c, CI_EDGE] == 2:
+            CI[c, CI_MODE] = SLIDE
+    return work, ok
+
+
+@jit
+def hermite_root(d0, d1, r0, r1):
+    """Root in (0, 1) of the cubic Hermite through (0, d0, r0) and (1, d1, r1) (r per step), by
+    safeguarded Newton on the cubic, kept inside the bracket."""
+    c2 = 3.0 * (d1 - d0) - 2.0 * r0 - r1
+    c3 = 2.0 * (d0 - d1) + r0 + r1
+    theta = min(max(d0 / (d0 - d1 if d0 != d1 else 1.0), 0.0), 1.0)
+    if (d0 > 0) == (d1 > 0):
+        return theta
+    lo, hi = 0.0, 1.0
+    positive = d0 > 0
+    for _ in range(60):
+        p = d0 + theta * (r0 + theta * (c2 + theta * c3))
+        dp = r0 + theta * (2.0 * c2 + 3.0 * c3 * theta)
+        if (p > 0) == positive:
+            lo = theta
+        else:
+            hi = theta
+        newton = theta - p / dp if dp != 0 else math.inf
+        nxt = newton if lo <= newton <= hi else 0.5 * (lo + hi)
+        done = abs(nxt - theta) <= 1e-15
+        theta = nxt
+        if done:
+            break
+    return theta
+
+
+@jit
+def bracketed_root(lo, f_lo, hi, f_hi, a, fa, b, fb, c, fc):
+    """Next estimate of a root bracketed in [lo, hi] (f_lo >= 0 > f_hi) from the latest three
+    trials (c the latest): inverse quadratic interpolation through them, else the secant through
+    the latest two; where that leaves the bracket, false position nudged off its ends."""
+    est = math.nan
+    if fa == fa and fa != fb and fa != fc and fb != fc:
+        est = (a * fb * fc / ((fa - fb) * (fa - fc)) + b * fa * fc / ((fb - fa) * (fb - fc))
+               + c * fa * fb / ((fc - fa) * (fc - fb)))
+    if not (lo < est < hi) and fb == fb and fc != fb:
+        est = c - fc * (c - b) / (fc - fb)
+    if lo < est < hi:
+        return est
+    width = hi - lo
+    if f_lo != f_hi:
+        return min(max(lo + width * f_lo / (f_lo - f_hi), lo + 0.01 * width), hi - 0.01 * width)
+    return 0.5 * (lo + hi)
+
+
+# ---------------------------------------------------------------------------------------------
+# Bodies in free flight and candidate contacts
+
+
+@jit
+def free_state(G, i, t, grav):
+    """Position and velocity of body i at time t in free flight from its base state."""
+    tau = t - G[i, G_TB]
+    return (G[i, G_S] + G[i, G_V] * tau + 0.5 * grav[0] * tau * tau,
+            G[i, G_S + 1] + G[i, G_V + 1] * tau + 0.5 * grav[1] * tau * tau,
+            G[i, G_S + 2] + G[i, G_V + 2] * tau + 0.5 * grav[2] * tau * tau,
+            G[i, G_V] + grav[0] * tau, G[i, G_V + 1] + grav[1] * tau, G[i, G_V + 2] + grav[2] * tau)
+
+
+@jit
+def bring(G, i, t, grav, fl):
+    """Move body i's base state to time t along its free flight."""
+    tau = t - G[i, G_TB]
+    if tau == 0.0:
+        return
+    px, py, pz, ux, uy, uz = free_state(G, i, t, grav)
+    if fl[FL_SPIN]:
+        turn(G[i, G_Q:G_Q + 4], G[i, G_W], G[i, G_W + 1], G[i, G_W + 2], tau, fl[FL_PLANAR])
+    G[i, G_S], G[i, G_S + 1], G[i, G_S + 2] = px, py, pz
+    G[i, G_V], G[i, G_V + 1], G[i, G_V + 2] = ux, uy, uz
+    G[i, G_TB] = t
+
+
+@jit
+def body_pv(G, GI, X, i, t, grav):
+    """Body i at time t: from its island's step if it is being stepped, else in free flight."""
+    a = GI[i, GI_LOC]
+    if a >= 0:
+        return X[a, X_S], X[a, X_S + 1], X[a, X_S + 2], X[a, X_V], X[a, X_V + 1], X[a, X_V + 2]
+    return free_state(G, i, t, grav)
+
+
+@jit
+def overlap(G, GI, X, Q, QF, k, t, WP, grav):
+    """Candidate k's overlap over its touching distance, and that ratio's rate."""
+    i, j = Q[k, Q_I], Q[k, Q_J]
+    px, py, pz, ux, uy, uz = body_pv(G, GI, X, i, t, grav)
+    reach = QF[k, QF_REACH]
+    if j >= 0:
+        qx, qy, qz, wx, wy, wz = body_pv(G, GI, X, j, t, grav)
+        dx, dy, dz = qx - px, qy - py, qz - pz
+        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+        return (reach - dist) / reach, ((ux - wx) * dx + (uy - wy) * dy + (uz - wz) * dz) / (dist * reach)
+    w = -1 - j
+    h = (px - WP[w, 0]) * WP[w, 3] + (py - WP[w, 1]) * WP[w, 4] + (pz - WP[w, 2]) * WP[w, 5]
+    return (reach - h) / reach, -(ux * WP[w, 3] + uy * WP[w, 4] + uz * WP[w, 5]) / reach
+
+
+@jit
+def engaged(Q, k, d, r, WP, grav):
+    """A contact is engaged when pressing, or touching and approaching (or, on a wall, resting
+    with gravity pressing it in), or touching and not separating if it was engaged already (a
+    contact of a Newton's cradle, engaged when a step found it pressing from touching)."""
+    if d > TOUCH_TOL:
+        return True
+    if d < -TOUCH_TOL:
+        return False
+    if r > 0 or (Q[k, Q_ENG] > 0 and r == 0):
+        return True
+    j = Q[k, Q_J]
+    if j < 0 and r == 0:
+        w = -1 - j
+        return grav[0] * WP[w, 3] + grav[1] * WP[w, 4] + grav[2] * WP[w, 5] < 0
+    return False
+
+
+@jit
+def smallest_positive_root(a, b, c):
+    """Smallest t > 0 with a t^2 + b t + c = 0 (inf if none); c >= 0 (not yet touching)."""
+    disc = b * b - 4.0 * a * c
+    if disc < 0:
+        return math.inf
+    q = -0.5 * (b + math.copysign(math.sqrt(disc), b))
+    r1 = c / q if q != 0 else math.inf
+    r2 = q / a if a != 0 else math.inf
+    best = math.inf
+    if r1 > 0:
+        best = r1
+    if 0 < r2 < best:
+        best = r2
+    return best
+
+
+@jit
+def touch_time(G, i, j, t, WP, grav):
+    """Time from t until body i touches body j (or wall -1 - j) in free flight (inf: never)."""
+    px, py, pz, ux, uy, uz = free_state(G, i, t, grav)
+    if j >= 0:
+        qx, qy, qz, wx, wy, wz = free_state(G, j, t, grav)
+        dx, dy, dz = qx - px, qy - py, qz - pz
+        ex, ey, ez = wx - ux, wy - uy, wz - uz  # gravity cancels in relative motion
+        b = 2.0 * (dx * ex + dy * ey + dz * ez)
+        if b >= 0:
+            return math.inf
+        reach = G[i, G_R] + G[j, G_R]
+        return smallest_positive_root(ex * ex + ey * ey + ez * ez, b,
+                                      max(dx * dx + dy * dy + dz * dz - reach * reach, 0.0))
+    w = -1 - j
+    gap = (px - WP[w, 0]) * WP[w, 3] + (py - WP[w, 1]) * WP[w, 4] + (pz - WP[w, 2]) * WP[w, 5] - G[i, G_R]
+    rate = ux * WP[w, 3] + uy * WP[w, 4] + uz * WP[w, 5]
+    acc = grav[0] * WP[w, 3] + grav[1] * WP[w, 4] + grav[2] * WP[w, 5]
+    return smallest_positive_root(0.5 * acc, rate, max(gap, 0.0))
+
+
+@jit
+def grow(buf, n):
+    """`buf` with room for row n (doubled when full)."""
+    if n < buf.shape[0]:
+        return buf
+    out = np.empty((2 * buf.shape[0] + 16, buf.shape[1]))
+    out[:buf.shape[0]] = buf
+    return out
+
+
+@jit
+def grow_int(buf, n):
+    if n < buf.shape[0]:
+        return buf
+    out = np.empty((2 * buf.shape[0] + 16, buf.shape[1]), np.int64)
+    out[:buf.shape[0]] = buf
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Broad phase: a uniform cell grid, so that finding contacts follows the bodies, not the pairs
+
+
+@jit
+def near_pairs(P, rad, margin, n, dim):
+    """Pairs (i < j) with |s_i - s_j| <= r_i + r_j + margin_i + margin_j, shape (K, 2), from
+    positions P (N, 3). A body whose reach is far above the rest's (a fast one) is checked
+    against every body instead of setting the cell size for all."""
+    out = np.empty((max(16, 4 * n), 2), np.int64)
+    m = 0
+    if n < 2:
+        return out[:0]
+    mean = 0.0
+    for i in range(n):
+        mean += rad[i] + margin[i]
+    mean /= n
+    size = 0.0
+    for i in range(n):
+        b = rad[i] + margin[i]
+        if b <= 4.0 * mean:
+            size = max(size, b)
+    size *= 2.0
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for i in range(n):
+        for d in range(dim):
+            lo[d] = min(lo[d], P[i, d])
+            hi[d] = max(hi[d], P[i, d])
+    cells = np.ones(3, np.int64)
+    while True:
+        total = 1
+        for d in range(dim):
+            cells[d] = min(int((hi[d] - lo[d]) / size) + 1, 1 << 20) if size > 0 else 1
+            total *= cells[d]
+        if total <= 4 * n + 64:
+            break
+        size *= 1.5
+    head = np.full(cells[0] * cells[1] * cells[2], -1, np.int64)
+    nxt = np.full(n, -1, np.int64)
+    cell = np.zeros((n, 3), np.int64)
+    for i in range(n):
+        if rad[i] + margin[i] > 4.0 * mean:
+            continue
+        for d in range(dim):
+            cell[i, d] = min(max(int((P[i, d] - lo[d]) / size) if size > 0 else 0, 0), cells[d] - 1)
+        key = (cell[i, 0] * cells[1] + cell[i, 1]) * cells[2] + cell[i, 2]
+        nxt[i] = head[key]
+        head[key] = i
+    for i in range(n):
+        bi = rad[i] + margin[i]
+        if bi > 4.0 * mean:
+            # Against everyone (another outlier only once, from the lower index).
+            for j in range(n):
+                if j == i or (j < i and rad[j] + margin[j] > 4.0 * mean):
+                    continue
+                if _close(P, i, j, bi + rad[j] + margin[j]):
+                    out = grow_int(out, m)
+                    out[m, 0], out[m, 1] = min(i, j), max(i, j)
+                    m += 1
+            continue
+        a0, a1 = max(cell[i, 0] - 1, 0), min(cell[i, 0] + 1, cells[0] - 1)
+        b0, b1 = max(cell[i, 1] - 1, 0), min(cell[i, 1] + 1, cells[1] - 1)
+        c0, c1 = max(cell[i, 2] - 1, 0), min(cell[i, 2] + 1, cells[2] - 1)
+        for a in range(a0, a1 + 1):
+            for b in range(b0, b1 + 1):
+                for c in range(c0, c1 + 1):
+                    j = head[(a * cells[1] + b) * cells[2] + c]
+                    while j >= 0:
+                        if j > i and _close(P, i, j, bi + rad[j] + margin[j]):
+                            out = grow_int(out, m)
+                            out[m, 0], out[m, 1] = i, j
+                            m += 1
+                        j = nxt[j]
+    return out[:m]
+
+
+@jit
+def _close(P, i, j, reach):
+    dx = P[j, 0] - P[i, 0]
+    dy = P[j, 1] - P[i, 1]
+    dz = P[j, 2] - P[i, 2]
+    return dx * dx + dy * dy + dz * dz <= reach * reach
+
+
+@jit
+def root_of(parent, i):
+    """Union-find root, with path halving."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@jit
+def join(parent, i, j):
+    a, b = root_of(parent, i), root_of(parent, j)
+    if a != b:
+        parent[max(a, b)] = min(a, b)
+
+
+# ---------------------------------------------------------------------------------------------
+# Recording
+
+
+@jit
+def add_knot(KN, CNT, t, g, free, X, a, sc, vc, wc, qc, acc, work):
+    """Append body g's state at t from row a of X (or of G, with the columns given)."""
+    KN = grow(KN, CNT[CN_KNOTS])
+    r = CNT[CN_KNOTS]
+    KN[r, K_T] = t
+    KN[r, K_BODY] = g
+    KN[r, K_FREE] = free
+    for d in range(3):
+        KN[r, K_S + d] = X[a, sc + d]
+        KN[r, K_V + d] = X[a, vc + d]
+        KN[r, K_W + d] = X[a, wc + d]
+        KN[r, K_A + d] = acc[d]
+        KN[r, K_AN + d] = acc[d]
+    for d in range(4):
+        KN[r, K_Q + d] = X[a, qc + d]
+    KN[r, K_WORK] = work
+    CNT[CN_KNOTS] += 1
+    return KN
+
+
+@jit
+def intervals(Q, nq, t, IV, OP, CNT, ST):
+    """Open an interval for every newly engaged candidate, close the island's that ended.
+    OP holds the rows of open intervals (CNT[CN_OPEN] of them). Returns the grown buffers."""
+    IV = grow(IV, CNT[CN_IVALS] + nq)
+    if CNT[CN_OPEN] + nq >= OP.shape[0]:
+        more = np.empty(2 * OP.shape[0] + nq + 16, np.int64)
+        more[:OP.shape[0]] = OP
+        OP = more
+    k = 0
+    while k < CNT[CN_OPEN]:
+        row = OP[k]
+        gi, gj = int(IV[row, V_I]), int(IV[row, V_J])
+        close = False
+        for q in range(nq):
+            if Q[q, Q_I] == gi and Q[q, Q_J] == gj:
+                close = Q[q, Q_ENG] == 0
+                break
+        if close:
+            IV[row, V_END] = t
+            CNT[CN_OPEN] -= 1
+            OP[k] = OP[CNT[CN_OPEN]]
+        else:
+            k += 1
+    for q in range(nq):
+        if Q[q, Q_ENG] == 0:
+            continue
+        found = False
+        for k in range(CNT[CN_OPEN]):
+            row = OP[k]
+            if int(IV[row, V_I]) == Q[q, Q_I] and int(IV[row, V_J]) == Q[q, Q_J]:
+                found = True
+                break
+        if found:
+            continue
+        row = CNT[CN_IVALS]
+        IV[row, V_I] = Q[q, Q_I]
+        IV[row, V_J] = Q[q, Q_J]
+        IV[row, V_START] = t
+        IV[row, V_END] = math.nan
+        OP[CNT[CN_OPEN]] = row
+        CNT[CN_OPEN] += 1
+        CNT[CN_IVALS] += 1
+        ST[S_CONTACTS] += 1
+    return IV, OP
+
+
+# ---------------------------------------------------------------------------------------------
+# An island
+
+
+@jit
+def gather(G, GI, X, XI, C, CI, Q, QF, nq, bodies_params):
+    """Set up the island's engaged contacts (C, CI) and their bodies (X, XI) from the engaged
+    candidates; returns (bodies, contacts)."""
+    ptab, wtab = bodies_params
+    na = 0
+    nc = 0
+    for k in range(nq):
+        if Q[k, Q_ENG] == 0:
+            continue
+        for side in range(2):
+            g = Q[k, Q_I] if side == 0 else Q[k, Q_J]
+            if g >= 0 and GI[g, GI_LOC] < 0:
+                GI[g, GI_LOC] = na
+                XI[na] = g
+                for d in range(13):
+                    X[na, X_S + d] = G[g, G_S + d]
+                X[na, X_IM] = G[g, G_IM]
+                X[na, X_II] = G[g, G_II]
+                X[na, X_R] = G[g, G_R]
+                X[na, X_M] = G[g, G_M]
+                X[na, X_I] = G[g, G_I]
+                na += 1
+        gi, gj = Q[k, Q_I], Q[k, Q_J]
+        CI[nc, CI_I] = GI[gi, GI_LOC]
+        CI[nc, CI_J] = GI[gj, GI_LOC] if gj >= 0 else gj
+        CI[nc, CI_GI] = gi
+        CI[nc, CI_GJ] = gj
+        CI[nc, CI_Q] = k
+        mi = int(G[gi, G_MAT])
+        if gj >= 0:
+            mj = int(G[gj, G_MAT])
+            C[nc, C_K], C[nc, C_MU], C[nc, C_EPS] = ptab[mi, mj, TP_K], ptab[mi, mj, TP_MU], ptab[mi, mj, TP_EPS]
+        else:
+            C[nc, C_K], C[nc, C_MU], C[nc, C_EPS] = wtab[mi, TP_K], wtab[mi, TP_MU], wtab[mi, TP_EPS]
+        C[nc, C_REACH] = QF[k, QF_REACH]
+        nc += 1
+    return na, nc
+
+
+@jit
+def island_omega(X, C, CI, na, nc):
+    """The stiffest frequency of the engaged contacts: exact for one contact, otherwise a
+    Gershgorin bound on the mass-symmetrised stiffness matrix (rows k/m_i + k/sqrt(m_i m_j))."""
+    if nc == 1:
+        i, j = CI[0, CI_I], CI[0, CI_J]
+        return math.sqrt(C[0, C_K] * (X[i, X_IM] + (X[j, X_IM] if j >= 0 else 0.0)))
+    for a in range(na):
+        X[a, X_FO] = 0.0
+    for c in range(nc):
+        i, j = CI[c, CI_I], CI[c, CI_J]
+        k = C[c, C_K]
+        if j >= 0:
+            cross = k * math.sqrt(X[i, X_IM] * X[j, X_IM])
+            X[i, X_FO] += k * X[i, X_IM] + cross
+            X[j, X_FO] += k * X[j, X_IM] + cross
+        else:
+            X[i, X_FO] += k * X[i, X_IM]
+    top = 0.0
+    for a in range(na):
+        top = max(top, X[a, X_FO])
+    return math.sqrt(top)
+
+
+@jit
+def energy(X, C, na, nc, grav, spin):
+    """Kinetic, rotational, gravitational and spring energy of the island's stepped bodies."""
+    e = 0.0
+    for a in range(na):
+        for d in range(3):
+            e += 0.5 * X[a, X_M] * X[a, X_V + d] ** 2 - X[a, X_M] * grav[d] * X[a, X_S + d]
+            if spin:
+                e += 0.5 * X[a, X_I] * X[a, X_W + d] ** 2
+    for c in range(nc):
+        e += 0.5 * C[c, C_K] * C[c, C_DELTA] ** 2
+    return e
+
+
+@jit
+def slip_turn(X, C, CI, nc, fl):
+    """The largest angle (rad) a sliding contact's slip turned by over the step just taken, seen
+    in the contact's frame: from its direction at the step's start (held, carried onto the end's
+    tangent plane) to its direction at the end. Zero in the plane, where a slip cannot turn."""
+    if fl[FL_PLANAR]:
+        return 0.0
+    top = 0.0
+    for c in range(nc):
+        if CI[c, CI_MODE] != SLIDE:
+            continue
+        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, fl[FL_SPIN])
+        nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+        hx, hy, hz = C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2]
+        hn = hx * nx + hy * ny + hz * nz
+        hx, hy, hz = hx - hn * nx, hy - hn * ny, hz - hn * nz
+        cross = math.sqrt((hy * sz - hz * sy) ** 2 + (hz * sx - hx * sz) ** 2 + (hx * sy - hy * sx) ** 2)
+        top = max(top, math.atan2(cross, hx * sx + hy * sy + hz * sz))
+    return top
+
+
+@jit
+def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
+                max_turn):
+    """One step from the start state; where an event would happen inside it, shortened to land
+    there, each refinement re-stepping from the start. Contacts starting or ending: a cubic
+    Hermite through the overlaps at both ends of a trial; friction modes: a bracketed root find
+    (Hermite with both ends' rates where they have closed forms, then inverse quadratic
+    interpolation, secant or Newton in the bracket). In 3D a sliding slip may turn by at most
+    `max_turn` (rad) a step: just after it leaves the band's edge it turns on a time scale of
+    eps over its rate, far below a step, and the step is shortened to follow it.
+    Returns (h taken, work, ok, whether the turning limited the step, a candidate that began
+    pressing from touching within the step: -1 if none, else the step was not taken)."""
+    h = h_full
+    limited = False
+    work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl)
+    if not ok:
+        return h, work, False, limited, -1
+    tol = TOUCH_TOL
+    # A contact touching at the start with no approach speed that presses by the end began with
+    # the step: it is engaged from the start and the step taken again (a Newton's cradle).
+    for k in range(nq):
+        if Q[k, Q_ENG] == 0 and -tol <= QF[k, QF_D0] <= tol:
+            d1, r1 = overlap(G, GI, X, Q, QF, k, t + h, WP, grav)
+            if d1 > tol:
+                return 0.0, work, True, limited, k
+    modes = 2 * nc if fl[FL_FRICTION] else 0
+    pending = False
+    col = -1
+    lo, hi, f_lo, f_hi = 0.0, 1.0, 0.0, 0.0
+    ta, fa, tb, fb = math.nan, math.nan, math.nan, math.nan
+    past = math.inf
+    shortest = 16.0 * EPS64 * (abs(t) + abs(h_full))
+    for _ in range(40):
+        frac = h / h_full
+        first = math.inf
+        for k in range(nq):
+            d1, r1 = overlap(G, GI, X, Q, QF, k, t + h, WP, grav)
+            QF[k, QF_D1], QF[k, QF_R1] = d1, r1
+            d0 = QF[k, QF_D0]
+            if (d0 > tol and d1 < -tol) or (d0 < -tol and d1 > tol):
+                first = min(first, hermite_root(d0, d1, QF[k, QF_R0] * h, r1 * h))
+        theta = math.inf
+        crossing = first < math.inf
+        if crossing:
+            theta = first * frac
+            if frac < past:
+                past = frac
+                for k in range(nq):
+                    QF[k, QF_DP], QF[k, QF_RP] = QF[k, QF_D1], QF[k, QF_R1]
+        short = past < math.inf and frac < past and not crossing
+        if short:
+            # Fell short: the crossing lies between this trial's end and the shorter crossing one.
+            gap = past - frac
+            first = math.inf
+            for k in range(nq):
+                d1, dp = QF[k, QF_D1], QF[k, QF_DP]
+                if (d1 > tol and dp < -tol) or (d1 < -tol and dp > tol):
+                    first = min(first, hermite_root(d1, dp, QF[k, QF_R1] * gap * h_full, QF[k, QF_RP] * gap * h_full))
+            if first < math.inf:
+                theta = frac + first * gap
+        if modes:
+            if not mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale):
+                return h, work, False, limited, -1
+            best = -1
+            guess = math.inf
+            for k in range(modes):
+                e0, e1 = E[k, E_V0], E[k, E_V1]
+                if e0 > MODE_TOL and e1 < -MODE_TOL and e0 / (e0 - e1) * frac < guess:
+                    guess = e0 / (e0 - e1) * frac
+                    best = k
+            fresh = best >= 0 and (not pending or best != col)
+            if fresh:
+                col = best
+                lo, f_lo, hi, f_hi = 0.0, E[col, E_V0], frac, E[col, E_V1]
+                ta, fa, tb, fb = math.nan, math.nan, 0.0, E[col, E_V0]
+                pending = True
+            if pending:
+                f = E[col, E_V1]
+                if not fresh:
+                    if f < 0:
+                        hi, f_hi = frac, f
+                    else:
+                        lo, f_lo = frac, f
+                if abs(f) <= MODE_TOL and (best < 0 or best == col):
+                    pending = False
+                    if short:
+                        theta = math.inf
+                else:
+                    estimate = bracketed_root(lo, f_lo, hi, f_hi, ta, fa, tb, fb, frac, f)
+                    slope = E[col, E_R1] * h_full
+                    if fresh:
+                        s0 = E[col, E_R0] * h
+                        if math.isfinite(s0) and math.isfinite(slope):
+                            estimate = hermite_root(E[col, E_V0], f, s0, slope * frac) * frac
+                    elif math.isfinite(slope) and slope != 0 and lo < frac - f / slope < hi:
+                        estimate = frac - f / slope
+                    theta = min(theta, estimate)
+                    ta, fa, tb, fb = tb, fb, frac, f
+        if modes and not pending:
+            turned = slip_turn(X, C, CI, nc, fl)
+            if turned > max_turn:
+                # The turning angle grows about in proportion to the step near the edge.
+                limited = True
+                theta = min(theta, frac * max(0.8 * max_turn / turned, 0.05))
+        if not (theta < math.inf and abs(theta - frac) > 1e-12 * max(frac, 1e-300)):
+            break
+        # Never shorter than a few ticks of the clock: an event closer than that is taken as passed.
+        h = max(h_full * max(theta, 1e-12), shortest)
+        work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl)
+        if not ok:
+            return h, work, False, limited, -1
+    return h, work, True, limited, -1
+
+
+@jit
+def record_step(KN, RC, CNT, G, GI, X, XI, C, CI, na, nc, t, fl):
+    """Knots of the stepped bodies and records of the engaged contacts at the end of a step."""
+    acc = np.empty(3)
+    for a in range(na):
+        g = XI[a]
+        for d in range(3):
+            acc[d] = X[a, X_A + d] + (X[a, X_F + d] if fl[FL_FRICTION] else 0.0)
+        KN = add_knot(KN, CNT, t, g, 0.0, X, a, X_S, X_V, X_W, X_Q, acc, G[g, G_WK])
+        GI[g, GI_KNOT] = CNT[CN_KNOTS] - 1
+    for c in range(nc):
+        RC = grow(RC, CNT[CN_RECS])
+        r = CNT[CN_RECS]
+        RC[r, R_T] = t
+        RC[r, R_I] = CI[c, CI_GI]
+        RC[r, R_J] = CI[c, CI_GJ]
+        RC[r, R_DELTA] = C[c, C_DELTA]
+        RC[r, R_FN] = C[c, C_FN]
+        for d in range(3):
+            RC[r, R_FX + d] = C[c, C_FF + d] if fl[FL_FRICTION] else 0.0
+        RC[r, R_MODE] = CI[c, CI_MODE] if fl[FL_FRICTION] else 0.0
+        CNT[CN_RECS] += 1
+    return KN, RC
+
+
+@jit
+def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
+    """Advance the island of candidate contacts Q (N_Q, 3) from T to W: free flight in closed
+    form while nothing is engaged, event-located steps of the bodies with engaged contacts while
+    something is. Returns the (grown) recording buffers; problems go to ST[S_STATUS]."""
+    KN, RC, IV, OP = bufs
+    spin, fric, record = fl[FL_SPIN], fl[FL_FRICTION], fl[FL_RECORD]
+    scale = fp[FP_SCALE]
+    nq = Q.shape[0]
+    size = 0
+    for k in range(nq):
+        size += 1 if Q[k, Q_J] < 0 else 2
+    X = np.zeros((size, NX))
+    XI = np.zeros(size, np.int64)
+    C = np.zeros((nq, NC))
+    CI = np.zeros((nq, NCI), np.int64)
+    E = np.zeros((2 * nq, 4))
+    stuck = np.zeros(nq, np.int64)
+    m_cap = min(nq, 48)
+    A = np.zeros((2 * m_cap, 2 * m_cap))
+    b = np.zeros(2 * nq)
+    t = T
+    stalled = 0
+    while t < W and ST[S_STATUS] == OK:
+        n_eng = 0
+        for k in range(nq):
+            d, r = overlap(G, GI, X, Q, QF, k, t, WP, grav)
+            Q[k, Q_ENG] = 1 if engaged(Q, k, d, r, WP, grav) else 0
+            n_eng += Q[k, Q_ENG]
+        IV, OP = intervals(Q, nq, t, IV, OP, CNT, ST)
+        if n_eng == 0:
+            tau = math.inf
+            for k in range(nq):
+                tau = min(tau, touch_time(G, Q[k, Q_I], Q[k, Q_J], t, WP, grav))
+            if t + tau >= W:
+                break
+            t += tau
+            continue
+        # A contact phase: the bodies of the engaged contacts are stepped.
+        for k in range(nq):
+            for side in range(2):
+                g = Q[k, Q_I] if side == 0 else Q[k, Q_J]
+                if g >= 0 and Q[k, Q_ENG]:
+                    bring(G, g, t, grav, fl)
+        na, nc = gather(G, GI, X, XI, C, CI, Q, QF, nq, tables)
+        if 2 * nc > A.shape[0] and fric:
+            A = np.zeros((2 * nc, 2 * nc))
+        omega = island_omega(X, C, CI, na, nc)
+        dt = fp[FP_OMEGA_H] / omega if fl[FL_AUTO] else fp[FP_DT]
+        # A slip may turn by the angle the stiffest contact's oscillation advances in a step.
+        max_turn = max(dt * omega, 1e-3)
+        grown = math.inf
+        FG[F_DT_MIN] = min(FG[F_DT_MIN], dt)
+        geometry(X, C, CI, nc, WP, fl[FL_SEED])
+        springs(X, C, CI, na, nc, grav)
+        e_start = energy(X, C, na, nc, grav, spin)
+        if record:
+            # Where a body's free flight ends and its steps begin.
+            for a in range(na):
+                g = XI[a]
+                last = GI[g, GI_KNOT]
+                if not (last >= 0 and KN[last, K_T] == t):
+                    KN = add_knot(KN, CNT, t, g, 0.0, X, a, X_S, X_V, X_W, X_Q, grav, G[g, G_WK])
+                    last = CNT[CN_KNOTS] - 1
+                    GI[g, GI_KNOT] = last
+                KN[last, K_FREE] = 0.0
+                for d in range(3):
+                    KN[last, K_AN + d] = X[a, X_A + d]
+        changed = False
+        while t < W and not changed and ST[S_STATUS] == OK:
+            if fric:
+                geometry(X, C, CI, nc, WP, fl[FL_SEED])
+                springs(X, C, CI, na, nc, grav)
+                done, ok = decide(X, C, CI, na, nc, stuck, A, b, fl, scale)
+                share(G, XI, na, done)
+                if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale):
+                    ST[S_STATUS] = SINGULAR
+                    FG[F_STATUS_T] = t
+                    break
+            for a in range(na):
+                for d in range(13):
+                    X[a, X_S0 + d] = X[a, X_S + d]
+                if record and fric:
+                    # The acceleration the coming step starts with (its modes).
+                    for d in range(3):
+                        KN[GI[XI[a], GI_KNOT], K_AN + d] = X[a, X_A + d] + X[a, X_F + d]
+            for k in range(nq):
+                QF[k, QF_D0], QF[k, QF_R0] = overlap(G, GI, X, Q, QF, k, t, WP, grav)
+            h_full = min(dt, W - t, grown)
+            h, work, ok, limited, late = step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP,
+                                                     grav, stuck, A, b, fl, scale, max_turn)
+            if late >= 0:
+                # Engage it from here: back to the step's start, and a new phase.
+                for a in range(na):
+                    for d in range(13):
+                        X[a, X_S + d] = X[a, X_S0 + d]
+                Q[late, Q_ENG] = 1
+                changed = True
+                break
+            # After a step the turning limited, let the next ones grow back by doubling.
+            grown = 2.0 * h if limited else (2.0 * grown if grown < dt else math.inf)
+            if not ok:
+                ST[S_STATUS] = SINGULAR
+                FG[F_STATUS_T] = t
+                break
+            stalled = stalled + 1 if h == 0.0 else 0
+            if stalled > STALL_LIMIT:
+                ST[S_STATUS] = STALL
+                FG[F_STATUS_T] = t
+                break
+            # A step to the window's end lands on it exactly.
+            t = W if (h == h_full and h_full == W - t) else t + h
+            ST[S_STEPS] += 1
+            share(G, XI, na, work)
+            for a in range(na):
+                for d in range(6):
+                    if not math.isfinite(X[a, X_S + d]):
+                        ST[S_STATUS] = NONFINITE
+            if ST[S_STEPS] > fl[FL_MAXSTEPS]:
+                ST[S_STATUS] = MAXSTEPS
+            if ST[S_STATUS] != OK:
+                FG[F_STATUS_T] = t
+                break
+            for c in range(nc):
+                FG[F_MAX_OVERLAP] = max(FG[F_MAX_OVERLAP], C[c, C_DELTA])
+            if record:
+                KN, RC = record_step(KN, RC, CNT, G, GI, X, XI, C, CI, na, nc, t, fl)
+            for k in range(nq):
+                d, r = overlap(G, GI, X, Q, QF, k, t, WP, grav)
+                if engaged(Q, k, d, r, WP, grav) != Q[k, Q_ENG]:
+                    changed = True
+        # The phase ends here: the stepped bodies go back to base states at t.
+        e_end = energy(X, C, na, nc, grav, spin)
+        if e_end - e_start > 0.5 * abs(e_start) + 1e-300 and ST[S_STATUS] == OK:
+            ST[S_STATUS] = ENERGY
+            FG[F_STATUS_T], FG[F_STATUS_A], FG[F_STATUS_B] = t, e_start, e_end
+        for a in range(na):
+            g = XI[a]
+            for d in range(13):
+                G[g, G_S + d] = X[a, X_S + d]
+            G[g, G_TB] = t
+            GI[g, GI_LOC] = -1
+        if record and changed:
+            # Bodies whose every contact has ended fly freely from their last knot.
+            for a in range(na):
+                g = XI[a]
+                still = False
+                for k in range(nq):
+                    if Q[k, Q_I] == g or Q[k, Q_J] == g:
+                        d, r = overlap(G, GI, X, Q, QF, k, t, WP, grav)
+                        still = still or engaged(Q, k, d, r, WP, grav)
+                if not still and GI[g, GI_KNOT] >= 0:
+                    KN[GI[g, GI_KNOT], K_FREE] = 1.0
+    return KN, RC, IV, OP
+
+
+@jit
+def share(G, XI, na, work):
+    """An island step's dissipated work, shared among its stepped bodies (their sum is exact at
+    the step's end, where every one of them has a knot)."""
+    if work != 0.0 and na > 0:
+        for a in range(na):
+            G[XI[a], G_WK] += work / na
+
+
+# ---------------------------------------------------------------------------------------------
+# A run: windows of islands
+
+
+@jit
+def positions_at(G, n, t, grav, P, V):
+    for i in range(n):
+        px, py, pz, ux, uy, uz = free_state(G, i, t, grav)
+        P[i, 0], P[i, 1], P[i, 2] = px, py, pz
+        V[i, 0], V[i, 1], V[i, 2] = ux, uy, uz
+
+
+@jit
+def engaged_now(G, P, V, n, WP, grav, dim):
+    """Contacts engaged at positions P and velocities V: (K, 2), walls as (i, -1 - wall)."""
+    margin = np.zeros(n)
+    for i in range(n):
+        margin[i] = 2.0 * TOUCH_TOL * G[i, G_R]
+    pairs = near_pairs(P, G[:, G_R], margin, n, dim)
+    out = np.empty((pairs.shape[0] + n * WP.shape[0] + 1, 2), np.int64)
+    m = 0
+    for p in range(pairs.shape[0]):
+        i, j = pairs[p, 0], pairs[p, 1]
+        dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
+        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+        reach = G[i, G_R] + G[j, G_R]
+        d = (reach - dist) / reach
+        r = (V[i, 0] - V[j, 0]) * dx + (V[i, 1] - V[j, 1]) * dy + (V[i, 2] - V[j, 2]) * dz
+        if d > TOUCH_TOL or (d >= -TOUCH_TOL and r > 0):
+            out[m, 0], out[m, 1] = i, j
+            m += 1
+    for w in range(WP.shape[0]):
+        into = grav[0] * WP[w, 3] + grav[1] * WP[w, 4] + grav[2] * WP[w, 5] < 0
+        for i in range(n):
+            h = (P[i, 0] - WP[w, 0]) * WP[w, 3] + (P[i, 1] - WP[w, 1]) * WP[w, 4] + (P[i, 2] - WP[w, 2]) * WP[w, 5]
+            d = (G[i, G_R] - h) / G[i, G_R]
+            r = -(V[i, 0] * WP[w, 3] + V[i, 1] * WP[w, 4] + V[i, 2] * WP[w, 5])
+            if d > TOUCH_TOL or (d >= -TOUCH_TOL and (r > 0 or (r == 0 and into))):
+                out[m, 0], out[m, 1] = i, -1 - w
+                m += 1
+    return out[:m]
+
+
+@jit
+def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair):
+    """The earliest contact start after t, looking `horizon` ahead (every pair if asked)."""
+    best = math.inf
+    if every_pair:
+        for i in range(n):
+            for j in range(i + 1, n):
+                best = min(best, touch_time(G, i, j, t, WP, grav))
+    else:
+        g = math.sqrt(grav[0] ** 2 + grav[1] ** 2 + grav[2] ** 2)
+        margin = np.empty(n)
+        for i in range(n):
+            margin[i] = math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2) * horizon + 0.5 * g * horizon ** 2
+        pairs = near_pairs(P, G[:, G_R], margin, n, dim)
+        for p in range(pairs.shape[0]):
+            best = min(best, touch_time(G, pairs[p, 0], pairs[p, 1], t, WP, grav))
+    for w in range(WP.shape[0]):
+        for i in range(n):
+            best = min(best, touch_time(G, i, -1 - w, t, WP, grav))
+    return best
+
+
+@jit
+def window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim):
+    """Contacts that may go on or start within the window: pairs and walls whose gap could close
+    within `horizon`, each body's speed bounded by the energy its engaged cluster holds (spin
+    included: friction can turn it into motion), plus gravity's pull. (K, 2)."""
+    ptab, wtab = tables
+    parent = np.arange(n)
+    for p in range(eng.shape[0]):
+        if eng[p, 1] >= 0:
+            join(parent, eng[p, 0], eng[p, 1])
+    pool = np.zeros(n)
+    clustered = np.zeros(n, np.bool_)
+    for p in range(eng.shape[0]):
+        i, j = eng[p, 0], eng[p, 1]
+        mi = int(G[i, G_MAT])
+        if j >= 0:
+            k = ptab[mi, int(G[j, G_MAT]), TP_K]
+            dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
+            delta = G[i, G_R] + G[j, G_R] - math.sqrt(dx * dx + dy * dy + dz * dz)
+            clustered[j] = True
+        else:
+            w = -1 - j
+            k = wtab[mi, TP_K]
+            delta = G[i, G_R] - ((P[i, 0] - WP[w, 0]) * WP[w, 3] + (P[i, 1] - WP[w, 1]) * WP[w, 4]
+                                 + (P[i, 2] - WP[w, 2]) * WP[w, 5])
+        clustered[i] = True
+        pool[root_of(parent, i)] += 0.5 * k * max(delta, 0.0) ** 2
+    for i in range(n):
+        if clustered[i]:
+            pool[root_of(parent, i)] += 0.5 * G[i, G_M] * (V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2) + \
+                0.5 * G[i, G_I] * (G[i, G_W] ** 2 + G[i, G_W + 1] ** 2 + G[i, G_W + 2] ** 2)
+    g = math.sqrt(grav[0] ** 2 + grav[1] ** 2 + grav[2] ** 2)
+    margin = np.empty(n)
+    for i in range(n):
+        speed = math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2)
+        if clustered[i]:
+            speed = max(speed, math.sqrt(2.0 * pool[root_of(parent, i)] / G[i, G_M]))
+        margin[i] = safety * (speed * horizon + 0.5 * g * horizon * horizon) + 2.0 * TOUCH_TOL * G[i, G_R]
+    pairs = near_pairs(P, G[:, G_R], margin, n, dim)
+    out = np.empty((pairs.shape[0] + n * WP.shape[0], 2), np.int64)
+    m = 0
+    for p in range(pairs.shape[0]):
+        out[m, 0], out[m, 1] = pairs[p, 0], pairs[p, 1]
+        m += 1
+    for w in range(WP.shape[0]):
+        for i in range(n):
+            gap = (P[i, 0] - WP[w, 0]) * WP[w, 3] + (P[i, 1] - WP[w, 1]) * WP[w, 4] + \
+                (P[i, 2] - WP[w, 2]) * WP[w, 5] - G[i, G_R]
+            if gap <= margin[i]:
+                out[m, 0], out[m, 1] = i, -1 - w
+                m += 1
+    return out[:m]
+
+
+@jit
+def missed_contact(G, P, V, n, t, cand, WP, grav, dim):
+    """Whether bodies (or a body and a wall) overlap at t without having been candidates."""
+    positions_at(G, n, t, grav, P, V)
+    # Each body's candidates, for a quick lookup (CSR).
+    start = np.zeros(n + 1, np.int64)
+    for k in range(cand.shape[0]):
+        start[cand[k, 0] + 1] += 1
+    for i in range(n):
+        start[i + 1] += start[i]
+    fill = start.copy()
+    other = np.empty(cand.shape[0], np.int64)
+    for k in range(cand.shape[0]):
+        other[fill[cand[k, 0]]] = cand[k, 1]
+        fill[cand[k, 0]] += 1
+    eng = engaged_now(G, P, V, n, WP, grav, dim)
+    for p in range(eng.shape[0]):
+        i, j = eng[p, 0], eng[p, 1]
+        if j >= 0:
+            dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
+            reach = G[i, G_R] + G[j, G_R]
+            deep = reach - math.sqrt(dx * dx + dy * dy + dz * dz) > 1e-9 * reach
+        else:
+            w = -1 - j
+            h = (P[i, 0] - WP[w, 0]) * WP[w, 3] + (P[i, 1] - WP[w, 1]) * WP[w, 4] + (P[i, 2] - WP[w, 2]) * WP[w, 5]
+            deep = G[i, G_R] - h > 1e-9 * G[i, G_R]
+        if not deep:
+            continue
+        found = False
+        for k in range(start[i], start[i + 1]):
+            if other[k] == j:
+                found = True
+                break
+        if not found:
+            return True
+    return False
+
+
+@jit
+def tail_after(tail, IV, CNT):
+    """After the last separation, keep going long enough to see the bodies part."""
+    if tail == tail:
+        return tail
+    first, last = math.inf, -math.inf
+    for k in range(CNT[CN_IVALS]):
+        first = min(first, IV[k, V_START])
+        if IV[k, V_END] == IV[k, V_END]:
+            last = max(last, IV[k, V_END])
+    if last == -math.inf:
+        return NO_CONTACT_TAIL
+    return max(2.0 * (last - first), 0.1 * last)
+
+
+@jit
+def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
+    """Advance every body to the run's end (see the README's engine notes): jump to the next
+    contact start while nothing touches; otherwise a window of islands. Returns the buffers and
+    the final time."""
+    KN, RC, IV, OP = bufs
+    n = G.shape[0]
+    dim = fl[FL_DIM]
+    P = np.zeros((n, 3))
+    V = np.zeros((n, 3))
+    t = 0.0
+    t_end = fp[FP_TEND]
+    search = math.inf
+    safety = 1.5
+    while ST[S_STATUS] == OK and t < t_end:
+        positions_at(G, n, t, grav, P, V)
+        eng = engaged_now(G, P, V, n, WP, grav, dim)
+        if eng.shape[0] == 0:
+            # Nothing touches: jump to the next contact start (nothing to record in free flight).
+            if search == math.inf:
+                fastest = 0.0
+                for i in range(n):
+                    fastest = max(fastest, math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2))
+                search = 4.0 * G[0, G_R] / fastest if fastest > 0 else 1.0
+            horizon = min(search, t_end - t)
+            small = YES if n <= 64 else NO
+            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, small)
+            if tau <= horizon or (small == YES and tau < math.inf):
+                t = min(t + tau, t_end)
+                search = 2.0 * tau if tau > 0 else search
+                continue
+            if t_end < math.inf:
+                t = min(t + horizon, t_end)
+                search *= 2.0
+                continue
+            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, YES)
+            if tau < math.inf:
+                t += tau
+                continue
+            # No contact ahead: the run ends a tail after the last separation (free flight since).
+            tail = tail_after(fp[FP_TAIL], IV, CNT)
+            t_end = t + tail if CNT[CN_IVALS] == 0 else _last_end(IV, CNT) + tail
+            t = t_end
+            break
+        # A window: islands of the bodies that may meet within it.
+        omega = 0.0
+        ptab, wtab = tables
+        for p in range(eng.shape[0]):
+            i, j = eng[p, 0], eng[p, 1]
+            mi = int(G[i, G_MAT])
+            k = ptab[mi, int(G[j, G_MAT]), TP_K] if j >= 0 else wtab[mi, TP_K]
+            omega = max(omega, math.sqrt(k * (G[i, G_IM] + (G[j, G_IM] if j >= 0 else 0.0))))
+        step_est = fp[FP_OMEGA_H] / omega if fl[FL_AUTO] else fp[FP_DT]
+        horizon = min(WINDOW_STEPS * step_est, t_end - t)
+        saved_G = G.copy()
+        saved_GI = GI.copy()
+        saved_CNT = CNT.copy()
+        saved_OP = OP[:CNT[CN_OPEN]].copy()
+        saved_flags = np.zeros(n)
+        for i in range(n):
+            if GI[i, GI_KNOT] >= 0:
+                saved_flags[i] = KN[GI[i, GI_KNOT], K_FREE]
+        while True:
+            cand = window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim)
+            parent = np.arange(n)
+            for k in range(cand.shape[0]):
+                if cand[k, 1] >= 0:
+                    join(parent, cand[k, 0], cand[k, 1])
+            # Bucket the candidates by island (counting sort on the island's root).
+            count = np.zeros(n + 1, np.int64)
+            for k in range(cand.shape[0]):
+                count[root_of(parent, cand[k, 0]) + 1] += 1
+            for i in range(n):
+                count[i + 1] += count[i]
+            fill = count.copy()
+            order = np.empty(cand.shape[0], np.int64)
+            for k in range(cand.shape[0]):
+                r = root_of(parent, cand[k, 0])
+                order[fill[r]] = k
+                fill[r] += 1
+            for r in range(n):
+                k0, k1 = count[r], count[r + 1]
+                if k1 == k0:
+                    continue
+                Q = np.zeros((k1 - k0, 3), np.int64)
+                QF = np.zeros((k1 - k0, NQF))
+                for k in range(k0, k1):
+                    i, j = cand[order[k], 0], cand[order[k], 1]
+                    Q[k - k0, Q_I], Q[k - k0, Q_J] = i, j
+                    QF[k - k0, QF_REACH] = G[i, G_R] + (G[j, G_R] if j >= 0 else 0.0)
+                KN, RC, IV, OP = run_island(G, GI, Q, QF, t, t + horizon, tables, WP, grav, weights, fl, fp,
+                                            (KN, RC, IV, OP), CNT, ST, FG)
+                if ST[S_STATUS] != OK:
+                    break
+            if ST[S_STATUS] != OK or not missed_contact(G, P, V, n, t + horizon, cand, WP, grav, dim):
+                break
+            # A contact between islands: a speed bound failed. Redo the window, shorter and safer.
+            ST[S_RETRIES] += 1
+            for i in range(n):
+                for d in range(NG):
+                    G[i, d] = saved_G[i, d]
+                GI[i, 0], GI[i, 1] = saved_GI[i, 0], saved_GI[i, 1]
+            for d in range(4):
+                CNT[d] = saved_CNT[d]
+            for k in range(CNT[CN_OPEN]):
+                OP[k] = saved_OP[k]
+                IV[OP[k], V_END] = math.nan
+            for i in range(n):
+                if GI[i, GI_KNOT] >= 0:
+                    KN[GI[i, GI_KNOT], K_FREE] = saved_flags[i]
+            horizon *= 0.25
+            safety *= 2.0
+            positions_at(G, n, t, grav, P, V)
+        t += horizon
+        ST[S_WINDOWS] += 1
+        search = math.inf
+    return KN, RC, IV, OP, t
+
+
+@jit
+def _last_end(IV, CNT):
+    last = 0.0
+    for k in range(CNT[CN_IVALS]):
+        if IV[k, V_END] == IV[k, V_END]:
+            last = max(last, IV[k, V_END])
+    return last
+
+
+@jit
+def simulate(G, tables, WP, grav, weights, fl, fp):
+    """Run one scene from the state in G (base time 0) to its end. Returns (final time, knots,
+    contact records, contact intervals, counters, figures); G holds the final state."""
+    n = G.shape[0]
+    GI = np.full((n, 2), -1, np.int64)
+    KN = np.empty((max(64, 4 * n), NK))
+    RC = np.empty((64, NR))
+    IV = np.empty((16, 4))
+    OP = np.empty(16, np.int64)
+    CNT = np.zeros(4, np.int64)
+    ST = np.zeros(NS, np.int64)
+    FG = np.zeros(NF)
+    FG[F_DT_MIN] = math.inf
+    acc = np.zeros(3)
+    for d in range(3):
+        acc[d] = grav[d]
+    if fl[FL_RECORD]:
+        for i in range(n):
+            KN = add_knot(KN, CNT, 0.0, i, 1.0, G, i, G_S, G_V, G_W, G_Q, acc, 0.0)
+            GI[i, GI_KNOT] = i
+    KN, RC, IV, OP, t = windows(G, GI, tables, WP, grav, weights, fl, fp, (KN, RC, IV, OP), CNT, ST, FG)
+    for i in range(n):
+        bring(G, i, t, grav, fl)
+        if fl[FL_RECORD] and not (GI[i, GI_KNOT] >= 0 and KN[GI[i, GI_KNOT], K_T] == t):
+            KN = add_knot(KN, CNT, t, i, 1.0, G, i, G_S, G_V, G_W, G_Q, acc, G[i, G_WK])
+            GI[i, GI_KNOT] = CNT[CN_KNOTS] - 1
+    for k in range(CNT[CN_OPEN]):
+        IV[OP[k], V_END] = t
+    return t, KN[:CNT[CN_KNOTS]].copy(), RC[:CNT[CN_RECS]].copy(), IV[:CNT[CN_IVALS]].copy(), ST, FG
+
+
+# ---------------------------------------------------------------------------------------------
+# The report's own update (section III), on its fixed grid
+
+
+@jit
+def seed_forces(G, pairs, WP, grav, tables, fl, force, facc, alp, RC, CNT, t_rec):
+    """The report's forces at the bodies' base states: springs clamped at zero overlap, and
+    friction mu F_n against the slip when it exceeds eps (explicit), the slip measured with the
+    slip lever and the torque applied at the contact point. Fills force (springs), facc
+    (friction, as accelerations) and alp, records each pressed contact at t_rec (when
+    recording); returns the largest overlap and the records."""
+    ptab, wtab = tables
+    n = G.shape[0]
+    seed, spin, fric = fl[FL_SEED], fl[FL_SPIN], fl[FL_FRICTION]
+    for i in range(n):
+        for d in range(3):
+            force[i, d] = 0.0
+            facc[i, d] = 0.0
+            alp[i, d] = 0.0
+    top = 0.0
+    npair = pairs.shape[0]
+    for p in range(npair + n * WP.shape[0]):
+        if p < npair:
+            i, j = pairs[p, 0], pairs[p, 1]
+        else:
+            i, j = (p - npair) % n, -1 - (p - npair) // n
+        r = G[i, G_R]
+        mi = int(G[i, G_MAT])
+        if j >= 0:
+            dx, dy, dz = G[j, G_S] - G[i, G_S], G[j, G_S + 1] - G[i, G_S + 1], G[j, G_S + 2] - G[i, G_S + 2]
+            dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+            nx, ny, nz = dx / dist, dy / dist, dz / dist
+            delta = r + G[j, G_R] - dist
+            mj = int(G[j, G_MAT])
+            k, mu, eps = ptab[mi, mj, TP_K], ptab[mi, mj, TP_MU], ptab[mi, mj, TP_EPS]
+            half = 0.5 * delta
+        else:
+            w = -1 - j
+            dist = (G[i, G_S] - WP[w, 0]) * WP[w, 3] + (G[i, G_S + 1] - WP[w, 1]) * WP[w, 4] + \
+                (G[i, G_S + 2] - WP[w, 2]) * WP[w, 5]
+            nx, ny, nz = -WP[w, 3], -WP[w, 4], -WP[w, 5]
+            delta = r - dist
+            k, mu, eps = wtab[mi, TP_K], wtab[mi, TP_MU], wtab[mi, TP_EPS]
+            half = delta
+        if delta <= 0.0:
+            continue
+        top = max(top, delta)
+        fn = k * delta
+        if fl[FL_RECORD]:
+            RC = grow(RC, CNT[CN_RECS])
+            row = CNT[CN_RECS]
+            RC[row, R_T], RC[row, R_I], RC[row, R_J] = t_rec, i, j
+            RC[row, R_DELTA], RC[row, R_FN] = delta, fn
+            RC[row, R_FX], RC[row, R_FY], RC[row, R_FZ], RC[row, R_MODE] = 0.0, 0.0, 0.0, 0.0
+            CNT[CN_RECS] += 1
+        force[i, 0] -= fn * nx
+        force[i, 1] -= fn * ny
+        force[i, 2] -= fn * nz
+        if j >= 0:
+            force[j, 0] += fn * nx
+            force[j, 1] += fn * ny
+            force[j, 2] += fn * nz
+        if not fric:
+            continue
+        lif = r - half
+        ljf = G[j, G_R] - half if j >= 0 else 0.0
+        lis = r if seed else lif
+        ljs = (G[j, G_R] if seed else ljf) if j >= 0 else 0.0
+        rx, ry, rz = G[i, G_V], G[i, G_V + 1], G[i, G_V + 2]
+        lx, ly, lz = lis * G[i, G_W], lis * G[i, G_W + 1], lis * G[i, G_W + 2]
+        if j >= 0:
+            rx, ry, rz = rx - G[j, G_V], ry - G[j, G_V + 1], rz - G[j, G_V + 2]
+            lx, ly, lz = lx + ljs * G[j, G_W], ly + ljs * G[j, G_W + 1], lz + ljs * G[j, G_W + 2]
+        rn = rx * nx + ry * ny + rz * nz
+        sx = rx - rn * nx + ly * nz - lz * ny
+        sy = ry - rn * ny + lz * nx - lx * nz
+        sz = rz - rn * nz + lx * ny - ly * nx
+        mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+        if not mag > eps:
+            continue
+        f = -mu * fn / mag
+        fx, fy, fz = f * sx, f * sy, f * sz
+        if fl[FL_RECORD]:
+            row = CNT[CN_RECS] - 1
+            RC[row, R_FX], RC[row, R_FY], RC[row, R_FZ], RC[row, R_MODE] = fx, fy, fz, SLIDE
+        cx, cy, cz = ny * fz - nz * fy, nz * fx - nx * fz, nx * fy - ny * fx
+        facc[i, 0] += fx * G[i, G_IM]
+        facc[i, 1] += fy * G[i, G_IM]
+        facc[i, 2] += fz * G[i, G_IM]
+        if spin:
+            alp[i, 0] += lif * G[i, G_II] * cx
+            alp[i, 1] += lif * G[i, G_II] * cy
+            alp[i, 2] += lif * G[i, G_II] * cz
+        if j >= 0:
+            facc[j, 0] -= fx * G[j, G_IM]
+            facc[j, 1] -= fy * G[j, G_IM]
+            facc[j, 2] -= fz * G[j, G_IM]
+            if spin:
+                alp[j, 0] += ljf * G[j, G_II] * cx
+                alp[j, 1] += ljf * G[j, G_II] * cy
+                alp[j, 2] += ljf * G[j, G_II] * cz
+    return top, RC
+
+
+@jit
+def seed_run(G, tables, WP, grav, fl, fp):
+    """The report's update on its grid of dt: forces from the current state, then w += alpha dt,
+    s += v dt + a dt^2 / 2, v += a dt (first order; it reproduces the report's tables). Free
+    flight between contacts jumps whole steps in closed form, so every step lands on the grid.
+    Returns what `simulate` returns."""
+    n = G.shape[0]
+    dim = fl[FL_DIM]
+    dt = fp[FP_DT]
+    spin, planar, record = fl[FL_SPIN], fl[FL_PLANAR], fl[FL_RECORD]
+    KN = np.empty((max(64, 4 * n), NK))
+    RC = np.empty((64, NR))
+    IV = np.empty((16, 4))
+    CNT = np.zeros(4, np.int64)
+    ST = np.zeros(NS, np.int64)
+    FG = np.zeros(NF)
+    FG[F_DT_MIN] = dt
+    P = np.zeros((n, 3))
+    V = np.zeros((n, 3))
+    force = np.zeros((n, 3))
+    facc = np.zeros((n, 3))
+    alp = np.zeros((n, 3))
+    acc = np.zeros((n, 3))
+    g3 = np.zeros(3)
+    for d in range(3):
+        g3[d] = grav[d]
+    knot_of = np.zeros(n, np.int64)
+    if record:
+        for i in range(n):
+            KN = add_knot(KN, CNT, 0.0, i, 1.0, G, i, G_S, G_V, G_W, G_Q, g3, 0.0)
+            knot_of[i] = i
+    t = 0.0
+    t_end = fp[FP_TEND]
+    in_contact = False
+
+    while t < t_end * (1 - 1e-15) and ST[S_STATUS] == OK:
+        positions_at(G, n, t, grav, P, V)
+        margin = np.zeros(n)
+        for i in range(n):
+            margin[i] = math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2) * dt + 1e-12 * G[i, G_R]
+        pairs = near_pairs(P, G[:, G_R], margin, n, dim)
+        for i in range(n):
+            bring(G, i, t, grav, fl)
+        top, RC = seed_forces(G, pairs, WP, grav, tables, fl, force, facc, alp, RC, CNT, t + dt)
+        if top > 0.0:
+            if not in_contact:
+                in_contact = True
+
+                IV = grow(IV, CNT[CN_IVALS])
+                IV[CNT[CN_IVALS], V_I] = -1.0
+                IV[CNT[CN_IVALS], V_J] = -1.0
+                IV[CNT[CN_IVALS], V_START] = t
+                IV[CNT[CN_IVALS], V_END] = math.nan
+                CNT[CN_IVALS] += 1
+                ST[S_CONTACTS] += 1
+            FG[F_MAX_OVERLAP] = max(FG[F_MAX_OVERLAP], top)
+            before = 0.0
+            after = 0.0
+            for i in range(n):
+                for d in range(3):
+                    acc[i, d] = force[i, d] * G[i, G_IM] + grav[d] + facc[i, d]
+            # Work against friction: what the friction kick removes at the start of the step.
+            for i in range(n):
+                for d in range(3):
+                    vm = G[i, G_V + d] + facc[i, d] * dt
+                    before += 0.5 * G[i, G_M] * G[i, G_V + d] ** 2
+                    after += 0.5 * G[i, G_M] * vm * vm
+                    if spin:
+                        before += 0.5 * G[i, G_I] * G[i, G_W + d] ** 2
+                        after += 0.5 * G[i, G_I] * (G[i, G_W + d] + alp[i, d] * dt) ** 2
+            work = before - after
+            if record:
+                # A knot where the step starts (within a seed step the motion is exactly
+                # quadratic: the step's acceleration on both of its sides).
+                for i in range(n):
+                    last = knot_of[i]
+                    if KN[last, K_T] < t:
+                        KN = add_knot(KN, CNT, t, i, 0.0, G, i, G_S, G_V, G_W, G_Q, g3, G[i, G_WK])
+                        last = CNT[CN_KNOTS] - 1
+                        knot_of[i] = last
+                    KN[last, K_FREE] = 0.0
+                    for d in range(3):
+                        KN[last, K_AN + d] = acc[i, d]
+            for i in range(n):
+                w0x, w0y, w0z = G[i, G_W], G[i, G_W + 1], G[i, G_W + 2]
+                for d in range(3):
+                    G[i, G_W + d] += alp[i, d] * dt
+                    G[i, G_S + d] += G[i, G_V + d] * dt + 0.5 * acc[i, d] * dt * dt
+                    G[i, G_V + d] += acc[i, d] * dt
+                if spin:
+                    turn(G[i, G_Q:G_Q + 4], 0.5 * (w0x + G[i, G_W]), 0.5 * (w0y + G[i, G_W + 1]),
+                         0.5 * (w0z + G[i, G_W + 2]), dt, planar)
+                G[i, G_WK] += work / n
+                G[i, G_TB] = t + dt
+            t += dt
+            ST[S_STEPS] += 1
+            if ST[S_STEPS] > fl[FL_MAXSTEPS]:
+                ST[S_STATUS] = MAXSTEPS
+            for i in range(n):
+                for d in range(6):
+                    if not math.isfinite(G[i, G_S + d]):
+                        ST[S_STATUS] = NONFINITE
+            if record:
+                for i in range(n):
+                    KN = add_knot(KN, CNT, t, i, 0.0, G, i, G_S, G_V, G_W, G_Q, acc[i], G[i, G_WK])
+                    knot_of[i] = CNT[CN_KNOTS] - 1
+            continue
+        if in_contact:
+            in_contact = False
+            IV[CNT[CN_IVALS] - 1, V_END] = t
+            if record:
+                for i in range(n):
+                    KN[knot_of[i], K_FREE] = 1.0
+                    for d in range(3):
+                        KN[knot_of[i], K_AN + d] = grav[d]
+        # Free flight: whole steps in closed form, up to the step in which a contact begins.
+        positions_at(G, n, t, grav, P, V)
+        tau = next_contact(G, P, V, n, t, WP, grav, dim, math.inf, YES)
+        if tau == math.inf and t_end == math.inf:
+            t_end = t + math.ceil(tail_after(fp[FP_TAIL], IV, CNT) / dt) * dt
+        jump = min(math.floor(tau / dt) * dt if tau < math.inf else math.inf, t_end - t)
+        if jump <= 0.0:
+            jump = dt  # a contact begins within this step: take it with the spring clamped
+            for i in range(n):
+                bring(G, i, t + dt, grav, fl)
+        t += jump
+    for i in range(n):
+        bring(G, i, t, grav, fl)
+        if record and KN[knot_of[i], K_T] < t:
+            KN = add_knot(KN, CNT, t, i, 1.0, G, i, G_S, G_V, G_W, G_Q, g3, G[i, G_WK])
+    if in_contact:
+        IV[CNT[CN_IVALS] - 1, V_END] = t
+    return t, KN[:CNT[CN_KNOTS]].copy(), RC[:CNT[CN_RECS]].copy(), IV[:CNT[CN_IVALS]].copy(), ST, FG

@@ -1,0 +1,101 @@
+"""How the engine's kernels run: compiled by numba, or the same code interpreted.
+
+numba compiles the kernels once per machine (about a minute and a half here) and keeps them in
+its on-disk cache; a compiled run then costs a few tenths of a second to load. So that the
+first run after install does not wait for that, `auto` runs the kernels interpreted (plain
+Python: the bonus demo in about 0.05 s rather than 0.3 ms) and compiles them in a background
+process, once; every later run loads the compiled code.
+
+COLLIDE_JIT=1 compiles (waiting for it if needed), COLLIDE_JIT=0 interprets, unset means auto.
+The decision is made once, when the engine is first imported.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+_KERNELS = Path(__file__).with_name("kernels.py")
+
+
+def _stamp() -> dict:
+    """What the compiled cache depends on: the kernels' source and the numba and Python versions."""
+    try:
+        from importlib.metadata import version
+
+        numba_version = version("numba")
+    except Exception:
+        numba_version = "unknown"
+    st = _KERNELS.stat()
+    return {"size": st.st_size, "mtime": st.st_mtime, "numba": numba_version,
+            "python": sys.version.split()[0]}
+
+
+def cache_dir() -> Path:
+    """Where numba keeps the compiled kernels (beside the source, or NUMBA_CACHE_DIR)."""
+    root = os.environ.get("NUMBA_CACHE_DIR")
+    return Path(root) if root else _KERNELS.parent / "__pycache__"
+
+
+def _marker() -> Path:
+    return cache_dir() / "collide-compiled.json"
+
+
+def compiled_ready() -> bool:
+    """Whether the background (or an explicit) compile finished for this exact source."""
+    try:
+        return json.loads(_marker().read_text()) == _stamp()
+    except (OSError, ValueError):
+        return False
+
+
+def mark_compiled() -> None:
+    _marker().parent.mkdir(parents=True, exist_ok=True)
+    _marker().write_text(json.dumps(_stamp()))
+
+
+def _start_background_compile() -> None:
+    """Compile the kernels in a detached process, unless one is already at it."""
+    lock = cache_dir() / "collide-compiling.lock"
+    try:
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        if lock.exists() and time.time() - lock.stat().st_mtime < 600:
+            return
+        lock.write_text(str(os.getpid()))
+        log = open(cache_dir() / "collide-compile.log", "w")
+        env = dict(os.environ, COLLIDE_JIT="1")
+        subprocess.Popen([sys.executable, "-m", "collide.engine.warm", "--lock", str(lock)], stdout=log,
+                         stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env, start_new_session=True)
+    except OSError:
+        pass  # a read-only install: runs stay interpreted; `python -m collide.engine.warm` compiles
+
+
+def _choose() -> bool:
+    setting = os.environ.get("COLLIDE_JIT", "auto").strip().lower()
+    if setting in ("1", "yes", "true", "on"):
+        return True
+    if setting in ("0", "no", "false", "off"):
+        return False
+    if compiled_ready():
+        return True
+    _start_background_compile()
+    return False
+
+
+COMPILED = _choose()
+BACKGROUND = not COMPILED and os.environ.get("COLLIDE_JIT", "auto").strip().lower() not in ("0", "no", "false", "off")
+
+if COMPILED:
+    from numba import njit
+
+    # error_model="numpy": a division by zero gives inf or NaN (checked after each step) instead
+    # of raising, which also keeps the compiled code smaller.
+    jit = njit(cache=True, error_model="numpy", nogil=True)
+else:
+    def jit(function):
+        """Interpreted: the kernel as plain Python."""
+        return function
