@@ -119,9 +119,11 @@ def click_slider(page: Page, handle, fraction: float) -> None:
     page.mouse.click(box["x"] + fraction * box["width"], box["y"] + box["height"] / 2)
 
 
-def slider_input(page: Page, handle):
-    """The number box beside a slider."""
-    return page.locator(f'[id="{dom_id(handle)}"]').locator("xpath=..").locator("input[inputmode=decimal]")
+def text_input(page: Page, handle):
+    """The text box of a parameter or of the time (what a user types into)."""
+    from viewer.testing import text_box
+
+    return text_box(page, handle)
 
 
 def choose(page: Page, handle, option: str) -> None:
@@ -212,10 +214,9 @@ def test_slider_resimulates_and_redraws(page):
 def test_unstable_combination_shows_message(page):
     session = session_of(page)
     good = session.view
-    box = slider_input(page, session._param_handles["body.ball1.position.x"])
+    box = text_input(page, session._param_boxes["body.ball1.position.x"])
     box.scroll_into_view_if_needed()
     box.fill("480")  # ball1's centre 20 mm from ball2's: they overlap at the start
-    box.press("Enter")
     page.wait_for_function("() => document.body.innerText.includes('Not run')", timeout=30_000)
     assert "overlaps" in status_text(page)
     assert session.view is good  # the last good run stays on screen
@@ -247,7 +248,7 @@ def test_replay_recording_from_the_list_and_play(page, recordings):
     page.get_by_role("button", name="Pause").click()
     wait_until(lambda: not session.playing, 10, "pause")
     assert session.t != t0, (session.error, session.view.t0, session.view.t1)
-    shown = float(slider_input(page, session.time_slider).input_value())
+    shown = float(text_input(page, session.time_box).input_value())
     assert shown == pytest.approx(session.t * 1e3, abs=2 * session.time_slider.step)
 
 
@@ -274,7 +275,7 @@ def test_upload_a_recording_and_save_a_run(page, recordings):
                                          "buffer": content}])
     wait_until(lambda: session.view is not None and "my-upload.rrd" in session.view.origin, 30, "the upload")
     assert (recordings / "my-upload.rrd").read_bytes() == content
-    page.get_by_role("button", name="Save this run").click()
+    page.get_by_role("button", name="Save this run (.rrd)").click()
     page.wait_for_function("() => document.body.innerText.includes('Saved')", timeout=30_000)
     saved = [p for p in recordings.glob("demo-2d-moving-*.rrd")]
     assert len(saved) == 1
