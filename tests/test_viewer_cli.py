@@ -39,7 +39,7 @@ def test_a_recording_that_crashes_the_reader_is_one_line(tmp_path):
     proc = collide("view", str(CRASH), "--port", "0")
     assert proc.returncode == 2, proc.stderr[-2000:]
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "the file is damaged" in lines[0] and str(CRASH) in lines[0]
+    assert len(lines) == 1 and "damaged recording" in lines[0] and str(CRASH) in lines[0]
 
 
 def test_the_crash_sample_still_crashes_the_reader():
