@@ -15,23 +15,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader", "--disable-quic",
-                 "--no-first-run", "--disable-background-networking", "--disable-component-update",
-                 "--disable-sync", "--disable-dev-shm-usage"]
+from tests.conftest import BROWSER_MARKS
+
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 
 try:
-    from playwright.sync_api import Page, sync_playwright
+    from playwright.sync_api import Page
 except ImportError:  # pragma: no cover - depends on the machine
-    sync_playwright = None
+    pass
 
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(sync_playwright is None, reason="the playwright Python package is not installed "
-                       "(pip install playwright; never `playwright install`)"),
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install -y chromium)"),
-]
+pytestmark = BROWSER_MARKS
 
 
 def dom_id(handle) -> str:
@@ -60,13 +53,6 @@ def app(recordings):
     yield app
     app.stop()
 
-
-@pytest.fixture(scope="module")
-def browser(app):
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
-        yield browser
-        browser.close()  # before the server stops: an open connection makes stop() wait
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.conftest import BROWSER_MARKS
 from viewer.testing import (
-    CHROMIUM,
     canvas_box,
     canvas_shot,
     click_slider,
@@ -26,16 +26,7 @@ from viewer.testing import (
     wait_until,
 )
 
-try:
-    from playwright.sync_api import sync_playwright
-except ImportError:  # pragma: no cover - depends on the machine
-    sync_playwright = None
-
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(sync_playwright is None, reason="the playwright Python package is not installed"),
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install -y chromium)"),
-]
+pytestmark = BROWSER_MARKS
 
 
 @pytest.fixture(scope="module")
@@ -53,15 +44,6 @@ def app(tmp_path_factory):
     yield app
     app.stop()
 
-
-@pytest.fixture(scope="module")
-def browser(app):
-    from viewer.testing import launch
-
-    with sync_playwright() as p:
-        browser = launch(p)
-        yield browser
-        browser.close()  # before the server stops: an open connection makes stop() wait
 
 
 @pytest.fixture

@@ -13,18 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from viewer.testing import CHROMIUM, hide_notifications, upload, visible_text, wait_until
+from tests.conftest import BROWSER_MARKS, sync_playwright
+from viewer.testing import hide_notifications, upload, visible_text, wait_until
 
-try:
-    from playwright.sync_api import sync_playwright
-except ImportError:  # pragma: no cover - depends on the machine
-    sync_playwright = None
-
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(sync_playwright is None, reason="the playwright Python package is not installed"),
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install -y chromium)"),
-]
+pytestmark = BROWSER_MARKS
 ROOT = Path(__file__).resolve().parent.parent
 CRASH = ROOT / "tests" / "data" / "viewer-reader-crash.rrd"
 
