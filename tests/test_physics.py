@@ -274,3 +274,13 @@ def test_an_energy_balance_far_off_the_tolerance_is_a_warning():
     assert not balance_warnings(r, [scene], np.array([scene.tol]), [True])
     warned = balance_warnings(r, [scene], np.array([residual / 1000]), [True])
     assert len(warned) == 1 and "energy balance is off" in warned[0]
+
+
+def test_engine_buffers_grow_to_any_row_asked_for():
+    """An island opening more contacts at once than a buffer's doubling gave room for wrote past
+    its end (a 64-sphere drop on a floor aborted the process): growth reaches the row asked for."""
+    for grow, dtype in ((kernels.grow, float), (kernels.grow_int, np.int64)):
+        buf = np.arange(64, dtype=dtype).reshape(16, 4)
+        out = grow(buf, 500)
+        assert out.shape[0] > 500 and out.shape[1] == 4
+        assert (out[:16] == buf).all()

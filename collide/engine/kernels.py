@@ -991,7 +991,8 @@ def grow(buf, n):
     """`buf` with room for row n (doubled when full)."""
     if n < buf.shape[0]:
         return buf
-    out = np.empty((2 * buf.shape[0] + 16, buf.shape[1]))
+    # At least row n: a caller may ask for many rows at once (an island's new contacts).
+    out = np.empty((max(2 * buf.shape[0] + 16, n + 1), buf.shape[1]))
     out[:buf.shape[0]] = buf
     return out
 
@@ -1000,7 +1001,7 @@ def grow(buf, n):
 def grow_int(buf, n):
     if n < buf.shape[0]:
         return buf
-    out = np.empty((2 * buf.shape[0] + 16, buf.shape[1]), np.int64)
+    out = np.empty((max(2 * buf.shape[0] + 16, n + 1), buf.shape[1]), np.int64)
     out[:buf.shape[0]] = buf
     return out
 
