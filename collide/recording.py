@@ -83,6 +83,7 @@ import rerun.blueprint as rrb
 from rerun.encodings import Vec3DBatch
 
 from collide import diagnostics as dg
+from collide.colours import body_colour, body_colours
 from collide.engine import kernels as kn
 from collide.model import Model, State, compile_scenes
 from collide.run import SceneRun
@@ -101,8 +102,6 @@ DEFAULT_FPS = 120.0  # frames per simulated second of free flight
 MAX_FREE_FRAMES = 100_000  # frames of free flight in one recording, at most (fps drops beyond)
 CONTACT_FRAMES = 100  # least frames across one contact in the 3D view
 
-_PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-            (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207)]
 _AXES = "xyz"
 
 
@@ -454,7 +453,7 @@ class _Writer:
         centres = _pad3(view.state.s)  # (T, N, 3)
         for n, name in enumerate(self.model.body_names):
             r = float(self.model.radius[0, n])
-            color = _PALETTE[n % len(_PALETTE)]
+            color = body_colour(n)
             entity = f"/world/{name}"
             self._static(entity, rr.Ellipsoids3D(half_sizes=[[r, r, r]], colors=[color], labels=[name],
                                                  fill_mode=rr.components.FillMode.MajorWireframe,
@@ -479,11 +478,11 @@ class _Writer:
 
     def _write_many_bodies(self) -> None:
         """Every sphere as an instance of one entity: positions each frame, radii and colours
-        (one per body, the viewer's palette) once."""
+        (one per body, the viewer's: `collide.colours`) once."""
         view = self.view
         centres = _pad3(view.state.s).astype(np.float32)  # (T, N, 3)
         n = self.model.n_bodies
-        colors = np.array([_PALETTE[k % len(_PALETTE)] for k in range(n)], dtype=np.uint8)
+        colors = body_colours(n)
         self._static("/world/bodies", rr.Points3D.from_fields(radii=self.model.radius[0].astype(np.float32),
                                                               colors=colors))
         cols = rr.Points3D.columns(positions=centres.reshape(-1, 3)).partition(np.full(len(view.times), n))

@@ -571,6 +571,54 @@ def test_every_body_has_its_own_colour():
     assert np.array_equal(colour_map(np.array([-1.0, 2.0]), 0.0, 1.0), colour_map(np.array([0.0, 1.0]), 0.0, 1.0))
 
 
+def _recorded_body_colours(path: Path) -> np.ndarray:
+    """The colour of each body as the Rerun recording stores it: (N, 3), bodies in scene order."""
+    from rerun.chunk import RrdReader
+
+    packed: dict[str, list[int]] = {}
+    for chunk in RrdReader(path).stream():
+        batch = chunk.to_record_batch()
+        for column in ("Ellipsoids3D:colors", "Points3D:colors"):
+            if chunk.is_static and column in batch.schema.names:
+                packed[chunk.entity_path] = batch.column(column).to_pylist()[-1]
+    if "/world/bodies" in packed:
+        rgba = packed["/world/bodies"]
+    else:
+        names = sorted((p for p in packed if p.startswith("/world/ball")), key=lambda p: int(p[len("/world/ball"):]))
+        rgba = [packed[p][0] for p in names]
+    rgba = np.array(rgba, dtype=np.uint64)
+    return np.stack([(rgba >> 24) & 255, (rgba >> 16) & 255, (rgba >> 8) & 255], axis=1).astype(np.uint8)
+
+
+@pytest.mark.parametrize("n, dim", [(16, 2), (40, 3)])
+def test_recording_and_viewer_give_each_body_the_same_colour(tmp_path, n, dim):
+    """16 bodies (one entity each in the recording) and 40 (one instanced entity): the recording's
+    colour of every body is the one the viewer draws it in, and no two bodies share one."""
+    import viser
+
+    from collide.recording import read_recording, write_recording
+    from viewer.scene3d import SceneDrawer
+
+    bodies = [{"name": f"ball{i + 1}", "mass": 0.1, "radius": 0.01,
+               "position": [0.05 * (i % 8), 0.05 * (i // 8), 0.0][:dim], "velocity": [0.0, 0.1, 0.0][:dim]}
+              for i in range(n)]
+    scene = parse_scene({"name": f"colours-{n}", "dim": dim, "duration": 0.01, "body": bodies}, f"colours-{n}")
+    path = write_recording(run_scene(scene), tmp_path / f"colours-{n}.rrd")
+    recorded = _recorded_body_colours(path)
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        drawer = SceneDrawer(server.scene)
+        view = ViewRun(read_recording(path))
+        drawer.show_run(view)
+        drawer.show_frame(view.frame(view.t0))
+        drawn = drawer.body_colours()
+    finally:
+        server.stop()
+    assert recorded.shape == drawn.shape == (n, 3)
+    assert np.array_equal(recorded, drawn)
+    assert len({tuple(c) for c in recorded}) == n
+
+
 def test_csv_export_is_the_cli_layout():
     from collide.summary import csv_columns, report_csv
     from viewer.exports import csv_every, png_bytes, run_csv

@@ -1,41 +1,22 @@
-"""Colours: one distinct colour per body, colour maps for speed, energy and contact count.
+"""Colours: colour maps for speed, energy and contact count; body colours come from the core
+(`collide.colours`) so the viewer and the Rerun recordings agree body by body.
 
-Pure numpy. Body colours come from a hand-picked palette for the first ten (the usual
-categorical ones, tuned to read on white), then from the golden angle around the hue circle at
-alternating lightness, so no two of the first few hundred bodies share a colour.
+Pure numpy.
 """
 
 from __future__ import annotations
 
-import colorsys
-
 import numpy as np
 
-PALETTE = [(66, 133, 244), (244, 132, 36), (52, 168, 83), (171, 71, 188), (219, 68, 55),
-           (0, 172, 193), (124, 179, 66), (233, 30, 99), (121, 85, 72), (96, 125, 139)]
-_GOLDEN = 0.381966011250105  # 1 - 1/phi: successive hues as far apart as possible
+from collide.colours import PALETTE, body_colour, body_colours
+
+__all__ = ["PALETTE", "body_colour", "body_colours", "colour_map", "darker", "hex_colour", "legend_html",
+           "lighter"]
 
 # viridis at nine stops (matplotlib's), interpolated linearly: perceptually ordered, readable
 # by most colour-blind viewers, and dark-to-bright so it survives greyscale printing.
 _VIRIDIS = np.array([(68, 1, 84), (71, 44, 122), (59, 81, 139), (44, 113, 142), (33, 144, 141),
                      (39, 173, 129), (92, 200, 99), (170, 220, 50), (253, 231, 37)], dtype=float)
-
-
-def body_colour(i: int) -> tuple[int, int, int]:
-    """The colour of body i (0-based): distinct for every body of a scene."""
-    if i < len(PALETTE):
-        return PALETTE[i]
-    k = i - len(PALETTE)
-    hue = (0.13 + k * _GOLDEN) % 1.0
-    light = (0.45, 0.60, 0.35)[k % 3]
-    sat = (0.75, 0.65, 0.85)[(k // 3) % 3]
-    r, g, b = colorsys.hls_to_rgb(hue, light, sat)
-    return int(round(255 * r)), int(round(255 * g)), int(round(255 * b))
-
-
-def body_colours(n: int) -> np.ndarray:
-    """(n, 3) uint8: `body_colour` for bodies 0..n-1."""
-    return np.array([body_colour(i) for i in range(n)], dtype=np.uint8).reshape(n, 3)
 
 
 def colour_map(values: np.ndarray, lo: float, hi: float) -> np.ndarray:
