@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -102,6 +103,35 @@ def test_leave_out_rule(written: dict) -> None:
     assert "/world/walls/wall0" in paths_wall
     assert "/contacts/ball-wall0/compression" in paths_wall
     assert "/residuals/momentum" not in paths_wall  # not conserved against a wall
+
+
+def _readme_entity_patterns() -> list[re.Pattern]:
+    """The entity paths of the README's table, `<b>`, `<c>` and `<k>` as any name."""
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    patterns = []
+    for line in readme.splitlines():
+        first = line.split("|")[1] if line.startswith("| `/") else ""
+        for path in re.findall(r"`(/[^`]*)`", first):
+            parts = re.split(r"(<[a-z]>)", path)
+            patterns.append(re.compile("".join("[^/]+" if re.fullmatch(r"<[a-z]>", x) else re.escape(x)
+                                               for x in parts)))
+    return patterns
+
+
+def test_readme_lists_every_entity(written: dict, tmp_path: Path) -> None:
+    """Every entity of a few-body recording and of a many-body, many-contact one (a row of 30
+    balls in 2D with friction: one instanced entity, 29 touching pairs) is in the README's table."""
+    bodies = [{"name": f"b{i}", "mass": 0.1, "radius": 0.01, "position": [0.0201 * i + (0.01 if i else 0.0), 0.0],
+               "velocity": [1.0 if i == 0 else 0.0, 0.0]} for i in range(30)]
+    row = parse_scene({"name": "row", "dim": 2, "contact": {"k": 1e5, "mu": 0.2}, "body": bodies}, "row")
+    many = entity_paths(write_recording(run_scene(row), tmp_path / "row.rrd"))
+    assert "/world/bodies" in many and "/contacts/count" in many
+    patterns = _readme_entity_patterns()
+    for name, (_, path) in written.items():
+        for entity in entity_paths(path):
+            assert any(p.fullmatch(entity) for p in patterns), f"{name}: {entity} is not in the README"
+    for entity in many:
+        assert any(p.fullmatch(entity) for p in patterns), f"row: {entity} is not in the README"
 
 
 def test_frames_include_contact_start_and_end_and_free_flight_is_sparse(written: dict) -> None:
