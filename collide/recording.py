@@ -341,11 +341,17 @@ class _Writer:
     def blueprint(self) -> rrb.Blueprint:
         """3D view (tabs: scene, settings) on the left, plots stacked on the right."""
         centre, size = self._extent()
-        eye = None
         if self.model.dim < 3:
             # A 1D or 2D scene seen from above its plane, x to the right and y up.
             eye = rrb.EyeControls3D(position=centre + np.array([0.0, 0.0, 1.1 * size]),
                                     look_target=centre, eye_up=[0.0, 1.0, 0.0])
+        else:
+            # From the front, right and above, z up, far enough that the whole region the bodies
+            # sweep (its bounding sphere, radius 0.87 size) fits the default field of view (Rerun's
+            # own choice frames the origin and cut gas-box's box in half).
+            direction = np.array([0.55, -0.7, 0.45]) / np.linalg.norm([0.55, -0.7, 0.45])
+            eye = rrb.EyeControls3D(position=centre + 2.2 * size * direction, look_target=centre,
+                                    eye_up=[0.0, 0.0, 1.0])
         overrides = {} if self.many else {f"/world/{b}/trail": rrb.VisibleTimeRanges(
             timeline=TIMELINE, start=rrb.TimeRangeBoundary.infinite(),
             end=rrb.TimeRangeBoundary.cursor_relative()) for b in self.model.body_names}
