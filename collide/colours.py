@@ -33,3 +33,10 @@ def body_colour(i: int) -> tuple[int, int, int]:
 def body_colours(n: int) -> np.ndarray:
     """(n, 3) uint8: `body_colour` for bodies 0..n-1."""
     return np.array([body_colour(i) for i in range(n)], dtype=np.uint8).reshape(n, 3)
+
+
+# Energy series, as the viewer's plots draw them (viewer/plots.py), so a line keeps its colour
+# from one to the other; on Rerun's dark background the total is light instead of near-black.
+ENERGY_COLOURS = {"kinetic": (66, 133, 244), "rotational": (171, 71, 188), "spring": (244, 132, 42),
+                  "gravitational": (141, 110, 99), "total": (232, 234, 237), "dissipated": (154, 160, 166),
+                  "total_plus_dissipated": (52, 168, 83)}

@@ -83,7 +83,7 @@ import rerun.blueprint as rrb
 from rerun.encodings import Vec3DBatch
 
 from collide import diagnostics as dg
-from collide.colours import body_colour, body_colours
+from collide.colours import ENERGY_COLOURS, body_colour, body_colours
 from collide.engine import kernels as kn
 from collide.model import Model, State, compile_scenes
 from collide.run import SceneRun
@@ -571,6 +571,9 @@ class _Writer:
             series["total_plus_dissipated"] = c.balance
         for key, values in series.items():
             if values is not None:
+                # Rerun's automatic colours are a hash of the path: dissipated and gravitational
+                # came out the same yellow.
+                self._static(f"/energy/{key}", rr.SeriesLines(colors=[ENERGY_COLOURS[key]], names=[key]))
                 self._send(f"/energy/{key}", rr.Scalars.columns(scalars=values), index)
         self._static("/momentum", rr.SeriesLines(names=[f"p.{a}" for a in _AXES[:model.dim]]))
         self._send("/momentum", rr.Scalars.columns(scalars=c.momentum), index)

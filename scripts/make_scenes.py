@@ -7,6 +7,10 @@ this script does): `python scripts/make_scenes.py` writes them into collide/scen
 - gas-box: 1 000 spheres in a closed box (3D), random speeds, elastic.
 - break-3d: a cue ball rolling into three balls on a table (3D, gravity, friction with the
   cloth and between the balls).
+- drop-pile (not a built-in: about 3 s to run, into tests/data/): 125 spheres dropped in a
+  5x5x5 lattice into a bin (floor and four side walls) under gravity, with friction; the first
+  0.15 s, as they land and jumble (the springs are undamped until contact laws bring
+  restitution, so they do not come to rest).
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import random
 from pathlib import Path
 
 OUT = Path(__file__).resolve().parent.parent / "collide" / "scenes"
+EXTRA = Path(__file__).resolve().parent.parent / "tests" / "data"
 
 # Pool balls (World Pool-Billiard Association): 57.15 mm, 170 g.
 R_POOL, M_POOL = 0.028575, 0.17
@@ -109,11 +114,43 @@ def break_3d() -> str:
     return "\n".join(lines)
 
 
+def drop_pile(per: int = 5, layers: int = 5, seed: int = 3) -> str:
+    """Spheres in a jittered lattice just above a floor, falling into a bin that fits them."""
+    rng = random.Random(seed)
+    r, m, gap = 0.01, 0.01, 0.024  # 20 mm beads of 10 g, 4 mm apart
+    half = per * gap / 2 + 0.002
+    n = per * per * layers
+    # k = 1e5 N/m: a bead resting under four layers presses about 0.005 mm; softer springs make
+    # contacts last longer, so more of the pile is one island and the run is ten times slower.
+    lines = ['name = "drop-pile"',
+             f'description = "{n} beads (20 mm, 10 g) dropped into a bin under gravity, friction mu = 0.3 '
+             '(3D); the first 0.15 s, as they land."',
+             "dim = 3", 'dt = "auto"', 'integrator = "verlet"', "tol = 1e-3", "duration = 0.15",
+             "gravity = [0.0, 0.0, -9.81]", "", "[contact]", "k = 1e5", "mu = 0.3", ""]
+    for index in range(n):
+        layer, rest = divmod(index, per * per)
+        i, j = divmod(rest, per)
+        pos = [(i - (per - 1) / 2) * gap + rng.uniform(-0.001, 0.001),
+               (j - (per - 1) / 2) * gap + rng.uniform(-0.001, 0.001), r + 0.003 + layer * gap]
+        lines += _body(f"s{index + 1}", m, r, pos, [rng.gauss(0.0, 0.1), rng.gauss(0.0, 0.1), -0.3])
+    lines += ["[[wall]]", "point = [0.0, 0.0, 0.0]", "normal = [0.0, 0.0, 1.0]", ""]
+    for axis in range(2):
+        for sign in (1.0, -1.0):
+            point = [0.0, 0.0, 0.0]
+            normal = [0.0, 0.0, 0.0]
+            point[axis] = -sign * half
+            normal[axis] = sign
+            lines += ["[[wall]]", f"point = {_vec(point)}", f"normal = {_vec(normal)}", ""]
+    return "\n".join(lines)
+
+
 def main() -> None:
     for name, text in (("billiards-break", billiards_break()), ("newtons-cradle", newtons_cradle()),
                        ("gas-box", gas_box()), ("break-3d", break_3d())):
         (OUT / f"{name}.toml").write_text(text)
         print(f"wrote {OUT / f'{name}.toml'}")
+    (EXTRA / "drop-pile.toml").write_text(drop_pile())
+    print(f"wrote {EXTRA / 'drop-pile.toml'}")
 
 
 if __name__ == "__main__":
