@@ -95,8 +95,8 @@ V_I, V_J, V_START, V_END = range(4)
 CN_KNOTS, CN_RECS, CN_IVALS, CN_OPEN = range(4)
 S_STEPS, S_WINDOWS, S_STATUS, S_CONTACTS, S_RETRIES = range(5)
 NS = 5
-F_MAX_OVERLAP, F_DT_MIN, F_STATUS_T, F_STATUS_A, F_STATUS_B = range(5)
-NF = 5
+F_MAX_OVERLAP, F_DT_MIN, F_STATUS_T, F_STATUS_A, F_STATUS_B, F_MAX_FORCE = range(6)
+NF = 6
 OK, NONFINITE, ENERGY, STALL, MAXSTEPS, SINGULAR = range(6)
 YES, NO = 1, 0
 # Numba compiles one specialisation per literal int an argument is called with: as numpy ints
@@ -1562,6 +1562,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 break
             for c in range(nc):
                 FG[F_MAX_OVERLAP] = max(FG[F_MAX_OVERLAP], C[c, C_DELTA])
+                FG[F_MAX_FORCE] = max(FG[F_MAX_FORCE], C[c, C_FN])
             if record:
                 KN, RC = record_step(KN, RC, CNT, G, GI, X, XI, C, CI, na, nc, t, fl)
             for k in range(nq):
