@@ -229,7 +229,7 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
     log = ContactLog(figures[:, dk.G_FIRST].copy(), figures[:, dk.G_LAST].copy(), figures[:, dk.G_TOUCH].copy(),
                      figures[:, dk.G_OVERLAP].copy(), stats[:, dk.S_CONTACTS].copy(), figures[:, dk.G_FORCE].copy())
     result = RunResult(model=model, initial=initial, final=final, integrator="dem", dt=dt.copy(),
-                       steps=stats[:, dk.S_STEPS].copy(), jumps=np.zeros(b_count, np.int64), wall_time_s=wall_time,
+                       steps=stats[:, dk.S_STEPS].copy(), jumps=stats[:, dk.S_JUMPS].copy(), wall_time_s=wall_time,
                        contacts=log, trajectories=trajectories, warnings=[], dt_min=dt.copy(),
                        windows=np.zeros(b_count, np.int64))
     result.dissipation = figures[:, [dk.G_DAMP, dk.G_FRIC, dk.G_ROLL]].copy()

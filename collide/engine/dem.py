@@ -45,8 +45,8 @@ NFLAG = 6
 P_DT, P_TEND, P_REST, P_TAIL, P_FRAME, P_SKIN = range(6)
 NPAR = 6
 # Outputs: stats (int) and figures (float).
-S_STEPS, S_STATUS, S_CONTACTS, S_BUILDS, S_PAIRS = range(5)
-NSTAT = 5
+S_STEPS, S_STATUS, S_CONTACTS, S_BUILDS, S_PAIRS, S_JUMPS = range(6)
+NSTAT = 6
 G_FIRST, G_LAST, G_TOUCH, G_OVERLAP, G_FORCE, G_DAMP, G_FRIC, G_ROLL, G_STORED, G_STATUS_T = range(10)
 NFIG = 10
 OK, NONFINITE, MAXSTEPS = 0, 1, 4
@@ -422,11 +422,12 @@ def _stored(hist, WH):
 
 
 @jit
-def _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n):
+def _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, free):
+    """Every body's state at t (knots); `free`: free flight follows, in closed form."""
     KN = _grow(KN, nkn + n)
     for a in range(n):
         r = nkn + a
-        KN[r, 0], KN[r, 1], KN[r, 2] = t, a, 0.0
+        KN[r, 0], KN[r, 1], KN[r, 2] = t, a, free
         for d in range(3):
             KN[r, 3 + d] = X[a, d]
             KN[r, 6 + d] = V[a, d]
@@ -438,6 +439,44 @@ def _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n):
             KN[r, 12 + d] = Qo[a, d]
         KN[r, 22] = WK[a, 0] + WK[a, 1] + WK[a, 2]
     return KN, nkn + n
+
+
+@jit
+def _rebuild(X, X0, Bd, n, dim, skin, keys, hist, ST):
+    """A fresh neighbour list, the listed pairs' history carried over."""
+    fresh = build_pairs(X, Bd, n, dim, skin)
+    hist = carry_history(keys, hist, fresh)
+    X0[:, :] = X
+    ST[S_BUILDS] += 1
+    return fresh, hist
+
+
+@jit
+def _free_time(X, V, Bd, keys, WP, grav, n, skin):
+    """How long every body can fly freely with no contact able to begin: until the fastest could
+    have covered half the smallest gap (listed pairs, walls; an unlisted pair's gap is at least
+    the skin, the list being fresh), gravity included."""
+    gap = skin
+    for k in range(keys.shape[0]):
+        i = keys[k] // n
+        j = keys[k] - i * n
+        dx, dy, dz = X[j, 0] - X[i, 0], X[j, 1] - X[i, 1], X[j, 2] - X[i, 2]
+        gap = min(gap, math.sqrt(dx * dx + dy * dy + dz * dz) - Bd[i, B_R] - Bd[j, B_R])
+    for i in range(n):
+        for w in range(WP.shape[0]):
+            h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
+                 + (X[i, 2] - WP[w, 2]) * WP[w, 5])
+            gap = min(gap, h - Bd[i, B_R])
+    if gap <= 0.0:
+        return 0.0
+    speed = 0.0
+    for a in range(n):
+        speed = max(speed, math.sqrt(V[a, 0] ** 2 + V[a, 1] ** 2 + V[a, 2] ** 2))
+    g = math.sqrt(grav[0] ** 2 + grav[1] ** 2 + grav[2] ** 2)
+    reach = 0.5 * gap  # each of two bodies may close it by half
+    if g > 0.0:
+        return (-speed + math.sqrt(speed * speed + 2.0 * g * reach)) / g
+    return reach / speed if speed > 0.0 else math.inf
 
 
 @jit
@@ -525,7 +564,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     engaged, niv, nrec, IV, REC = forces(X, V, W, F, T, PT, Bd, keys, hist, WH, WP, tabs, wtabs, grav, fl, 0.0, t,
                                          n, FG, ST, IV, niv, REC, nrec, record != 0)
     if record:
-        KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n)
+        KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
         EP = _grow(EP, nep)
         EP[nep, EP_T] = 0.0
         nep += 1
@@ -535,6 +574,34 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     steps = 0
     last = False
     while not last:
+        if engaged == 0:
+            # Nothing touches: fly in closed form as far as no contact can begin (free flight is
+            # not stepped, as in the event engine), then step again.
+            keys, hist = _rebuild(X, X0, Bd, n, dim, skin, keys, hist, ST)
+            tau = _free_time(X, V, Bd, keys, WP, grav, n, skin)
+            if t + tau >= t_end * (1.0 - 1e-12):
+                tau = t_end - t
+            if tau > 2.0 * dt:
+                if record:
+                    if nkn >= n and KN[nkn - 1, 0] == t:
+                        for r in range(nkn - n, nkn):
+                            KN[r, 2] = 1.0
+                    else:
+                        KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 1.0)
+                for a in range(n):
+                    for d in range(3):
+                        X[a, d] += V[a, d] * tau + 0.5 * grav[d] * tau * tau
+                        V[a, d] += grav[d] * tau
+                    if fl[F_SPIN]:
+                        _turn(Qo[a], W[a, 0], W[a, 1], W[a, 2], tau, planar)
+                t += tau
+                ST[S_JUMPS] += 1
+                if record:
+                    KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
+                if t >= t_end * (1.0 - 1e-12):
+                    break
+                if not math.isfinite(t_end) and ever and not _will_meet(X, V, Bd, WP, n):
+                    break
         h = dt
         if t + h >= t_end * (1.0 - 1e-12):
             h = t_end - t
@@ -551,11 +618,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             ddx, ddy, ddz = X[a, 0] - X0[a, 0], X[a, 1] - X0[a, 1], X[a, 2] - X0[a, 2]
             moved = max(moved, ddx * ddx + ddy * ddy + ddz * ddz)
         if 4.0 * moved > skin * skin:
-            fresh = build_pairs(X, Bd, n, dim, skin)
-            hist = carry_history(keys, hist, fresh)
-            keys = fresh
-            X0[:, :] = X
-            ST[S_BUILDS] += 1
+            keys, hist = _rebuild(X, X0, Bd, n, dim, skin, keys, hist, ST)
         t = t + h
         steps += 1
         record_now = record != 0 and (t >= next_frame or last)
@@ -572,7 +635,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             break
         peak = max(peak, kinetic)
         if record_now:
-            KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n)
+            KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
             EP = _grow(EP, nep)
             EP[nep, EP_T] = t
             for c in range(3):
@@ -601,5 +664,5 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             s += WK[a, c]
         FG[G_DAMP + c] = s
     if record and (nkn == 0 or KN[nkn - 1, 0] < t):
-        KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n)
+        KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
     return t, WK, KN[:nkn], REC[:nrec], IV[:niv], EP[:nep], ST, FG
