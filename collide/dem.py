@@ -19,7 +19,7 @@ from collide.engine import dem as dk
 from collide.engine import kernels as kn
 from collide.engine import tier
 from collide.model import KISSING, TABLE_ESTAR, TABLE_K, TABLE_REST, Model, State, select_model
-from collide.stepper import ContactLog, RunError, RunResult, Trajectory, approach_bound, unpack_state
+from collide.stepper import ContactLog, Progress, RunError, RunResult, Trajectory, approach_bound, unpack_state, watch
 
 HERTZ_TIME = 2.868  # t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5): Johnson, Contact Mechanics, 11.4
 # The outcome's relative error against steps per contact time n: ERROR_CONSTANT / n^ERROR_ORDER.
@@ -158,7 +158,7 @@ def _pad3(x: np.ndarray) -> np.ndarray:
 
 
 def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.ndarray, tail: np.ndarray,
-                 rest: np.ndarray, record: bool, max_steps: int) -> RunResult:
+                 rest: np.ndarray, record: bool, max_steps: int, progress: Progress | None = None) -> RunResult:
     """Run B scenes through the DEM kernel at their fixed steps dt (B,). `duration`, `tail` and
     `rest` are (B,) with NaN meaning 'not set'."""
     b_count = model.batch
@@ -191,12 +191,13 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
         fl = np.array([model.dim, model.spin_dim > 0, model.hertz, model.tangential_spring, record, max_steps],
                       dtype=np.int64)
         fp = np.array([dt[b], t_end, rest[b] if np.isfinite(rest[b]) else 0.0, 0.0, frame,
-                       SKIN * float(model.radius[b].min())])
+                       SKIN * float(model.radius[b].min()), 0.0, 0.0])
         pair, wall = kernel_tables(model, b)
         args = (X, V, W, Q, _bodies(model, b), pair, wall, WP, grav, fl, fp)
         _load_compiled(*args)
         started = time.perf_counter()
-        t, WK, KN, REC, IV, EP, st, fg = dk.dem_run(*args)
+        with watch(progress, fp, int(dk.P_NOW), t_end, b, b_count):
+            t, WK, KN, REC, IV, EP, st, fg = dk.dem_run(*args)
         wall_time += time.perf_counter() - started
         if st[dk.S_STATUS] == dk.NONFINITE:
             raise RunError(f"non-finite numbers at t = {fg[dk.G_STATUS_T]:.6g} s: the DEM step is unstable; "

@@ -12,7 +12,7 @@ from collide import diagnostics as dg
 from collide.integrators import INTEGRATORS
 from collide.model import compile_scenes, reference_frequency
 from collide.scene import Scene, SceneError, dem_reason
-from collide.stepper import EDGE_TOL, MAX_STEPS_DEFAULT, RunError, RunResult, simulate
+from collide.stepper import EDGE_TOL, MAX_STEPS_DEFAULT, Progress, RunError, RunResult, simulate
 
 
 @dataclass
@@ -116,7 +116,7 @@ def auto_dt(scenes: list[Scene], integrator: str, tol: np.ndarray) -> tuple[np.n
 
 def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float | str | None = None,
                tol: float | None = None, record: bool = True,
-               max_steps: int = MAX_STEPS_DEFAULT) -> SceneRun:
+               max_steps: int = MAX_STEPS_DEFAULT, progress: Progress | None = None) -> SceneRun:
     """Run B same-shaped scenes in one batch. `integrator`, `dt` and `tol` override the scenes'."""
     names = {s.integrator for s in scenes} if integrator is None else {integrator}
     if len(names) != 1:
@@ -135,7 +135,7 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
         raise SceneError(f"integrator: '{integ}' runs the report's contact law only; {needs.name}'s "
                          f"({dem_reason(needs)}) runs with --integrator dem")
     if integ == "dem":
-        return _run_dem(scenes, model, state, requested, auto_used, tols, dt, record, max_steps)
+        return _run_dem(scenes, model, state, requested, auto_used, tols, dt, record, max_steps, progress)
     omega = reference_frequency(model)
     omega_h = np.zeros(len(scenes))
     if any(auto_used):
@@ -165,14 +165,15 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     with np.errstate(divide="ignore") if contactless else contextlib.nullcontext():
         result = simulate(model, state, integrator=integ, dt=dt_arr, duration=duration, tail=tail,
                           record=record, max_steps=max_steps, event_tol=event_tol, auto=np.array(auto_used),
-                          omega_h=omega_h)
+                          omega_h=omega_h, progress=progress)
     check_finite(result, scenes)
     result.warnings.extend(balance_warnings(result, scenes, tols, auto_used))
     return SceneRun(list(scenes), result, dt, [float(x) for x in tols], estimate, auto_used)
 
 
 def _run_dem(scenes: list[Scene], model, state, requested: list, auto_used: list[bool], tols: np.ndarray,
-             dt_request: float | str | None, record: bool, max_steps: int) -> SceneRun:
+             dt_request: float | str | None, record: bool, max_steps: int,
+             progress: Progress | None = None) -> SceneRun:
     """A batch through the fixed-step DEM kernel (`collide.dem`)."""
     from collide import dem
 
@@ -185,7 +186,7 @@ def _run_dem(scenes: list[Scene], model, state, requested: list, auto_used: list
     tail = np.array([np.nan if s.tail is None else s.tail for s in scenes])
     rest = np.array([np.nan if s.rest is None else s.rest for s in scenes])
     result = simulate(model, state, integrator="dem", dt=steps, duration=duration, tail=tail, record=record,
-                      max_steps=max_steps, rest=rest)
+                      max_steps=max_steps, rest=rest, progress=progress)
     check_finite(result, scenes)
     t_c, _, _ = dem.contact_time(model, state)
     estimate = dem.predicted_error(t_c / steps)

@@ -9,7 +9,10 @@ fixed grid) is described in `collide/engine/kernels.py` and the README.
 from __future__ import annotations
 
 import math
+import threading
 import time
+from collections.abc import Callable
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -22,6 +25,35 @@ from collide.model import Model, State, max_frequency, reference_frequency, sele
 
 MAX_STEPS_DEFAULT = 20_000_000
 EDGE_TOL = float(kn.EDGE_TOL)
+
+
+# A progress display: called about 4 times a second while a run is going, with (member, members,
+# simulated time reached, simulated end (inf if open), steps so far, seconds since it started).
+Progress = Callable[[int, int, float, float, int, float], None]
+PROGRESS_PERIOD = 0.25
+
+
+@contextmanager
+def watch(progress: Progress | None, fp: np.ndarray, now: int, t_end: float, member: int, members: int):
+    """Report a kernel's progress from a thread while it runs: the compiled kernels release the
+    GIL and write the time reached and their step count into fp[now], fp[now + 1]."""
+    if progress is None:
+        yield
+        return
+    done = threading.Event()
+    started = time.perf_counter()
+
+    def poll() -> None:
+        while not done.wait(PROGRESS_PERIOD):
+            progress(member, members, float(fp[now]), t_end, int(fp[now + 1]), time.perf_counter() - started)
+
+    thread = threading.Thread(target=poll, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join()
 
 
 class RunError(RuntimeError):
@@ -306,7 +338,8 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
              duration: np.ndarray | None = None, tail: np.ndarray | None = None,
              record: bool = True, max_steps: int = MAX_STEPS_DEFAULT,
              event_tol: np.ndarray | float = EDGE_TOL, auto: np.ndarray | None = None,
-             omega_h: np.ndarray | None = None, rest: np.ndarray | None = None) -> RunResult:
+             omega_h: np.ndarray | None = None, rest: np.ndarray | None = None,
+             progress: Progress | None = None) -> RunResult:
     """Run B scenes to their end. `duration` and `tail` are (B,) with NaN meaning 'not set'.
     `dt` (B,) is the step; where `auto` is set each island steps by omega_h over its own stiffest
     frequency instead (dt is then the step of the stiffest single contact). `event_tol`
@@ -320,7 +353,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
                             duration=nan if duration is None else np.asarray(duration, dtype=float),
                             tail=nan if tail is None else np.asarray(tail, dtype=float),
                             rest=nan if rest is None else np.asarray(rest, dtype=float), record=record,
-                            max_steps=max_steps)
+                            max_steps=max_steps, progress=progress)
     integ = INTEGRATORS[integrator]
     dt = np.broadcast_to(np.asarray(dt, dtype=float), (b_count,)).copy()
     auto = np.zeros(b_count, bool) if auto is None else np.broadcast_to(np.asarray(auto, bool), (b_count,))
@@ -347,14 +380,15 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
         speed = max(float(np.sqrt((initial.v[b] ** 2).sum(-1)).max()), 10 * float(model.eps[b]) + 1e-300)
         t_end = duration[b] if np.isfinite(duration[b]) else np.inf
         # Closing speeds under 1e-9 of the fastest are round-off, not an approach.
-        fp = np.array([dt[b], omega_h[b], t_end, tail[b], speed * event_tol[b] / EDGE_TOL, 1e-9 * speed])
+        fp = np.array([dt[b], omega_h[b], t_end, tail[b], speed * event_tol[b] / EDGE_TOL, 1e-9 * speed, 0.0, 0.0])
         _load_compiled(integ.events, G, tables, WP, grav, weights, fl, fp)
         if b == 0:
             started = time.perf_counter()  # loading the compiled code is not simulating
-        if integ.events:
-            t, knots, recs, ivals, st, fg = kn.simulate(G, tables, WP, grav, weights, fl, fp)
-        else:
-            t, knots, recs, ivals, st, fg = kn.seed_run(G, tables, WP, grav, fl, fp)
+        with watch(progress, fp, int(kn.FP_NOW), t_end, b, b_count):
+            if integ.events:
+                t, knots, recs, ivals, st, fg = kn.simulate(G, tables, WP, grav, weights, fl, fp)
+            else:
+                t, knots, recs, ivals, st, fg = kn.seed_run(G, tables, WP, grav, fl, fp)
         _check_status(model, b, st, fg, dt, integ)
         finals.append((t, G, float(G[:, kn.G_WK].sum())))
         stats[b], figures[b] = st, fg

@@ -279,3 +279,19 @@ def test_too_large_a_dem_step_is_refused():
     raw["dt"] = 1e-3
     with pytest.raises(RunError, match="beyond the stability limit of the DEM step"):
         run_scene(parse_scene(raw), record=False)
+
+
+def test_long_run_shows_progress_on_stderr_and_keeps_json_on_stdout():
+    """Progress (simulated time, steps, rate) goes to stderr; stdout stays one JSON object."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, COLLIDE_PROGRESS="1", COLLIDE_PROGRESS_AFTER="0")
+    done = subprocess.run([sys.executable, "-m", "cli.main", "run", "break-3d", "--json", "--no-record"],
+                          capture_output=True, text=True, env=env, timeout=600)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    assert summary["scene"] == "break-3d" and summary["contact"]["max_normal_force"] > 0
+    assert "break-3d: " in done.stderr and "steps/s" in done.stderr and "of 1.2 s" in done.stderr

@@ -42,8 +42,8 @@ NH = 6
 # Flags and figures.
 F_DIM, F_SPIN, F_HERTZ, F_TSPRING, F_RECORD, F_MAXSTEPS = range(6)
 NFLAG = 6
-P_DT, P_TEND, P_REST, P_TAIL, P_FRAME, P_SKIN = range(6)
-NPAR = 6
+P_DT, P_TEND, P_REST, P_TAIL, P_FRAME, P_SKIN, P_NOW, P_NOW_STEPS = range(8)
+NPAR = 8  # the last two are written by the run: time reached and steps, read by a progress display
 # Outputs: stats (int) and figures (float).
 S_STEPS, S_STATUS, S_CONTACTS, S_BUILDS, S_PAIRS, S_JUMPS = range(6)
 NSTAT = 6
@@ -647,6 +647,9 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             nep += 1
             while next_frame <= t:
                 next_frame += fp[P_FRAME]
+        if steps & 255 == 0:
+            fp[P_NOW] = t
+            fp[P_NOW_STEPS] = steps
         if steps >= fl[F_MAXSTEPS]:
             ST[S_STATUS] = MAXSTEPS
             FG[G_STATUS_T] = t

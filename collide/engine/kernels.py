@@ -80,8 +80,8 @@ E_V0, E_R0, E_V1, E_R1 = 0, 1, 2, 3
 # Settings: flags (int) and figures (float).
 FL_SPIN, FL_FRICTION, FL_SEED, FL_PLANAR, FL_RECORD, FL_AUTO, FL_MAXSTEPS, FL_DIM = range(8)
 NFL = 8
-FP_DT, FP_OMEGA_H, FP_TEND, FP_TAIL, FP_SCALE, FP_SLOW = range(6)
-NFP = 6
+FP_DT, FP_OMEGA_H, FP_TEND, FP_TAIL, FP_SCALE, FP_SLOW, FP_NOW, FP_NOW_STEPS = range(8)
+NFP = 8  # the last two are written by the run: time reached and steps, read by a progress display
 # Contact parameter tables: pairs (M, M, NP), walls (M, NP).
 TP_K, TP_MU, TP_EPS = range(3)
 # Records.
@@ -1810,6 +1810,8 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     search = math.inf
     safety = 1.5
     while ST[S_STATUS] == OK and t < t_end:
+        fp[FP_NOW] = t
+        fp[FP_NOW_STEPS] = ST[S_STEPS]
         positions_at(G, n, t, grav, P, V)
         eng = engaged_now(G, P, V, n, WP, grav, dim)
         if eng.shape[0] == 0:
@@ -2111,6 +2113,8 @@ def seed_run(G, tables, WP, grav, fl, fp):
     in_contact = False
 
     while t < t_end * (1 - 1e-15) and ST[S_STATUS] == OK:
+        fp[FP_NOW] = t
+        fp[FP_NOW_STEPS] = ST[S_STEPS]
         positions_at(G, n, t, grav, P, V)
         margin = np.zeros(n)
         for i in range(n):
