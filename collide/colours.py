@@ -39,4 +39,6 @@ def body_colours(n: int) -> np.ndarray:
 # from one to the other; on Rerun's dark background the total is light instead of near-black.
 ENERGY_COLOURS = {"kinetic": (66, 133, 244), "rotational": (171, 71, 188), "spring": (244, 132, 42),
                   "gravitational": (141, 110, 99), "total": (232, 234, 237), "dissipated": (154, 160, 166),
-                  "total_plus_dissipated": (52, 168, 83)}
+                  "total_plus_dissipated": (52, 168, 83), "dissipated_damping": (219, 68, 55),
+                  "dissipated_friction": (0, 172, 193), "dissipated_rolling": (233, 30, 99),
+                  "tangential_spring": (251, 192, 45)}

@@ -587,7 +587,8 @@ class _Writer:
             if values is not None:
                 # Rerun's automatic colours are a hash of the path: dissipated and gravitational
                 # came out the same yellow.
-                self._static(f"/energy/{key}", rr.SeriesLines(colors=[ENERGY_COLOURS[key]], names=[key]))
+                colour = ENERGY_COLOURS.get(key)
+                self._static(f"/energy/{key}", rr.SeriesLines(colors=None if colour is None else [colour], names=[key]))
                 self._send(f"/energy/{key}", rr.Scalars.columns(scalars=values), index)
         self._static("/momentum", rr.SeriesLines(names=[f"p.{a}" for a in _AXES[:model.dim]]))
         self._send("/momentum", rr.Scalars.columns(scalars=c.momentum), index)

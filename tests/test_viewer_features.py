@@ -311,26 +311,37 @@ def test_engine_run_of_dozens_of_spheres_on_a_floor(page):
     page.screenshot(path=str(DOCS / "viewer-drop-32.png"), timeout=120_000)
 
 
-def test_screenshot_many_spheres_on_a_floor(page):
-    """docs/viewer-many-spheres.png: 1 000 spheres (synthetic frames) settling on a floor,
-    coloured by speed, with their shadows; docs/viewer-force-chains.png: the force chains."""
-    from viewer.frames import settling_pile
+def test_screenshot_many_spheres_on_a_floor(page, tmp_path):
+    """docs/viewer-many-spheres.png and docs/viewer-force-chains.png: a real engine run, recorded
+    and replayed. drop-pile (tests/data: 125 beads dropped into a bin, friction and restitution,
+    DEM kernel) mid-landing coloured by speed, then nearly settled with its force chains coloured
+    by number of contacts."""
+    from collide.recording import write_recording
+    from collide.run import run_scene
+    from collide.scene import load_scene
 
+    scene = load_scene(Path(__file__).resolve().parent / "data" / "drop-pile.toml")
+    path = write_recording(run_scene(scene), tmp_path / "drop-pile.rrd")
     session = page.session
-    run = settling_pile(1000)
-    session.show_frames(run)
-    wait_until(lambda: session.view is run, 30, "the pile")
-    session.seek(0.12)
+    assert session.open_recording(path)
+    wait_until(lambda: session.view is not None and session.view.n_bodies == 125, 60, "the drop-pile recording")
+    assert session.drawer.many and session.drawer._floor is not None
+    session.seek(0.08)
+    frame = session.view.frame(session.t)
+    assert len(frame.contacts) > 20 and np.linalg.norm(frame.velocities, axis=-1).max() > 0.1  # landing
     session.set_show(colour_by="speed", chains=False)
     page.wait_for_function("() => document.body.innerText.includes('colour: speed')", timeout=30_000)
     scroll_to_text(page, "colour: speed")
     page.wait_for_timeout(6000)
     png = page.screenshot(path=str(DOCS / "viewer-many-spheres.png"), timeout=180_000)
     assert len(png) > 50_000
-    session.seek(1.4)
+    session.seek(session.view.t1)
     session.set_show(colour_by="contacts", chains=True)
     scroll_to_text(page, "colour: contacts")
-    page.wait_for_timeout(6000)
+    end = session.view.frame(session.t)
+    assert len(end.contacts) > 125  # resting on each other and the floor: more contacts than beads
+    wait_until(lambda: colour_mask(canvas_shot(page), CHAIN, 60).sum() > 300, 60, "the force chains")
+    page.wait_for_timeout(3000)
     png = page.screenshot(path=str(DOCS / "viewer-force-chains.png"), timeout=180_000)
     assert len(png) > 50_000
 

@@ -274,9 +274,12 @@ class SceneDrawer:
                 c, wxyz, dims = wall_box(foot, normal, 1.3 * extent, thickness, False, 1.3 * extent)
             is_floor = self._floor is not None and np.allclose(point, self._floor[0]) and np.allclose(
                 normal, self._floor[1])
+            # Walls other than the floor are glass: the sides of a bin stand between the camera
+            # and the pile (at 0.85 opaque they hid it and its force chains).
             self.scene.add_box(f"/world/walls/{k}", color=(222, 224, 228) if is_floor else (150, 158, 170),
                                dimensions=dims, position=tuple(c), wxyz=tuple(wxyz),
-                               opacity=None if is_floor else 0.85, cast_shadow=False, receive_shadow=True)
+                               opacity=None if is_floor else (0.85 if planar else 0.2), cast_shadow=False,
+                               receive_shadow=True)
 
     def legend(self) -> str:
         """What the colours and arrow lengths mean, for the GUI."""
