@@ -21,6 +21,7 @@ from viewer.testing import (
     canvas_shot,
     choose,
     click,
+    click_slider,
     colour_mask,
     group_button,
     hide_notifications,
@@ -197,6 +198,35 @@ def test_more_and_fewer_balls(page):
     page.wait_for_function("() => document.body.innerText.includes('at least two')", timeout=10_000)
     load(page, "demo-1d")
     assert not session.balls.visible
+
+
+def _bounce_height(view) -> float:
+    """The ball's highest point (its bottom above the floor) after its first bounce."""
+    _, end = view.contact_windows[0]
+    times = np.linspace(end, view.t1, 600)
+    return max(float(view.frame(t).positions[0, 1]) for t in times) - float(view.radius[0])
+
+
+def test_restitution_slider_takes_height_out_of_a_bounce(page):
+    """Every scene gets an elasticity slider; moved to about 0.5 on a ball dropped from 0.2 m
+    (linear spring: restitution below 1 runs in the DEM kernel), the ball comes back up to
+    about e^2 of the drop instead of all of it."""
+    from collide.scene import parse_scene
+
+    scene = parse_scene({"name": "drop-ball", "dim": 2, "gravity": [0.0, -9.81], "duration": 0.6,
+                         "contact": {"k": 1e4},
+                         "body": [{"name": "ball", "mass": 0.05, "radius": 0.02, "position": [0.0, 0.22]}],
+                         "wall": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}]}, "drop-ball")
+    session = load(page, scene)
+    assert "contact.restitution" in session._param_handles
+    elastic = _bounce_height(session.view)
+    assert elastic == pytest.approx(0.2, rel=1e-3)  # e = 1: back to where it fell from
+    before = session.view
+    click_slider(page, session._param_handles["contact.restitution"], 0.5)
+    wait_until(lambda: session.view is not before and session.worker.idle(), 120, "the run with the new restitution")
+    e = float(session.values["contact.restitution"])
+    assert 0.3 < e < 0.7 and session.view.scene.integrator == "dem"
+    assert _bounce_height(session.view) == pytest.approx(e**2 * 0.2, rel=0.05)
 
 
 def test_plot_readout_at_the_cursor(page):

@@ -25,6 +25,7 @@ from collide.scene import INTEGRATORS, Scene, SceneError, parse_scene, set_path
 DT_CHOICES = tuple(m * 10.0**e for e in range(-8, -2) for m in (1.0, 2.0, 5.0))
 TOL_CHOICES = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
 AUTO = "auto"
+DEM_TOL = 1e-3  # the viewer's least tol for a run it moves to the DEM kernel
 MAX_BALLS = 10  # "more balls" stops here: beyond two bodies each step uses the slower numpy path
 
 
@@ -209,16 +210,17 @@ def _k_span(k: float) -> tuple[float, float, float]:
 
 
 CONTACT_PARAMS: tuple[ContactParam, ...] = (
-    ContactParam("k", "k", "N/m", lambda s: True, _k_span,
+    ContactParam("k", "k", "N/m", lambda s: s.contact.model == "linear", _k_span,
                  "each sphere's spring constant (the report measured 1500 +- 30 N/m)", positive=True),
     ContactParam("mu", "mu", "", lambda s: s.dim > 1, lambda x: (0.0, max(2.0, 2 * x), 0.01),
                  "Coulomb friction coefficient", nonneg=True),
     ContactParam("eps", "eps", "m/s", lambda s: s.dim > 1, lambda x: (0.0, max(0.1, 10 * x), 1e-7),
                  "friction dead band: slip below it feels no friction", nonneg=True),
-    # The elasticity slider, once the contact laws land (DESIGN section 9): shown for any scene
-    # whose contact has a restitution coefficient.
+    # The elasticity slider (DESIGN section 9), for every scene: below 1 the run goes to the
+    # DEM kernel (`build_scene`), which has the dashpot. Below 0.05 a contact is nearly plastic
+    # and the dashpot's step limit makes runs slow.
     ContactParam("restitution", "restitution", "", lambda s: hasattr(s.contact, "restitution"),
-                 lambda x: (0.01, 1.0, 0.01), "coefficient of restitution: 1 elastic, smaller loses energy",
+                 lambda x: (0.05, 1.0, 0.01), "coefficient of restitution: 1 elastic, smaller loses energy",
                  positive=True),
 )
 
@@ -341,6 +343,14 @@ def build_scene(controls: Controls, values: dict[str, float], settings: Settings
     raw["integrator"] = settings.integrator
     raw["dt"] = settings.dt
     raw["tol"] = settings.tol
+    if settings.integrator != "dem":
+        # A law only the DEM kernel has (restitution below 1 from the slider, Hertz...): run it
+        # there rather than refuse, at 1 000 steps a contact at most (DEM's tol is 1/steps).
+        probe = {key: value for key, value in raw.items() if key not in ("integrator", "dt", "tol")}
+        if parse_scene(probe, controls.scene.name).needs_dem:
+            raw["integrator"] = "dem"
+            raw["dt"] = AUTO
+            raw["tol"] = max(settings.tol, DEM_TOL)
     return for_viewing(parse_scene(raw, controls.scene.name))
 
 

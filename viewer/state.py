@@ -329,6 +329,16 @@ class ViewRun:
     # Summary
 
     def _contact_windows(self) -> list[tuple[float, float]]:
+        if self.scene.integrator == "dem":
+            # The DEM kernel steps (not free) whenever spheres are within its neighbour skin,
+            # touching or not: its contact phases are the windows (overlapping ones merged).
+            windows: list[tuple[float, float]] = []
+            for a, b in sorted((float(a), float(b)) for a, b in self.traj.intervals[:, 2:4]):
+                if windows and a <= windows[-1][1]:
+                    windows[-1] = (windows[-1][0], max(windows[-1][1], b))
+                else:
+                    windows.append((a, b))
+            return windows
         t = self.traj.t[:, 0]
         contact = ~self.traj.free[1:, 0]
         windows = []
