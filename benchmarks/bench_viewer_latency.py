@@ -1,7 +1,8 @@
 """Viewer latency and replay rate: a slider change to the new run drawn, for every built-in
 scene; and a 1 000-sphere run replayed frame by frame.
 
-    python benchmarks/bench_viewer_latency.py [--repeats 9] [--no-browser] [--replay FILE.rrd] [--seconds 10]
+    python benchmarks/bench_viewer_latency.py [--repeats 9] [--no-browser] [--spheres 1000] [--replay FILE.rrd]
+                                              [--seconds 10]
 
 Starts the viewer in-process (127.0.0.1, any free port), opens it in headless Chromium
 (Debian's /usr/bin/chromium through Playwright) unless --no-browser.
@@ -18,12 +19,14 @@ per scene (medians, milliseconds):
   sim      the core's simulate() wall time;  prepare  ViewRun (sampling, plots, residuals)
   draw     scene + plot + table + status messages;  first  change -> first run drawn
 
-Replay: a recording of N spheres (`--replay`, default recordings/gas-box.rrd, made by `collide
-run gas-box` if missing: 1 000 spheres of a real run) played for `seconds` with force chains and
-colour by contact count, the player asked for 30 and then 120 frames a second. Printed: frame
-updates sent per second (server side: positions, colours, shadows and chains of every sphere
-queued to the browser), and the server's work per frame (median, 95th percentile) with the rate
-it allows. Without a browser the session draws into the server's scene with no client
+Replay: a synthetic pile of N spheres (`viewer.frames.settling_pile`: frames, not physics), or
+a recording (`--replay`), played for `seconds` with force chains and colour by contact count,
+the player asked for 30 and then 120 frames a second. (recordings/gas-box.rrd is not the
+default: reading its 78 506 steps back builds the dense every-body-at-every-knot view, about
+20 GB.) Printed: frame updates sent per second (server side: positions, colours, shadows and
+chains of every sphere queued to the browser), and the server's work per frame (median, 95th
+percentile) with the rate it allows. Without a browser the session draws into the server's
+scene with no client
 connected: the server columns only.
 """
 
@@ -39,10 +42,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from collide.recording import read_recording, write_recording  # noqa: E402
-from collide.run import run_scene  # noqa: E402
+from collide.recording import read_recording  # noqa: E402
 from collide.scene import builtin_names, load_scene  # noqa: E402
 from viewer.app import ViewerApp  # noqa: E402
+from viewer.frames import settling_pile  # noqa: E402
 from viewer.state import ViewRun  # noqa: E402
 from viewer.testing import CHROMIUM, launch  # noqa: E402
 
@@ -68,6 +71,7 @@ def median_ms(values: list[float]) -> str:
 
 
 def bench_scene(session, page, name: str, repeats: int) -> dict[str, list[float]]:
+    print(f"  {name}...", file=sys.stderr, flush=True)
     session.load_scene(name)
     session.worker.wait_idle(120)
     key = "contact.k" if "contact.k" in session.values else "contact.restitution"
@@ -76,7 +80,9 @@ def bench_scene(session, page, name: str, repeats: int) -> dict[str, list[float]
     for r in range(repeats):
         n_before = len(session.timings)
         before = page.evaluate(PLOT_SUM_JS) if page is not None else None
-        session.values[key] = k0 * (1.02 if r % 2 == 0 else 0.98)  # what a slider drag sets
+        # What a slider drag sets (a restitution moves down: 1 is its top).
+        up, down = (0.98, 0.96) if key == "contact.restitution" else (1.02, 0.98)
+        session.values[key] = k0 * (up if r % 2 == 0 else down)
         t0 = time.perf_counter()
         session.request_run()
         browser_t = None
@@ -100,9 +106,12 @@ def bench_scene(session, page, name: str, repeats: int) -> dict[str, list[float]
     return out
 
 
-def bench_replay(session, path: Path, seconds: float) -> list[tuple[float, float, float, float]]:
+def bench_replay(session, spheres: int, path: Path | None, seconds: float) -> list[tuple[float, float, float, float]]:
     """(asked fps, frames sent per second, median and 95th-percentile work per frame in s)."""
-    session.show_recording(ViewRun(read_recording(path)), path.name)
+    if path is None:
+        session.show_frames(settling_pile(spheres, duration=4.0, fps=60))
+    else:
+        session.show_recording(ViewRun(read_recording(path)), path.name)
     session.set_show(colour_by="contacts", chains=True, shadows=True)
     session.speed.value = "0.3x"
     session.loop.value = True
@@ -126,12 +135,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=9)
     parser.add_argument("--no-browser", action="store_true")
-    parser.add_argument("--replay", type=Path, default=Path("recordings/gas-box.rrd"))
+    parser.add_argument("--spheres", type=int, default=1000)
+    parser.add_argument("--replay", type=Path, default=None)
     parser.add_argument("--seconds", type=float, default=10.0)
     args = parser.parse_args()
-    if not args.replay.exists() and args.replay == Path("recordings/gas-box.rrd"):
-        write_recording(run_scene(load_scene("gas-box")), args.replay)
-    spheres = len(read_recording(args.replay).model.body_names)
+    spheres = args.spheres if args.replay is None else len(read_recording(args.replay).scene.bodies)
     # Slider scenes: every built-in a user would drag a slider on (1 000-sphere runs take seconds).
     names = [n for n in builtin_names() if len(load_scene(n).bodies) <= 200]
     use_browser = not args.no_browser and CHROMIUM.exists()
@@ -153,7 +161,7 @@ def main() -> None:
                 page.wait_for_function("() => document.body.innerText.includes('simulated in')", timeout=60_000)
                 for name in names:
                     results[name] = bench_scene(session, page, name, args.repeats)
-                replay = bench_replay(session, args.replay, args.seconds)
+                replay = bench_replay(session, spheres, args.replay, args.seconds)
                 browser.close()
         else:
             from viewer.session import Session
@@ -162,7 +170,7 @@ def main() -> None:
             session.fit_camera = lambda *a, **k: None  # no camera without a browser
             for name in names:
                 results[name] = bench_scene(session, None, name, args.repeats)
-            replay = bench_replay(session, args.replay, args.seconds)
+            replay = bench_replay(session, spheres, args.replay, args.seconds)
             session.close()
     finally:
         app.stop()
@@ -174,7 +182,8 @@ def main() -> None:
     for name, r in results.items():
         print(f"{name:<20} {median_ms(r['server'])} {median_ms(r['browser'])} {median_ms(r['first'])} "
               f"{median_ms(r['sim'])} {median_ms(r['prepare'])} {median_ms(r['draw'])}")
-    print(f"\nReplay of {args.replay} ({spheres} spheres; force chains, colour by contacts, floor "
+    what = "synthetic pile" if args.replay is None else str(args.replay)
+    print(f"\nReplay of {what} ({spheres} spheres; force chains, colour by contacts, floor "
           f"shadows), {args.seconds:g} s per row, {mode}")
     print(f"{'asked fps':>10} {'sent fps':>10} {'work/frame (ms) median':>24} {'p95':>8} {'allows (fps)':>14}")
     for fps, rate, median, p95 in replay:
