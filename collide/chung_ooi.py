@@ -236,17 +236,25 @@ def wall_scene(material: Material, radius: float, velocity: tuple[float, float],
 def pair_scene(materials: tuple[Material, Material], radii: tuple[float, float],
                velocities: tuple[tuple[float, float], tuple[float, float]], spins: tuple[float, float] = (0.0, 0.0),
                *, e: float = 1.0, mu: float = 0.0, tangential: str = "coulomb", name: str = "chung-ooi") -> Scene:
-    """Sphere a below sphere b along y (a gap of GAP radii), Hertz, at the given velocities and spins."""
+    """Sphere a below sphere b along y (a gap of GAP radii), Hertz, at the given velocities and
+    spins. With a tangential relative velocity the spheres slide past each other by v_t t_c
+    during the contact and the line of centres turns (by v_t t_c / (r_a + r_b)); the rigid
+    relations take the normal as fixed. Sphere a starts offset along x so that the centres line
+    up at mid-contact: the normal then turns from +phi/2 to -phi/2 and its effect on the normal
+    and tangential impulses cancels to first order (measured on test 8 at v_t = 10 v_n: 8 %
+    off with the centres lined up at first touch, 0.1 % with this placement)."""
     (ma, mb), (ra, rb) = materials, radii
     m1, m2 = sphere_mass(ma, ra), sphere_mass(mb, rb)
     m_star, r_star = m1 * m2 / (m1 + m2), ra * rb / (ra + rb)
     e_star = effective_modulus(ma, mb)
     speed = velocities[0][1] - velocities[1][1]
     gap = GAP * min(ra, rb)
+    t_mid = gap / speed + 0.5 * hertz_impact(m_star, r_star, e_star, speed)["contact_time"]
+    x_a = -(velocities[0][0] - velocities[1][0]) * t_mid
     mats = [ma.toml()] if ma == mb else [ma.toml(), mb.toml()]
     raw = {"name": name, "dim": 2, "integrator": "dem", "dt": _dt(m_star, r_star, e_star, speed),
            "contact": _contact("hertz", e, mu, tangential), "material": mats,
-           "body": [{"name": "a", "material": ma.name, "radius": ra, "position": [0.0, -ra - gap / 2],
+           "body": [{"name": "a", "material": ma.name, "radius": ra, "position": [x_a, -ra - gap / 2],
                      "velocity": list(velocities[0]), "spin": spins[0]},
                     {"name": "b", "material": mb.name, "radius": rb, "position": [0.0, rb + gap / 2],
                      "velocity": list(velocities[1]), "spin": spins[1]}]}
@@ -501,13 +509,6 @@ def test6(spins: tuple[float, ...] | None = None, tangentials: tuple[str, ...] =
     return rows, fig
 
 
-def _pair_hertz(scene: Scene) -> tuple[float, float, float]:
-    """m*, R*, E* of a two-sphere scene."""
-    a, b = _spheres(scene)
-    mats = [Material(x.material or "", *_modulus(scene, x.material), 1.0) for x in scene.bodies]
-    return a.mass * b.mass / (a.mass + b.mass), a.radius * b.radius / (a.radius + b.radius), effective_modulus(*mats)
-
-
 def _oblique_pair(scenes: list[Scene], e: float, mu: float) -> dict[str, np.ndarray]:
     res = _run(scenes)
     exp = [rigid_impact(*_spheres(s), e, mu, contact_levers(s)) for s in scenes]
@@ -563,22 +564,11 @@ def test8(tangential_speeds: tuple[float, ...] | None = None, tangentials: tuple
         fig.setdefault("rigid", {"psi2": -psi2_rigid, "vt_a": out["vt_rigid"][:, 0],
                                  "spin_a": out["w_rigid"][:, 0], "spin_b": out["w_rigid"][:, 1]})
         if tangential == "coulomb" and sliding.any():
-            # The spheres slide past each other by v_t t_c during the contact, so the line of
-            # centres turns by phi ~ v_t t_c / (r_a + r_b): the approach along it falls by
-            # phi v_t / v_n and the normal impulse gains a tangential part phi / mu of the
-            # friction's. The rigid relation assumes a fixed normal: allowed error BAR + that.
-            t_c = np.array([hertz_impact(*_pair_hertz(sc), vn)["contact_time"] for sc in scenes])
-            phi = vt0 * t_c / (ra + rb)
-            tilt = phi * (vt0 / vn + 1.0 / mu)
-            note = "normal turns by v_t t_c/(r_a+r_b) while sliding: tolerance 1 % + that"
-            for what, got, exp in (("rebound v_t (m/s)", out["vt"][:, 1], out["vt_rigid"][:, 1]),
-                                   ("rebound spin b (rad/s)", out["w"][:, 1], out["w_rigid"][:, 1])):
-                err = np.abs(got - exp) / np.abs(exp)
-                i = int(np.argmax(np.where(sliding, err - tilt, -np.inf)))
-                tol = BAR + float(tilt[i])
-                rows.append(Row(8, f"coulomb, sliding, v_t = {vt0[i]:g}", what, float(got[i]), float(exp[i]),
-                                float(err[i]), tol, bool(err[i] <= tol), note))
-            fig["tilt"] = tilt
+            s = sliding
+            rows.append(_worst(8, "coulomb, sliding", "rebound v_t (m/s)", out["vt"][s].ravel(),
+                               out["vt_rigid"][s].ravel()))
+            rows.append(_worst(8, "coulomb, sliding", "rebound spin (rad/s)", out["w"][s].ravel(),
+                               out["w_rigid"][s].ravel()))
         if tangential == "spring" and (~sliding).any():
             lowest = float(fig[tangential]["psi2"][~sliding].min())
             rows.append(Row(8, "spring", "lowest normalised recoil psi2", lowest, 0.0, float("nan"), float("nan"),
@@ -677,7 +667,7 @@ def plot_suite(result: SuiteResult, folder: Path | str = DEFAULT_PLOTS) -> list[
             figure.suptitle("Test 4: oblique impact on a plane at 3.9 m/s (aluminium oxide, mu 0.092, e 0.98)")
         elif number in (5, 8):
             x = fig["psi1"]
-            series = [k for k in fig if k not in ("psi1", "sliding", "rigid", "tilt")]
+            series = [k for k in fig if k not in ("psi1", "sliding", "rigid")]
             quantities = [("psi2", "normalised recoil psi2 = slip' / (mu v_n)")]
             quantities.append(("spin_n", "normalised spin r w' / (mu v_n)") if number == 5
                               else ("spin_a", "spin of sphere a (rad/s)"))
