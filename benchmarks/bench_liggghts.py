@@ -215,7 +215,7 @@ def read_dump(path: Path, n: int) -> np.ndarray:
 def scene_toml(case: Case) -> str:
     m = case.material
     out = [f'name = "{case.name}"', "dim = 3", 'integrator = "dem"', f"dt = {case.dt!r}",
-           f"duration = {case.steps * case.dt!r}", f"gravity = [0.0, 0.0, {-case.gravity!r}]", "",
+           f"duration = {case.steps * case.dt!r}", f"gravity = [0.0, 0.0, {(-case.gravity or 0.0)!r}]", "",
            "[contact]", 'model = "hertz"', f"restitution = {case.restitution!r}", 'tangential = "spring"',
            f"mu = {case.mu!r}", "", "[[material]]", f'name = "{m.name}"', f"density = {m.density!r}",
            f"youngs_modulus = {m.youngs_modulus!r}", f"poisson_ratio = {m.poisson_ratio!r}", ""]
@@ -235,6 +235,14 @@ def scene_toml(case: Case) -> str:
         out += ["[[wall]]", f"point = [{', '.join(repr(x) for x in point)}]",
                 f"normal = [{', '.join(repr(x) for x in normal)}]", ""]
     return "\n".join(out)
+
+
+def run_collide_cpu(case: Case, workdir: Path) -> tuple[dict, float]:
+    """run_collide, and the process's CPU time (user + system, s)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    summary = run_collide(case, workdir)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return summary, after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
 
 
 def run_collide(case: Case, workdir: Path) -> dict:
@@ -299,7 +307,8 @@ def impact_outcome_liggghts(case: Case, run: LiggghtsRun) -> dict[str, float]:
 
 def impact_outcome_collide(case: Case, summary: dict) -> dict[str, float]:
     body = summary["bodies"][0]
-    return {"delta_max": summary["contact"]["max_compression"], "f_max": summary["contact"]["max_normal_force"],
+    # max_overlap: the overlap of the pair (max_compression is each sphere's share, the report's)
+    return {"delta_max": summary["contact"]["max_overlap"], "f_max": summary["contact"]["max_normal_force"],
             "t_contact": summary["contact"]["duration"], "vx": body["velocity"][0], "vz": body["velocity"][2],
             "wy": body["spin"][1]}
 
@@ -339,17 +348,94 @@ def impact_rows(case: Case, lig: dict[str, float], ours: dict[str, float] | None
     return rows
 
 
+def emulate_wall_impact(case: Case, lever: str, cap: str) -> tuple[float, float]:
+    """A sphere on the plane z = 0, stepped as both codes step it (velocity Verlet, Hertz with
+    damping, history spring with dashpot), with one code's convention for each of the two things
+    in which they differ. Returns the rebound (v_x, w_y).
+
+    lever: "half" (LIGGGHTS: friction acts at r - delta/2) or "full" (collide: at r - delta, the
+    plane's surface). cap: "spring" (LIGGGHTS 3.8: the spring force alone is compared with mu F_n;
+    when it slides, the dashpot is dropped and the stretch set to F/k_t) or "total" (collide, as
+    LAMMPS `pair granular`: spring plus dashpot is capped, the stretch set to the capped force less
+    the dashpot's part)."""
+    m, r, mat = case.mass, case.radius, case.material
+    inertia = 0.4 * m * r * r
+    estar = e_star(mat, wall=True)
+    kt_ratio = 2 * (1 - mat.poisson_ratio) / (2 - mat.poisson_ratio)
+    le = math.log(case.restitution)
+    zeta = -le / math.sqrt(le * le + math.pi**2) * math.sqrt(5.0 / 6.0)
+    s = case.spheres[0]
+    z, vz, vx, wy = s.position[2], s.velocity[2], s.velocity[0], 0.0
+
+    def force(z: float, vz: float, vx: float, wy: float, xi: float, h: float) -> tuple[float, ...]:
+        delta = r - z
+        if delta <= 0:
+            return 0.0, 0.0, 0.0, 0.0
+        sn = 2 * estar * math.sqrt(r * delta)
+        kt = kt_ratio * sn
+        fn = 4 / 3 * estar * math.sqrt(r) * delta**1.5 - 2 * zeta * math.sqrt(m * sn) * vz
+        arm = r - (0.5 * delta if lever == "half" else delta)
+        slip = vx - arm * wy
+        xi += slip * h
+        gt = 2 * zeta * math.sqrt(m * kt)
+        if cap == "spring":
+            ft = -kt * xi
+            if abs(ft) > case.mu * abs(fn):
+                ft = math.copysign(case.mu * abs(fn), ft)
+                xi = -ft / kt
+            else:
+                ft -= gt * slip
+        else:
+            ft = -kt * xi - gt * slip
+            if abs(ft) > case.mu * max(fn, 0.0):
+                ft = math.copysign(case.mu * max(fn, 0.0), ft)
+                xi = -(ft + gt * slip) / kt
+        return fn, ft, -arm * ft, xi
+
+    fn, ft, ty, xi = force(z, vz, vx, wy, 0.0, 0.0)
+    h = case.dt
+    for _ in range(case.steps):
+        vz, vx, wy = vz + 0.5 * h * fn / m, vx + 0.5 * h * ft / m, wy + 0.5 * h * ty / inertia
+        z += h * vz
+        fn, ft, ty, xi = force(z, vz, vx, wy, xi, h)
+        vz, vx, wy = vz + 0.5 * h * fn / m, vx + 0.5 * h * ft / m, wy + 0.5 * h * ty / inertia
+    return vx, wy
+
+
+def explain_oblique(results: list[tuple[Case, dict[str, float], dict[str, float] | None]]) -> None:
+    print("\nWhere the oblique impacts differ, and why: a 40-line stepper (`emulate_wall_impact`) with "
+          "each code's convention for the friction's lever arm and for capping the damped spring "
+          "reproduces each code:\n")
+    print("| case | lever arm, cap | rebound v_x (m/s) | rebound w_y (rad/s) | matches |")
+    print("|---|---|---|---|---|")
+    for case, lig, ours in results:
+        for lever, cap in (("half", "spring"), ("full", "spring"), ("half", "total"), ("full", "total")):
+            vx, wy = emulate_wall_impact(case, lever, cap)
+            match = []
+            for name, out in (("LIGGGHTS", lig), ("collide", ours)):
+                if out is not None and abs(vx - out["vx"]) <= 1e-6 * abs(out["vx"]) + 1e-9 \
+                        and abs(wy - out["wy"]) <= 1e-6 * abs(out["wy"]):
+                    match.append(name)
+            arm = "r - delta/2" if lever == "half" else "r - delta"
+            print(f"| {case.name} | {arm}, {'spring alone' if cap == 'spring' else 'spring + dashpot'} | "
+                  f"{vx:.6g} | {wy:.6g} | {', '.join(match) or '-'} |")
+
+
 def run_impacts(workdir: Path, liggghts_only: bool) -> None:
     print("\n### (a) Single impacts (Hertz, tangential history spring)\n")
     print("| case | quantity | closed form | LIGGGHTS | collide | collide vs LIGGGHTS |")
     print("|---|---|---|---|---|---|")
+    oblique = []
     for case in impact_cases():
         lig = impact_outcome_liggghts(case, run_liggghts(case, workdir / case.name / "liggghts"))
         ours = None if liggghts_only else impact_outcome_collide(case, run_collide(case, workdir / case.name))
         for row in impact_rows(case, lig, ours):
             print("| " + " | ".join(row) + " |", flush=True)
+        if case.walls and case.mu > 0:
+            oblique.append((case, lig, ours))
     print("\nOblique cases: sphere moving +x and down onto z = 0; spin is about y (rad/s). Closed forms: "
           "Hertz for e = 1; v_out/v_in = e; rigid-body gross sliding (none near sticking).")
+    explain_oblique(oblique)
 
 
 # ------------------------------------------------------------------ (b) granular box
@@ -386,45 +472,54 @@ def box_state(x: np.ndarray, v: np.ndarray, m: float) -> tuple[float, float]:
 
 def run_box(workdir: Path, steps: int, repeat: int, liggghts_only: bool) -> None:
     case = box_case(steps)
+    one = box_case(1)  # the same set-up for one step: each process's start-up cost, to subtract
     n = len(case.spheres)
     print(f"\n### (b) Granular box: {n} spheres, r = {case.radius * 1e3:g} mm, "
           f"E = {case.material.youngs_modulus:.2g} Pa, e = {case.restitution}, mu = {case.mu}, "
           f"dt = {case.dt:.3g} s, {case.steps} steps ({case.steps * case.dt:.3g} s simulated)\n", flush=True)
-    times: dict[str, list[float]] = {"lig": [], "lig_cpu": [], "ours": [], "ours_cpu": []}
+    t: dict[str, list[float]] = {k: [] for k in ("lig", "lig_cpu", "lig_cpu1", "ours", "ours_cpu", "ours_cpu1")}
     lig = ours = None
     if not liggghts_only:
         run_collide(case, workdir / "box-warm")  # loads (or compiles) the kernels before any timing
     load = [os.getloadavg()[0]]
     for i in range(repeat):  # alternate, so that load from other work on the machine hits both alike
         lig = run_liggghts(case, workdir / f"box-{i}" / "liggghts")
-        times["lig"].append(lig.loop_time_s)
-        times["lig_cpu"].append(lig.cpu_s)
+        t["lig"].append(lig.loop_time_s)
+        t["lig_cpu"].append(lig.cpu_s)
+        t["lig_cpu1"].append(run_liggghts(one, workdir / f"one-{i}" / "liggghts").cpu_s)
         if not liggghts_only:
-            before = resource.getrusage(resource.RUSAGE_CHILDREN)
-            ours = run_collide(case, workdir / f"box-{i}")
-            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            ours, cpu = run_collide_cpu(case, workdir / f"box-{i}")
             if ours["steps"] != case.steps:
                 raise RuntimeError(f"collide ran {ours['steps']} steps, LIGGGHTS {case.steps}")
-            times["ours"].append(ours["wall_time_s"])
-            times["ours_cpu"].append(after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
+            t["ours"].append(ours["wall_time_s"])
+            t["ours_cpu"].append(cpu)
+            t["ours_cpu1"].append(run_collide_cpu(one, workdir / f"one-{i}")[1])
         load.append(os.getloadavg()[0])
     assert lig is not None
-    med = {k: statistics.median(v) for k, v in times.items() if v}
+    med = {k: statistics.median(v) for k, v in t.items() if v}
+    # CPU seconds of the steps alone: the run's process less the one-step process's. Unlike wall
+    # time, this does not grow when other work shares the cores.
+    if "ours_cpu" in med:
+        med["ours_cpu_steps"] = med["ours_cpu"] - med["ours_cpu1"]
+    med["lig_cpu_steps"] = med["lig_cpu"] - med["lig_cpu1"]
+    work = n * (case.steps - 1)
 
-    def rate(key: str) -> str:
-        return f"{n * case.steps / med[key]:.3g}" if key in med else ""
+    def rate(key: str, count: int) -> str:
+        return f"{count / med[key]:.3g}" if key in med else ""
 
     def ratio(ours_key: str, lig_key: str) -> str:
         return f"{med[lig_key] / med[ours_key]:.2f}" if ours_key in med else ""
 
     def runs(key: str) -> str:
-        return ", ".join(f"{x:.3g}" for x in times[key])
+        return ", ".join(f"{x:.3g}" for x in t[key])
 
-    rows = [("particle-steps per second (median; LIGGGHTS loop time, collide `wall_time_s`)",
-             rate("lig"), rate("ours"), ratio("ours", "lig")),
-            ("simulation time, s (runs)", runs("lig"), runs("ours"), ""),
-            ("process CPU time, s (runs; whole process, collide's includes Python start-up)",
-             runs("lig_cpu"), runs("ours_cpu"), ratio("ours_cpu", "lig_cpu"))]
+    rows = [("particle-steps per second, wall clock (median; LIGGGHTS loop time, collide `wall_time_s`)",
+             rate("lig", n * case.steps), rate("ours", n * case.steps), ratio("ours", "lig")),
+            ("particle-steps per CPU second (median CPU of the run less a one-step run's)",
+             rate("lig_cpu_steps", work), rate("ours_cpu_steps", work), ratio("ours_cpu_steps", "lig_cpu_steps")),
+            ("simulation wall time, s (runs)", runs("lig"), runs("ours"), ""),
+            ("process CPU time, s (runs)", runs("lig_cpu"), runs("ours_cpu"), ""),
+            ("process CPU time of a one-step run, s (runs)", runs("lig_cpu1"), runs("ours_cpu1"), "")]
     ke_l, z_l = box_state(lig.frames[-1, :, 0:3], lig.frames[-1, :, 3:6], case.mass)
     if ours is not None:
         x = np.array([b["position"] for b in ours["bodies"]])
@@ -435,7 +530,7 @@ def run_box(workdir: Path, steps: int, repeat: int, liggghts_only: bool) -> None
     else:
         rows += [("final kinetic energy (J, translational)", f"{ke_l:.4g}", "", ""),
                  ("final mean height (m)", f"{z_l:.5g}", "", "")]
-    print("| | LIGGGHTS (1 core) | collide | collide / LIGGGHTS (speed) |")
+    print("| | LIGGGHTS (1 core) | collide | collide / LIGGGHTS (speed; heights, energies) |")
     print("|---|---|---|---|")
     for row in rows:
         print("| " + " | ".join(row) + " |")
