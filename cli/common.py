@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
+import os
 import shutil
 import subprocess
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, NoReturn
 
@@ -61,3 +64,37 @@ def spawn_viewer(path: Path) -> None:
         typer.echo(f"  opened in the Rerun viewer: rerun {path}")
     except OSError as exc:
         typer.echo(f"  could not start the Rerun viewer ({exc.strerror}); open the file with: rerun {path}")
+
+
+PROGRESS_AFTER = 2.0  # s: a run shorter than this shows no progress
+
+
+@contextmanager
+def progress_display(name: str):
+    """A progress line on stderr (never stdout: `--json` keeps stdout pure) for a run that takes
+    more than PROGRESS_AFTER seconds: simulated time reached, steps, rate. Shown when stderr is a
+    terminal, or with COLLIDE_PROGRESS=1; erased when the run ends."""
+    wanted = os.environ.get("COLLIDE_PROGRESS", "").strip() == "1" or sys.stderr.isatty()
+    try:
+        after = float(os.environ.get("COLLIDE_PROGRESS_AFTER", PROGRESS_AFTER))
+    except ValueError:
+        after = PROGRESS_AFTER
+    shown = [False]
+
+    def show(member: int, members: int, t_now: float, t_end: float, steps: int, elapsed: float) -> None:
+        if elapsed < after:
+            return
+        part = f"{t_now:.4g} s of {t_end:.4g} s ({100 * t_now / t_end:.0f} %)" if math.isfinite(t_end) else \
+            f"{t_now:.4g} s"
+        who = f" member {member + 1}/{members}" if members > 1 else ""
+        rate = steps / elapsed if elapsed > 0 else 0.0
+        sys.stderr.write(f"\r{name}{who}: {part}, {steps:,} steps, {rate:,.0f} steps/s, {elapsed:.0f} s ")
+        sys.stderr.flush()
+        shown[0] = True
+
+    try:
+        yield show if wanted else None
+    finally:
+        if shown[0]:
+            sys.stderr.write("\r\033[K" if sys.stderr.isatty() else "\n")
+            sys.stderr.flush()

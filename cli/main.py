@@ -97,12 +97,16 @@ def run(
 
       collide run my_scene.toml --dt auto --tol 1e-9 --no-record
     """
+    from cli.common import progress_display
     from collide.run import run_scene
     from collide.scene import load_scene
     from collide.summary import report_csv, run_summary
 
     loaded = load_scene(scene, set_ or [])
-    result = run_scene(loaded, integrator=integrator, dt=parse_dt(dt), tol=tol, record=True)
+    # The trajectory is kept only for what uses it: the recording and the CSV.
+    keep = not no_record or csv is not None
+    with progress_display(loaded.name) as show:
+        result = run_scene(loaded, integrator=integrator, dt=parse_dt(dt), tol=tol, record=keep, progress=show)
     summary = run_summary(result)
     if csv is not None:
         every = csv_every if csv_every is not None else 100 * float(result.result.dt[0])

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from collide.engine import kernels as kn
-from collide.model import Model, State
+from collide.model import TABLE_ESTAR, Model, State
 from collide.stepper import RunResult, Trajectory
 
 
@@ -114,8 +114,24 @@ def stiffness(model: Model, contacts: np.ndarray) -> np.ndarray:
     return k
 
 
+def elastic_energy(model: Model, contacts: np.ndarray, overlap: np.ndarray) -> np.ndarray:
+    """Energy (..., C) the normal springs of `contacts` hold at these overlaps: k delta^2 / 2
+    (linear), 8/15 E* sqrt(R*) delta^2.5 (Hertz)."""
+    if not model.hertz:
+        return 0.5 * stiffness(model, contacts) * overlap**2
+    i, j = contacts[:, 0], contacts[:, 1]
+    pair = j >= 0
+    jj = np.where(pair, j, 0)
+    e_star = model.pair_column(i, jj, TABLE_ESTAR)
+    ri, rj = model.radius[:, i], model.radius[:, jj]
+    r_star = np.where(pair, ri * rj / (ri + rj), ri)
+    if model.n_walls:
+        e_star = np.where(pair, e_star, model.wall_column(TABLE_ESTAR)[:, i])
+    return 8.0 / 15.0 * e_star * np.sqrt(r_star) * overlap**2.5
+
+
 def conserved(model: Model, t: np.ndarray, s: np.ndarray, v: np.ndarray, w: np.ndarray,
-              work: np.ndarray, contacts: np.ndarray | None = None) -> Conserved:
+              work: np.ndarray, contacts: np.ndarray | None = None, stored: np.ndarray | None = None) -> Conserved:
     """Energies, momentum, angular momentum about the origin and centre of mass. The spring
     energy sums over `contacts` (default: every possible contact of a small scene, those near at
     these states for a large one)."""
@@ -126,7 +142,7 @@ def conserved(model: Model, t: np.ndarray, s: np.ndarray, v: np.ndarray, w: np.n
         contacts = contacts_near(model, s)
     if len(contacts):
         _, overlap, _ = contact_geometry(model, s, contacts)
-        spring = 0.5 * np.sum(stiffness(model, contacts) * np.maximum(overlap, 0.0) ** 2, axis=-1)
+        spring = np.sum(elastic_energy(model, contacts, np.maximum(overlap, 0.0)), axis=-1)
     else:
         spring = np.zeros(kinetic.shape)
     gravitational = None
@@ -139,7 +155,9 @@ def conserved(model: Model, t: np.ndarray, s: np.ndarray, v: np.ndarray, w: np.n
         if w.shape[-1]:
             angular = angular + np.sum(model.inertia[..., None] * w, axis=-2)
     com = np.sum(m[..., None] * s, axis=-2) / m.sum(axis=-1)[..., None]
-    return Conserved(kinetic, rotational, spring, gravitational, work if model.friction else None,
+    if stored is not None:
+        spring = spring + stored
+    return Conserved(kinetic, rotational, spring, gravitational, work if model.dissipative else None,
                      momentum, angular, com)
 
 
@@ -154,7 +172,42 @@ def _touched_or_all(model: Model, traj: Trajectory) -> np.ndarray:
 
 
 def state_conserved(model: Model, state: State) -> Conserved:
-    return conserved(model, state.t, state.s, state.v, state.w, state.work)
+    return conserved(model, state.t, state.s, state.v, state.w, state.work, stored=state.stored)
+
+
+def packing_fraction(model: Model, s: np.ndarray, member: int = 0) -> float:
+    """Solid fraction of a settled pile (3D): the spheres' volume over the volume they fill, the
+    box the walls bound across gravity from the floor up to the pile's surface, taken as the
+    mean top (centre + radius) of the highest 5 % of spheres. NaN without gravity, in 1D/2D, or
+    without a wall on every side across gravity."""
+    if model.gravity is None or model.dim != 3 or not model.n_walls:
+        return float("nan")
+    g = model.gravity[member]
+    up = -g / np.linalg.norm(g)
+    normals, points = model.wall_normal, model.wall_point
+    floor = [w for w in range(model.n_walls) if np.dot(normals[w], up) > 0.999]
+    if not floor:
+        return float("nan")
+    base = float(np.dot(points[floor[0]], up))
+    radius = model.radius[member]
+    heights = s @ up + radius - base
+    top = float(np.mean(np.sort(heights)[-max(1, len(heights) // 20):]))
+    # The cross-section: for each axis across gravity, the two walls facing each other.
+    area = 1.0
+    for axis in range(3):
+        direction = np.zeros(3)
+        direction[axis] = 1.0
+        if abs(np.dot(direction, up)) > 1e-9:
+            continue
+        lows = [float(np.dot(points[w], direction)) for w in range(model.n_walls)
+                if np.dot(normals[w], direction) > 0.999]
+        highs = [float(np.dot(points[w], direction)) for w in range(model.n_walls)
+                 if np.dot(normals[w], direction) < -0.999]
+        if not lows or not highs:
+            return float("nan")
+        area *= min(highs) - max(lows)
+    solid = float(np.sum(4.0 / 3.0 * np.pi * radius**3))
+    return solid / (area * top) if area > 0 and top > 0 else float("nan")
 
 
 # ---------------------------------------------------------------------------------------------

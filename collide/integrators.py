@@ -38,4 +38,6 @@ INTEGRATORS: dict[str, Integrator] = {
     "verlet": Integrator("verlet", (1.0,), 2, 2.0, events=True),
     "yoshida4": Integrator("yoshida4", YOSHIDA4, 4, 2.0 / (_CBRT2 * _Y1), events=True),
     "kahan6": Integrator("kahan6", KAHAN6, 6, 2.0 / max(abs(x) for x in KAHAN6), events=True),
+    # The fixed-step DEM kernel (collide.engine.dem): velocity Verlet, contacts switch at steps.
+    "dem": Integrator("dem", (1.0,), 2, 2.0, events=False),
 }

@@ -9,8 +9,9 @@ mass, inv_mass      (B, N)        kg, 1/kg
 radius              (B, N)        m
 inertia             (B, N)        kg m^2 (isotropic: spheres)
 material            (B, N)        index into the contact tables
-pair_table          (B, M, M, 3)  per pair of materials: k (N/m, springs in series), mu, eps
-wall_table          (B, M, 3)     per material on a wall: k (the sphere's own spring), mu, eps
+pair_table          (B, M, M, 7)  per pair of materials: k (N/m, springs in series), mu, eps,
+                                  E* (Pa, Hertz), restitution, rolling friction, k_t / k_n
+wall_table          (B, M, 7)     per material on a wall (rigid): the same columns
 k, mu, eps          (B,)          the scene's [contact] values
 gravity             (B, D)        m/s^2, or None
 wall_point          (W, D)        m
@@ -27,13 +28,16 @@ widens only the first axis: `compile_scenes` takes B scenes of the same shape.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from collide.scene import Scene, SceneError
 
-TABLE_K, TABLE_MU, TABLE_EPS = 0, 1, 2
+TABLE_K, TABLE_MU, TABLE_EPS, TABLE_ESTAR, TABLE_REST, TABLE_ROLL, TABLE_KTR = range(7)
+N_TABLE = 7
+EVENT_COLUMNS = 3  # the event engine reads k, mu, eps only
 KISSING = {1: 2, 2: 6, 3: 12}  # most equal spheres that can touch one sphere at once
 
 
@@ -60,6 +64,9 @@ class Model:
     wall_normal: np.ndarray
     friction: bool
     seed_lever: bool
+    hertz: bool = False
+    tangential_spring: bool = False
+    dissipative: bool = False  # damping, friction or rolling resistance can take energy out
 
     @property
     def batch(self) -> int:
@@ -82,6 +89,16 @@ class Model:
         b = np.arange(self.batch)[:, None]
         return self.pair_table[b, self.material[:, i], self.material[:, j], TABLE_K]
 
+    def pair_column(self, i: np.ndarray, j: np.ndarray, column: int) -> np.ndarray:
+        """Column `column` (B, P) of the pair table for the contacts between bodies i and j."""
+        b = np.arange(self.batch)[:, None]
+        return self.pair_table[b, self.material[:, i], self.material[:, j], column]
+
+    def wall_column(self, column: int) -> np.ndarray:
+        """Column `column` (B, N) of the wall table for each sphere."""
+        b = np.arange(self.batch)[:, None]
+        return self.wall_table[b, self.material, column]
+
     def wall_stiffness(self) -> np.ndarray:
         """Spring constant (B, N) of each sphere on a wall (its own: the wall is rigid)."""
         b = np.arange(self.batch)[:, None]
@@ -102,15 +119,80 @@ class State:
     w: np.ndarray
     q: np.ndarray
     work: np.ndarray
+    stored: np.ndarray | None = None  # (B,) J held by tangential springs (DEM); None: nothing held
 
     def copy(self) -> State:
         return State(self.t.copy(), self.s.copy(), self.v.copy(), self.w.copy(), self.q.copy(),
-                     self.work.copy())
+                     self.work.copy(), None if self.stored is None else self.stored.copy())
 
 
 def shape_key(scene: Scene) -> tuple:
     return (scene.dim, tuple(b.name for b in scene.bodies), len(scene.walls),
-            scene.gravity is not None, scene.has_spin, scene.contact.lever)
+            scene.gravity is not None, scene.has_spin, scene.contact.lever, len(scene.materials),
+            scene.contact.model, scene.contact.tangential)
+
+
+def _mixed(a: float | None, b: float | None, default: float, mean: str) -> float:
+    """A pair's value from its two materials': the [contact] default unless a material gives
+    one; two given values mix arithmetically (mu, rolling friction) or geometrically (restitution:
+    the product of two dampings' losses)."""
+    if a is None and b is None:
+        return default
+    a = default if a is None else a
+    b = default if b is None else b
+    return math.sqrt(a * b) if mean == "geometric" else 0.5 * (a + b)
+
+
+def contact_tables(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Pair table (M, M, N_TABLE) and wall table (M, N_TABLE) of one scene; material 0 is the
+    [contact] table itself (bodies naming no material), 1.. the scene's [[material]]s."""
+    c = scene.contact
+    mats = [None, *scene.materials]
+    count = len(mats)
+    young = [c.youngs_modulus if m is None or m.youngs_modulus is None else m.youngs_modulus for m in mats]
+    poisson = [c.poisson_ratio if m is None or m.poisson_ratio is None else m.poisson_ratio for m in mats]
+    pair = np.zeros((count, count, N_TABLE))
+    wall = np.zeros((count, N_TABLE))
+    overrides = {frozenset(p.materials): p for p in scene.pairs}
+    for a in range(count):
+        ma = mats[a]
+        for b in range(count):
+            mb = mats[b]
+            row = pair[a, b]
+            row[TABLE_K] = c.k * c.k / (c.k + c.k)
+            row[TABLE_EPS] = c.eps
+            row[TABLE_MU] = _mixed(ma and ma.mu, mb and mb.mu, c.mu, "arithmetic")
+            row[TABLE_REST] = _mixed(ma and ma.restitution, mb and mb.restitution, c.restitution, "geometric")
+            row[TABLE_ROLL] = _mixed(ma and ma.rolling_friction, mb and mb.rolling_friction, c.rolling_friction,
+                                     "arithmetic")
+            over = overrides.get(frozenset((ma.name, mb.name))) if ma is not None and mb is not None else None
+            if over is not None:
+                for column, value in ((TABLE_MU, over.mu), (TABLE_REST, over.restitution),
+                                      (TABLE_ROLL, over.rolling_friction)):
+                    if value is not None:
+                        row[column] = value
+            if young[a] is not None and young[b] is not None:
+                row[TABLE_ESTAR] = 1.0 / ((1 - poisson[a] ** 2) / young[a] + (1 - poisson[b] ** 2) / young[b])
+                # Mindlin: k_t / k_n = 4 G* / E*, G* = 1 / ((2 - nu_a)/G_a + (2 - nu_b)/G_b).
+                shear = [young[x] / (2 * (1 + poisson[x])) for x in (a, b)]
+                g_star = 1.0 / ((2 - poisson[a]) / shear[0] + (2 - poisson[b]) / shear[1])
+                mindlin = 4.0 * g_star / row[TABLE_ESTAR]
+            else:
+                mindlin = 2.0 / 7.0
+            row[TABLE_KTR] = c.tangential_stiffness_ratio if c.tangential_stiffness_ratio is not None else \
+                (mindlin if c.model == "hertz" else 2.0 / 7.0)
+        wrow = wall[a]
+        wrow[TABLE_K] = c.k
+        wrow[TABLE_EPS] = c.eps
+        wrow[TABLE_MU] = c.mu if ma is None or ma.mu is None else ma.mu
+        wrow[TABLE_REST] = c.restitution if ma is None or ma.restitution is None else ma.restitution
+        wrow[TABLE_ROLL] = c.rolling_friction if ma is None or ma.rolling_friction is None else ma.rolling_friction
+        if young[a] is not None:
+            wrow[TABLE_ESTAR] = young[a] / (1 - poisson[a] ** 2)  # a rigid wall
+        # Mindlin on a rigid wall: 4 G*/E* with G* = G / (2 - nu): 2 (1 - nu) / (2 - nu).
+        wrow[TABLE_KTR] = c.tangential_stiffness_ratio if c.tangential_stiffness_ratio is not None else \
+            (2 * (1 - poisson[a]) / (2 - poisson[a]) if c.model == "hertz" else 2.0 / 7.0)
+    return pair, wall
 
 
 def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
@@ -137,19 +219,25 @@ def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
     k = np.array([s.contact.k for s in scenes], dtype=float)
     mu = np.array([s.contact.mu for s in scenes], dtype=float)
     eps = np.array([s.contact.eps for s in scenes], dtype=float)
-    # One material: every sphere is a spring of constant k, two in series (DESIGN section 2).
-    pair_table = np.stack((k * k / (k + k), mu, eps), axis=-1).reshape(b, 1, 1, 3)
-    wall_table = np.stack((k, mu, eps), axis=-1).reshape(b, 1, 3)
+    # Every sphere is a spring of constant k, two in series (DESIGN section 2); materials add
+    # Hertz constants and their own contact values (DESIGN section 9).
+    tables = [contact_tables(s) for s in scenes]
+    pair_table = np.stack([t[0] for t in tables])
+    wall_table = np.stack([t[1] for t in tables])
+    material = np.array([[0 if body.material is None else 1 + [m.name for m in s.materials].index(body.material)
+                          for body in s.bodies] for s in scenes], dtype=np.int64).reshape(b, n)
     gravity = None if first.gravity is None else np.array([s.gravity for s in scenes], dtype=float)
     walls = first.walls
     model = Model(
         dim=dim, spin_dim=spin_dim, body_names=tuple(body.name for body in first.bodies),
         mass=mass, inv_mass=1.0 / mass, radius=radius, inertia=inertia, inv_inertia=1.0 / inertia,
-        material=np.zeros((b, n), dtype=np.int64), pair_table=pair_table, wall_table=wall_table,
+        material=material, pair_table=pair_table, wall_table=wall_table,
         k=k, mu=mu, eps=eps, gravity=gravity,
         wall_point=np.array([w.point for w in walls], dtype=float).reshape(len(walls), dim),
         wall_normal=np.array([w.normal for w in walls], dtype=float).reshape(len(walls), dim),
         friction=any(s.has_friction for s in scenes), seed_lever=first.contact.lever == "seed",
+        hertz=first.contact.model == "hertz", tangential_spring=first.contact.tangential == "spring",
+        dissipative=any(s.has_friction or s.needs_dem for s in scenes),
     )
     s = np.array([[body.position for body in sc.bodies] for sc in scenes], dtype=float).reshape(b, n, dim)
     v = np.array([[body.velocity for body in sc.bodies] for sc in scenes], dtype=float).reshape(b, n, dim)
@@ -176,7 +264,8 @@ def select_model(model: Model, index: int) -> Model:
 
 def select_state(state: State, index: int) -> State:
     sl = slice(index, index + 1)
-    return State(state.t[sl], state.s[sl], state.v[sl], state.w[sl], state.q[sl], state.work[sl])
+    return State(state.t[sl], state.s[sl], state.v[sl], state.w[sl], state.q[sl], state.work[sl],
+                 None if state.stored is None else state.stored[sl])
 
 
 def reference_frequency(model: Model) -> np.ndarray:

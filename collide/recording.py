@@ -39,7 +39,8 @@ Entity paths (`<b>` a body name, `<c>` a contact such as `ball1-ball2` or `ball1
 /energy/kinetic, spring, total                Scalars J
 /energy/rotational                            Scalars J (when something spins)
 /energy/gravitational                         Scalars J (with gravity)
-/energy/dissipated, total_plus_dissipated     Scalars J (with friction)
+/energy/dissipated, total_plus_dissipated     Scalars J (with friction, damping or rolling resistance)
+/energy/dissipated_damping, _friction, _rolling, tangential_spring   Scalars J (DEM runs: each part)
 /momentum                                     Scalars kg m/s, one series per axis
 /angular_momentum                             Scalars kg m^2/s about the origin (2D, 3D)
 /spin/<b>                                     Scalars rad/s (when something spins)
@@ -295,6 +296,7 @@ class _Writer:
         self.calls = 0
         self.spin = self.model.spin_dim > 0 and self.scene.has_spin
         self.friction = self.model.friction and self.scene.has_friction
+        self.dissipative = self.model.dissipative
         self.many = self.model.n_bodies >= MANY_BODIES
 
     # -- frames ---------------------------------------------------------------------------
@@ -561,9 +563,21 @@ class _Writer:
         model, st, index, c = self.model, self.exact.state, self.exact.index, self.conserved
         series = {"kinetic": c.kinetic, "rotational": c.rotational if self.spin else None,
                   "spring": c.spring, "gravitational": c.gravitational, "total": c.total}
-        if self.friction:
+        if self.dissipative:
             series["dissipated"] = c.dissipated
             series["total_plus_dissipated"] = c.balance
+        parts = self.traj.energy_parts
+        if parts is not None and len(parts) > 1:
+            # DEM runs: each part's work, and what the tangential springs hold (the friction
+            # account, and `dissipated`, include it until the springs let go).
+            at = st.t
+            def part(column: int) -> np.ndarray:
+                return np.interp(at, parts[:, 0], parts[:, column])
+            stored = part(4)
+            series["dissipated_damping"] = part(1)
+            series["dissipated_friction"] = part(2) - stored
+            series["dissipated_rolling"] = part(3)
+            series["tangential_spring"] = stored
         for key, values in series.items():
             if values is not None:
                 self._send(f"/energy/{key}", rr.Scalars.columns(scalars=values), index)

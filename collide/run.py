@@ -11,8 +11,8 @@ import numpy as np
 from collide import diagnostics as dg
 from collide.integrators import INTEGRATORS
 from collide.model import compile_scenes, reference_frequency
-from collide.scene import Scene, SceneError
-from collide.stepper import EDGE_TOL, MAX_STEPS_DEFAULT, RunError, RunResult, simulate
+from collide.scene import Scene, SceneError, dem_reason
+from collide.stepper import EDGE_TOL, MAX_STEPS_DEFAULT, Progress, RunError, RunResult, simulate
 
 
 @dataclass
@@ -116,7 +116,7 @@ def auto_dt(scenes: list[Scene], integrator: str, tol: np.ndarray) -> tuple[np.n
 
 def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float | str | None = None,
                tol: float | None = None, record: bool = True,
-               max_steps: int = MAX_STEPS_DEFAULT) -> SceneRun:
+               max_steps: int = MAX_STEPS_DEFAULT, progress: Progress | None = None) -> SceneRun:
     """Run B same-shaped scenes in one batch. `integrator`, `dt` and `tol` override the scenes'."""
     names = {s.integrator for s in scenes} if integrator is None else {integrator}
     if len(names) != 1:
@@ -130,6 +130,12 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     tols = np.array([scene.tol if tol is None else tol for scene in scenes])
     requested = [scene.dt if dt is None else dt for scene in scenes]
     auto_used = [step == "auto" for step in requested]
+    needs = next((scene for scene in scenes if scene.needs_dem), None)
+    if needs is not None and integ != "dem":
+        raise SceneError(f"integrator: '{integ}' runs the report's contact law only; {needs.name}'s "
+                         f"({dem_reason(needs)}) runs with --integrator dem")
+    if integ == "dem":
+        return _run_dem(scenes, model, state, requested, auto_used, tols, dt, record, max_steps, progress)
     omega = reference_frequency(model)
     omega_h = np.zeros(len(scenes))
     if any(auto_used):
@@ -159,10 +165,33 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     with np.errstate(divide="ignore") if contactless else contextlib.nullcontext():
         result = simulate(model, state, integrator=integ, dt=dt_arr, duration=duration, tail=tail,
                           record=record, max_steps=max_steps, event_tol=event_tol, auto=np.array(auto_used),
-                          omega_h=omega_h)
+                          omega_h=omega_h, progress=progress)
     check_finite(result, scenes)
     result.warnings.extend(balance_warnings(result, scenes, tols, auto_used))
     return SceneRun(list(scenes), result, dt, [float(x) for x in tols], estimate, auto_used)
+
+
+def _run_dem(scenes: list[Scene], model, state, requested: list, auto_used: list[bool], tols: np.ndarray,
+             dt_request: float | str | None, record: bool, max_steps: int,
+             progress: Progress | None = None) -> SceneRun:
+    """A batch through the fixed-step DEM kernel (`collide.dem`)."""
+    from collide import dem
+
+    steps = np.array([np.nan if a else s for a, s in zip(auto_used, requested)], dtype=float)
+    if any(auto_used):
+        steps = np.where(auto_used, dem.auto_dt(model, state, tols), steps)
+    if not np.all(np.isfinite(steps)) or np.any(steps <= 0):
+        raise SceneError(f"dt: must be a positive number or 'auto', got {dt_request!r}")
+    duration = np.array([np.nan if s.duration is None else s.duration for s in scenes])
+    tail = np.array([np.nan if s.tail is None else s.tail for s in scenes])
+    rest = np.array([np.nan if s.rest is None else s.rest for s in scenes])
+    result = simulate(model, state, integrator="dem", dt=steps, duration=duration, tail=tail, record=record,
+                      max_steps=max_steps, rest=rest, progress=progress)
+    check_finite(result, scenes)
+    t_c, _, _ = dem.contact_time(model, state)
+    estimate = dem.predicted_error(t_c / steps)
+    result.warnings.extend(balance_warnings(result, scenes, np.maximum(tols, estimate), auto_used))
+    return SceneRun(list(scenes), result, dt_request, [float(x) for x in tols], estimate, auto_used)
 
 
 def balance_warnings(result: RunResult, scenes: list[Scene], tols: np.ndarray, auto_used: list[bool]) -> list[str]:

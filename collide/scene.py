@@ -16,7 +16,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-INTEGRATORS = ("seed", "verlet", "yoshida4", "kahan6")
+INTEGRATORS = ("seed", "verlet", "yoshida4", "kahan6", "dem")
 DEFAULT_INTEGRATOR = "kahan6"
 DEFAULT_TOL = 1e-6
 # Every number of a scene is at most this large in magnitude, and every positive quantity (mass,
@@ -43,6 +43,7 @@ class Body:
     position: tuple[float, ...]
     velocity: tuple[float, ...]
     spin: tuple[float, ...]
+    material: str | None = None
 
 
 @dataclass(frozen=True)
@@ -55,7 +56,10 @@ class Wall:
 
 @dataclass(frozen=True)
 class Contact:
-    """Contact law for every pair and wall: linear springs in series plus Coulomb friction.
+    """Contact law for every pair and wall (DESIGN sections 2 and 9): a normal model (the
+    report's linear springs in series, or Hertz), optional normal damping for a restitution,
+    a tangential model (the report's Coulomb slip with a dead band, or a history spring capped
+    by Coulomb) and optional rolling resistance.
 
     `lever = "seed"` reproduces the report: slip measured with the undeformed radius while the
     torque acts at the deformed contact point (DESIGN section 2).
@@ -66,6 +70,46 @@ class Contact:
     mu: float = 0.0
     eps: float = 1e-6
     lever: str = "contact"
+    youngs_modulus: float | None = None
+    poisson_ratio: float = 0.3
+    restitution: float = 1.0
+    tangential: str = "coulomb"
+    tangential_stiffness_ratio: float | None = None
+    rolling_friction: float = 0.0
+
+    @property
+    def stiffness_ratio(self) -> float:
+        """k_t over the normal stiffness dF_n/d delta: as given, else 2/7 (linear) or Mindlin's
+        2(1 - nu)/(2 - nu) (Hertz, both spheres of this Poisson ratio)."""
+        if self.tangential_stiffness_ratio is not None:
+            return self.tangential_stiffness_ratio
+        if self.model == "hertz":
+            return 2.0 * (1.0 - self.poisson_ratio) / (2.0 - self.poisson_ratio)
+        return 2.0 / 7.0
+
+
+@dataclass(frozen=True)
+class Material:
+    """A named material: density (for bodies without a mass), elastic constants, and contact
+    values that replace [contact]'s for its pairs (None: not given)."""
+
+    name: str
+    density: float | None = None
+    youngs_modulus: float | None = None
+    poisson_ratio: float | None = None
+    mu: float | None = None
+    restitution: float | None = None
+    rolling_friction: float | None = None
+
+
+@dataclass(frozen=True)
+class PairLaw:
+    """Contact values for one pair of materials, overriding the mixing rules."""
+
+    materials: tuple[str, str]
+    mu: float | None = None
+    restitution: float | None = None
+    rolling_friction: float | None = None
 
 
 @dataclass(frozen=True)
@@ -79,10 +123,13 @@ class Scene:
     contact: Contact
     bodies: tuple[Body, ...]
     walls: tuple[Wall, ...] = ()
+    materials: tuple[Material, ...] = ()
+    pairs: tuple[PairLaw, ...] = ()
     gravity: tuple[float, ...] | None = None
     duration: float | None = None
     tail: float | None = None
     tol: float = DEFAULT_TOL
+    rest: float | None = None  # DEM: end when the kinetic energy falls below this part of its peak
     description: str = ""
     source: dict = field(default_factory=dict, compare=False, repr=False)
 
@@ -93,7 +140,21 @@ class Scene:
 
     @property
     def has_friction(self) -> bool:
-        return self.dim > 1 and self.contact.mu > 0.0
+        mus = [self.contact.mu] + [m.mu for m in self.materials if m.mu is not None] + \
+            [p.mu for p in self.pairs if p.mu is not None]
+        return self.dim > 1 and max(mus) > 0.0
+
+    @property
+    def needs_dem(self) -> bool:
+        """Whether the contact law goes beyond the report's (linear, undamped, Coulomb with a
+        dead band, no rolling resistance): such laws run in the fixed-step DEM kernel."""
+        c = self.contact
+        rest = [c.restitution] + [m.restitution for m in self.materials if m.restitution is not None] + \
+            [p.restitution for p in self.pairs if p.restitution is not None]
+        rolling = [c.rolling_friction] + [m.rolling_friction for m in self.materials
+                                          if m.rolling_friction is not None] + \
+            [p.rolling_friction for p in self.pairs if p.rolling_friction is not None]
+        return c.model != "linear" or c.tangential != "coulomb" or min(rest) < 1.0 or max(rolling) > 0.0
 
     @property
     def has_spin(self) -> bool:
@@ -317,9 +378,12 @@ def _set_component(vector: list, component: str, value: Any, key: str) -> None:
 # Validation
 
 _TOP_KEYS = {"name", "description", "dim", "dt", "integrator", "duration", "tail", "tol",
-             "gravity", "contact", "body", "wall"}
-_CONTACT_KEYS = {"model", "k", "mu", "eps", "lever"}
-_BODY_KEYS = {"name", "mass", "radius", "inertia", "position", "velocity", "spin"}
+             "gravity", "contact", "body", "wall", "material", "pair", "rest"}
+_CONTACT_KEYS = {"model", "k", "mu", "eps", "lever", "youngs_modulus", "poisson_ratio", "restitution",
+                 "tangential", "tangential_stiffness_ratio", "rolling_friction"}
+_MATERIAL_KEYS = {"name", "density", "youngs_modulus", "poisson_ratio", "mu", "restitution", "rolling_friction"}
+_PAIR_KEYS = {"materials", "mu", "restitution", "rolling_friction"}
+_BODY_KEYS = {"name", "mass", "radius", "inertia", "position", "velocity", "spin", "material"}
 _WALL_KEYS = {"point", "normal"}
 
 
@@ -396,21 +460,14 @@ def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
     gravity = raw.get("gravity")
     gravity = None if gravity is None else _vector(gravity, "gravity", dim)
 
-    contact_raw = raw.get("contact", {})
-    _check_keys(contact_raw, _CONTACT_KEYS, "contact")
-    model = contact_raw.get("model", "linear")
-    if model != "linear":
-        raise SceneError(f"contact.model: unknown {_shown(model)} (only 'linear')")
-    lever = contact_raw.get("lever", "contact")
-    if lever not in ("contact", "seed"):
-        raise SceneError(f"contact.lever: must be 'contact' or 'seed', got {_shown(lever)}")
-    contact = Contact(
-        model=model,
-        k=_number(contact_raw.get("k", 1500.0), "contact.k", positive=True),
-        mu=_number(contact_raw.get("mu", 0.0), "contact.mu", nonneg=True),
-        eps=_number(contact_raw.get("eps", 1e-6), "contact.eps", nonneg=True),
-        lever=lever,
-    )
+    contact = _parse_contact(raw.get("contact", {}))
+    materials = _parse_materials(raw.get("material", []))
+    by_name = {m.name: m for m in materials}
+    pairs = _parse_pairs(raw.get("pair", []), by_name)
+    rest = raw.get("rest")
+    rest = None if rest is None else _number(rest, "rest", positive=True)
+    if rest is not None and rest >= 1.0:
+        raise SceneError(f"rest: a fraction of the peak kinetic energy below 1, got {_shown(raw.get('rest'))}")
 
     bodies_raw = raw.get("body")
     if not isinstance(bodies_raw, list) or not bodies_raw:
@@ -424,11 +481,21 @@ def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
         if not isinstance(bname, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_\-]*", bname):
             raise SceneError(f"{where}.name: expected a name of letters, digits, _ or -, got {_shown(bname)}")
         where = f"body.{bname}"
-        for required in ("mass", "radius", "position"):
+        for required in ("radius", "position"):
             if required not in b:
                 raise SceneError(f"{where}.{required}: missing")
-        mass = _number(b["mass"], f"{where}.mass", positive=True)
         radius = _number(b["radius"], f"{where}.radius", positive=True)
+        material = b.get("material")
+        if material is not None and material not in by_name:
+            known = ", ".join(sorted(by_name)) or "none defined"
+            raise SceneError(f"{where}.material: unknown {_shown(material)} (materials: {known})")
+        if "mass" in b:
+            mass = _number(b["mass"], f"{where}.mass", positive=True)
+        elif material is not None and by_name[material].density is not None:
+            mass = _number(4.0 / 3.0 * math.pi * radius**3 * by_name[material].density, f"{where}.mass",
+                           positive=True)
+        else:
+            raise SceneError(f"{where}.mass: missing (give a mass, or a material with a density)")
         inertia_raw = b.get("inertia", "solid")
         if inertia_raw == "solid":
             inertia = 0.4 * mass * radius**2
@@ -449,7 +516,7 @@ def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
             spin = (0.0,) * spin_len
         else:
             spin = _vector(spin_raw, f"{where}.spin", spin_len)
-        bodies.append(Body(bname, mass, radius, inertia, position, velocity, spin))
+        bodies.append(Body(bname, mass, radius, inertia, position, velocity, spin, material))
     names = [b.name for b in bodies]
     duplicate = next((n for n in names if names.count(n) > 1), None)
     if duplicate:
@@ -473,10 +540,140 @@ def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
         walls.append(Wall(point, tuple(c / norm for c in normal)))
 
     scene = Scene(name=name, dim=dim, dt=dt, integrator=integrator, contact=contact,
-                  bodies=tuple(bodies), walls=tuple(walls), gravity=gravity, duration=duration,
-                  tail=tail, tol=tol, description=str(raw.get("description", "")), source=raw)
+                  bodies=tuple(bodies), walls=tuple(walls), materials=materials, pairs=pairs,
+                  gravity=gravity, duration=duration, tail=tail, tol=tol, rest=rest,
+                  description=str(raw.get("description", "")), source=raw)
+    if scene.needs_dem:
+        if "integrator" not in raw:
+            scene = replace(scene, integrator="dem")
+        elif integrator != "dem":
+            raise SceneError(f"integrator: {_shown(integrator)} runs the report's contact law only; this scene's "
+                             f"({dem_reason(scene)}) runs with integrator = 'dem'")
+    if scene.contact.model == "hertz":
+        for body in scene.bodies:
+            if body.material is None and contact.youngs_modulus is None:
+                raise SceneError(f"contact.youngs_modulus: missing for model = 'hertz' (body.{body.name} has no "
+                                 "material giving one)")
+            if body.material is not None and by_name[body.material].youngs_modulus is None \
+                    and contact.youngs_modulus is None:
+                raise SceneError(f"material.{body.material}.youngs_modulus: missing for model = 'hertz'")
+    if rest is not None and scene.integrator != "dem":
+        raise SceneError("rest: ends a DEM run (integrator = 'dem') when it comes to rest; this scene's "
+                         f"integrator is {_shown(scene.integrator)}")
     _check_start_overlap(scene)
     return scene
+
+
+def dem_reason(scene: Scene) -> str:
+    """Which part of a scene's contact law needs the DEM kernel, for messages."""
+    c = scene.contact
+    if c.model != "linear":
+        return f"model = '{c.model}'"
+    if c.tangential != "coulomb":
+        return f"tangential = '{c.tangential}'"
+    if scene.needs_dem and c.rolling_friction == 0.0 and all(
+            (m.rolling_friction or 0.0) == 0.0 for m in scene.materials):
+        return "restitution below 1"
+    return "rolling_friction"
+
+
+def _choice(table: dict, key: str, where: str, options: tuple[str, ...]) -> str:
+    value = table.get(key, options[0])
+    if value not in options:
+        raise SceneError(f"{where}.{key}: unknown {_shown(value)} (choose from {', '.join(options)})")
+    return value
+
+
+def _restitution(value: Any, key: str) -> float:
+    e = _number(value, key, positive=True)
+    if e > 1.0:
+        raise SceneError(f"{key}: a restitution is at most 1 (1 = no damping), got {_shown(value)}")
+    return e
+
+
+def _poisson(value: Any, key: str) -> float:
+    nu = _number(value, key, nonneg=True)
+    if nu >= 0.5:
+        raise SceneError(f"{key}: a Poisson ratio is below 0.5, got {_shown(value)}")
+    return nu
+
+
+def _parse_contact(table: Any) -> Contact:
+    _check_keys(table, _CONTACT_KEYS, "contact")
+    lever = table.get("lever", "contact")
+    if lever not in ("contact", "seed"):
+        raise SceneError(f"contact.lever: must be 'contact' or 'seed', got {_shown(lever)}")
+    young = table.get("youngs_modulus")
+    ratio = table.get("tangential_stiffness_ratio")
+    return Contact(
+        model=_choice(table, "model", "contact", ("linear", "hertz")),
+        k=_number(table.get("k", 1500.0), "contact.k", positive=True),
+        mu=_number(table.get("mu", 0.0), "contact.mu", nonneg=True),
+        eps=_number(table.get("eps", 1e-6), "contact.eps", nonneg=True),
+        lever=lever,
+        youngs_modulus=None if young is None else _number(young, "contact.youngs_modulus", positive=True),
+        poisson_ratio=_poisson(table.get("poisson_ratio", 0.3), "contact.poisson_ratio"),
+        restitution=_restitution(table.get("restitution", 1.0), "contact.restitution"),
+        tangential=_choice(table, "tangential", "contact", ("coulomb", "spring")),
+        tangential_stiffness_ratio=None if ratio is None else _number(ratio, "contact.tangential_stiffness_ratio",
+                                                                      positive=True),
+        rolling_friction=_number(table.get("rolling_friction", 0.0), "contact.rolling_friction", nonneg=True),
+    )
+
+
+def _optional(table: dict, key: str, where: str, read: Any) -> Any:
+    return None if table.get(key) is None else read(table[key], f"{where}.{key}")
+
+
+def _parse_materials(tables: Any) -> tuple[Material, ...]:
+    if not isinstance(tables, list):
+        raise SceneError("material: expected [[material]] tables")
+    out = []
+    for index, table in enumerate(tables):
+        _check_keys(table, _MATERIAL_KEYS, f"material[{index}]")
+        name = table.get("name")
+        if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_\-]*", name):
+            raise SceneError(f"material[{index}].name: expected a name of letters, digits, _ or -, got {_shown(name)}")
+        where = f"material.{name}"
+        if any(m.name == name for m in out):
+            raise SceneError(f"{where}: the name is used twice")
+
+        def positive(v: Any, k: str) -> float:
+            return _number(v, k, positive=True)
+
+        def nonneg(v: Any, k: str) -> float:
+            return _number(v, k, nonneg=True)
+
+        out.append(Material(name, _optional(table, "density", where, positive),
+                            _optional(table, "youngs_modulus", where, positive),
+                            _optional(table, "poisson_ratio", where, _poisson),
+                            _optional(table, "mu", where, nonneg),
+                            _optional(table, "restitution", where, _restitution),
+                            _optional(table, "rolling_friction", where, nonneg)))
+    return tuple(out)
+
+
+def _parse_pairs(tables: Any, materials: dict[str, Material]) -> tuple[PairLaw, ...]:
+    if not isinstance(tables, list):
+        raise SceneError("pair: expected [[pair]] tables")
+    out = []
+    for index, table in enumerate(tables):
+        where = f"pair[{index}]"
+        _check_keys(table, _PAIR_KEYS, where)
+        names = table.get("materials")
+        if not isinstance(names, list) or len(names) != 2 or not all(isinstance(n, str) for n in names):
+            raise SceneError(f"{where}.materials: expected two material names, got {_shown(names)}")
+        for n in names:
+            if n not in materials:
+                raise SceneError(f"{where}.materials: unknown material {_shown(n)}")
+
+        def nonneg(v: Any, k: str) -> float:
+            return _number(v, k, nonneg=True)
+
+        out.append(PairLaw((names[0], names[1]), _optional(table, "mu", where, nonneg),
+                           _optional(table, "restitution", where, _restitution),
+                           _optional(table, "rolling_friction", where, nonneg)))
+    return tuple(out)
 
 
 def _check_start_overlap(scene: Scene) -> None:

@@ -9,7 +9,10 @@ fixed grid) is described in `collide/engine/kernels.py` and the README.
 from __future__ import annotations
 
 import math
+import threading
 import time
+from collections.abc import Callable
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -22,6 +25,35 @@ from collide.model import Model, State, max_frequency, reference_frequency, sele
 
 MAX_STEPS_DEFAULT = 20_000_000
 EDGE_TOL = float(kn.EDGE_TOL)
+
+
+# A progress display: called about 4 times a second while a run is going, with (member, members,
+# simulated time reached, simulated end (inf if open), steps so far, seconds since it started).
+Progress = Callable[[int, int, float, float, int, float], None]
+PROGRESS_PERIOD = 0.25
+
+
+@contextmanager
+def watch(progress: Progress | None, fp: np.ndarray, now: int, t_end: float, member: int, members: int):
+    """Report a kernel's progress from a thread while it runs: the compiled kernels release the
+    GIL and write the time reached and their step count into fp[now], fp[now + 1]."""
+    if progress is None:
+        yield
+        return
+    done = threading.Event()
+    started = time.perf_counter()
+
+    def poll() -> None:
+        while not done.wait(PROGRESS_PERIOD):
+            progress(member, members, float(fp[now]), t_end, int(fp[now + 1]), time.perf_counter() - started)
+
+    thread = threading.Thread(target=poll, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join()
 
 
 class RunError(RuntimeError):
@@ -47,6 +79,9 @@ class Trajectory:
     records: np.ndarray
     intervals: np.ndarray
     model: Model = field(repr=False)
+    # DEM runs: (F, 5) per recorded frame: t, work of damping, friction, rolling resistance (J,
+    # cumulative), energy held by tangential springs (J).
+    energy_parts: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def knot_times(self) -> np.ndarray:
@@ -124,6 +159,7 @@ class ContactLog:
     duration: np.ndarray
     max_overlap: np.ndarray
     count: np.ndarray
+    max_normal_force: np.ndarray | None = None  # N; NaN where not known (the seed's grid with walls)
 
 
 @dataclass
@@ -143,6 +179,7 @@ class RunResult:
     warnings: list[str] = field(default_factory=list)
     dt_min: np.ndarray | None = None  # (B,) the smallest step any island took
     windows: np.ndarray | None = None  # (B,) windows of islands the run took
+    dissipation: np.ndarray | None = None  # (B, 3) DEM: J taken out by damping, friction, rolling
 
     @property
     def batch_size(self) -> int:
@@ -159,15 +196,16 @@ class RunResult:
             return None if x is None else x[index:index + 1]
 
         log = ContactLog(*(pick(getattr(self.contacts, f)) for f in
-                           ("first_start", "last_end", "duration", "max_overlap", "count")))
+                           ("first_start", "last_end", "duration", "max_overlap", "count", "max_normal_force")))
         trajectories = None
         if self.trajectories is not None:
             traj = self.trajectories[index]
-            trajectories = [Trajectory(traj.knots, traj.records, traj.intervals, select_model(self.model, index))]
+            trajectories = [Trajectory(traj.knots, traj.records, traj.intervals, select_model(self.model, index),
+                                       traj.energy_parts)]
         return RunResult(select_model(self.model, index), select_state(self.initial, index),
                          select_state(self.final, index), self.integrator, pick(self.dt), pick(self.steps),
                          pick(self.jumps), self.wall_time_s, log, trajectories, list(self.warnings),
-                         pick(self.dt_min), pick(self.windows))
+                         pick(self.dt_min), pick(self.windows), pick(self.dissipation))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -300,13 +338,23 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
              duration: np.ndarray | None = None, tail: np.ndarray | None = None,
              record: bool = True, max_steps: int = MAX_STEPS_DEFAULT,
              event_tol: np.ndarray | float = EDGE_TOL, auto: np.ndarray | None = None,
-             omega_h: np.ndarray | None = None) -> RunResult:
+             omega_h: np.ndarray | None = None, rest: np.ndarray | None = None,
+             progress: Progress | None = None) -> RunResult:
     """Run B scenes to their end. `duration` and `tail` are (B,) with NaN meaning 'not set'.
     `dt` (B,) is the step; where `auto` is set each island steps by omega_h over its own stiffest
     frequency instead (dt is then the step of the stiffest single contact). `event_tol`
     (relative to the fastest initial speed): how close a friction mode change must land."""
-    integ = INTEGRATORS[integrator]
     b_count = model.batch
+    if integrator == "dem":
+        from collide.dem import simulate_dem
+
+        nan = np.full(b_count, np.nan)
+        return simulate_dem(model, initial, dt=np.broadcast_to(np.asarray(dt, dtype=float), (b_count,)).copy(),
+                            duration=nan if duration is None else np.asarray(duration, dtype=float),
+                            tail=nan if tail is None else np.asarray(tail, dtype=float),
+                            rest=nan if rest is None else np.asarray(rest, dtype=float), record=record,
+                            max_steps=max_steps, progress=progress)
+    integ = INTEGRATORS[integrator]
     dt = np.broadcast_to(np.asarray(dt, dtype=float), (b_count,)).copy()
     auto = np.zeros(b_count, bool) if auto is None else np.broadcast_to(np.asarray(auto, bool), (b_count,))
     if omega_h is None:
@@ -332,14 +380,15 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
         speed = max(float(np.sqrt((initial.v[b] ** 2).sum(-1)).max()), 10 * float(model.eps[b]) + 1e-300)
         t_end = duration[b] if np.isfinite(duration[b]) else np.inf
         # Closing speeds under 1e-9 of the fastest are round-off, not an approach.
-        fp = np.array([dt[b], omega_h[b], t_end, tail[b], speed * event_tol[b] / EDGE_TOL, 1e-9 * speed])
+        fp = np.array([dt[b], omega_h[b], t_end, tail[b], speed * event_tol[b] / EDGE_TOL, 1e-9 * speed, 0.0, 0.0])
         _load_compiled(integ.events, G, tables, WP, grav, weights, fl, fp)
         if b == 0:
             started = time.perf_counter()  # loading the compiled code is not simulating
-        if integ.events:
-            t, knots, recs, ivals, st, fg = kn.simulate(G, tables, WP, grav, weights, fl, fp)
-        else:
-            t, knots, recs, ivals, st, fg = kn.seed_run(G, tables, WP, grav, fl, fp)
+        with watch(progress, fp, int(kn.FP_NOW), t_end, b, b_count):
+            if integ.events:
+                t, knots, recs, ivals, st, fg = kn.simulate(G, tables, WP, grav, weights, fl, fp)
+            else:
+                t, knots, recs, ivals, st, fg = kn.seed_run(G, tables, WP, grav, fl, fp)
         _check_status(model, b, st, fg, dt, integ)
         finals.append((t, G, float(G[:, kn.G_WK].sum())))
         stats[b], figures[b] = st, fg
@@ -351,8 +400,14 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     final = State(np.array([t for t, _, _ in finals]), np.stack([p[0] for p in parts]),
                   np.stack([p[1] for p in parts]), np.stack([p[2] for p in parts]),
                   np.stack([p[3] for p in parts]), initial.work + np.array([w for _, _, w in finals]))
+    if integ.events:
+        max_force = figures[:, kn.F_MAX_FORCE].copy()
+    elif not model.n_walls:  # the seed's grid: pairs only, each a spring k_pair delta
+        max_force = model.pair_table[:, 0, 0, 0] * figures[:, kn.F_MAX_OVERLAP]
+    else:
+        max_force = np.full(b_count, np.nan)
     log = ContactLog(logs[:, 0], logs[:, 1], logs[:, 2], logs[:, 3] * 0 + figures[:, kn.F_MAX_OVERLAP],
-                     stats[:, kn.S_CONTACTS].copy())
+                     stats[:, kn.S_CONTACTS].copy(), max_force)
     dt_min = np.where(np.isfinite(figures[:, kn.F_DT_MIN]), figures[:, kn.F_DT_MIN], dt)
     return RunResult(model=model, initial=initial, final=final, integrator=integrator, dt=dt,
                      steps=stats[:, kn.S_STEPS].copy(), jumps=stats[:, kn.S_WINDOWS].copy(),

@@ -3,7 +3,10 @@ reference, or must be refused with a message that names the cause.
 
 Cases (issue 4): spring constants 1e-1 to 1e12 N/m, mass ratios up to 1e6 both ways, approach
 speeds 1e-6 to 1e3 m/s, grazing impacts up to b = 0.9999 (r1 + r2), spins up to 1e4 rad/s,
-mu up to 10, spheres touching at the start with zero and with a small speed. Head-on 1D cases
+mu up to 10, spheres touching at the start with zero and with a small speed; and for the DEM
+contact laws (issue 11) Hertz from E = 1e5 to 2e11 Pa and 1e-4 to 1e2 m/s, and restitution from
+0.01 to 0.99 against a 1000 times heavier ball, each against its closed form within the DEM
+run's own error estimate. Head-on 1D cases
 have an exact answer for any k (a linear spring is elastic); oblique 2D cases are compared with
 the rigid limit, allowing the soft model's own distance from it (`rigid.softness_estimate`).
 """
@@ -23,6 +26,7 @@ from collide.scene import Scene, SceneError, parse_scene
 from collide.stepper import RunError
 
 M, R = 0.0254, 0.03021  # the report's stress balls
+DEM_TOL = 1e-3  # the DEM cases' tolerance: 2 000 steps per contact time
 
 
 @dataclass
@@ -88,7 +92,35 @@ def cases() -> list[Case]:
     out.append(Case("touching", "at rest", touching, "still"))
     slow = head_on(M, M, 1e-6, 0.0, 1e4, gap=0.0)
     out.append(Case("touching", "v = 1e-6 m/s", slow, "exact", elastic_1d(M, M, 1e-6, 0.0)))
+    # Contact laws beyond the report's (DEM kernel): Hertz from soft to stiff, and damping.
+    for young in (1e5, 1e8, 2e11):
+        raw = hertz_head_on(M, M, 1.0, -2.0, young)
+        out.append(Case("hertz", f"E = {young:g} Pa", raw, "dem", inelastic_1d(M, M, 1.0, -2.0, 1.0)))
+    for speed in (1e-4, 1e2):
+        raw = hertz_head_on(M, M, speed, 0.0, 7e10)
+        out.append(Case("hertz", f"v = {speed:g} m/s, E = 7e10 Pa", raw, "dem", inelastic_1d(M, M, speed, 0.0, 1.0)))
+    out.append(Case("hertz", "v = 1e4 m/s, E = 1e5 Pa", hertz_head_on(M, M, 1e4, 0.0, 1e5), "refuse"))
+    for model in ("linear", "hertz"):
+        for e in (0.01, 0.5, 0.99):
+            raw = hertz_head_on(M, 1e3 * M, 1.0, 0.0, 7e10, model=model, restitution=e)
+            out.append(Case("restitution", f"{model}, e = {e:g}, m2/m1 = 1e3", raw, "dem",
+                            inelastic_1d(M, 1e3 * M, 1.0, 0.0, e)))
     return out
+
+
+def hertz_head_on(m1: float, m2: float, v1: float, v2: float, young: float, model: str = "hertz",
+                  restitution: float = 1.0) -> dict:
+    """A head-on impact of the report's balls under a DEM contact law."""
+    raw = head_on(m1, m2, v1, v2, 1e9)
+    raw["contact"] = {"model": model, "k": 1e9, "youngs_modulus": young, "poisson_ratio": 0.3,
+                      "restitution": restitution}
+    return raw
+
+
+def inelastic_1d(m1: float, m2: float, v1: float, v2: float, e: float) -> np.ndarray:
+    """Final speeds of a head-on impact with restitution e (momentum kept, approach speed times e)."""
+    p, approach = m1 * v1 + m2 * v2, v1 - v2
+    return np.array([(p - m2 * e * approach) / (m1 + m2), (p + m1 * e * approach) / (m1 + m2)])
 
 
 def _speed(scene: Scene) -> float:
@@ -98,9 +130,12 @@ def _speed(scene: Scene) -> float:
 def run_case(case: Case, tol: float = 1e-7) -> CaseResult:
     """Run one case with dt = auto and judge it."""
     start = time.perf_counter()
+    dem = case.kind == "dem" or case.group in ("hertz", "restitution")
     try:
-        scene = parse_scene({**case.raw, "dt": "auto", "integrator": "kahan6", "tol": tol}, case.group)
-        result = run_scene(scene, record=False).result
+        integrator, case_tol = ("dem", DEM_TOL) if dem else ("kahan6", tol)
+        scene = parse_scene({**case.raw, "dt": "auto", "integrator": integrator, "tol": case_tol}, case.group)
+        run = run_scene(scene, record=False)
+        result = run.result
     except (RunError, SceneError) as exc:
         wall = time.perf_counter() - start
         verdict = "PASS" if case.kind == "refuse" else "FAIL"
@@ -118,6 +153,11 @@ def run_case(case: Case, tol: float = 1e-7) -> CaseResult:
         error = float(np.abs(final).max())
         tolerance = 0.0
         label = "stays at rest"
+    elif case.kind == "dem":
+        error = float(np.abs(result.final.v[0, :, 0] - case.expect).max() / scale)
+        # The DEM step's own promise: its error estimate (contacts switch at steps).
+        tolerance = float(run.error_estimate[0])
+        label = "1D closed form (restitution e), DEM"
     elif case.kind == "exact":
         error = float(np.abs(result.final.v[0, :, 0] - case.expect).max() / scale)
         # The step meets tol; round-off in the overlap (positions ~ 1 m, overlaps down to

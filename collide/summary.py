@@ -63,12 +63,22 @@ def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
             # a wall takes all of it.
             "max_compression": max_overlap / 2 if r.model.n_walls == 0 else max_overlap,
             "max_overlap": max_overlap,
+            "max_normal_force": None if log.max_normal_force is None else
+            _finite_or_none(log.max_normal_force[member]),
             "duration": float(log.duration[member]),
             "first_start": _finite_or_none(log.first_start[member]),
             "last_end": _finite_or_none(log.last_end[member]),
         },
         "warnings": list(r.warnings),
     }
+    if r.dissipation is not None:
+        damping, friction, rolling = (float(x) for x in r.dissipation[member])
+        stored = 0.0 if r.final.stored is None else float(r.final.stored[member])
+        # The kernel's friction account includes what the tangential springs still hold.
+        summary["dissipated"] = {"damping": damping, "friction": friction - stored, "rolling": rolling,
+                                 "tangential_spring_energy": stored}
+    if scene.rest is not None:
+        summary["packing_fraction"] = _finite_or_none(dg.packing_fraction(r.model, r.final.s[member], member))
     _refuse_non_finite(summary, scene.name)
     return summary
 

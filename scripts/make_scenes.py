@@ -5,8 +5,10 @@ this script does): `python scripts/make_scenes.py` writes them into collide/scen
   friction between the balls (mu = 0.1).
 - newtons-cradle: five steel balls in a row, 1 mm apart; the first swings in at 1 m/s.
 - gas-box: 1 000 spheres in a closed box (3D), random speeds, elastic.
-- break-3d: a cue ball rolling into three balls on a table (3D, gravity, friction with the
-  cloth and between the balls).
+- break-3d: a cue ball rolling into three balls on a cloth-covered table (3D, gravity, DEM with
+  materials: Hertz contacts, restitution, friction and rolling resistance on the cloth).
+- bounce: a rubber ball dropped on a floor with restitution 0.8 (heights fall by e^2 a bounce).
+- pile: 1 000 spheres poured into a box settle to rest (Hertz, damping, tangential springs).
 """
 
 from __future__ import annotations
@@ -97,21 +99,92 @@ def gas_box(n: int = 1000, seed: int = 1) -> str:
 def break_3d() -> str:
     r, m = R_POOL, M_POOL
     lines = ['name = "break-3d"',
-             'description = "A cue ball rolling at 2 m/s into three balls on a table (3D, gravity, friction '
-             'mu = 0.2 with the cloth and between the balls)."',
-             "dim = 3", 'dt = "auto"', 'integrator = "kahan6"', "tol = 1e-4", "duration = 0.6",
-             "gravity = [0.0, 0.0, -9.81]", "", "[contact]", "k = 1e6", "mu = 0.2", ""]
-    lines += _body("cue", m, r, [0.0, 0.0, r], [2.0, 0.0, 0.0], [0.0, 2.0 / r, 0.0])
+             'description = "A cue ball rolling at 2 m/s into three balls on a cloth-covered table (3D, gravity, '
+             'DEM with Hertz contacts: balls e = 0.95, mu = 0.05 between them; on the cloth e = 0.5, mu = 0.2, '
+             'rolling resistance 0.01)."',
+             "dim = 3", 'dt = "auto"', 'integrator = "dem"', "tol = 4e-2", "duration = 1.2",
+             "gravity = [0.0, 0.0, -9.81]", "", "[contact]", 'model = "hertz"', "youngs_modulus = 5e9",
+             "poisson_ratio = 0.35", "",
+             "[[material]]", 'name = "phenolic"', "density = 1740.0", "youngs_modulus = 5e9", "poisson_ratio = 0.35",
+             "mu = 0.2", "restitution = 0.5", "rolling_friction = 0.01", "",
+             "[[pair]]", 'materials = ["phenolic", "phenolic"]', "mu = 0.05", "restitution = 0.95",
+             "rolling_friction = 0.0", ""]
+    bodies = _body("cue", m, r, [0.0, 0.0, r], [2.0, 0.0, 0.0], [0.0, 2.0 / r, 0.0])
     apex = 0.4
     for n, (x, y) in enumerate([(apex, 0.0), (apex + math.sqrt(3) * r, -r), (apex + math.sqrt(3) * r, r)]):
-        lines += _body(f"b{n + 1}", m, r, [x, y, r], [0.0, 0.0, 0.0])
+        bodies += _body(f"b{n + 1}", m, r, [x, y, r], [0.0, 0.0, 0.0])
+    lines += [line for line in bodies if not line.startswith("mass")] + [""]
+    lines = _with_material(lines, "phenolic")
     lines += ["[[wall]]", "point = [0.0, 0.0, 0.0]", "normal = [0.0, 0.0, 1.0]", ""]
+    return "\n".join(lines)
+
+
+def _with_material(lines: list[str], material: str) -> list[str]:
+    """Every [[body]] names `material` (its density gives the mass)."""
+    out = []
+    for line in lines:
+        out.append(line)
+        if line == "[[body]]":
+            out.append(f'material = "{material}"')
+    return out
+
+
+def bounce() -> str:
+    r, height, e = 0.03, 1.0, 0.8
+    lines = ['name = "bounce"',
+             'description = "A rubber ball dropped from 1 m onto a rigid floor, restitution 0.8 (Hertz, DEM): each '
+             'bounce peaks at e^2 = 0.64 of the last."',
+             "dim = 2", 'dt = "auto"', 'integrator = "dem"', "tol = 1e-2", "duration = 3.5",
+             "gravity = [0.0, -9.81]", "", "[contact]", 'model = "hertz"', f"restitution = {e!r}", "",
+             "[[material]]", 'name = "rubber"', "density = 1100.0", "youngs_modulus = 5e6", "poisson_ratio = 0.45", "",
+             "[[body]]", 'name = "ball"', 'material = "rubber"', f"radius = {r!r}", f"position = [0.0, {height + r!r}]",
+             "velocity = [0.3, 0.0]", "",
+             "[[wall]]", "point = [0.0, 0.0]", "normal = [0.0, 1.0]", ""]
+    return "\n".join(lines)
+
+
+def pile(n: int = 1000, seed: int = 2) -> str:
+    rng = random.Random(seed)
+    r, side = 0.005, 0.1
+    per = int(side / (2.2 * r))
+    spacing = side / per
+    layers = math.ceil(n / per**2)
+    lines = ['name = "pile"',
+             f'description = "{n} glass-like spheres (r = 5 mm, softened E = 5 MPa) poured from a loose lattice into a '
+             f'{side * 100:.0f} cm box settle under gravity (Hertz, e = 0.3, tangential springs, mu = 0.5, rolling '
+             'resistance 0.05). The run ends at rest: kinetic energy below 1e-6 of its peak."',
+             "dim = 3", 'dt = "auto"', 'integrator = "dem"', "tol = 4e-2", "duration = 5.0", "rest = 1e-6",
+             "gravity = [0.0, 0.0, -9.81]", "", "[contact]", 'model = "hertz"', "restitution = 0.3",
+             'tangential = "spring"', "mu = 0.5", "rolling_friction = 0.05", "",
+             "[[material]]", 'name = "glass"', "density = 2500.0", "youngs_modulus = 5e6", "poisson_ratio = 0.25", ""]
+    count = 0
+    for k in range(layers):
+        for i in range(per):
+            for j in range(per):
+                if count == n:
+                    break
+                jitter = 0.1 * (spacing - 2 * r)
+                pos = [(i + 0.5) * spacing + rng.uniform(-jitter, jitter),
+                       (j + 0.5) * spacing + rng.uniform(-jitter, jitter), r + 0.002 + k * spacing]
+                vel = [rng.gauss(0.0, 0.05), rng.gauss(0.0, 0.05), 0.0]
+                count += 1
+                lines += ["[[body]]", f'name = "g{count}"', 'material = "glass"', f"radius = {r!r}",
+                          f"position = {_vec(pos)}", f"velocity = {_vec(vel)}", ""]
+    for axis in range(3):
+        for side_value, sign in ((0.0, 1.0), (side, -1.0)):
+            if axis == 2 and sign < 0:
+                continue  # open at the top
+            point = [0.0, 0.0, 0.0]
+            normal = [0.0, 0.0, 0.0]
+            point[axis] = side_value
+            normal[axis] = sign
+            lines += ["[[wall]]", f"point = {_vec(point)}", f"normal = {_vec(normal)}", ""]
     return "\n".join(lines)
 
 
 def main() -> None:
     for name, text in (("billiards-break", billiards_break()), ("newtons-cradle", newtons_cradle()),
-                       ("gas-box", gas_box()), ("break-3d", break_3d())):
+                       ("gas-box", gas_box()), ("break-3d", break_3d()), ("bounce", bounce()), ("pile", pile())):
         (OUT / f"{name}.toml").write_text(text)
         print(f"wrote {OUT / f'{name}.toml'}")
 

@@ -68,7 +68,8 @@ FPS = 30.0
 CURSOR_PERIOD = 0.25  # s between plot-cursor and values-table updates while playing
 PREVIEW_BUDGET = 0.08  # s: when a full run takes longer, a coarse preview is drawn first
 PREVIEW_TOL = 1e-3  # the preview's accuracy (auto dt)
-STAGES = {"seed": 1, "verlet": 1, "yoshida4": 3, "kahan6": 9}  # force evaluations per step
+STAGES = {"seed": 1, "verlet": 1, "yoshida4": 3, "kahan6": 9, "dem": 1}  # force evaluations per step
+DEM_PREVIEW_TOL = 4e-2  # a DEM preview: 50 steps per contact time, the DEM codes' usual step
 SLOW_MOTION = 0.1  # playback rate inside contacts, relative to the chosen speed
 PLAYBACK_SECONDS = 5.0  # 'auto' speed plays a run in about this long
 SPEEDS = ["auto", "0.001x", "0.003x", "0.01x", "0.03x", "0.1x", "0.3x", "1x"]
@@ -97,6 +98,10 @@ def preview_settings(scene: Scene) -> tuple[str, float] | None:
     """A cheaper integrator and tolerance for a first, coarse run while the user drags, or None
     when no candidate costs less than half the scene's own run (force evaluations per contact:
     stages / dt). A preview that costs more than the real run (issue 12, item 3) is never used."""
+    if scene.integrator == "dem":
+        # The DEM step's error is first order in dt: a preview at the DEM codes' usual step.
+        return ("dem", DEM_PREVIEW_TOL) if scene.dt == AUTO and scene.tol < 0.5 * DEM_PREVIEW_TOL else None
+
     def cost(integrator: str, tol: float) -> float:
         if scene.dt != AUTO and integrator == scene.integrator and tol == scene.tol:
             return STAGES[integrator] / float(scene.dt)

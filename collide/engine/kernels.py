@@ -80,8 +80,8 @@ E_V0, E_R0, E_V1, E_R1 = 0, 1, 2, 3
 # Settings: flags (int) and figures (float).
 FL_SPIN, FL_FRICTION, FL_SEED, FL_PLANAR, FL_RECORD, FL_AUTO, FL_MAXSTEPS, FL_DIM = range(8)
 NFL = 8
-FP_DT, FP_OMEGA_H, FP_TEND, FP_TAIL, FP_SCALE, FP_SLOW = range(6)
-NFP = 6
+FP_DT, FP_OMEGA_H, FP_TEND, FP_TAIL, FP_SCALE, FP_SLOW, FP_NOW, FP_NOW_STEPS = range(8)
+NFP = 8  # the last two are written by the run: time reached and steps, read by a progress display
 # Contact parameter tables: pairs (M, M, NP), walls (M, NP).
 TP_K, TP_MU, TP_EPS = range(3)
 # Records.
@@ -95,8 +95,8 @@ V_I, V_J, V_START, V_END = range(4)
 CN_KNOTS, CN_RECS, CN_IVALS, CN_OPEN = range(4)
 S_STEPS, S_WINDOWS, S_STATUS, S_CONTACTS, S_RETRIES = range(5)
 NS = 5
-F_MAX_OVERLAP, F_DT_MIN, F_STATUS_T, F_STATUS_A, F_STATUS_B = range(5)
-NF = 5
+F_MAX_OVERLAP, F_DT_MIN, F_STATUS_T, F_STATUS_A, F_STATUS_B, F_MAX_FORCE = range(6)
+NF = 6
 OK, NONFINITE, ENERGY, STALL, MAXSTEPS, SINGULAR = range(6)
 YES, NO = 1, 0
 # Numba compiles one specialisation per literal int an argument is called with: as numpy ints
@@ -1562,6 +1562,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 break
             for c in range(nc):
                 FG[F_MAX_OVERLAP] = max(FG[F_MAX_OVERLAP], C[c, C_DELTA])
+                FG[F_MAX_FORCE] = max(FG[F_MAX_FORCE], C[c, C_FN])
             if record:
                 KN, RC = record_step(KN, RC, CNT, G, GI, X, XI, C, CI, na, nc, t, fl)
             for k in range(nq):
@@ -1809,6 +1810,8 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     search = math.inf
     safety = 1.5
     while ST[S_STATUS] == OK and t < t_end:
+        fp[FP_NOW] = t
+        fp[FP_NOW_STEPS] = ST[S_STEPS]
         positions_at(G, n, t, grav, P, V)
         eng = engaged_now(G, P, V, n, WP, grav, dim)
         if eng.shape[0] == 0:
@@ -2110,6 +2113,8 @@ def seed_run(G, tables, WP, grav, fl, fp):
     in_contact = False
 
     while t < t_end * (1 - 1e-15) and ST[S_STATUS] == OK:
+        fp[FP_NOW] = t
+        fp[FP_NOW_STEPS] = ST[S_STEPS]
         positions_at(G, n, t, grav, P, V)
         margin = np.zeros(n)
         for i in range(n):

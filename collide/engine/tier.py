@@ -30,8 +30,8 @@ def _stamp() -> dict:
         numba_version = version("numba")
     except Exception:
         numba_version = "unknown"
-    st = _KERNELS.stat()
-    return {"size": st.st_size, "mtime": st.st_mtime, "numba": numba_version,
+    sources = [_KERNELS, _KERNELS.with_name("dem.py")]
+    return {"sources": [[s.name, s.stat().st_size, s.stat().st_mtime] for s in sources], "numba": numba_version,
             "python": sys.version.split()[0]}
 
 

@@ -31,6 +31,13 @@ def warm() -> float:
     scene = parse_scene({"dim": 2, "contact": {"k": 1e4, "mu": 0.3}, "body": bodies})
     run_scene(scene, record=True)
     run_scene(scene, integrator="seed", dt=1e-4, record=True)
+    dem = parse_scene({"dim": 3, "dt": 1e-6, "duration": 2e-3,
+                       "contact": {"model": "hertz", "youngs_modulus": 1e8, "restitution": 0.5, "mu": 0.3,
+                                   "tangential": "spring", "rolling_friction": 0.01},
+                       "body": [{"name": "a", "mass": 1.0, "radius": 0.1, "position": [0.0, 0.0, 0.1],
+                                 "velocity": [1.0, 0.0, -1.0]}],
+                       "wall": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]})
+    run_scene(dem, record=True)
     tier.mark_compiled()
     return time.perf_counter() - started
 

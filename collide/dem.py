@@ -1,0 +1,250 @@
+"""Running scenes through the fixed-step DEM kernel (`collide.engine.dem`): the contact laws of
+DESIGN section 9 (Hertz, restitution, tangential springs, rolling resistance, materials).
+
+The event engine (`collide.engine.kernels`) locates every contact start and end and every
+friction mode change, which makes the report's law exact to the tolerance; a DEM step does not
+(contacts switch at steps, as in LIGGGHTS or YADE), so its error is set by the steps per contact
+time: `contact_time` estimates the shortest one from the fastest approach the scene allows, and
+`auto_dt` divides it by what the tolerance needs (`STEPS_PER_CONTACT`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from collide.engine import dem as dk
+from collide.engine import kernels as kn
+from collide.engine import tier
+from collide.model import KISSING, TABLE_ESTAR, TABLE_K, TABLE_REST, Model, State, select_model
+from collide.stepper import ContactLog, Progress, RunError, RunResult, Trajectory, approach_bound, unpack_state, watch
+
+HERTZ_TIME = 2.868  # t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5): Johnson, Contact Mechanics, 11.4
+# The outcome's relative error against steps per contact time n: ERROR_CONSTANT / n^ERROR_ORDER.
+# Measured on a damped Hertz impact on a wall and a frictional oblique impact (benchmarks/
+# bench_dem.py prints it); padded by about 2x. Contacts switch at steps, so the error is first
+# order in dt whatever the integrator's own order.
+ERROR_CONSTANT, ERROR_ORDER = 2.0, 1
+MIN_STEPS_PER_CONTACT, MAX_STEPS_PER_CONTACT = 50, 20_000
+FRAME_BUDGET = 2_000_000  # body-frames a recording keeps at most
+SKIN = 0.25  # neighbour-list skin, in smallest radii
+
+
+def _extremes(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per member (B,): lightest mass, smallest radius, largest E* and largest linear k_eff
+    over the pairs and walls the scene can have."""
+    light = model.mass.min(axis=1)
+    small = model.radius.min(axis=1)
+    e_star = model.pair_table[..., TABLE_ESTAR].reshape(model.batch, -1).max(axis=1)
+    k_lin = model.pair_table[..., TABLE_K].reshape(model.batch, -1).max(axis=1)
+    if model.n_walls:
+        e_star = np.maximum(e_star, model.wall_table[..., TABLE_ESTAR].reshape(model.batch, -1).max(axis=1))
+        k_lin = np.maximum(k_lin, model.wall_table[..., TABLE_K].reshape(model.batch, -1).max(axis=1))
+    return light, small, e_star, k_lin
+
+
+def contact_time(model: Model, state: State) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The shortest contact time (B,) s the scene can produce, the stiffest contact frequency
+    (B,) rad/s and the deepest overlap (B,) m, from the fastest approach `approach_bound`
+    allows. A wall counts as a pair of the lightest and smallest sphere with itself (m* = m,
+    R* = r): the stiffest case of either kind."""
+    light, small, e_star, k_lin = _extremes(model)
+    m_star, r_star = light, small
+    if model.n_bodies > 1 and not model.n_walls:
+        m_star, r_star = 0.5 * light, 0.5 * small
+    speed = approach_bound(model, state)
+    if model.n_walls:  # a wall stays put: a sphere's own speed is its approach
+        speed = np.maximum(speed, np.sqrt((state.v**2).sum(-1)).max(axis=1))
+    speed = np.maximum(speed, 1e-12)
+    if model.hertz:
+        overlap = (15.0 * m_star * speed**2 / (16.0 * e_star * np.sqrt(r_star))) ** 0.4
+        omega = np.sqrt(2.0 * e_star * np.sqrt(r_star * overlap) / m_star)
+        duration = HERTZ_TIME * (m_star**2 / (r_star * e_star**2 * speed)) ** 0.2
+    else:
+        omega = np.sqrt(k_lin / m_star)
+        duration = math.pi / omega
+        overlap = speed / omega
+    return duration, omega, overlap
+
+
+def predicted_error(steps_per_contact: np.ndarray) -> np.ndarray:
+    return ERROR_CONSTANT / np.asarray(steps_per_contact, dtype=float) ** ERROR_ORDER
+
+
+def auto_dt(model: Model, state: State, tol: np.ndarray) -> np.ndarray:
+    """The step (B,) that meets tol by the error model, within MIN..MAX_STEPS_PER_CONTACT."""
+    duration, _, _ = contact_time(model, state)
+    needed = (ERROR_CONSTANT / np.asarray(tol, dtype=float)) ** (1.0 / ERROR_ORDER)
+    if (needed > MAX_STEPS_PER_CONTACT).any():
+        b = int(np.argmax(needed))
+        reach = float(predicted_error(np.array([MAX_STEPS_PER_CONTACT]))[0])
+        raise RunError(f"--tol {float(np.asarray(tol).reshape(-1)[b]):.3g} would need {needed[b]:.3g} DEM steps per "
+                       f"contact (contacts switch at steps: first order); the DEM kernel reaches about {reach:.0e} "
+                       f"at {MAX_STEPS_PER_CONTACT} steps per contact. Use a looser --tol or give a --dt")
+    return duration / np.clip(needed, MIN_STEPS_PER_CONTACT, MAX_STEPS_PER_CONTACT)
+
+
+def check_dem(model: Model, state: State, dt: np.ndarray, max_steps: int, duration: np.ndarray) -> np.ndarray:
+    """Refuse a step beyond Verlet's stability for the stiffest contacts together, a contact so
+    soft the spheres pass through, or a run longer than max_steps. Returns steps per contact."""
+    t_c, omega, overlap = contact_time(model, state)
+    # Several contacts on the lightest sphere at once stiffen it: Gershgorin over its neighbours.
+    together = omega * math.sqrt(1 + min(model.n_bodies - 1, KISSING[model.dim]) + model.n_walls)
+    damped = model.pair_table[..., TABLE_REST].min(axis=(1, 2))
+    if model.n_walls:
+        damped = np.minimum(damped, model.wall_table[..., TABLE_REST].min(axis=1))
+    zeta = damping_ratio(damped, model.hertz)
+    # Velocity Verlet with a dashpot: stable while omega dt < 2 (sqrt(1 + zeta^2) - zeta).
+    limit = 2.0 * (np.sqrt(1.0 + zeta**2) - zeta) / together
+    if (dt > limit).any():
+        b = int(np.argmax(dt / limit))
+        raise RunError(f"dt = {dt[b]:.3g} s is beyond the stability limit of the DEM step for these contacts "
+                       f"(several at once on the lightest sphere, {together[b]:.4g} rad/s); the largest safe step "
+                       f"is {limit[b]:.3g} s (use --dt auto to choose one)")
+    reach = model.radius.min(axis=1) * (2.0 if model.n_bodies > 1 and not model.n_walls else 1.0)
+    if not np.all(np.isfinite(overlap)):
+        raise RunError("the speeds are too large to judge whether the spheres would pass through each other "
+                       "(the bound overflows); use smaller velocities")
+    if (overlap >= reach).any():
+        b = int(np.argmax(overlap / reach))
+        what = "contact.youngs_modulus (or the materials')" if model.hertz else "contact.k"
+        raise RunError(f"{what} is too soft: the overlap could reach {overlap[b]:.3g} m, beyond "
+                       f"{reach[b]:.3g} m; the spheres would pass through. Use a stiffer contact")
+    per_contact = t_c / dt
+    if np.isfinite(duration).all():
+        steps = duration / dt
+        if (steps > max_steps).any():
+            b = int(np.argmax(steps))
+            raise RunError(f"dt = {dt[b]:.3g} s over {duration[b]:.3g} s is {steps[b]:.3g} steps (limit "
+                           f"{max_steps:.3g}); use a larger dt or a shorter duration")
+    return per_contact
+
+
+def damping_ratio(restitution: np.ndarray, hertz: bool) -> np.ndarray:
+    """The dashpot's zeta (gamma = 2 zeta sqrt(m* dF/d delta)) that gives this restitution:
+    -ln e / sqrt(ln^2 e + pi^2) for the linear spring; for Hertz LIGGGHTS' and LAMMPS'
+    coefficient 2 sqrt(5/6) beta sqrt(S_n m*), the same times sqrt(5/6), which gives e exactly
+    too when the force may pull at the end (tests/test_contact_laws.py)."""
+    e = np.asarray(restitution, dtype=float)
+    le = np.log(e)
+    return -le / np.sqrt(le**2 + math.pi**2) * (math.sqrt(5.0 / 6.0) if hertz else 1.0)
+
+
+def kernel_tables(model: Model, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """Member b's pair and wall tables with restitution turned into the damping ratio."""
+    pair, wall = model.pair_table[b].copy(), model.wall_table[b].copy()
+    pair[..., TABLE_REST] = damping_ratio(pair[..., TABLE_REST], model.hertz)
+    wall[..., TABLE_REST] = damping_ratio(wall[..., TABLE_REST], model.hertz)
+    return pair, wall
+
+
+def _bodies(model: Model, b: int) -> np.ndarray:
+    bd = np.zeros((model.n_bodies, int(dk.NB)))
+    bd[:, dk.B_IM] = model.inv_mass[b]
+    bd[:, dk.B_II] = model.inv_inertia[b] if model.spin_dim else 0.0
+    bd[:, dk.B_R] = model.radius[b]
+    bd[:, dk.B_M] = model.mass[b]
+    bd[:, dk.B_I] = model.inertia[b]
+    bd[:, dk.B_MAT] = model.material[b]
+    return bd
+
+
+def _pad3(x: np.ndarray) -> np.ndarray:
+    out = np.zeros(x.shape[:-1] + (3,))
+    out[..., :x.shape[-1]] = x
+    return out
+
+
+def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.ndarray, tail: np.ndarray,
+                 rest: np.ndarray, record: bool, max_steps: int, progress: Progress | None = None) -> RunResult:
+    """Run B scenes through the DEM kernel at their fixed steps dt (B,). `duration`, `tail` and
+    `rest` are (B,) with NaN meaning 'not set'."""
+    b_count = model.batch
+    if model.gravity is not None and (np.isnan(duration) & np.isnan(rest)).any():
+        raise RunError("duration: a DEM run under gravity needs a duration (or rest, to end when it settles)")
+    check_dem(model, initial, dt, max_steps, duration)
+    t_c, _, _ = contact_time(model, initial)
+    finals, trajectories, parts = [], [] if record else None, []
+    stats = np.zeros((b_count, int(dk.NSTAT)), np.int64)
+    figures = np.zeros((b_count, int(dk.NFIG)))
+    wall_time = 0.0
+    for b in range(b_count):
+        X, V = _pad3(initial.s[b]), _pad3(initial.v[b])
+        W = np.zeros((model.n_bodies, 3))
+        Q = np.zeros((model.n_bodies, 4))
+        if model.spin_dim == 1:
+            W[:, 2] = initial.w[b, :, 0]
+            Q[:, 0] = initial.q[b, :, 0]
+        elif model.spin_dim == 3:
+            W[:] = initial.w[b]
+            Q[:] = initial.q[b]
+        WP = np.zeros((model.n_walls, 6))
+        if model.n_walls:
+            WP[:, :3] = _pad3(model.wall_point)
+            WP[:, 3:] = _pad3(model.wall_normal)
+        grav = _pad3(model.gravity[b]) if model.gravity is not None else np.zeros(3)
+        t_end = duration[b] if np.isfinite(duration[b]) else np.inf
+        frames = int(np.clip(FRAME_BUDGET // max(model.n_bodies, 1), 100, 1500))
+        frame = t_end / frames if np.isfinite(t_end) else t_c[b] / 10.0
+        fl = np.array([model.dim, model.spin_dim > 0, model.hertz, model.tangential_spring, record, max_steps],
+                      dtype=np.int64)
+        fp = np.array([dt[b], t_end, rest[b] if np.isfinite(rest[b]) else 0.0, 0.0, frame,
+                       SKIN * float(model.radius[b].min()), 0.0, 0.0])
+        pair, wall = kernel_tables(model, b)
+        args = (X, V, W, Q, _bodies(model, b), pair, wall, WP, grav, fl, fp)
+        _load_compiled(*args)
+        started = time.perf_counter()
+        with watch(progress, fp, int(dk.P_NOW), t_end, b, b_count):
+            t, WK, KN, REC, IV, EP, st, fg = dk.dem_run(*args)
+        wall_time += time.perf_counter() - started
+        if st[dk.S_STATUS] == dk.NONFINITE:
+            raise RunError(f"non-finite numbers at t = {fg[dk.G_STATUS_T]:.6g} s: the DEM step is unstable; "
+                           "try a smaller dt")
+        if st[dk.S_STATUS] == dk.MAXSTEPS:
+            raise RunError(f"the run did not end within {int(st[dk.S_STEPS])} steps; set a duration or a larger dt")
+        if not np.isfinite(t_end) and np.isnan(rest[b]) and np.isfinite(tail[b]) and tail[b] > 0:
+            X += V * tail[b] + 0.5 * grav * tail[b] ** 2  # free flight after the last contact
+            V += grav * tail[b]
+            t += tail[b]
+        G = np.zeros((model.n_bodies, int(kn.NG)))
+        G[:, kn.G_S:kn.G_S + 3], G[:, kn.G_V:kn.G_V + 3] = X, V
+        G[:, kn.G_W:kn.G_W + 3], G[:, kn.G_Q:kn.G_Q + 4] = W, Q
+        if model.spin_dim == 1:
+            G[:, kn.G_Q] = Q[:, 0]
+        finals.append((t, G, float(WK.sum()), float(fg[dk.G_STORED])))
+        stats[b], figures[b] = st, fg
+        parts.append(EP)
+        if record:
+            traj = Trajectory(KN, REC, IV, select_model(model, b))
+            traj.energy_parts = EP
+            trajectories.append(traj)
+    unpacked = [unpack_state(model, G, t) for t, G, _, _ in finals]
+    final = State(np.array([f[0] for f in finals]), np.stack([p[0] for p in unpacked]),
+                  np.stack([p[1] for p in unpacked]), np.stack([p[2] for p in unpacked]),
+                  np.stack([p[3] for p in unpacked]),
+                  # The kernel's friction work includes what the tangential springs still hold:
+                  # that is elastic energy (State.stored), not dissipated.
+                  initial.work + np.array([f[2] - f[3] for f in finals]), np.array([f[3] for f in finals]))
+    log = ContactLog(figures[:, dk.G_FIRST].copy(), figures[:, dk.G_LAST].copy(), figures[:, dk.G_TOUCH].copy(),
+                     figures[:, dk.G_OVERLAP].copy(), stats[:, dk.S_CONTACTS].copy(), figures[:, dk.G_FORCE].copy())
+    result = RunResult(model=model, initial=initial, final=final, integrator="dem", dt=dt.copy(),
+                       steps=stats[:, dk.S_STEPS].copy(), jumps=stats[:, dk.S_JUMPS].copy(), wall_time_s=wall_time,
+                       contacts=log, trajectories=trajectories, warnings=[], dt_min=dt.copy(),
+                       windows=np.zeros(b_count, np.int64))
+    result.dissipation = figures[:, [dk.G_DAMP, dk.G_FRIC, dk.G_ROLL]].copy()
+    return result
+
+
+_LOADED: list[bool] = []
+
+
+def _load_compiled(*args) -> None:
+    """Load the compiled DEM kernel from numba's cache before the clock starts (once a process)."""
+    if _LOADED or not tier.COMPILED:
+        return
+    import numba
+
+    dk.dem_run.compile(tuple(numba.typeof(a) for a in args))
+    _LOADED.append(True)

@@ -1,0 +1,671 @@
+"""The fixed-step DEM kernel: the contact laws of DESIGN section 9, stepped as DEM codes step them.
+
+Velocity Verlet at a fixed dt (half kick, drift, forces, half kick: LIGGGHTS' `nve/sphere`),
+with forces from the positions after the drift and the half-step velocities; contacts switch on
+and off at steps; a Verlet neighbour list (a hashed cell grid, rebuilt when a body has moved
+half the skin) keeps the cost per step proportional to the bodies. Each contact composes:
+
+- normal: linear (k delta, springs in series) or Hertz (4/3 E* sqrt(R*) delta^1.5);
+- damping for a restitution e: gamma = 2 zeta sqrt(m* k_n), zeta = -ln e / sqrt(ln^2 e + pi^2),
+  with k_n = dF/d delta (linear: the spring-dashpot formula; Hertz: LIGGGHTS' and LAMMPS'
+  2 sqrt(5/6) beta sqrt(S_n m*), the same number). The force is not clipped at zero, so a
+  contact may pull as it ends; with that choice e_out = e exactly for both laws;
+- tangential: the report's Coulomb slip (mu F_n against any slip faster than eps) or a history
+  spring (Cundall-Strack; Mindlin's stiffness for Hertz) with LIGGGHTS' tangential damping,
+  capped at mu F_n;
+- rolling resistance: a torque mu_r R* F_n against the relative rotation (rolling and
+  twisting), capped by a viscous
+  torque that would stop it in ROLL_STEPS steps (so that a ball at rest does not chatter, and a
+  sphere with many contacts does not overshoot).
+
+Work taken out by each part (damping, friction, rolling) is summed per body, so the energy
+balance (kinetic + potential + elastic + dissipated) stays a check on the stepping.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from collide.engine.tier import jit
+
+# Bodies: B (N, NB).
+B_IM, B_II, B_R, B_M, B_I, B_MAT = range(6)
+NB = 6
+# Contact tables (as collide.model, with the restitution column turned into the damping ratio
+# zeta by `collide.dem.kernel_tables`): k, mu, eps, E*, zeta, rolling friction, k_t / k_n.
+T_K, T_MU, T_EPS, T_ESTAR, T_ZETA, T_ROLL, T_KTR = range(7)
+# History per contact: tangential spring (3), its stored energy, open interval row, engaged.
+H_XI, H_U, H_IV, H_ON = 0, 3, 4, 5
+NH = 6
+# Flags and figures.
+F_DIM, F_SPIN, F_HERTZ, F_TSPRING, F_RECORD, F_MAXSTEPS = range(6)
+NFLAG = 6
+P_DT, P_TEND, P_REST, P_TAIL, P_FRAME, P_SKIN, P_NOW, P_NOW_STEPS = range(8)
+NPAR = 8  # the last two are written by the run: time reached and steps, read by a progress display
+# Outputs: stats (int) and figures (float).
+S_STEPS, S_STATUS, S_CONTACTS, S_BUILDS, S_PAIRS, S_JUMPS = range(6)
+NSTAT = 6
+G_FIRST, G_LAST, G_TOUCH, G_OVERLAP, G_FORCE, G_DAMP, G_FRIC, G_ROLL, G_STORED, G_STATUS_T = range(10)
+NFIG = 10
+OK, NONFINITE, MAXSTEPS = 0, 1, 4
+# Record layouts shared with the event engine (collide.engine.kernels): knots, records, intervals.
+NK, NR = 23, 9
+EP_T, EP_DAMP, EP_FRIC, EP_ROLL, EP_STORED = range(5)
+NEP = 5
+HASH_PRIMES = (73856093, 19349663, 83492791)
+# Below mu_r R* F_n, rolling resistance is a viscous torque that would stop the relative rolling
+# in this many steps: more than the 12 contacts a sphere can have, so that together they never
+# overshoot (a cap of one step each made a sphere in a pile spin up, measured).
+ROLL_STEPS = 16
+for _name, _value in list(globals().items()):
+    if _name.isupper() and type(_value) is int:
+        globals()[_name] = np.int64(_value)
+
+
+@jit
+def _grow(buf, n):
+    if n < buf.shape[0]:
+        return buf
+    out = np.empty((max(2 * buf.shape[0] + 16, n + 1), buf.shape[1]))
+    out[:buf.shape[0]] = buf
+    return out
+
+
+@jit
+def _cell(x, size):
+    return np.int64(math.floor(x / size))
+
+
+@jit
+def build_pairs(P, Bd, n, dim, reach_pad):
+    """Pairs (i < j) whose gap is under reach_pad, sorted by i * n + j: a hashed cell grid."""
+    rmax = 0.0
+    for i in range(n):
+        rmax = max(rmax, Bd[i, B_R])
+    size = 2.0 * rmax + reach_pad
+    table = 1
+    while table < 2 * n:
+        table *= 2
+    head = np.full(table, -1, np.int64)
+    nxt = np.full(n, -1, np.int64)
+    cells = np.zeros((n, 3), np.int64)
+    for i in range(n):
+        h = 0
+        for d in range(3):
+            c = _cell(P[i, d], size) if d < dim else 0
+            cells[i, d] = c
+            h ^= c * HASH_PRIMES[d]
+        h = h & (table - 1)
+        nxt[i] = head[h]
+        head[h] = i
+    keys = np.empty(16 * n + 16, np.int64)
+    count = 0
+    reach = 1 if dim >= 1 else 0
+    ry = 1 if dim >= 2 else 0
+    rz = 1 if dim >= 3 else 0
+    for i in range(n):
+        for ox in range(-reach, reach + 1):
+            for oy in range(-ry, ry + 1):
+                for oz in range(-rz, rz + 1):
+                    cx, cy, cz = cells[i, 0] + ox, cells[i, 1] + oy, cells[i, 2] + oz
+                    h = (cx * HASH_PRIMES[0]) ^ (cy * HASH_PRIMES[1]) ^ (cz * HASH_PRIMES[2])
+                    j = head[h & (table - 1)]
+                    while j >= 0:
+                        # Hash collisions bring other cells' bodies: take j from its own cell only.
+                        if j > i and cells[j, 0] == cx and cells[j, 1] == cy and cells[j, 2] == cz:
+                            dx = P[j, 0] - P[i, 0]
+                            dy = P[j, 1] - P[i, 1]
+                            dz = P[j, 2] - P[i, 2]
+                            lim = Bd[i, B_R] + Bd[j, B_R] + reach_pad
+                            if dx * dx + dy * dy + dz * dz < lim * lim:
+                                if count >= keys.shape[0]:
+                                    more = np.empty(2 * keys.shape[0], np.int64)
+                                    more[:count] = keys[:count]
+                                    keys = more
+                                keys[count] = i * n + j
+                                count += 1
+                        j = nxt[j]
+    return np.sort(keys[:count])
+
+
+@jit
+def carry_history(old_keys, old_hist, new_keys):
+    """History rows of the new pair list: the old pair's where it was listed, else zero."""
+    hist = np.zeros((new_keys.shape[0], NH))
+    for k in range(new_keys.shape[0]):
+        hist[k, H_IV] = -1.0
+    a = 0
+    for k in range(new_keys.shape[0]):
+        while a < old_keys.shape[0] and old_keys[a] < new_keys[k]:
+            a += 1
+        if a < old_keys.shape[0] and old_keys[a] == new_keys[k]:
+            for c in range(NH):
+                hist[k, c] = old_hist[a, c]
+    return hist
+
+
+@jit
+def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tab, hist, k, fl, dt, out):
+    """Add contact (i, j)'s forces and torques (j < 0: a rigid wall along -n) to F, T, and by
+    part to PT (damping force, friction force, friction torque, rolling torque: columns 0, 3,
+    6, 9). n points from i into j. Returns the normal force; `out` gets the friction force on
+    i (3) and the mode."""
+    hertz, tspring, spin = fl[F_HERTZ], fl[F_TSPRING], fl[F_SPIN]
+    ri = Bd[i, B_R]
+    if j >= 0:
+        rj = Bd[j, B_R]
+        ai, aj = ri - 0.5 * delta, rj - 0.5 * delta
+        mstar = Bd[i, B_M] * Bd[j, B_M] / (Bd[i, B_M] + Bd[j, B_M])
+        rstar = ri * rj / (ri + rj)
+    else:
+        rj = 0.0
+        ai, aj = ri - delta, 0.0
+        mstar = Bd[i, B_M]
+        rstar = ri
+    # Surface velocities at the contact point: i's minus j's.
+    vx, vy, vz = V[i, 0], V[i, 1], V[i, 2]
+    if spin:
+        vx += W[i, 1] * nz * ai - W[i, 2] * ny * ai
+        vy += W[i, 2] * nx * ai - W[i, 0] * nz * ai
+        vz += W[i, 0] * ny * ai - W[i, 1] * nx * ai
+    if j >= 0:
+        vx -= V[j, 0]
+        vy -= V[j, 1]
+        vz -= V[j, 2]
+        if spin:
+            vx -= -(W[j, 1] * nz * aj - W[j, 2] * ny * aj)
+            vy -= -(W[j, 2] * nx * aj - W[j, 0] * nz * aj)
+            vz -= -(W[j, 0] * ny * aj - W[j, 1] * nx * aj)
+    vn = vx * nx + vy * ny + vz * nz  # the overlap's rate: > 0 while approaching
+    tx, ty, tz = vx - vn * nx, vy - vn * ny, vz - vn * nz
+    if hertz:
+        root = math.sqrt(rstar * delta)
+        elastic = 4.0 / 3.0 * tab[T_ESTAR] * root * delta
+        kn = 2.0 * tab[T_ESTAR] * root
+    else:
+        elastic = tab[T_K] * delta
+        kn = tab[T_K]
+    zeta = tab[T_ZETA]
+    damp = 2.0 * zeta * math.sqrt(mstar * kn) * vn
+    fn = elastic + damp
+    press = max(fn, 0.0)
+    fx, fy, fz = -fn * nx, -fn * ny, -fn * nz  # on i
+    mode = 0.0
+    sx, sy, sz = 0.0, 0.0, 0.0  # friction on i
+    mu = tab[T_MU]
+    if spin and (mu > 0.0 or tspring):
+        if tspring:
+            # The spring's stretch, turned into the current tangent plane at its length.
+            hx, hy, hz = hist[k, H_XI], hist[k, H_XI + 1], hist[k, H_XI + 2]
+            before = math.sqrt(hx * hx + hy * hy + hz * hz)
+            hn = hx * nx + hy * ny + hz * nz
+            hx, hy, hz = hx - hn * nx, hy - hn * ny, hz - hn * nz
+            after = math.sqrt(hx * hx + hy * hy + hz * hz)
+            if after > 0.0:
+                scale = before / after
+                hx, hy, hz = hx * scale, hy * scale, hz * scale
+            hx, hy, hz = hx + tx * dt, hy + ty * dt, hz + tz * dt
+            kt = tab[T_KTR] * kn
+            gt = 2.0 * zeta * math.sqrt(mstar * kt)
+            sx, sy, sz = -kt * hx - gt * tx, -kt * hy - gt * ty, -kt * hz - gt * tz
+            mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+            cap = mu * press
+            mode = 2.0
+            if mag > cap:
+                mode = 1.0
+                if mag > 0.0:
+                    ratio = cap / mag
+                    sx, sy, sz = sx * ratio, sy * ratio, sz * ratio
+                    # LIGGGHTS' rescaling: the stretch whose force (with damping) is the capped force.
+                    hx, hy, hz = -(sx + gt * tx) / kt, -(sy + gt * ty) / kt, -(sz + gt * tz) / kt
+            stored = 0.5 * kt * (hx * hx + hy * hy + hz * hz)
+            hist[k, H_XI], hist[k, H_XI + 1], hist[k, H_XI + 2], hist[k, H_U] = hx, hy, hz, stored
+        else:
+            slip = math.sqrt(tx * tx + ty * ty + tz * tz)
+            if slip > tab[T_EPS] and slip > 0.0:
+                f = mu * press / slip
+                sx, sy, sz = -f * tx, -f * ty, -f * tz
+                mode = 1.0
+        fx += sx
+        fy += sy
+        fz += sz
+        # Torque a x F with a = ai n on i, -aj n on j (which takes -F).
+        cx, cy, cz = ny * sz - nz * sy, nz * sx - nx * sz, nx * sy - ny * sx
+        T[i, 0] += ai * cx
+        T[i, 1] += ai * cy
+        T[i, 2] += ai * cz
+        PT[i, 3] += sx
+        PT[i, 4] += sy
+        PT[i, 5] += sz
+        PT[i, 6] += ai * cx
+        PT[i, 7] += ai * cy
+        PT[i, 8] += ai * cz
+        if j >= 0:
+            T[j, 0] += aj * cx
+            T[j, 1] += aj * cy
+            T[j, 2] += aj * cz
+            PT[j, 3] -= sx
+            PT[j, 4] -= sy
+            PT[j, 5] -= sz
+            PT[j, 6] += aj * cx
+            PT[j, 7] += aj * cy
+            PT[j, 8] += aj * cz
+    roll = tab[T_ROLL]
+    if spin and roll > 0.0 and press > 0.0:
+        wx, wy, wz = W[i, 0], W[i, 1], W[i, 2]
+        ieff = Bd[i, B_I]
+        if j >= 0:
+            wx, wy, wz = wx - W[j, 0], wy - W[j, 1], wz - W[j, 2]
+            ieff = Bd[i, B_I] * Bd[j, B_I] / (Bd[i, B_I] + Bd[j, B_I])
+        # Rolling and twisting alike (LAMMPS composes a twisting model; here it shares mu_r):
+        # a sphere left spinning about its contact normal would never stop.
+        rate = math.sqrt(wx * wx + wy * wy + wz * wz)
+        if rate > 0.0:
+            torque = min(roll * rstar * press, ieff * rate / (ROLL_STEPS * dt))
+            g = torque / rate
+            for d, wd in ((0, wx), (1, wy), (2, wz)):
+                T[i, d] -= g * wd
+                PT[i, 9 + d] -= g * wd
+                if j >= 0:
+                    T[j, d] += g * wd
+                    PT[j, 9 + d] += g * wd
+    F[i, 0] += fx
+    F[i, 1] += fy
+    F[i, 2] += fz
+    dx, dy, dz = -damp * nx, -damp * ny, -damp * nz
+    PT[i, 0] += dx
+    PT[i, 1] += dy
+    PT[i, 2] += dz
+    if j >= 0:
+        F[j, 0] -= fx
+        F[j, 1] -= fy
+        F[j, 2] -= fz
+        PT[j, 0] -= dx
+        PT[j, 1] -= dy
+        PT[j, 2] -= dz
+    out[0], out[1], out[2], out[3] = sx, sy, sz, mode
+    return fn
+
+
+@jit
+def forces(X, V, W, F, T, PT, Bd, keys, hist, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST, IV, niv, REC, nrec,
+           record_now):
+    """Forces and torques of every engaged contact (F, T, and by part PT) and the run's contact
+    figures. Returns (engaged, niv, nrec, IV, REC)."""
+    record = fl[F_RECORD]
+    for a in range(n):
+        for d in range(3):
+            F[a, d] = Bd[a, B_M] * grav[d]
+            T[a, d] = 0.0
+        for d in range(12):
+            PT[a, d] = 0.0
+    out = np.zeros(4)
+    engaged = 0
+    for k in range(keys.shape[0]):
+        i = keys[k] // n
+        j = keys[k] - i * n
+        dx = X[j, 0] - X[i, 0]
+        dy = X[j, 1] - X[i, 1]
+        dz = X[j, 2] - X[i, 2]
+        reach = Bd[i, B_R] + Bd[j, B_R]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 >= reach * reach:
+            if hist[k, H_ON] != 0.0:
+                _close(hist, k, IV, t, FG)
+            continue
+        dist = math.sqrt(d2)
+        delta = reach - dist
+        if hist[k, H_ON] == 0.0:
+            niv, IV = _open(hist, k, IV, niv, i, j, t, FG, ST, record)
+        engaged += 1
+        tab = tabs[np.int64(Bd[i, B_MAT]), np.int64(Bd[j, B_MAT])]
+        fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx / dist, dy / dist, dz / dist, delta, tab, hist, k, fl,
+                           dt, out)
+        FG[G_OVERLAP] = max(FG[G_OVERLAP], delta)
+        FG[G_FORCE] = max(FG[G_FORCE], fn)
+        if record_now:
+            REC = _grow(REC, nrec)
+            _record(REC, nrec, t, i, j, delta, fn, out)
+            nrec += 1
+    nw = WP.shape[0]
+    for i in range(n):
+        for w in range(nw):
+            k = i * nw + w
+            h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
+                 + (X[i, 2] - WP[w, 2]) * WP[w, 5])
+            delta = Bd[i, B_R] - h
+            if delta <= 0.0:
+                if WH[k, H_ON] != 0.0:
+                    _close(WH, k, IV, t, FG)
+                continue
+            if WH[k, H_ON] == 0.0:
+                niv, IV = _open(WH, k, IV, niv, i, -1 - w, t, FG, ST, record)
+            engaged += 1
+            fn = contact_force(X, V, W, F, T, PT, Bd, i, -1 - w, -WP[w, 3], -WP[w, 4], -WP[w, 5], delta,
+                               wtabs[np.int64(Bd[i, B_MAT])], WH, k, fl, dt, out)
+            FG[G_OVERLAP] = max(FG[G_OVERLAP], delta)
+            FG[G_FORCE] = max(FG[G_FORCE], fn)
+            if record_now:
+                REC = _grow(REC, nrec)
+                _record(REC, nrec, t, i, -1 - w, delta, fn, out)
+                nrec += 1
+    return engaged, niv, nrec, IV, REC
+
+
+@jit
+def _open(hist, k, IV, niv, i, j, t, FG, ST, record):
+    hist[k, H_ON] = 1.0
+    for c in range(3):
+        hist[k, H_XI + c] = 0.0
+    hist[k, H_U] = 0.0
+    ST[S_CONTACTS] += 1
+    if not FG[G_FIRST] <= t:
+        FG[G_FIRST] = t
+    hist[k, H_IV] = -1.0
+    if record:
+        IV = _grow(IV, niv)
+        IV[niv, 0], IV[niv, 1], IV[niv, 2], IV[niv, 3] = i, j, t, np.nan
+        hist[k, H_IV] = niv
+        niv += 1
+    return niv, IV
+
+
+@jit
+def _close(hist, k, IV, t, FG):
+    hist[k, H_ON] = 0.0
+    # A spring released stores nothing; what it held was given back as it unloaded.
+    for c in range(4):
+        hist[k, H_XI + c] = 0.0
+    FG[G_LAST] = t
+    row = np.int64(hist[k, H_IV])
+    if row >= 0:
+        IV[row, 3] = t
+    hist[k, H_IV] = -1.0
+
+
+@jit
+def _record(REC, row, t, i, j, delta, fn, out):
+    REC[row, 0], REC[row, 1], REC[row, 2], REC[row, 3], REC[row, 4] = t, i, j, delta, fn
+    REC[row, 5], REC[row, 6], REC[row, 7], REC[row, 8] = out[0], out[1], out[2], out[3]
+
+
+@jit
+def kick(V, W, F, T, PT, Bd, h2, n, WK):
+    """A half kick of h2, and the work each part of the contact forces did in it, from the
+    kinetic energy it changed: F . (v_before + v_after) / 2 h2 per body (exact for a kick, and
+    additive over the parts). WK (N, 3) gathers minus that: damping, friction (with what the
+    tangential springs hold), rolling resistance."""
+    for a in range(n):
+        vb0, vb1, vb2 = V[a, 0], V[a, 1], V[a, 2]
+        wb0, wb1, wb2 = W[a, 0], W[a, 1], W[a, 2]
+        for d in range(3):
+            V[a, d] += h2 * F[a, d] * Bd[a, B_IM]
+            W[a, d] += h2 * T[a, d] * Bd[a, B_II]
+        v0, v1, v2 = 0.5 * (vb0 + V[a, 0]), 0.5 * (vb1 + V[a, 1]), 0.5 * (vb2 + V[a, 2])
+        w0, w1, w2 = 0.5 * (wb0 + W[a, 0]), 0.5 * (wb1 + W[a, 1]), 0.5 * (wb2 + W[a, 2])
+        WK[a, 0] -= h2 * (PT[a, 0] * v0 + PT[a, 1] * v1 + PT[a, 2] * v2)
+        WK[a, 1] -= h2 * (PT[a, 3] * v0 + PT[a, 4] * v1 + PT[a, 5] * v2
+                          + (PT[a, 6] * w0 + PT[a, 7] * w1 + PT[a, 8] * w2) * (Bd[a, B_II] > 0.0))
+        WK[a, 2] -= h2 * (PT[a, 9] * w0 + PT[a, 10] * w1 + PT[a, 11] * w2) * (Bd[a, B_II] > 0.0)
+
+
+@jit
+def _stored(hist, WH):
+    total = 0.0
+    for k in range(hist.shape[0]):
+        total += hist[k, H_U]
+    for k in range(WH.shape[0]):
+        total += WH[k, H_U]
+    return total
+
+
+@jit
+def _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, free):
+    """Every body's state at t (knots); `free`: free flight follows, in closed form."""
+    KN = _grow(KN, nkn + n)
+    for a in range(n):
+        r = nkn + a
+        KN[r, 0], KN[r, 1], KN[r, 2] = t, a, free
+        for d in range(3):
+            KN[r, 3 + d] = X[a, d]
+            KN[r, 6 + d] = V[a, d]
+            KN[r, 9 + d] = W[a, d]
+            acc = F[a, d] * Bd[a, B_IM]
+            KN[r, 16 + d] = acc
+            KN[r, 19 + d] = acc
+        for d in range(4):
+            KN[r, 12 + d] = Qo[a, d]
+        KN[r, 22] = WK[a, 0] + WK[a, 1] + WK[a, 2]
+    return KN, nkn + n
+
+
+@jit
+def _rebuild(X, X0, Bd, n, dim, skin, keys, hist, ST):
+    """A fresh neighbour list, the listed pairs' history carried over."""
+    fresh = build_pairs(X, Bd, n, dim, skin)
+    hist = carry_history(keys, hist, fresh)
+    X0[:, :] = X
+    ST[S_BUILDS] += 1
+    return fresh, hist
+
+
+@jit
+def _free_time(X, V, Bd, keys, WP, grav, n, skin):
+    """How long every body can fly freely with no contact able to begin: until the fastest could
+    have covered half the smallest gap (listed pairs, walls; an unlisted pair's gap is at least
+    the skin, the list being fresh), gravity included."""
+    gap = skin
+    for k in range(keys.shape[0]):
+        i = keys[k] // n
+        j = keys[k] - i * n
+        dx, dy, dz = X[j, 0] - X[i, 0], X[j, 1] - X[i, 1], X[j, 2] - X[i, 2]
+        gap = min(gap, math.sqrt(dx * dx + dy * dy + dz * dz) - Bd[i, B_R] - Bd[j, B_R])
+    for i in range(n):
+        for w in range(WP.shape[0]):
+            h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
+                 + (X[i, 2] - WP[w, 2]) * WP[w, 5])
+            gap = min(gap, h - Bd[i, B_R])
+    if gap <= 0.0:
+        return 0.0
+    speed = 0.0
+    for a in range(n):
+        speed = max(speed, math.sqrt(V[a, 0] ** 2 + V[a, 1] ** 2 + V[a, 2] ** 2))
+    g = math.sqrt(grav[0] ** 2 + grav[1] ** 2 + grav[2] ** 2)
+    reach = 0.5 * gap  # each of two bodies may close it by half
+    if g > 0.0:
+        return (-speed + math.sqrt(speed * speed + 2.0 * g * reach)) / g
+    return reach / speed if speed > 0.0 else math.inf
+
+
+@jit
+def _turn(q, w0, w1, w2, tau, planar):
+    if planar:
+        q[0] += w2 * tau
+        return
+    rate = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    if rate == 0.0:
+        return
+    half = 0.5 * rate * tau
+    s = math.sin(half) / rate
+    dw, dx, dy, dz = math.cos(half), s * w0, s * w1, s * w2
+    a, b, c, d = q[0], q[1], q[2], q[3]
+    q[0] = dw * a - dx * b - dy * c - dz * d
+    q[1] = dw * b + dx * a + dy * d - dz * c
+    q[2] = dw * c - dx * d + dy * a + dz * b
+    q[3] = dw * d + dx * c - dy * b + dz * a
+
+
+@jit
+def _kinetic(V, W, Bd, n):
+    e = 0.0
+    for a in range(n):
+        e += 0.5 * Bd[a, B_M] * (V[a, 0] ** 2 + V[a, 1] ** 2 + V[a, 2] ** 2)
+        e += 0.5 * Bd[a, B_I] * (W[a, 0] ** 2 + W[a, 1] ** 2 + W[a, 2] ** 2)
+    return e
+
+
+@jit
+def _will_meet(X, V, Bd, WP, n):
+    """Whether any two spheres, or a sphere and a wall, will touch in free flight (no gravity)."""
+    for i in range(n):
+        for j in range(i + 1, n):
+            dx, dy, dz = X[j, 0] - X[i, 0], X[j, 1] - X[i, 1], X[j, 2] - X[i, 2]
+            ux, uy, uz = V[j, 0] - V[i, 0], V[j, 1] - V[i, 1], V[j, 2] - V[i, 2]
+            closing = dx * ux + dy * uy + dz * uz
+            if closing >= 0.0:
+                continue
+            speed2 = ux * ux + uy * uy + uz * uz
+            # Nearest approach of two straight lines.
+            tau = -closing / speed2
+            cx, cy, cz = dx + ux * tau, dy + uy * tau, dz + uz * tau
+            reach = Bd[i, B_R] + Bd[j, B_R]
+            if cx * cx + cy * cy + cz * cz < reach * reach:
+                return True
+        for w in range(WP.shape[0]):
+            if V[i, 0] * WP[w, 3] + V[i, 1] * WP[w, 4] + V[i, 2] * WP[w, 5] < 0.0:
+                return True
+    return False
+
+
+@jit
+def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
+    """Run to the end (duration, rest, or every contact over and none to come) at the fixed
+    step fp[P_DT]. X, V, W (N, 3) and Qo (N, 4) are updated in place; WK (N, 3) returns each
+    body's share of the work of damping, friction and rolling resistance. Returns (t, WK,
+    knots, records, intervals, energy parts, stats, figures)."""
+    n = X.shape[0]
+    dim, planar = fl[F_DIM], fl[F_DIM] < 3
+    dt, t_end, rest, skin = fp[P_DT], fp[P_TEND], fp[P_REST], fp[P_SKIN]
+    record = fl[F_RECORD]
+    ST = np.zeros(NSTAT, np.int64)
+    FG = np.zeros(NFIG)
+    FG[G_FIRST] = np.nan
+    FG[G_LAST] = np.nan
+    FG[G_STATUS_T] = np.nan
+    F = np.zeros((n, 3))
+    T = np.zeros((n, 3))
+    PT = np.zeros((n, 12))
+    WK = np.zeros((n, 3))
+    KN = np.zeros((0, NK))
+    REC = np.zeros((0, NR))
+    IV = np.zeros((0, 4))
+    EP = np.zeros((0, NEP))
+    nkn, nrec, niv, nep = 0, 0, 0, 0
+    keys = build_pairs(X, Bd, n, dim, skin)
+    hist = carry_history(np.zeros(0, np.int64), np.zeros((0, NH)), keys)
+    ST[S_BUILDS] = 1
+    WH = np.zeros((n * WP.shape[0], NH))
+    for k in range(WH.shape[0]):
+        WH[k, H_IV] = -1.0
+    X0 = X.copy()
+    t = 0.0
+    engaged, niv, nrec, IV, REC = forces(X, V, W, F, T, PT, Bd, keys, hist, WH, WP, tabs, wtabs, grav, fl, 0.0, t,
+                                         n, FG, ST, IV, niv, REC, nrec, record != 0)
+    if record:
+        KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
+        EP = _grow(EP, nep)
+        EP[nep, EP_T] = 0.0
+        nep += 1
+    next_frame = fp[P_FRAME]
+    peak = _kinetic(V, W, Bd, n)
+    ever = engaged > 0
+    steps = 0
+    last = False
+    while not last:
+        if engaged == 0:
+            # Nothing touches: fly in closed form as far as no contact can begin (free flight is
+            # not stepped, as in the event engine), then step again.
+            keys, hist = _rebuild(X, X0, Bd, n, dim, skin, keys, hist, ST)
+            tau = _free_time(X, V, Bd, keys, WP, grav, n, skin)
+            if t + tau >= t_end * (1.0 - 1e-12):
+                tau = t_end - t
+            if tau > 2.0 * dt:
+                if record:
+                    if nkn >= n and KN[nkn - 1, 0] == t:
+                        for r in range(nkn - n, nkn):
+                            KN[r, 2] = 1.0
+                    else:
+                        KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 1.0)
+                for a in range(n):
+                    for d in range(3):
+                        X[a, d] += V[a, d] * tau + 0.5 * grav[d] * tau * tau
+                        V[a, d] += grav[d] * tau
+                    if fl[F_SPIN]:
+                        _turn(Qo[a], W[a, 0], W[a, 1], W[a, 2], tau, planar)
+                t += tau
+                ST[S_JUMPS] += 1
+                if record:
+                    KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
+                if t >= t_end * (1.0 - 1e-12):
+                    break
+                if not math.isfinite(t_end) and ever and not _will_meet(X, V, Bd, WP, n):
+                    break
+        h = dt
+        if t + h >= t_end * (1.0 - 1e-12):
+            h = t_end - t
+            last = True
+        if h <= 0.0:
+            break
+        kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK)
+        moved = 0.0
+        for a in range(n):
+            for d in range(3):
+                X[a, d] += h * V[a, d]
+            if fl[F_SPIN]:
+                _turn(Qo[a], W[a, 0], W[a, 1], W[a, 2], h, planar)
+            ddx, ddy, ddz = X[a, 0] - X0[a, 0], X[a, 1] - X0[a, 1], X[a, 2] - X0[a, 2]
+            moved = max(moved, ddx * ddx + ddy * ddy + ddz * ddz)
+        if 4.0 * moved > skin * skin:
+            keys, hist = _rebuild(X, X0, Bd, n, dim, skin, keys, hist, ST)
+        t = t + h
+        steps += 1
+        record_now = record != 0 and (t >= next_frame or last)
+        engaged, niv, nrec, IV, REC = forces(X, V, W, F, T, PT, Bd, keys, hist, WH, WP, tabs, wtabs, grav, fl, h, t,
+                                             n, FG, ST, IV, niv, REC, nrec, record_now)
+        kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK)
+        if engaged:
+            FG[G_TOUCH] += h
+            ever = True
+        kinetic = _kinetic(V, W, Bd, n)
+        if not math.isfinite(kinetic):
+            ST[S_STATUS] = NONFINITE
+            FG[G_STATUS_T] = t
+            break
+        peak = max(peak, kinetic)
+        if record_now:
+            KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
+            EP = _grow(EP, nep)
+            EP[nep, EP_T] = t
+            for c in range(3):
+                s = 0.0
+                for a in range(n):
+                    s += WK[a, c]
+                EP[nep, EP_DAMP + c] = s
+            EP[nep, EP_STORED] = _stored(hist, WH)
+            nep += 1
+            while next_frame <= t:
+                next_frame += fp[P_FRAME]
+        if steps & 255 == 0:
+            fp[P_NOW] = t
+            fp[P_NOW_STEPS] = steps
+        if steps >= fl[F_MAXSTEPS]:
+            ST[S_STATUS] = MAXSTEPS
+            FG[G_STATUS_T] = t
+            break
+        if rest > 0.0 and ever and kinetic < rest * peak:
+            break
+        if not math.isfinite(t_end) and ever and engaged == 0 and not _will_meet(X, V, Bd, WP, n):
+            break
+    ST[S_STEPS] = steps
+    ST[S_PAIRS] = keys.shape[0]
+    FG[G_STORED] = _stored(hist, WH)
+    for c in range(3):
+        s = 0.0
+        for a in range(n):
+            s += WK[a, c]
+        FG[G_DAMP + c] = s
+    if record and (nkn == 0 or KN[nkn - 1, 0] < t):
+        KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
+    return t, WK, KN[:nkn], REC[:nrec], IV[:niv], EP[:nep], ST, FG
