@@ -12,10 +12,11 @@ half the skin) keeps the cost per step proportional to the bodies. Each contact 
   contact may pull as it ends; with that choice e_out = e exactly for both laws;
 - tangential: the report's Coulomb slip (mu F_n against any slip faster than eps) or a history
   spring (Cundall-Strack; Mindlin's stiffness for Hertz) with LIGGGHTS' tangential damping,
-  capped at mu F_n. After a slip the spring alone holds the capped force; LIGGGHTS and LAMMPS
-  fold the dashpot's share into the stretch (-(F + gamma_t v_t) / k_t), which with Hertz and
-  damping makes the outcome drift as dt shrinks (2 % between 400 and 102 400 steps per
-  contact, measured, and growing) instead of converging;
+  capping spring plus dashpot at mu F_n (as LAMMPS' pair granular; LIGGGHTS 3.8 compares the
+  spring alone and drops the dashpot while sliding). After a slip the spring alone holds the
+  capped force (as LIGGGHTS); LAMMPS folds the dashpot's share into the stretch
+  (-(F + gamma_t v_t) / k_t), which with Hertz and damping made the outcome drift as dt shrank
+  (2 % between 400 and 102 400 steps per contact, measured, and growing) instead of converging;
 - rolling resistance: a torque mu_r R* F_n against the relative rotation (rolling and
   twisting), capped by a viscous
   torque that would stop it in ROLL_STEPS steps (so that a ball at rest does not chatter, and a
