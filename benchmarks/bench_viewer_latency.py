@@ -1,21 +1,28 @@
-"""Viewer latency: from a slider change to the new run drawn, for every built-in scene.
+"""Viewer latency and replay rate: a slider change to the new run drawn, for every built-in
+scene; and a 1 000-sphere run replayed frame by frame.
 
-    python benchmarks/bench_viewer_latency.py [--repeats 9] [--no-browser]
+    python benchmarks/bench_viewer_latency.py [--repeats 9] [--no-browser] [--spheres 1000] [--seconds 10]
 
 Starts the viewer in-process (127.0.0.1, any free port), opens it in headless Chromium
-(Debian's /usr/bin/chromium through Playwright) and, per scene at its default settings, moves
-the contact.k slider back and forth `repeats` times. Each change goes through the same path as
-a user's: the session reads the controls, the worker re-simulates, the 3D scene, plots and
-status are redrawn and flushed to the browser. Printed per scene (medians, milliseconds):
+(Debian's /usr/bin/chromium through Playwright) unless --no-browser.
+
+Latency, per scene at its default settings, contact.k moved back and forth `repeats` times.
+Each change goes through the same path as a user's: the session reads the values, the worker
+re-simulates, the 3D scene, plots, values table and status are redrawn and flushed. Printed
+per scene (medians, milliseconds):
 
   server   change -> run drawn and flushed (what the viewer controls)
   browser  change -> the browser holds the new plot data (adds transfer and React/uPlot work)
   sim      the core's simulate() wall time;  prepare  ViewRun (sampling, plots, residuals)
-  draw     scene + plot + status messages;   first    change -> first run drawn (a preview when
-           the full run is expected to take longer than the preview budget)
+  draw     scene + plot + table + status messages;  first  change -> first run drawn
 
-Without a browser (--no-browser, or when Chromium/Playwright are missing) the session draws
-into the server's scene with no client connected: the server column only.
+Replay: a synthetic pile of N spheres (`viewer.frames.settling_pile`: frames, not physics; the
+current engine cannot run 1 000 spheres) played for `seconds` with force chains and colour by
+contact count, the player asked for 30 and then 120 frames a second. Printed: frame updates
+sent per second (server side: positions, colours, shadows and chains of every sphere queued to
+the browser), and the server's work per frame (median, 95th percentile) with the rate it
+allows. Without a browser the session draws into the server's scene with no client
+connected: the server columns only.
 """
 
 from __future__ import annotations
@@ -26,15 +33,15 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from collide.scene import builtin_names  # noqa: E402
 from viewer.app import ViewerApp  # noqa: E402
+from viewer.frames import settling_pile  # noqa: E402
+from viewer.testing import CHROMIUM, launch  # noqa: E402
 
-CHROMIUM = Path("/usr/bin/chromium")
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader", "--disable-quic",
-        "--no-first-run", "--disable-background-networking", "--disable-component-update", "--disable-sync",
-        "--disable-dev-shm-usage"]
 PLOT_SUM_JS = """() => {
     const charts = Object.values(window.__viserTestpoints?.uplots || {}).map(u => u.chart);
     const c = charts.find(c => (c.root.innerText || '').startsWith('energy'));
@@ -59,19 +66,18 @@ def median_ms(values: list[float]) -> str:
 def bench_scene(session, page, name: str, repeats: int) -> dict[str, list[float]]:
     session.load_scene(name)
     session.worker.wait_idle(120)
-    handle = session._param_handles["contact.k"]
-    k0 = float(handle.value)
+    k0 = float(session.values["contact.k"])
     out: dict[str, list[float]] = {k: [] for k in ("server", "browser", "first", "sim", "prepare", "draw")}
     for r in range(repeats):
         n_before = len(session.timings)
         before = page.evaluate(PLOT_SUM_JS) if page is not None else None
-        handle.value = k0 * (1.02 if r % 2 == 0 else 0.98)  # what a slider drag sets
+        session.values["contact.k"] = k0 * (1.02 if r % 2 == 0 else 0.98)  # what a slider drag sets
         t0 = time.perf_counter()
         session.request_run()
         browser_t = None
         if page is not None:
             page.wait_for_function(f"() => {{ const f = {PLOT_SUM_JS}; const v = f(); "
-                                   f"return v !== null && v !== {before!r}; }}", polling="raf", timeout=60_000)
+                                   f"return v !== null && v !== {before!r}; }}", polling="raf", timeout=120_000)
             browser_t = time.perf_counter() - t0
         session.worker.wait_idle(120)
         drawn = list(session.timings)[n_before:]
@@ -89,10 +95,35 @@ def bench_scene(session, page, name: str, repeats: int) -> dict[str, list[float]
     return out
 
 
+def bench_replay(session, spheres: int, seconds: float) -> list[tuple[float, float, float, float]]:
+    """(asked fps, frames sent per second, median and 95th-percentile work per frame in s)."""
+    run = settling_pile(spheres, duration=4.0, fps=60)
+    session.show_frames(run)
+    session.set_show(colour_by="contacts", chains=True, shadows=True)
+    session.speed.value = "0.3x"
+    session.loop.value = True
+    rows = []
+    for fps in (30.0, 120.0):
+        session.fps = fps
+        session.frame_times.clear()
+        session.frame_costs.clear()
+        session.toggle_play(True)
+        time.sleep(seconds)
+        session.toggle_play(False)
+        times = list(session.frame_times)
+        costs = list(session.frame_costs)
+        rate = (len(times) - 1) / (times[-1] - times[0]) if len(times) > 1 else 0.0
+        rows.append((fps, rate, float(np.median(costs)), float(np.percentile(costs, 95))))
+    session.fps = 30.0
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=9)
     parser.add_argument("--no-browser", action="store_true")
+    parser.add_argument("--spheres", type=int, default=1000)
+    parser.add_argument("--seconds", type=float, default=10.0)
     args = parser.parse_args()
     use_browser = not args.no_browser and CHROMIUM.exists()
     try:
@@ -102,17 +133,18 @@ def main() -> None:
 
     app = ViewerApp("demo-bonus", port=0, recordings_dir=Path("recordings"))
     app.start()
-    results = {}
+    results, replay = {}, []
     try:
         if use_browser:
             with sync_playwright() as p:
-                browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
+                browser = launch(p)
                 page = browser.new_page(viewport={"width": 1280, "height": 800})
                 page.goto(app.url + "/?fixedDpr=0.5")
                 session = app.wait_for_session(1, timeout=60)[0]
                 page.wait_for_function("() => document.body.innerText.includes('simulated in')", timeout=60_000)
                 for name in builtin_names():
                     results[name] = bench_scene(session, page, name, args.repeats)
+                replay = bench_replay(session, args.spheres, args.seconds)
                 browser.close()
         else:
             from viewer.session import Session
@@ -121,17 +153,23 @@ def main() -> None:
             session.fit_camera = lambda *a, **k: None  # no camera without a browser
             for name in builtin_names():
                 results[name] = bench_scene(session, None, name, args.repeats)
+            replay = bench_replay(session, args.spheres, args.seconds)
             session.close()
     finally:
         app.stop()
 
-    mode = "headless Chromium (software GL)" if use_browser else "no browser"
+    mode = "headless Chromium (software GL, fixedDpr=0.5)" if use_browser else "no browser"
     print(f"\nViewer latency, slider change -> new run drawn; median of {args.repeats} changes of "
           f"contact.k (ms), {mode}")
     print(f"{'scene':<20} {'server':>8} {'browser':>8} {'first':>8} {'sim':>8} {'prepare':>8} {'draw':>8}")
     for name, r in results.items():
         print(f"{name:<20} {median_ms(r['server'])} {median_ms(r['browser'])} {median_ms(r['first'])} "
               f"{median_ms(r['sim'])} {median_ms(r['prepare'])} {median_ms(r['draw'])}")
+    print(f"\nReplay of {args.spheres} spheres (synthetic frames; force chains, colour by contacts, floor "
+          f"shadows), {args.seconds:g} s per row, {mode}")
+    print(f"{'asked fps':>10} {'sent fps':>10} {'work/frame (ms) median':>24} {'p95':>8} {'allows (fps)':>14}")
+    for fps, rate, median, p95 in replay:
+        print(f"{fps:10.0f} {rate:10.1f} {median * 1e3:24.1f} {p95 * 1e3:8.1f} {1 / median:14.0f}")
 
 
 if __name__ == "__main__":

@@ -13,18 +13,21 @@ from cli.common import UserError
 def view(
     source: Annotated[str, typer.Argument(
         help="A built-in scene name, a .toml scene file, or a .rrd recording made by collide.")] = "demo-bonus",
-    port: Annotated[int, typer.Option(help="Port to serve on (0: any free port).", min=0, max=65535)] = 8080,
+    port: Annotated[int, typer.Option(help="Port to serve on; 0 picks any free port.", min=0, max=65535)] = 8080,
     host: Annotated[str, typer.Option(
-        help="Address to listen on. The default serves this machine only; use 0.0.0.0 to expose the "
-        "viewer to your network deliberately.")] = "127.0.0.1",
+        help="Address to listen on. The default serves this machine only; 0.0.0.0 exposes the viewer to "
+        "your network, deliberately.")] = "127.0.0.1",
     recordings: Annotated[Path, typer.Option(
         "--recordings", help="Folder of .rrd files to open; uploads and saved runs go here.")] = Path("recordings"),
     scenes_dir: Annotated[Path | None, typer.Option(
-        "--scenes-dir", help="Folder of .toml scenes to add to the scene picker [default: ./scenes if it "
-        "exists].")] = None,
+        "--scenes-dir", help="Folder of .toml scenes to add to the scene picker; by default ./scenes when it "
+        "exists.")] = None,
 ) -> None:
-    """Serve the viewer in the browser: 3D scene, sliders for every parameter (re-simulated
-    while you drag), timeline, live plots, replay of .rrd recordings, ensembles.
+    """Serve the live viewer in the browser, or replay a recording.
+
+    The page has a 3D view, a slider and a text box for every parameter (the run is redone
+    while you drag), a timeline with step buttons, live plots, a values table, replay and
+    upload of .rrd recordings, ensembles, and CSV and PNG downloads.
 
     Examples:
 
@@ -36,7 +39,7 @@ def view(
 
       collide view my_scene.toml --scenes-dir scenes/
     """
-    from viewer.app import ViewerApp
+    from viewer.app import ViewerApp, check_listen_address
 
     if scenes_dir is not None and not scenes_dir.is_dir():
         raise UserError(f"--scenes-dir {scenes_dir} is not a folder")
@@ -50,13 +53,18 @@ def view(
         # Read it once in a child process first: a damaged file can make Rerun's reader abort
         # the whole process, which must cost the child, not this command (one line instead).
         read_recording_safely(Path(source))
+    try:
+        check_listen_address(host)  # before any work: a wrong --host must not hang
+    except OSError as exc:
+        raise UserError(f"--host {host}: {exc}") from None
     app = ViewerApp(source, host=host, port=port, recordings_dir=recordings, scenes_dir=scenes_dir)
     app.prepare()  # reads the scene or recording: a bad one is a one-line error before serving
     try:
         app.start()
     except OSError as exc:
         raise UserError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
-    typer.echo(f"collide view: {app.initial_label or source} at {app.url}  (Ctrl+C to stop)")
+    shown = f"recording {source}" if app.initial_recording is not None else (app.initial_label or source)
+    typer.echo(f"collide view: {shown} at {app.url}  (Ctrl+C to stop)")
     if host not in ("127.0.0.1", "localhost", "::1"):
         typer.echo(f"  listening on {host}: anyone who can reach this address can use the viewer", err=True)
     app.serve_forever()

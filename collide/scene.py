@@ -164,9 +164,11 @@ _BUILTIN_PACKAGE = "collide.scenes"
 
 
 def builtin_names() -> list[str]:
-    """Names of the built-in scenes, in a stable order."""
+    """Names of the built-in scenes: the report's demos first, then its textbook checks, then
+    the scenes beyond the report (what a new user meets first in a list)."""
     files = resources.files(_BUILTIN_PACKAGE).iterdir()
-    return sorted(p.name[:-5] for p in files if p.name.endswith(".toml"))
+    names = [p.name[:-5] for p in files if p.name.endswith(".toml")]
+    return sorted(names, key=lambda n: (0 if n.startswith("demo") else 1 if n.startswith("textbook") else 2, n))
 
 
 def builtin_text(name: str) -> str:

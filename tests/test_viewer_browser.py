@@ -15,23 +15,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader", "--disable-quic",
-                 "--no-first-run", "--disable-background-networking", "--disable-component-update",
-                 "--disable-sync", "--disable-dev-shm-usage"]
+from tests.conftest import BROWSER_MARKS
+
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 
 try:
-    from playwright.sync_api import Page, sync_playwright
+    from playwright.sync_api import Page
 except ImportError:  # pragma: no cover - depends on the machine
-    sync_playwright = None
+    pass
 
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(sync_playwright is None, reason="the playwright Python package is not installed "
-                       "(pip install playwright; never `playwright install`)"),
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="/usr/bin/chromium is missing (apt-get install -y chromium)"),
-]
+pytestmark = BROWSER_MARKS
 
 
 def dom_id(handle) -> str:
@@ -60,13 +53,6 @@ def app(recordings):
     yield app
     app.stop()
 
-
-@pytest.fixture(scope="module")
-def browser(app):
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
-        yield browser
-        browser.close()  # before the server stops: an open connection makes stop() wait
 
 
 @pytest.fixture(scope="module")
@@ -119,9 +105,11 @@ def click_slider(page: Page, handle, fraction: float) -> None:
     page.mouse.click(box["x"] + fraction * box["width"], box["y"] + box["height"] / 2)
 
 
-def slider_input(page: Page, handle):
-    """The number box beside a slider."""
-    return page.locator(f'[id="{dom_id(handle)}"]').locator("xpath=..").locator("input[inputmode=decimal]")
+def text_input(page: Page, handle):
+    """The text box of a parameter or of the time (what a user types into)."""
+    from viewer.testing import text_box
+
+    return text_box(page, handle)
 
 
 def choose(page: Page, handle, option: str) -> None:
@@ -212,10 +200,9 @@ def test_slider_resimulates_and_redraws(page):
 def test_unstable_combination_shows_message(page):
     session = session_of(page)
     good = session.view
-    box = slider_input(page, session._param_handles["body.ball1.position.x"])
+    box = text_input(page, session._param_boxes["body.ball1.position.x"])
     box.scroll_into_view_if_needed()
     box.fill("480")  # ball1's centre 20 mm from ball2's: they overlap at the start
-    box.press("Enter")
     page.wait_for_function("() => document.body.innerText.includes('Not run')", timeout=30_000)
     assert "overlaps" in status_text(page)
     assert session.view is good  # the last good run stays on screen
@@ -247,7 +234,7 @@ def test_replay_recording_from_the_list_and_play(page, recordings):
     page.get_by_role("button", name="Pause").click()
     wait_until(lambda: not session.playing, 10, "pause")
     assert session.t != t0, (session.error, session.view.t0, session.view.t1)
-    shown = float(slider_input(page, session.time_slider).input_value())
+    shown = float(text_input(page, session.time_box).input_value())
     assert shown == pytest.approx(session.t * 1e3, abs=2 * session.time_slider.step)
 
 
@@ -274,7 +261,7 @@ def test_upload_a_recording_and_save_a_run(page, recordings):
                                          "buffer": content}])
     wait_until(lambda: session.view is not None and "my-upload.rrd" in session.view.origin, 30, "the upload")
     assert (recordings / "my-upload.rrd").read_bytes() == content
-    page.get_by_role("button", name="Save this run").click()
+    page.get_by_role("button", name="Save this run (.rrd)").click()
     page.wait_for_function("() => document.body.innerText.includes('Saved')", timeout=30_000)
     saved = [p for p in recordings.glob("demo-2d-moving-*.rrd")]
     assert len(saved) == 1

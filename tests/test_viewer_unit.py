@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,22 @@ from collide.stepper import RunError
 from viewer import ensemble as ens
 from viewer import files
 from viewer.geometry import compressed_sphere, fit_camera, orientation_wxyz, quat_from_to
-from viewer.params import Settings, build_scene, check_settings, parse_dt_choice, scene_controls, values_of
+from viewer.params import (
+    CONTACT_PARAMS,
+    Settings,
+    TypedValueError,
+    add_ball,
+    approach_time,
+    build_scene,
+    check_settings,
+    for_viewing,
+    format_value,
+    parse_dt_choice,
+    read_typed,
+    remove_ball,
+    scene_controls,
+    values_of,
+)
 from viewer.plots import CURSOR_OFF, display_scale, with_cursor, y_range
 from viewer.state import ViewRun
 from viewer.worker import LatestWorker
@@ -66,32 +82,101 @@ def test_controls_3d_spin_is_a_vector():
 def test_defaults_rebuild_the_same_scene():
     scene = load_scene("demo-bonus")
     controls = scene_controls(scene)
-    rebuilt, notes = build_scene(controls, controls.defaults(), controls.settings)
-    assert notes == []
+    rebuilt = build_scene(controls, controls.defaults(), controls.settings)
     assert rebuilt.bodies == scene.bodies and rebuilt.contact == scene.contact
     assert values_of(rebuilt, controls) == pytest.approx(controls.defaults())
+
+
+def test_viewed_runs_go_on_as_long_after_the_contact_as_before_it():
+    """The viewer's tail: as long as the approach (textbook-glancing: 28 ms, not 2.8)."""
+    scene = load_scene("textbook-glancing")
+    assert scene.tail is None and scene.duration is None
+    approach = approach_time(scene)
+    gap = scene.bodies[1].position[0] - scene.bodies[0].position[0]
+    # Straight-line motion to the first touch: |d + u t| = r1 + r2.
+    assert approach == pytest.approx((gap - np.sqrt(0.1**2 - scene.bodies[0].position[1] ** 2)) / 5.0)
+    viewed = for_viewing(scene)
+    assert viewed.tail == pytest.approx(approach) and viewed.bodies == scene.bodies
+    view = ViewRun(run_scene(viewed))
+    a, b = view.contact_windows[0]
+    assert view.t1 - b == pytest.approx(approach, rel=1e-9)
+    assert for_viewing(load_scene("demo-bonus", ["duration=0.3"])).tail is None  # a set duration is kept
 
 
 def test_slider_values_reach_the_scene_in_si_units():
     controls = scene_controls(load_scene("demo-bonus"))
     values = controls.defaults() | {"contact.k": 3000.0, "body.ball1.mass": 30.0, "body.ball1.position.y": 5.0,
                                     "body.ball2.spin": -2.0}
-    scene, _ = build_scene(controls, values, controls.settings)
+    scene = build_scene(controls, values, controls.settings)
     assert scene.contact.k == 3000.0
     assert scene.bodies[0].mass == pytest.approx(0.030)
     assert scene.bodies[0].position[1] == pytest.approx(0.005)
     assert scene.bodies[1].spin == (-2.0,)
 
 
-def test_out_of_range_values_are_clamped_with_a_message():
+@pytest.mark.parametrize("text, value", [("1e-7", 1e-7), ("2.5E9", 2.5e9), (" -0.02 ", -0.02), ("\u22123", -3.0),
+                                         ("1500", 1500.0), (".5", 0.5)])
+def test_typed_values_are_read_exactly(text, value):
+    assert read_typed(text, "x") == value
+
+
+@pytest.mark.parametrize("text, reason", [("1e", "not a number"), ("15OO", "not a number"), ("", "empty"),
+                                          ("1,5", "comma"), ("inf", "not finite"), ("nan", "not finite"),
+                                          ("1_000", "not a plain number"), ("e-7", "not a number")])
+def test_typed_values_that_do_not_read_are_refused(text, reason):
+    with pytest.raises(TypedValueError, match=reason) as info:
+        read_typed(text, "eps (m/s)")
+    assert str(info.value).startswith("eps (m/s)") and str(info.value).endswith("not applied")
+
+
+def test_typed_values_beyond_the_slider_widen_it_and_invalid_ones_are_refused():
     controls = scene_controls(load_scene("demo-bonus"))
     k = controls.by_ident()["contact.k"]
-    value, note = k.clamp(1e9)
-    assert value == k.hi and "clamped" in note
-    assert k.clamp(float("nan"))[0] == k.value
-    scene, notes = build_scene(controls, controls.defaults() | {"contact.k": -5.0}, controls.settings)
-    assert scene.contact.k == k.lo > 0
-    assert len(notes) == 1 and "contact.k" not in notes[0] and "k = -5" in notes[0]
+    assert k.problem(1e9) is None
+    wider = k.widened(1e9)
+    assert wider.lo <= 1e9 <= wider.hi and wider.step > 0 and k.widened(k.value) is k
+    assert k.problem(-5.0) == "must be positive" and k.problem(float("nan")) == "must be finite"
+    eps = controls.by_ident()["contact.eps"]
+    assert eps.problem(0.0) is None and eps.problem(-1e-7) == "must not be negative"
+    assert eps.widened(1.0).hi >= 1.0 and eps.widened(1.0).lo == 0.0
+    x = controls.by_ident()["body.ball1.position.x"]
+    assert x.widened(-5000.0).lo <= -5000.0
+    with pytest.raises(SceneError, match="k .N/m. = -5: must be positive"):
+        build_scene(controls, controls.defaults() | {"contact.k": -5.0}, controls.settings)
+    # A value beyond the slider is used exactly as typed, not clamped.
+    assert build_scene(controls, controls.defaults() | {"contact.k": 1e9}, controls.settings).contact.k == 1e9
+    assert format_value(1e-7) == "1e-07" and read_typed(format_value(0.1 + 0.2), "x") == 0.1 + 0.2
+
+
+def test_contact_parameters_come_from_one_table():
+    """A contact law parameter (restitution, once the engine has it) is one row: shown only for a
+    scene whose contact has it."""
+    names = [row.name for row in CONTACT_PARAMS]
+    assert names[:3] == ["k", "mu", "eps"] and "restitution" in names
+    idents = {p.ident for p in scene_controls(load_scene("demo-bonus")).params}
+    assert {"contact.k", "contact.mu", "contact.eps"} <= idents
+    assert ("contact.restitution" in idents) == hasattr(load_scene("demo-bonus").contact, "restitution")
+
+
+def test_more_and_fewer_balls():
+    scene = load_scene("demo-bonus")
+    more = add_ball(scene)
+    assert [b.name for b in more.bodies] == ["ball1", "ball2", "ball3"]
+    new = more.bodies[2]
+    assert new.mass == scene.bodies[1].mass and new.radius == scene.bodies[1].radius
+    assert new.position[0] < min(b.position[0] for b in scene.bodies) and new.velocity[0] > 0
+    run = run_scene(more, dt="auto", tol=1e-3)
+    assert int(run.result.contacts.count[0]) >= 1
+    assert [b.name for b in remove_ball(more).bodies] == ["ball1", "ball2"]
+    with pytest.raises(SceneError, match="at least two"):
+        remove_ball(scene)
+    with pytest.raises(SceneError, match="2D"):
+        add_ball(load_scene("demo-1d"))
+    many = scene
+    for _ in range(8):
+        many = add_ball(many)
+    with pytest.raises(SceneError, match="at most"):
+        add_ball(many)
 
 
 def test_overlap_at_start_is_a_scene_error():
@@ -356,7 +441,9 @@ def test_cursor_rows_in_plot_data():
 
 
 def test_plot_scales():
-    assert display_scale({"L": np.array([-2.7e-4, -2.7e-4])}, "kg m^2/s") == (1e6, "1e-6 kg m^2/s")
+    assert display_scale({"L": np.array([-2.7e-4, -2.7e-4])}, "kg m²/s") == (1e6, "1e-6 kg m²/s")
+    # Round-off around zero keeps the quantity's own scale, not 1e-21.
+    assert display_scale({"L": np.array([0.0, 3e-21, -2e-21])}, "kg m²/s", scale=2.5e-3) == (1e3, "1e-3 kg m²/s")
     assert display_scale({"E": np.array([0.0, 0.063])}, "J") == pytest.approx((1e3, "mJ"))
     lo, hi = y_range({"p": np.array([-0.0254, -0.0254 + 1e-17])})
     assert hi - lo > 1e-3  # round-off is not magnified into a spike
@@ -414,3 +501,101 @@ def test_view_refuses_unreadable_input(tmp_path, make, expected):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and expected in lines[0]
     assert proc.stdout == ""
+
+
+# ---------------------------------------------------------------------------------------------
+# Preview, many bodies, colours, exports, reading untrusted recordings
+
+
+def _break_3d(tol: float):
+    """Issue 12's 3D break: a cue ball with top spin into three balls on a floor, friction."""
+    bodies = [{"name": "cue", "mass": 0.17, "radius": 0.028, "position": [0.0, 0.0, 0.028], "velocity": [2.0, 0, 0],
+               "spin": [0.0, 40.0, 0.0]}]
+    for k, (x, y) in enumerate([(0.3, 0.0), (0.35, 0.03), (0.35, -0.03)]):
+        bodies.append({"name": f"b{k + 1}", "mass": 0.17, "radius": 0.028, "position": [x, y, 0.028]})
+    return parse_scene({"name": "break", "dim": 3, "tol": tol, "gravity": [0, 0, -9.81], "duration": 0.2,
+                        "contact": {"k": 1e5, "mu": 0.2}, "body": bodies,
+                        "wall": [{"point": [0, 0, 0], "normal": [0, 0, 1]}]}, "break")
+
+
+@pytest.mark.parametrize("integrator, tol", [("verlet", 1e-2), ("kahan6", 1e-2), ("kahan6", 1e-3)])
+def test_a_preview_never_costs_more_than_the_run(integrator, tol):
+    """The coarse preview ran Verlet at tol 1e-3 whatever the scene asked: for a scene that asks
+    less than that it cost more than the real run (issue 12, item 3: a 3D break took 41-54 s a
+    slider change). Now a preview is used only when it costs less than half the run."""
+    from collide.run import auto_dt
+    from viewer.session import STAGES, preview_settings
+
+    scene = replace(_break_3d(tol), integrator=integrator)
+
+    def cost(name: str, t: float) -> float:
+        return STAGES[name] / float(auto_dt([scene], name, np.array([t]))[0][0])
+
+    full = cost(scene.integrator, scene.tol)
+    if integrator == "verlet":
+        assert cost("verlet", 1e-3) > full  # the old preview
+    preview = preview_settings(scene)
+    assert preview is None or (preview[1] >= scene.tol and cost(*preview) < 0.5 * full)
+
+
+def test_frames_run_answers_like_a_view():
+    from viewer.frames import settling_pile
+
+    run = settling_pile(200, duration=0.5, fps=20)
+    assert run.positions.shape == (len(run.times), 200, 3) and run.n_bodies == 200
+    f = run.frame(0.33)
+    k = int(np.searchsorted(run.times, 0.33)) - 1
+    x = (0.33 - run.times[k]) / (run.times[k + 1] - run.times[k])
+    assert np.allclose(f.positions, (1 - x) * run.positions[k] + x * run.positions[k + 1])
+    links = f.contact_links()
+    assert len(links.i) and np.all(links.force > 0) and links.counts(200).sum() == 2 * np.sum(links.j >= 0) + np.sum(
+        links.j < 0)
+    # Floor contacts touch the floor; pair contacts lie between the two centres.
+    floor = links.j < 0
+    assert np.allclose(links.point[floor, 2], 0.0)
+    lo, hi = run.bounds()
+    assert lo[2] >= -1e-9 and np.all(hi > lo)
+    assert [s.title for s in run.plots.all] == ["energy", "momentum", "contacts"]
+    assert run.next_step(0.33, 1) == run.times[k + 1] and run.next_step(0.33, -1) == run.times[k]
+    assert run.body_values(0.33)["speed"].shape == (200,)
+
+
+def test_every_body_has_its_own_colour():
+    from viewer.colours import body_colours, colour_map
+
+    colours = body_colours(1000)
+    assert len({tuple(c) for c in colours}) == 1000
+    assert len({tuple(c) for c in colours[:16]}) == 16
+    ramp = colour_map(np.linspace(0, 1, 5), 0.0, 1.0)
+    assert np.all(np.diff(ramp.astype(int).sum(axis=1)) > 0)  # viridis brightens with the value
+    assert np.array_equal(colour_map(np.array([-1.0, 2.0]), 0.0, 1.0), colour_map(np.array([0.0, 1.0]), 0.0, 1.0))
+
+
+def test_csv_export_is_the_cli_layout():
+    from collide.summary import csv_columns, report_csv
+    from viewer.exports import csv_every, png_bytes, run_csv
+
+    run = run_scene(load_scene("demo-bonus"))
+    content, every = run_csv(run)
+    assert every == csv_every(run) and every <= 100 * float(run.result.dt[0])
+    lines = content.decode().splitlines()
+    assert lines[0].split(",") == csv_columns(run.result.model) and len(lines) - 1 >= 200
+    assert content.decode() == report_csv(run, every, "aligned")
+    png = png_bytes(np.zeros((4, 6, 4), np.uint8))
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_untrusted_recordings_are_read_in_a_child(tmp_path):
+    from collide.recording import RecordingError, write_recording
+    from viewer.reading import read_untrusted
+
+    good = write_recording(run_scene(load_scene("demo-1d")), tmp_path / "good.rrd")
+    run = read_untrusted(good)
+    assert run.scene.name == "demo-1d" and run.result.trajectory is not None
+    crash = Path(__file__).parent / "data" / "viewer-reader-crash.rrd"
+    with pytest.raises(RecordingError, match=r"^upload\.rrd: damaged recording: Rerun.s reader crashed"):
+        read_untrusted(crash, name="upload.rrd")
+    (tmp_path / "junk.rrd").write_bytes(b"junk" * 10)
+    with pytest.raises(RecordingError) as info:
+        read_untrusted(tmp_path / "junk.rrd", name="mine.rrd")
+    assert str(info.value).startswith("mine.rrd: ") and str(tmp_path) not in str(info.value)

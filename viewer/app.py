@@ -16,6 +16,9 @@ from __future__ import annotations
 
 import contextlib
 import io
+import ipaddress
+import re
+import socket
 import threading
 import time
 from pathlib import Path
@@ -25,8 +28,49 @@ import viser
 from collide.run import SceneRun, run_scene
 from collide.scene import Scene, load_scene
 from viewer import files
+from viewer.params import for_viewing
+from viewer.reading import read_untrusted
 from viewer.session import Session
 from viewer.state import ViewRun
+
+
+def check_listen_address(host: str, timeout: float = 3.0) -> None:
+    """Raise OSError with a one-line reason unless this machine can listen on `host` (an IP
+    address or a name that resolves to one of its own addresses)."""
+    try:
+        addresses = [str(ipaddress.ip_address(host))]
+    except ValueError:
+        addresses = []
+    if not addresses:
+        if re.fullmatch(r"[0-9.]+|[0-9a-fA-F:.]*:[0-9a-fA-F:.]*", host):
+            raise OSError(f"'{host}' is not a valid IP address")
+        found: list = []
+
+        def resolve() -> None:
+            try:
+                found.extend(socket.getaddrinfo(host, None, type=socket.SOCK_STREAM))
+            except OSError as exc:
+                found.append(exc)
+
+        thread = threading.Thread(target=resolve, daemon=True)
+        thread.start()
+        thread.join(timeout)
+        if not found:
+            raise OSError(f"cannot resolve '{host}' (no answer in {timeout:g} s)")
+        if isinstance(found[0], OSError):
+            raise OSError(f"cannot resolve '{host}': {found[0].strerror or found[0]}")
+        addresses = sorted({info[4][0] for info in found})
+    errors = []
+    for address in addresses:
+        family = socket.AF_INET6 if ":" in address else socket.AF_INET
+        try:
+            with socket.socket(family, socket.SOCK_STREAM) as probe:
+                probe.bind((address, 0))
+            return
+        except OSError as exc:
+            errors.append(exc)
+    reason = errors[0].strerror if errors and errors[0].strerror else "cannot bind"
+    raise OSError(f"{host} is not an address of this machine ({reason})")
 
 
 class ViewerApp:
@@ -60,15 +104,14 @@ class ViewerApp:
         source = self.initial
         extra = []
         if source.lower().endswith(".rrd"):
-            from collide.recording import read_recording
-
             path = Path(source)
-            run = read_recording(path)
+            # In a child process: a damaged file must not abort the CLI (issue 14, item 3).
+            run = read_untrusted(path, name=str(path))
             self.initial_recording = path.name
             self.initial_view = ViewRun(run, origin=f"recording {path.name}")
             self.initial_scene = run.scene
         else:
-            scene = load_scene(source)
+            scene = for_viewing(load_scene(source))
             run = run_scene(scene, record=True)
             self.initial_scene = scene
             self.initial_view = ViewRun(run, origin=scene.name)
@@ -80,13 +123,18 @@ class ViewerApp:
         for choice in self.scene_choices:
             if choice.source == source:
                 self.initial_label = choice.label
-        if not self.initial_label:
+        if self.initial_recording is not None:
+            self.initial_label = f"rec: {self.initial_recording}"
+        elif not self.initial_label:
             self.initial_label = self.scene_choices[0].label
 
     def start(self) -> None:
         """Prepare the initial run and start serving (non-blocking)."""
         if self.initial_view is None:
             self.prepare()
+        # viser retries the next port on any bind error and waits forever when none works: an
+        # address this machine does not have hung `collide view --host 10.255.255.1`.
+        check_listen_address(self.host)
         # viser prints its own banner; the CLI prints the URL itself.
         with contextlib.redirect_stdout(io.StringIO()):
             server = viser.ViserServer(host=self.host, port=self.port, label="collide view", verbose=False)

@@ -78,7 +78,7 @@ def check_upload(name: str, size: int, limit: int = MAX_UPLOAD_BYTES) -> None:
     if size == 0:
         raise UploadError(f"'{Path(name).name}' is empty")
     if size > limit:
-        raise UploadError(f"'{Path(name).name}' is {size / 1e6:.1f} MB, above the {limit / 1e6:.0f} MB limit")
+        raise UploadError(f"'{Path(name).name}' is {size / 2**20:.1f} MB, above the {limit / 2**20:.0f} MB limit")
 
 
 def staging_path(folder: Path) -> Path:

@@ -131,9 +131,11 @@ class CameraFit:
 
 
 def fit_camera(lo: np.ndarray, hi: np.ndarray, planar: bool, aspect: float = 1.2,
-               fov_deg: float = 35.0, tilt_deg: float = 28.0) -> CameraFit:
+               fov_deg: float = 35.0, tilt_deg: float = 28.0, fill: float = 0.9) -> CameraFit:
     """A camera that sees the box [lo, hi]: looking down on the plane (tilted a little so the
-    spheres read as 3D) for 1D and 2D scenes, from an oblique corner for 3D ones."""
+    spheres read as 3D) for 1D and 2D scenes, from an oblique corner for 3D ones; as close as
+    it can be with every corner of the box within `fill` of the view's half-width and
+    half-height (perspective enlarges the near side, so the corners are projected)."""
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     centre = 0.5 * (lo + hi)
     size = np.maximum(hi - lo, 1e-6)
@@ -141,17 +143,34 @@ def fit_camera(lo: np.ndarray, hi: np.ndarray, planar: bool, aspect: float = 1.2
     tan_v = math.tan(fov / 2)
     tan_h = tan_v * aspect
     if planar:
-        # Distance that fits the box's width (x) and depth (y, foreshortened by the tilt).
         tilt = math.radians(tilt_deg)
-        depth = size[1] * math.cos(tilt) + size[2] * math.sin(tilt)
-        dist = 1.15 * max(size[0] / (2 * tan_h), depth / (2 * tan_v))
-        offset = np.array([0.0, -math.sin(tilt), math.cos(tilt)]) * dist
-        return CameraFit(tuple(centre + offset), tuple(centre), (0.0, 0.0, 1.0), fov)
-    radius = 0.5 * float(np.linalg.norm(size))
-    dist = 1.2 * radius / math.sin(min(fov / 2, math.atan(tan_h)))
-    direction = np.array([0.55, -0.75, 0.45])
-    direction /= np.linalg.norm(direction)
-    return CameraFit(tuple(centre + direction * dist), tuple(centre), (0.0, 0.0, 1.0), fov)
+        direction = np.array([0.0, -math.sin(tilt), math.cos(tilt)])
+    else:
+        direction = np.array([0.55, -0.75, 0.45])
+        direction /= np.linalg.norm(direction)
+    up = np.array([0.0, 0.0, 1.0])
+    forward = -direction
+    right = np.cross(forward, up)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, forward)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    rel = corners - centre
+
+    def fits(dist: float) -> bool:
+        depth = dist - rel @ direction  # along the view direction, from the eye
+        if np.any(depth <= 1e-9 * dist):
+            return False
+        return bool(np.all(np.abs(rel @ right) / depth <= fill * tan_h) and
+                    np.all(np.abs(rel @ true_up) / depth <= fill * tan_v))
+
+    far = float(np.linalg.norm(size)) / math.sin(min(fov / 2, math.atan(tan_h))) + 1e-9
+    while not fits(far):
+        far *= 2
+    near = 0.0
+    for _ in range(50):  # bisection on the distance: fits() is monotonic in it
+        mid = 0.5 * (near + far)
+        near, far = (near, mid) if fits(mid) else (mid, far)
+    return CameraFit(tuple(centre + direction * far), tuple(centre), (0.0, 0.0, 1.0), fov)
 
 
 def nice_cell(extent: float, cells: int = 20) -> float:
@@ -176,3 +195,42 @@ def wall_box(point: np.ndarray, normal: np.ndarray, extent: float, thickness: fl
     wxyz = quat_from_to(np.array([1.0, 0.0, 0.0]), n)
     # In the plane the normal has no z: the box stays upright, `height` tall.
     return centre, wxyz, (thickness, extent, height if planar else extent)
+
+
+def quats_from_z(d: np.ndarray) -> np.ndarray:
+    """Quaternions (K, 4) wxyz turning +z onto each direction of d (K, 3) (any length > 0)."""
+    d = np.asarray(d, float)
+    n = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-300)
+    # q = (1 + z.n, z x n) normalised; z x n = (-n_y, n_x, 0).
+    q = np.stack((1.0 + n[:, 2], -n[:, 1], n[:, 0], np.zeros(len(n))), axis=-1)
+    opposite = q[:, 0] < 1e-9
+    q[opposite] = (0.0, 1.0, 0.0, 0.0)  # -z: half a turn about x
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def rotate(wxyz: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Vectors v (K, 3) (or one (3,)) turned by quaternions wxyz (K, 4)."""
+    w, xyz = wxyz[:, :1], wxyz[:, 1:]
+    v = np.broadcast_to(np.asarray(v, float), xyz.shape)
+    t = 2.0 * np.cross(xyz, v)
+    return v + w * t + np.cross(xyz, t)
+
+
+def cylinder(segments: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """A unit cylinder along +z from z = 0 to 1, radius 1, without caps: vertices, faces."""
+    a = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    ring = np.stack((np.cos(a), np.sin(a)), -1)
+    verts = np.concatenate((np.c_[ring, np.zeros(segments)], np.c_[ring, np.ones(segments)]))
+    i = np.arange(segments)
+    j = (i + 1) % segments
+    faces = np.concatenate((np.stack((i, j, segments + j), -1), np.stack((i, segments + j, segments + i), -1)))
+    return verts, faces.astype(np.uint32)
+
+
+def disc(segments: int = 24) -> tuple[np.ndarray, np.ndarray]:
+    """A unit disc in the xy-plane, facing +z: vertices, faces (a triangle fan)."""
+    a = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    verts = np.concatenate(([[0.0, 0.0, 0.0]], np.stack((np.cos(a), np.sin(a), np.zeros(segments)), -1)))
+    i = np.arange(segments)
+    faces = np.stack((np.zeros(segments, int), 1 + i, 1 + (i + 1) % segments), -1)
+    return verts, faces.astype(np.uint32)

@@ -1,24 +1,35 @@
-"""Which controls a scene needs, their safe ranges, and how their values become a scene.
+"""Which controls a scene needs, their ranges, how typed values are read, and how the values
+become a scene.
 
-Pure Python (no viser): the GUI layer builds one slider per `Param`, reads the values back in
-display units, and calls `build_scene`. Ranges are derived from the scene's own values, so a
-slider always starts at the scene's setting and spans a physically sensible neighbourhood.
-A value outside a range is clamped (`Param.clamp` says so); a combination the core refuses
-(overlap at the start, a contact too soft) surfaces as the core's one-line `SceneError` or
-`RunError`.
+Pure Python (no viser): the GUI layer builds one slider and one text box per `Param`, reads the
+values back in display units, and calls `build_scene`. Slider ranges are derived from the
+scene's own values, so a slider starts at the scene's setting and spans a physically sensible
+neighbourhood. A typed value is read exactly (`read_typed`: `1e-7` is 1e-7) or refused with a
+one-line reason, never changed into another number; a valid value outside the slider's range
+widens the range. A combination the core refuses (overlap at the start, a contact too soft)
+surfaces as the core's one-line `SceneError` or `RunError`.
+
+Contact parameters come from one table (`CONTACT_PARAMS`), each with the condition under which
+the scene uses it: a contact law parameter such as `contact.restitution` is one more row.
 """
 
 from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 
 from collide.scene import INTEGRATORS, Scene, SceneError, parse_scene, set_path
 
 DT_CHOICES = tuple(m * 10.0**e for e in range(-8, -2) for m in (1.0, 2.0, 5.0))
 TOL_CHOICES = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
 AUTO = "auto"
+MAX_BALLS = 10  # "more balls" stops here: beyond two bodies each step uses the slower numpy path
+
+
+class TypedValueError(ValueError):
+    """A typed value that cannot be used as typed (not a number, not finite, not allowed)."""
 
 
 @dataclass(frozen=True)
@@ -27,6 +38,7 @@ class Param:
 
     `key` is the scene key it sets: `contact.k`, `body.ball1.mass`, or a vector component
     `body.ball1.velocity.y` (`component` is then 0, 1 or 2 and `key` names the vector).
+    [lo, hi] is the slider's range; `positive` / `nonneg` what the scene accepts at all.
     """
 
     key: str
@@ -39,27 +51,73 @@ class Param:
     step: float
     value: float
     component: int | None = None
-    slider: bool = True
     hint: str = ""
+    positive: bool = False
+    nonneg: bool = False
 
     @property
     def ident(self) -> str:
         """Unique name of the control (the key, with the component letter for vectors)."""
         return self.key if self.component is None else f"{self.key}.{'xyz'[self.component]}"
 
-    def clamp(self, display: float) -> tuple[float, str | None]:
-        """The value inside [lo, hi] and a message when it had to be moved (or was not a number)."""
-        try:
-            x = float(display)
-        except (TypeError, ValueError):
-            return self.value, f"{self.label}: not a number; reset to {self.value:g} {self.unit}".strip()
+    @property
+    def title(self) -> str:
+        """The label with its unit, as shown beside the control."""
+        return f"{self.label} ({self.unit})" if self.unit else self.label
+
+    def problem(self, x: float) -> str | None:
+        """Why the scene cannot take display value x, or None."""
         if not math.isfinite(x):
-            return self.value, f"{self.label}: not finite; reset to {self.value:g} {self.unit}".strip()
-        if x < self.lo or x > self.hi:
-            clamped = min(max(x, self.lo), self.hi)
-            return clamped, (f"{self.label} = {x:g} is outside the safe range "
-                             f"[{self.lo:g}, {self.hi:g}] {self.unit}; clamped to {clamped:g}").strip()
-        return x, None
+            return "must be finite"
+        if self.positive and x <= 0:
+            return "must be positive"
+        if self.nonneg and x < 0:
+            return "must not be negative"
+        return None
+
+    def widened(self, x: float) -> Param:
+        """This control with its slider range grown to include x (a typed value)."""
+        if self.lo <= x <= self.hi:
+            return self
+        if self.positive and x > 0:
+            lo, hi = min(self.lo, x / 10), max(self.hi, x * 10)
+        else:
+            span = max(self.hi - self.lo, abs(x))
+            lo, hi = min(self.lo, x - 0.25 * span), max(self.hi, x + 0.25 * span)
+            if self.nonneg:
+                lo = max(lo, 0.0)
+        lo, hi, step = _range(x, lo, hi, max(round((self.hi - self.lo) / self.step), 100))
+        return replace(self, lo=lo, hi=hi, step=step)
+
+
+def read_typed(text: str, what: str) -> float:
+    """A number typed by the user, read exactly as typed: plain or scientific notation
+    ('0.02', '-3', '1e-7', '2.5E9'). Anything else raises `TypedValueError` naming `what`;
+    nothing is ever rounded, clamped or reinterpreted."""
+    cleaned = text.strip().replace("\u2212", "-")  # a typographic minus is still a minus
+    if not cleaned:
+        raise TypedValueError(f"{what}: empty; not applied")
+    if "," in cleaned:
+        raise TypedValueError(f"{what} = '{text.strip()}': use a point for decimals, not a comma; not applied")
+    if "_" in cleaned:
+        raise TypedValueError(f"{what} = '{text.strip()}' is not a plain number; not applied")
+    try:
+        x = float(cleaned)
+    except ValueError:
+        raise TypedValueError(f"{what} = '{text.strip()}' is not a number (write e.g. 0.02 or 1e-7); "
+                              "not applied") from None
+    if not math.isfinite(x):
+        raise TypedValueError(f"{what} = '{text.strip()}' is not finite; not applied")
+    return x
+
+
+def format_value(x: float) -> str:
+    """A value as a text box shows it: short, and read back to the same float."""
+    for digits in (6, 9, 12, 17):
+        text = f"{x:.{digits}g}"
+        if float(text) == x:
+            return text
+    return repr(x)
 
 
 @dataclass(frozen=True)
@@ -98,6 +156,9 @@ class Controls:
     def defaults(self) -> dict[str, float]:
         return {p.ident: p.value for p in self.params}
 
+    def replace_param(self, param: Param) -> None:
+        self.params = [param if p.ident == param.ident else p for p in self.params]
+
 
 def _nice_step(span: float, divisions: int = 1000) -> float:
     """A round step (1, 2 or 5 times a power of ten) near span / divisions."""
@@ -109,11 +170,6 @@ def _nice_step(span: float, divisions: int = 1000) -> float:
         if m * 10.0**exp >= raw:
             return m * 10.0**exp
     return 10.0 ** (exp + 1)
-
-
-def _snap(x: float, step: float) -> float:
-    """x rounded to a multiple of step (keeps slider ends on the step grid)."""
-    return round(round(x / step) * step, 12)
 
 
 def _range(value: float, lo: float, hi: float, divisions: int = 1000) -> tuple[float, float, float]:
@@ -133,9 +189,43 @@ def length_unit(scene: Scene) -> tuple[str, float]:
     return ("mm", 1e3) if extent < 2.0 else ("m", 1.0)
 
 
+@dataclass(frozen=True)
+class ContactParam:
+    """A row of the contact table: which `[contact]` key, how it is shown, when it applies,
+    and its slider range from the scene's value."""
+
+    name: str
+    label: str
+    unit: str
+    applies: Callable[[Scene], bool]
+    span: Callable[[float], tuple[float, float, float]]
+    hint: str
+    positive: bool = False
+    nonneg: bool = False
+
+
+def _k_span(k: float) -> tuple[float, float, float]:
+    return _range(k, k / 10, k * 10)
+
+
+CONTACT_PARAMS: tuple[ContactParam, ...] = (
+    ContactParam("k", "k", "N/m", lambda s: True, _k_span,
+                 "each sphere's spring constant (the report measured 1500 +- 30 N/m)", positive=True),
+    ContactParam("mu", "mu", "", lambda s: s.dim > 1, lambda x: (0.0, max(2.0, 2 * x), 0.01),
+                 "Coulomb friction coefficient", nonneg=True),
+    ContactParam("eps", "eps", "m/s", lambda s: s.dim > 1, lambda x: (0.0, max(0.1, 10 * x), 1e-7),
+                 "friction dead band: slip below it feels no friction", nonneg=True),
+    # The elasticity slider, once the contact laws land (DESIGN section 9): shown for any scene
+    # whose contact has a restitution coefficient.
+    ContactParam("restitution", "restitution", "", lambda s: hasattr(s.contact, "restitution"),
+                 lambda x: (0.01, 1.0, 0.01), "coefficient of restitution: 1 elastic, smaller loses energy",
+                 positive=True),
+)
+
+
 def scene_controls(scene: Scene) -> Controls:
     """The controls a scene uses: per body mass, radius, position, velocity (and spin where
-    bodies can rotate); contact k (and mu, eps where friction can act); gravity if set."""
+    bodies can rotate); the contact table's rows that apply; gravity if set."""
     params: list[Param] = []
     lunit, lscale = length_unit(scene)
     dim = scene.dim
@@ -150,10 +240,10 @@ def scene_controls(scene: Scene) -> Controls:
         munit, mscale = ("g", 1e3) if body.mass < 1.0 else ("kg", 1.0)
         m = body.mass * mscale
         params.append(Param(f"{base}.mass", "mass", body.name, munit, mscale,
-                            *_range(m, m / 10, m * 10), value=m))
+                            *_range(m, m / 10, m * 10), value=m, positive=True))
         r = body.radius * lscale
         params.append(Param(f"{base}.radius", "radius", body.name, lunit, lscale,
-                            *_range(r, r / 4, r * 3), value=r))
+                            *_range(r, r / 4, r * 3), value=r, positive=True))
         for c in range(dim):
             p = body.position[c] * lscale
             # Along the line of approach the bodies travel the scene's width; across it, a few
@@ -178,20 +268,18 @@ def scene_controls(scene: Scene) -> Controls:
                 lo, hi, step = _range(body.spin[c], -w_lim, w_lim)
                 params.append(Param(f"{base}.spin", f"spin {'xyz'[c]}", body.name, "rad/s", 1.0,
                                     lo, hi, step, body.spin[c], component=c))
-    contact = scene.contact
-    k = contact.k
-    params.append(Param("contact.k", "k", "contact", "N/m", 1.0, *_range(k, k / 10, k * 10), value=k,
-                        hint="each sphere's spring constant (the report measured 1500 +- 30 N/m)"))
-    if dim > 1:
-        params.append(Param("contact.mu", "mu", "contact", "", 1.0, 0.0, 2.0, 0.01, contact.mu,
-                            hint="Coulomb friction coefficient"))
-        params.append(Param("contact.eps", "eps", "contact", "m/s", 1.0, 0.0, 0.1, 1e-7, contact.eps,
-                            slider=False, hint="friction dead band: slip below it feels no friction"))
+    for row in CONTACT_PARAMS:
+        if not row.applies(scene):
+            continue
+        x = float(getattr(scene.contact, row.name))
+        lo, hi, step = row.span(x)
+        params.append(Param(f"contact.{row.name}", row.label, "contact", row.unit, 1.0, lo, hi, step, x,
+                            hint=row.hint, positive=row.positive, nonneg=row.nonneg))
     if scene.gravity is not None:
         for c in range(dim):
             g = scene.gravity[c]
             params.append(Param("gravity", f"gravity {'xyz'[c]}" if dim > 1 else "gravity", "contact",
-                                "m/s^2", 1.0, -30.0, 30.0, 0.01, g, component=c))
+                                "m/s²", 1.0, min(-30.0, g), max(30.0, g), 0.01, g, component=c))
     dt_choices = [AUTO] + [format_dt(d) for d in DT_CHOICES]
     if scene.dt != AUTO and format_dt(float(scene.dt)) not in dt_choices:
         dt_choices.append(format_dt(float(scene.dt)))
@@ -229,20 +317,20 @@ def check_settings(integrator: str, dt: float | str, tol: float) -> Settings:
     return Settings(integrator, dt, tol)
 
 
-def build_scene(controls: Controls, values: dict[str, float], settings: Settings) -> tuple[Scene, list[str]]:
-    """The scene with the controls' values (display units) applied; clamps out-of-range values.
+def build_scene(controls: Controls, values: dict[str, float], settings: Settings) -> Scene:
+    """The scene with the controls' values (display units) applied, ready to view.
 
-    Returns the scene and the clamping messages. Raises `SceneError` for combinations the
-    core refuses (e.g. spheres overlapping at the start).
+    Raises `SceneError` for a value the scene cannot take or a combination the core refuses
+    (e.g. spheres overlapping at the start), naming the control.
     """
     raw = copy.deepcopy(controls.scene.source)
-    notes: list[str] = []
     vectors: dict[str, list[float]] = {}
     for param in controls.params:
-        display = values.get(param.ident, param.value)
-        display, note = param.clamp(display)
-        if note:
-            notes.append(f"{param.group} {note}" if param.group != "contact" else note)
+        display = float(values.get(param.ident, param.value))
+        problem = param.problem(display)
+        if problem:
+            where = f"{param.group} {param.title}" if param.group != "contact" else param.title
+            raise SceneError(f"{where} = {display:g}: {problem}")
         si = display / param.scale
         if param.component is None:
             set_path(raw, param.key, si)
@@ -253,7 +341,7 @@ def build_scene(controls: Controls, values: dict[str, float], settings: Settings
     raw["integrator"] = settings.integrator
     raw["dt"] = settings.dt
     raw["tol"] = settings.tol
-    return parse_scene(raw, controls.scene.name), notes
+    return for_viewing(parse_scene(raw, controls.scene.name))
 
 
 def values_of(scene: Scene, controls: Controls) -> dict[str, float]:
@@ -272,3 +360,100 @@ def values_of(scene: Scene, controls: Controls) -> dict[str, float]:
             value = value[param.component or 0]
         out[param.ident] = float(value) * param.scale
     return out
+
+
+# ---------------------------------------------------------------------------------------------
+# What the viewer runs: the scene with a tail long enough to see the outcome
+
+
+def approach_time(scene: Scene) -> float | None:
+    """Time until the first contact begins, from the start state in straight-line motion (an
+    estimate: gravity is left out); None when nothing is heading for a contact."""
+    best = math.inf
+    bodies = scene.bodies
+    for i, a in enumerate(bodies):
+        for b in bodies[i + 1:]:
+            d = [q - p for p, q in zip(a.position, b.position)]
+            u = [q - p for p, q in zip(a.velocity, b.velocity)]
+            reach = a.radius + b.radius
+            aa = sum(x * x for x in u)
+            bb = 2 * sum(x * y for x, y in zip(d, u))
+            cc = sum(x * x for x in d) - reach * reach
+            disc = bb * bb - 4 * aa * cc
+            if aa > 0 and bb < 0 and disc >= 0:
+                best = min(best, max(0.0, (-bb - math.sqrt(disc)) / (2 * aa)))
+        for wall in scene.walls:
+            height = sum((p - q) * n for p, q, n in zip(a.position, wall.point, wall.normal)) - a.radius
+            rate = sum(v * n for v, n in zip(a.velocity, wall.normal))
+            if rate < 0:
+                best = min(best, max(0.0, height / -rate))
+    return best if math.isfinite(best) else None
+
+
+def for_viewing(scene: Scene) -> Scene:
+    """The scene as the viewer runs it: when it sets neither `duration` nor `tail`, the run goes
+    on after the last separation for as long as the bodies took to meet, so the outcome (the
+    textbook's 37 degree split) is seen, not cut off a few milliseconds after the contact.
+    Free flight is exact and not stepped, so the longer tail costs nothing."""
+    if scene.duration is not None or scene.tail is not None:
+        return scene
+    t = approach_time(scene)
+    if t is None or t <= 0:
+        return scene
+    raw = copy.deepcopy(scene.source)
+    raw["tail"] = t
+    return parse_scene(raw, scene.name)
+
+
+# ---------------------------------------------------------------------------------------------
+# More balls, fewer balls (2D scenes, as in PhET's Collision Lab)
+
+
+def _free_name(scene: Scene) -> str:
+    names = {b.name for b in scene.bodies}
+    n = len(scene.bodies) + 1
+    while f"ball{n}" in names:
+        n += 1
+    return f"ball{n}"
+
+
+def add_ball(scene: Scene) -> Scene:
+    """The scene with one more ball like the last one, placed clear of the others behind the
+    leftmost ball and sent towards the others. Raises SceneError when it cannot be added."""
+    if scene.dim != 2:
+        raise SceneError("more balls: only for 2D scenes")
+    if len(scene.bodies) >= MAX_BALLS:
+        raise SceneError(f"more balls: at most {MAX_BALLS} here (a bigger scene goes in a .toml file)")
+    raw = copy.deepcopy(scene.source)
+    template = scene.bodies[-1]
+    r = template.radius
+    left = min(scene.bodies, key=lambda b: b.position[0] - b.radius)
+    speed = max([math.hypot(*b.velocity) for b in scene.bodies] + [0.0]) or 1.0
+    n = len(scene.bodies)
+    # Staggered across the line of approach, so a new ball hits at an angle, not head-on.
+    offset = (0.6 if n % 2 else -0.6) * r
+    x = left.position[0] - left.radius - 3 * r
+    y = left.position[1] + offset
+    body = {"name": _free_name(scene), "mass": template.mass, "radius": r, "position": [x, y],
+            "velocity": [speed, 0.0]}
+    if template.spin and scene.has_spin:
+        body["spin"] = 0.0
+    raw.setdefault("body", []).append(body)
+    for _ in range(20):
+        try:
+            return parse_scene(raw, scene.name)
+        except SceneError as exc:
+            if "overlaps" not in str(exc):
+                raise
+            body["position"] = [body["position"][0] - 2 * r, body["position"][1]]
+    raise SceneError("more balls: no free place found for another ball")
+
+
+def remove_ball(scene: Scene) -> Scene:
+    """The scene without its last ball (at least two stay)."""
+    if len(scene.bodies) <= 2:
+        raise SceneError("fewer balls: a collision needs at least two")
+    raw = copy.deepcopy(scene.source)
+    name = scene.bodies[-1].name
+    raw["body"] = [b for b in raw["body"] if b.get("name", "") != name]
+    return parse_scene(raw, scene.name)

@@ -23,6 +23,9 @@ from viewer.geometry import embed3, orientation_wxyz
 
 MAX_PLOT_POINTS = 400
 MAX_PATH_POINTS = 400
+ROUND_OFF = 1e-12  # relative: overlaps and spreads below this are float64 round-off, not physics
+FLAT = 1e-9  # relative spread below which a conserved line is drawn flat (round-off accumulates)
+MAX_COMPRESSION_LINES = 6
 
 
 @dataclass
@@ -42,22 +45,63 @@ class ContactFrame:
 
 
 @dataclass
+class Links:
+    """Active contacts as arrays (for many bodies): body i (K,), the other body j (K,; -1 for a
+    wall), the contact point (K, 3) m and the normal force's magnitude (K,) N."""
+
+    i: np.ndarray
+    j: np.ndarray
+    point: np.ndarray
+    force: np.ndarray
+
+    @staticmethod
+    def empty() -> Links:
+        return Links(np.zeros(0, int), np.zeros(0, int), np.zeros((0, 3)), np.zeros(0))
+
+    def counts(self, n: int) -> np.ndarray:
+        """Active contacts per body (n,)."""
+        both = np.concatenate((self.i, self.j[self.j >= 0]))
+        return np.bincount(both, minlength=n)[:n]
+
+
+@dataclass
 class Frame:
-    """The scene at time t: positions (N, 3) m, orientations (N, 4) wxyz, active contacts."""
+    """The scene at time t: positions (N, 3) m, orientations (N, 4) wxyz, velocities (N, 3)
+    m/s, active contacts, and the centre of mass (3,) m."""
 
     t: float
     positions: np.ndarray
     wxyz: np.ndarray
     contacts: list[ContactFrame]
+    velocities: np.ndarray | None = None
+    com: np.ndarray | None = None
+    links: Links | None = None
+
+    def contact_links(self) -> Links:
+        """The contacts as `Links` (built from `contacts` when not given)."""
+        if self.links is not None:
+            return self.links
+        if not self.contacts:
+            return Links.empty()
+        return Links(np.array([c.i for c in self.contacts]),
+                     np.array([-1 if c.j is None else c.j for c in self.contacts]),
+                     np.array([c.point for c in self.contacts]),
+                     np.array([float(np.linalg.norm(c.normal_force)) for c in self.contacts]))
 
 
 @dataclass
 class Series:
-    """A named plot: x = time (s), one y array per line, with units for the axis."""
+    """A named plot: x = time (s), one y array per line, with units for the axis.
+
+    `scale` is the quantity's natural size in its unit (the run's energy, sum m|v|, sum |s x m
+    v| + I|w|): the plot's axis is chosen from it, and `flat` names the lines that are constant
+    to round-off against it (drawn flat, not magnified into noise)."""
 
     title: str
     unit: str
     lines: dict[str, np.ndarray]
+    scale: float = 0.0
+    flat: tuple[str, ...] = ()
 
 
 @dataclass
@@ -107,6 +151,10 @@ class ViewRun:
         self.n_bodies = self.model.n_bodies
         self.names = list(self.model.body_names)
         self.radius = self.model.radius[0].astype(float)
+        self.mass = self.model.mass[0].astype(float)
+        self.spin_dim = self.model.spin_dim
+        self.friction = bool(self.model.friction)
+        self.n_walls = self.model.n_walls
         t = self.traj.t[:, 0]
         self.t0, self.t1 = float(t[0]), float(t[-1])
         self.times = plot_times(self.traj)
@@ -115,19 +163,43 @@ class ViewRun:
         self.plots = self._make_plots(states)
         path_t = _subsample(self.times, MAX_PATH_POINTS)
         self.path_times = path_t
-        self.paths = embed3(self.sample(path_t).s[:, 0]).transpose(1, 0, 2)
+        path_s = embed3(self.sample(path_t).s[:, 0])
+        self.paths = path_s.transpose(1, 0, 2)
+        self.com_path = (self.mass[None, :, None] * path_s).sum(axis=1) / self.mass.sum()
+        self.walls = [(embed3(np.asarray(w.point, float)), embed3(np.asarray(w.normal, float)))
+                      for w in self.scene.walls]
+        speed = np.linalg.norm(states.v[:, 0], axis=-1)
+        self.max_speed = float(np.max(speed, initial=0.0))
+        self.max_momentum = float(np.max(speed * self.mass, initial=0.0))
+        energy = 0.5 * self.mass * speed**2
+        if states.w.shape[-1]:
+            energy = energy + 0.5 * self.model.inertia[0] * np.sum(states.w[:, 0] ** 2, axis=-1)
+        self.max_body_energy = float(np.max(energy, initial=0.0))
         res = dg.residuals(result)
         self.residuals = {"energy": float(res.energy[0]), "momentum": float(res.momentum[0]),
                           "angular_momentum": float(res.angular_momentum[0])}
         series = dg.contact_series(self.model, self.traj, self.times, states)
         self.max_normal_force = float(np.max(np.linalg.norm(series.normal_force, axis=-1), initial=0.0))
+        touching = series.overlap[:, 0] > ROUND_OFF * float(self.radius.max())  # (T, C)
+        counts = np.zeros((len(self.times), self.n_bodies))
+        for c, (i, j) in enumerate(series.pairs):
+            counts[:, i] += touching[:, c]
+            if j >= 0:
+                counts[:, j] += touching[:, c]
+        self.max_contacts = int(counts.max(initial=0))
+        self.max_links = int(touching.sum(axis=1).max(initial=0))  # contacts at once, at most
         records = self.traj.records
         if self.model.friction and len(records):
-            force = records[:, kn.R_FX:kn.R_FX + 3]
+            force = records[:, kn.R_FX:kn.R_FX + self.dim]
             self.max_friction_force = float(np.max(np.linalg.norm(force, axis=-1), initial=0.0))
         else:
             self.max_friction_force = 0.0
         self.contact_windows = self._contact_windows()
+        # Every contact step's start and end: what "one contact step" moves between.
+        on = ~self.traj.free[1:, 0] & (t[1:] > t[:-1])
+        self.step_times = np.union1d(t[:-1][on], t[1:][on])
+        self.before = self.sample(np.array([self.t0]))
+        self.after = self.sample(np.array([self.t1]))
 
     # ------------------------------------------------------------------------------------------
     # Sampling
@@ -146,18 +218,39 @@ class ViewRun:
     def in_contact(self, t: float) -> bool:
         return any(a <= t <= b for a, b in self.contact_windows)
 
+    def next_step(self, t: float, direction: int) -> float:
+        """The next (direction +1) or previous (-1) contact step's time from t: within a contact
+        its steps one by one, outside it the nearest step of the next (or previous) contact."""
+        times = self.step_times
+        if not len(times):
+            return self.t1 if direction > 0 else self.t0
+        tol = 1e-9 * max(self.duration, 1e-300)
+        if direction > 0:
+            later = times[times > t + tol]
+            return float(later[0]) if len(later) else self.t1
+        earlier = times[times < t - tol]
+        return float(earlier[-1]) if len(earlier) else self.t0
+
+    def body_values(self, t: float) -> dict[str, np.ndarray]:
+        """Per body at time t: velocity (N, D) m/s, speed (N,), momentum (N, D), kinetic energy
+        (N,) J (translational), spin (N, K) rad/s and rotational energy (N,) J."""
+        st = self.sample(np.array([self.clamp_time(t)]))
+        return body_values_arrays(self.mass, self.model.inertia[0], st.v[0, 0], st.w[0, 0])
+
     def frame(self, t: float) -> Frame:
         """Bodies and active contacts at time t (clamped to the run)."""
         t = self.clamp_time(t)
         times = np.array([t])
         st = self.sample(times)
         positions = embed3(st.s[0, 0])
+        velocities = embed3(st.v[0, 0])
         wxyz = orientation_wxyz(st.q[0, 0])
         series = dg.contact_series(self.model, self.traj, times, st)
         contacts = []
         for c, name in enumerate(series.names):
             overlap = float(series.overlap[0, 0, c])
-            if overlap <= 0.0:
+            # Spheres that touch only to round-off (an overlap of 1e-17 m) are not in contact.
+            if overlap <= ROUND_OFF * float(self.radius.max()):
                 continue
             i, j = (int(x) for x in series.pairs[c])
             if j >= 0:
@@ -173,7 +266,8 @@ class ViewRun:
             contacts.append(ContactFrame(name, i, j, embed3(series.point[0, 0, c]), normal,
                                          embed3(series.normal_force[0, 0, c]), friction, overlap,
                                          (float(comp[0]), float(comp[1]))))
-        return Frame(t, positions, wxyz, contacts)
+        com = self.mass @ positions / self.mass.sum()
+        return Frame(t, positions, wxyz, contacts, velocities, com)
 
     # ------------------------------------------------------------------------------------------
     # Plots
@@ -191,8 +285,11 @@ class ViewRun:
         if con.dissipated is not None:
             energy["dissipated"] = con.dissipated[:, 0]
             energy["total + dissipated"] = con.balance[:, 0]
+        mass = self.mass[None, :, None]
+        v, s = states.v[:, 0], states.s[:, 0]
         axes = "xyz"[: self.dim]
         momentum = {f"p{a}": con.momentum[:, 0, k] for k, a in enumerate(axes)}
+        p_scale = float(np.max(np.sum(mass[..., 0] * np.linalg.norm(v, axis=-1), axis=-1), initial=0.0))
         angular = None
         if con.angular_momentum is not None:
             # Inside a contact step, straight between the steps' own values: interpolated spins
@@ -205,14 +302,25 @@ class ViewRun:
             for c in range(values.shape[-1]):
                 values[inside, c] = np.interp(self.times[inside], t, rows[:, c])
             comps = ("z",) if values.shape[-1] == 1 else ("x", "y", "z")
-            angular = Series("angular momentum", "kg m^2/s", {f"L{a}": values[:, c] for c, a in enumerate(comps)})
+            # Its natural size: sum |s x m v| + I |w| (the residual's scale), largest over the run.
+            arm = np.linalg.norm(np.atleast_3d(_cross(s, mass * v)), axis=-1).sum(axis=-1)
+            spin = states.w[:, 0]
+            if spin.shape[-1]:
+                arm = arm + np.sum(self.model.inertia[0] * np.linalg.norm(spin, axis=-1), axis=-1)
+            angular = _conserved_series("angular momentum", "kg m²/s",
+                                        {f"L{a}": values[:, c] for c, a in enumerate(comps)},
+                                        float(np.max(arm, initial=0.0)))
         compression = {}
         for c, name in enumerate(series.names):
             comp = series.compression[:, 0, c, 0]
-            if np.any(comp > 0):
+            if np.any(comp > ROUND_OFF * self.radius.max()):
                 compression[name] = comp * 1e3
-        plots = PlotData(self.times, Series("energy", "J", energy), Series("momentum", "kg m/s", momentum),
-                         angular, Series("compression", "mm", compression) if compression else None)
+        e_scale = float(np.max(np.abs(energy["total"]), initial=0.0))
+        energy_series = _conserved_series("energy", "J", energy, e_scale)
+        plots = PlotData(self.times, energy_series, _conserved_series("momentum", "kg m/s", momentum, p_scale),
+                         angular, Series("compression", "mm", _top_lines(compression),
+                                         float(max((v.max() for v in compression.values()), default=0.0)))
+                         if compression else None)
         plots.all = [s for s in (plots.energy, plots.momentum, plots.angular_momentum, plots.compression)
                      if s is not None]
         return plots
@@ -238,6 +346,10 @@ class ViewRun:
     @property
     def duration(self) -> float:
         return self.t1 - self.t0
+
+    @property
+    def name(self) -> str:
+        return self.scene.name
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Box around every body's path, padded by its radius (m, 3D)."""
@@ -281,6 +393,51 @@ class ViewRun:
         else:
             lines.append("contact: none")
         return lines
+
+
+def body_values_arrays(mass: np.ndarray, inertia: np.ndarray, v: np.ndarray, w: np.ndarray) -> dict[str, np.ndarray]:
+    """`ViewRun.body_values` from masses (N,), moments of inertia (N,), velocities (N, D) and
+    spins (N, K)."""
+    speed = np.linalg.norm(v, axis=-1)
+    out = {"velocity": v, "speed": speed, "momentum": mass[:, None] * v, "kinetic": 0.5 * mass * speed**2,
+           "spin": w}
+    out["rotational"] = 0.5 * inertia * np.sum(w * w, axis=-1) if w.shape[-1] else np.zeros(len(mass))
+    return out
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b for 1D (zero), 2D (z component, shape (..., 1)) and 3D vectors."""
+    if a.shape[-1] == 1:
+        return np.zeros((*a.shape[:-1], 1))
+    if a.shape[-1] == 2:
+        return (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0])[..., None]
+    return np.cross(a, b)
+
+
+def _conserved_series(title: str, unit: str, lines: dict[str, np.ndarray], scale: float) -> Series:
+    """A series whose lines that are constant to round-off (spread below FLAT of `scale`) are
+    drawn at their mean: a spread of 1e-21 on a quantity of size 1e-3 is not a signal."""
+    flat = []
+    out = {}
+    for name, y in lines.items():
+        if scale > 0 and np.all(np.isfinite(y)) and np.ptp(y) <= FLAT * scale:
+            level = float(np.mean(y))
+            out[name] = np.full_like(y, 0.0 if abs(level) <= ROUND_OFF * scale else level)
+            flat.append(name)
+        else:
+            out[name] = y
+    return Series(title, unit, out, scale, tuple(flat))
+
+
+def _top_lines(lines: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """At most MAX_COMPRESSION_LINES lines, the largest ones; the rest folded into one
+    'others (max)' line (a pile has hundreds of contacts)."""
+    if len(lines) <= MAX_COMPRESSION_LINES:
+        return lines
+    order = sorted(lines, key=lambda k: -float(lines[k].max()))
+    keep = {k: lines[k] for k in order[: MAX_COMPRESSION_LINES - 1]}
+    keep[f"{len(order) - len(keep)} others (max)"] = np.max([lines[k] for k in order[len(keep):]], axis=0)
+    return keep
 
 
 def format_residual(x: float) -> str:

@@ -48,7 +48,11 @@ STICK_SCALE = 1e-3  # s: turns a friction force into a slip change, to compare w
 TOUCH_TOL = 1e-12  # relative overlap below which spheres count as just touching
 FIXED_POINT = 12  # most iterations of an implicit kick
 WINDOW_STEPS = 64  # a window spans this many steps of the stiffest engaged contact
+ISLAND_SLACK = 4  # ... unless its islands grow past this many times the largest touching cluster
 STALL_LIMIT = 64
+TINY_LIMIT = 20000  # steps in a row under a thousandth of the contact's step
+LATE = 2  # Q_ENG of a contact engaged from a step's start after the step found it pressing
+MAX_RETRIES = 24  # a window redone this often, each 4x shorter, has met a contact it cannot foresee
 NO_CONTACT_TAIL = 1.0  # s: how long a run with no contact at all lasts
 EPS64 = 2.220446049250313e-16
 
@@ -76,8 +80,8 @@ E_V0, E_R0, E_V1, E_R1 = 0, 1, 2, 3
 # Settings: flags (int) and figures (float).
 FL_SPIN, FL_FRICTION, FL_SEED, FL_PLANAR, FL_RECORD, FL_AUTO, FL_MAXSTEPS, FL_DIM = range(8)
 NFL = 8
-FP_DT, FP_OMEGA_H, FP_TEND, FP_TAIL, FP_SCALE = range(5)
-NFP = 5
+FP_DT, FP_OMEGA_H, FP_TEND, FP_TAIL, FP_SCALE, FP_SLOW = range(6)
+NFP = 6
 # Contact parameter tables: pairs (M, M, NP), walls (M, NP).
 TP_K, TP_MU, TP_EPS = range(3)
 # Records.
@@ -322,60 +326,119 @@ def set_basis(C, c):
 
 
 @jit
-def solve(A, b, m):
-    """Solve A[:m, :m] x = b[:m] in place (Gaussian elimination, partial pivoting); b holds x.
-    Returns False if A is singular."""
+def factor(A, piv, m):
+    """LU-factor A[:m, :m] in place with partial pivoting (row swaps in piv). False if singular."""
     for k in range(m):
         p = k
         for r in range(k + 1, m):
             if abs(A[r, k]) > abs(A[p, k]):
                 p = r
+        piv[k] = p
         if A[p, k] == 0.0:
             return False
         if p != k:
             for col in range(m):
                 A[k, col], A[p, col] = A[p, col], A[k, col]
-            b[k], b[p] = b[p], b[k]
         for r in range(k + 1, m):
-            f = A[r, k] / A[k, k]
+            A[r, k] /= A[k, k]
+            f = A[r, k]
             if f != 0.0:
-                for col in range(k, m):
+                for col in range(k + 1, m):
                     A[r, col] -= f * A[k, col]
-                b[r] -= f * b[k]
+    return True
+
+
+@jit
+def solve_factored(A, piv, b, m):
+    """Solve with the factors from `factor`; b holds the solution."""
+    for k in range(m):
+        p = piv[k]
+        if p != k:
+            b[k], b[p] = b[p], b[k]
+    for k in range(m):
+        s = b[k]
+        for col in range(k):
+            s -= A[k, col] * b[col]
+        b[k] = s
     for k in range(m - 1, -1, -1):
         s = b[k]
         for col in range(k + 1, m):
             s -= A[k, col] * b[col]
         b[k] = s / A[k, k]
-    return True
 
 
 @jit
-def hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed):
-    """Solve W f = b for the stuck contacts `stuck[:m]` (b in tangent coordinates, 2 per contact):
-    W's block (c, d) is the rate of change of c's slip per unit friction force at d. A single
-    contact's block is K times the identity; contacts that share a body couple. Adds the forces
-    f (as accelerations) to X_UA/X_UL; they are also left in b. Returns False if singular."""
+def _share(CI, c, a):
+    """+1 if body a is contact c's first body, -1 if its second, 0 if neither."""
+    if CI[c, CI_I] == a:
+        return 1.0
+    if CI[c, CI_J] == a:
+        return -1.0
+    return 0.0
+
+
+@jit
+def couple_block(X, C, CI, c, d, a, spin, A, row, col):
+    """Add to A[row:row+2, col:col+2] what a friction force along d's tangents does to c's slip
+    rate along c's tangents through their shared body a: a force f on it (sign s_d) moves it by
+    s_d f / m_a and turns it by l_d (n_d x f) / I_a; c's slip sees s_c times the first and
+    l_c (turn x n_c) of the second."""
+    sc, sd = _share(CI, c, a), _share(CI, d, a)
+    lc = C[c, C_LIS] if sc > 0 else C[c, C_LJS]
+    ld = C[d, C_LIF] if sd > 0 else C[d, C_LJF]
+    im, ii = X[a, X_IM], X[a, X_II]
+    ncx, ncy, ncz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+    ndx, ndy, ndz = C[d, C_N], C[d, C_N + 1], C[d, C_N + 2]
+    for beta in range(2):
+        ex, ey, ez = C[d, C_B + 3 * beta], C[d, C_B + 3 * beta + 1], C[d, C_B + 3 * beta + 2]
+        rx, ry, rz = sc * sd * im * ex, sc * sd * im * ey, sc * sd * im * ez
+        if spin:
+            k = lc * ii * ld
+            # (n_d x e) x n_c
+            tx, ty, tz = ndy * ez - ndz * ey, ndz * ex - ndx * ez, ndx * ey - ndy * ex
+            rx += k * (ty * ncz - tz * ncy)
+            ry += k * (tz * ncx - tx * ncz)
+            rz += k * (tx * ncy - ty * ncx)
+        for alpha in range(2):
+            A[row + alpha, col + beta] += (rx * C[c, C_B + 3 * alpha] + ry * C[c, C_B + 3 * alpha + 1]
+                                           + rz * C[c, C_B + 3 * alpha + 2])
+
+
+@jit
+def hold_matrix(X, C, CI, stuck, m, A, piv, spin):
+    """Build and factor W (2m x 2m) for the stuck contacts: block (c, d) is the rate of change of
+    c's slip per unit friction force at d; a contact's own block is K times the identity, and
+    contacts couple only through a body they share. False if singular."""
+    for r in range(2 * m):
+        for col in range(2 * m):
+            A[r, col] = 0.0
+    for p in range(m):
+        c = stuck[p]
+        for q in range(m):
+            d = stuck[q]
+            for side in range(2):
+                a = CI[d, CI_I] if side == 0 else CI[d, CI_J]
+                if a < 0 or _share(CI, c, a) == 0.0:
+                    continue
+                couple_block(X, C, CI, c, d, a, spin, A, 2 * p, 2 * q)
+    return factor(A, piv, 2 * m)
+
+
+@jit
+def hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, fresh):
+    """Solve W f = b for the stuck contacts `stuck[:m]` (b in tangent coordinates, 2 per contact;
+    see `hold_matrix`); with `fresh` W is built and factored here, else the factors in A from the
+    last call at this geometry and these modes are used. Adds the forces (as accelerations) to
+    X_UA/X_UL; they are also left in b. Returns False if W is singular."""
+    piv = stuck[stuck.shape[0] // 3:]  # `stuck` holds the stuck contacts, then W's row swaps
     if m == 1:
         k = response(X, C, CI, stuck[0], spin)
         b[0] /= k
         b[1] /= k
     else:
-        for col in range(2 * m):
-            d = stuck[col // 2]
-            e = C_B + 3 * (col % 2)
-            for a in range(na):
-                for x in range(3):
-                    X[a, X_UA + x] = 0.0
-                    X[a, X_UL + x] = 0.0
-            add_force(X, C, CI, d, C[d, e], C[d, e + 1], C[d, e + 2], X_UA, X_UL, spin)
-            for row in range(0, 2 * m, 2):
-                c = stuck[row // 2]
-                gx, gy, gz = slip_rate(X, C, CI, c, X_V, X_W, X_UA, X_UL, spin, seed, NO)
-                A[row, col] = gx * C[c, C_B] + gy * C[c, C_B + 1] + gz * C[c, C_B + 2]
-                A[row + 1, col] = gx * C[c, C_B + 3] + gy * C[c, C_B + 4] + gz * C[c, C_B + 5]
-        if not solve(A, b, 2 * m):
+        if fresh and not hold_matrix(X, C, CI, stuck, m, A, piv, spin):
             return False
+        solve_factored(A, piv, b, 2 * m)
     for a in range(na):
         for x in range(3):
             X[a, X_UA + x] = 0.0
@@ -419,12 +482,13 @@ def slide_direction(X, C, CI, c, vc, wc, spin, span):
 
 
 @jit
-def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span):
+def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh):
     """Friction forces (C_FF, on body i) of every contact at the velocities in columns (vc, wc),
     by mode, and their accelerations (X_F, X_L); X_A holds everything else's. Stuck contacts'
     slips stop changing: W f = -G, with G their slip rates under every other force. `span`: the
     velocities already hold the forces now in C_FF over that many seconds (see
-    `slide_direction`); 0 when they hold none."""
+    `slide_direction`); 0 when they hold none. `fresh`: the stuck contacts' matrix must be built
+    (a new geometry or new modes), else the last one is reused."""
     spin, seed = fl[FL_SPIN], fl[FL_SEED]
     for a in range(na):
         for d in range(3):
@@ -460,7 +524,7 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span):
         gx, gy, gz = slip_rate(X, C, CI, c, vc, wc, X_T, X_L, spin, seed, YES)
         b[2 * k] = -(gx * C[c, C_B] + gy * C[c, C_B + 1] + gz * C[c, C_B + 2])
         b[2 * k + 1] = -(gx * C[c, C_B + 3] + gy * C[c, C_B + 4] + gz * C[c, C_B + 5])
-    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed):
+    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, fresh):
         return False
     for k in range(m):
         c = stuck[k]
@@ -502,7 +566,8 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl):
                 X[a, X_W1 + d] = X[a, X_W + d]
         for it in range(FIXED_POINT):
             # The first pass sees no friction yet in V1; later ones take each contact's own back out.
-            if not friction(X, C, CI, na, nc, X_V1, X_W1, stuck, A, b, fl, h_end if it > 0 else 0.0):
+            if not friction(X, C, CI, na, nc, X_V1, X_W1, stuck, A, b, fl, h_end if it > 0 else 0.0,
+                            YES if it == 0 else NO):
                 return work, False
             change = 0.0
             size = 0.0
@@ -521,7 +586,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl):
             for d in range(3):
                 X[a, X_V + d] = X[a, X_V1 + d]
                 X[a, X_W + d] = X[a, X_W1 + d]
-    elif not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0):
+    elif not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES):
         return work, False
     if h_start != 0.0:
         for a in range(na):
@@ -564,7 +629,7 @@ def settle(X, C, CI, na, nc, stuck, A, b, fl):
         dx, dy, dz = hm * hx - sx, hm * hy - sy, hm * hz - sz
         b[2 * k] = dx * C[c, C_B] + dy * C[c, C_B + 1] + dz * C[c, C_B + 2]
         b[2 * k + 1] = dx * C[c, C_B + 3] + dy * C[c, C_B + 4] + dz * C[c, C_B + 5]
-    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed):
+    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, YES):
         return 0.0, False
     for a in range(na):
         for d in range(3):
@@ -661,7 +726,7 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale):
     slip, as the slip change they would make over STICK_SCALE (rates NaN: no closed form).
     Leaves the friction forces in C_FF. Returns False if the hold system is singular."""
     spin, seed = fl[FL_SPIN], fl[FL_SEED]
-    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0):
+    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES):
         return False
     for a in range(na):
         for d in range(3):
@@ -729,7 +794,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
         else:
             CI[c, CI_MODE] = BAND
     for _ in range(nc + 1):
-        if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0):
+        if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES):
             return 0.0, False
         changed = False
         for c in range(nc):
@@ -872,7 +937,9 @@ def engaged(Q, k, d, r, WP, grav):
         return True
     if d < -TOUCH_TOL:
         return False
-    if r > 0 or (Q[k, Q_ENG] > 0 and r == 0):
+    # A contact found pressing late (within a step that began with it touching) stays engaged
+    # while it touches, whatever its rate: otherwise it would be found late again, forever.
+    if r > 0 or (Q[k, Q_ENG] > 0 and r == 0) or Q[k, Q_ENG] == LATE:
         return True
     j = Q[k, Q_J]
     if j < 0 and r == 0:
@@ -924,7 +991,8 @@ def grow(buf, n):
     """`buf` with room for row n (doubled when full)."""
     if n < buf.shape[0]:
         return buf
-    out = np.empty((2 * buf.shape[0] + 16, buf.shape[1]))
+    # At least row n: a caller may ask for many rows at once (an island's new contacts).
+    out = np.empty((max(2 * buf.shape[0] + 16, n + 1), buf.shape[1]))
     out[:buf.shape[0]] = buf
     return out
 
@@ -933,7 +1001,7 @@ def grow(buf, n):
 def grow_int(buf, n):
     if n < buf.shape[0]:
         return buf
-    out = np.empty((2 * buf.shape[0] + 16, buf.shape[1]), np.int64)
+    out = np.empty((max(2 * buf.shape[0] + 16, n + 1), buf.shape[1]), np.int64)
     out[:buf.shape[0]] = buf
     return out
 
@@ -1370,12 +1438,14 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
     C = np.zeros((nq, NC))
     CI = np.zeros((nq, NCI), np.int64)
     E = np.zeros((2 * nq, 4))
-    stuck = np.zeros(nq, np.int64)
+    stuck = np.zeros(3 * nq, np.int64)
     m_cap = min(nq, 48)
     A = np.zeros((2 * m_cap, 2 * m_cap))
     b = np.zeros(2 * nq)
     t = T
     stalled = 0
+    tiny = 0
+    restarts = 0
     while t < W and ST[S_STATUS] == OK:
         n_eng = 0
         for k in range(nq):
@@ -1388,6 +1458,12 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             for k in range(nq):
                 tau = min(tau, touch_time(G, Q[k, Q_I], Q[k, Q_J], t, WP, grav))
             if t + tau >= W:
+                break
+            # A touch closer than the clock resolves, over and over, is a stall, not progress.
+            stalled = stalled + 1 if t + tau == t else 0
+            if stalled > STALL_LIMIT:
+                ST[S_STATUS] = STALL
+                FG[F_STATUS_T], FG[F_STATUS_A] = t, 2.0
                 break
             t += tau
             continue
@@ -1449,9 +1525,14 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 for a in range(na):
                     for d in range(13):
                         X[a, X_S + d] = X[a, X_S0 + d]
-                Q[late, Q_ENG] = 1
+                Q[late, Q_ENG] = LATE
                 changed = True
+                restarts += 1
+                if restarts > STALL_LIMIT:
+                    ST[S_STATUS] = STALL
+                    FG[F_STATUS_T], FG[F_STATUS_A] = t, 3.0
                 break
+            restarts = 0
             # After a step the turning limited, let the next ones grow back by doubling.
             grown = 2.0 * h if limited else (2.0 * grown if grown < dt else math.inf)
             if not ok:
@@ -1459,7 +1540,10 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 FG[F_STATUS_T] = t
                 break
             stalled = stalled + 1 if h == 0.0 else 0
-            if stalled > STALL_LIMIT:
+            # Steps a thousand times shorter than the contact's, on and on, are events piling up
+            # (a Zeno cascade of mode changes): refused, not ground through for hours.
+            tiny = tiny + 1 if h < 1e-3 * dt else 0
+            if stalled > STALL_LIMIT or tiny > TINY_LIMIT:
                 ST[S_STATUS] = STALL
                 FG[F_STATUS_T] = t
                 break
@@ -1562,13 +1646,18 @@ def engaged_now(G, P, V, n, WP, grav, dim):
 
 
 @jit
-def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair):
-    """The earliest contact start after t, looking `horizon` ahead (every pair if asked)."""
+def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow):
+    """The earliest contact start after t, looking `horizon` ahead (every pair if asked). Two
+    bodies closing at under `slow` (m/s) are taken as not approaching: what is left of a perfect
+    exchange of velocities, round-off, would otherwise meet again billions of seconds later."""
     best = math.inf
     if every_pair:
         for i in range(n):
             for j in range(i + 1, n):
-                best = min(best, touch_time(G, i, j, t, WP, grav))
+                dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
+                closing = -((V[j, 0] - V[i, 0]) * dx + (V[j, 1] - V[i, 1]) * dy + (V[j, 2] - V[i, 2]) * dz)
+                if closing > slow * math.sqrt(dx * dx + dy * dy + dz * dz):
+                    best = min(best, touch_time(G, i, j, t, WP, grav))
     else:
         g = math.sqrt(grav[0] ** 2 + grav[1] ** 2 + grav[2] ** 2)
         margin = np.empty(n)
@@ -1576,7 +1665,11 @@ def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair):
             margin[i] = math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2) * horizon + 0.5 * g * horizon ** 2
         pairs = near_pairs(P, G[:, G_R], margin, n, dim)
         for p in range(pairs.shape[0]):
-            best = min(best, touch_time(G, pairs[p, 0], pairs[p, 1], t, WP, grav))
+            i, j = pairs[p, 0], pairs[p, 1]
+            dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
+            closing = -((V[j, 0] - V[i, 0]) * dx + (V[j, 1] - V[i, 1]) * dy + (V[j, 2] - V[i, 2]) * dz)
+            if closing > slow * math.sqrt(dx * dx + dy * dy + dz * dz):
+                best = min(best, touch_time(G, i, j, t, WP, grav))
     for w in range(WP.shape[0]):
         for i in range(n):
             best = min(best, touch_time(G, i, -1 - w, t, WP, grav))
@@ -1691,6 +1784,17 @@ def tail_after(tail, IV, CNT):
 
 
 @jit
+def largest_set(parent, n):
+    size = np.zeros(n, np.int64)
+    big = 0
+    for i in range(n):
+        r = root_of(parent, i)
+        size[r] += 1
+        big = max(big, size[r])
+    return big
+
+
+@jit
 def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     """Advance every body to the run's end (see the README's engine notes): jump to the next
     contact start while nothing touches; otherwise a window of islands. Returns the buffers and
@@ -1716,7 +1820,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 search = 4.0 * G[0, G_R] / fastest if fastest > 0 else 1.0
             horizon = min(search, t_end - t)
             small = YES if n <= 64 else NO
-            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, small)
+            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, small, fp[FP_SLOW])
             if tau <= horizon or (small == YES and tau < math.inf):
                 t = min(t + tau, t_end)
                 search = 2.0 * tau if tau > 0 else search
@@ -1725,7 +1829,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 t = min(t + horizon, t_end)
                 search *= 2.0
                 continue
-            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, YES)
+            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, YES, fp[FP_SLOW])
             if tau < math.inf:
                 t += tau
                 continue
@@ -1752,12 +1856,23 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
         for i in range(n):
             if GI[i, GI_KNOT] >= 0:
                 saved_flags[i] = KN[GI[i, GI_KNOT], K_FREE]
+        # The largest cluster of touching bodies: islands much bigger than it mean the window
+        # is long enough for free bodies to chain up, and every step would cost the chain.
+        parent = np.arange(n)
+        for p in range(eng.shape[0]):
+            if eng[p, 1] >= 0:
+                join(parent, eng[p, 0], eng[p, 1])
+        touching = largest_set(parent, n)
+        retries = 0
         while True:
             cand = window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim)
             parent = np.arange(n)
             for k in range(cand.shape[0]):
                 if cand[k, 1] >= 0:
                     join(parent, cand[k, 0], cand[k, 1])
+            if largest_set(parent, n) > max(ISLAND_SLACK * touching, 16) and horizon > 4.0 * step_est:
+                horizon *= 0.5
+                continue
             # Bucket the candidates by island (counting sort on the island's root).
             count = np.zeros(n + 1, np.int64)
             for k in range(cand.shape[0]):
@@ -1788,6 +1903,11 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 break
             # A contact between islands: a speed bound failed. Redo the window, shorter and safer.
             ST[S_RETRIES] += 1
+            retries += 1
+            if retries > MAX_RETRIES:
+                ST[S_STATUS] = STALL
+                FG[F_STATUS_T], FG[F_STATUS_A] = t, 1.0
+                break
             for i in range(n):
                 for d in range(NG):
                     G[i, d] = saved_G[i, d]
@@ -2071,7 +2191,7 @@ def seed_run(G, tables, WP, grav, fl, fp):
                         KN[knot_of[i], K_AN + d] = grav[d]
         # Free flight: whole steps in closed form, up to the step in which a contact begins.
         positions_at(G, n, t, grav, P, V)
-        tau = next_contact(G, P, V, n, t, WP, grav, dim, math.inf, YES)
+        tau = next_contact(G, P, V, n, t, WP, grav, dim, math.inf, YES, fp[FP_SLOW])
         if tau == math.inf and t_end == math.inf:
             t_end = t + math.ceil(tail_after(fp[FP_TAIL], IV, CNT) / dt) * dt
         jump = min(math.floor(tau / dt) * dt if tau < math.inf else math.inf, t_end - t)

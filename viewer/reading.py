@@ -1,0 +1,37 @@
+"""Reading recordings the viewer did not write itself, without risking the server.
+
+A damaged `.rrd` can make rerun's reader panic inside its Rust code and abort the whole
+process (issue 14, item 3), or hang. `read_untrusted` reads through the core's
+`read_recording_safely` (a child process with a time and memory limit), so a crash or a hang
+costs that child only; the caller gets a `RecordingError` with one line that names the file as
+the user knows it (never a temporary path).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from collide.recording import RecordingError, read_recording_safely
+from collide.run import SceneRun
+
+TIMEOUT_S = 60.0
+MEMORY_MB = 6144  # address space of the child: rerun and numpy reserve much more than they use
+
+
+def read_untrusted(path: str | Path, *, name: str | None = None, timeout_s: float = TIMEOUT_S,
+                   memory_mb: int = MEMORY_MB) -> SceneRun:
+    """Read a recording in a child process. `name` is how the file is shown in messages
+    (default: its file name). Raises `RecordingError` (one line) for anything that goes wrong:
+    not a recording, damaged, a reader crash, a hang, too much memory."""
+    path = Path(path)
+    try:
+        return read_recording_safely(path, timeout_s=timeout_s, memory_mb=memory_mb)
+    except RecordingError as exc:
+        raise RecordingError(_rename(str(exc), path, name or path.name)) from None
+
+
+def _rename(text: str, path: Path, shown: str) -> str:
+    """The reader's message with the file named as the user knows it."""
+    for form in (str(path.resolve()), str(path), path.name):
+        text = text.replace(form, shown)
+    return " ".join(text.split())
