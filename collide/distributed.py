@@ -24,6 +24,7 @@ import logging
 import os
 import re
 import uuid
+from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -244,37 +245,48 @@ class DaskExecutor:
             return 2
 
     def run(self, chunks: list[list[RunSpec]], settings: ChunkSettings) -> Iterator[tuple[int, ChunkResult]]:
-        from distributed import as_completed
+        """Submit chunks as slots free up; yield each as it finishes.
+
+        When workers die, Dask blames every task they held, the innocent ones queued beside the
+        culprit too. So a chunk whose workers died (KilledWorker) is run again alone, once the
+        cluster has drained: only if its workers die again then does it become error rows.
+        """
+        from distributed import KilledWorker, as_completed
 
         client, address = self.cluster.client, self.cluster.address
         batch = uuid.uuid4().hex[:8]
-        index: dict[str, int] = {}
-        pending = iter(range(len(chunks)))
+        waiting = deque(range(len(chunks)))
+        suspects: deque[int] = deque()
+        live: dict[Any, tuple[int, bool]] = {}  # future -> (chunk, running alone)
+        queue = as_completed([], loop=client.loop)
+        slots = self._slots()
 
-        def submit() -> Any | None:
-            i = next(pending, None)
-            if i is None:
-                return None
-            future = client.submit(self.task, chunks[i], settings, key=f"collide-chunk-{batch}-{i}",
-                                   retries=RETRIES, pure=False)
-            index[future.key] = i
-            return future
+        def submit(i: int, alone: bool) -> None:
+            future = client.submit(self.task, chunks[i], settings, retries=RETRIES, pure=False,
+                                   key=f"collide-chunk-{batch}-{i}" + ("-alone" if alone else ""))
+            live[future] = (i, alone)
+            queue.add(future)
 
-        futures = [f for f in (submit() for _ in range(min(self._slots(), len(chunks)))) if f is not None]
-        queue = as_completed(futures, loop=client.loop)
-        live = set(futures)
+        def fill() -> None:
+            if suspects:
+                if not live:  # drained: the suspect runs with nothing beside it
+                    submit(suspects.popleft(), True)
+                return
+            while waiting and len(live) < slots:
+                submit(waiting.popleft(), False)
+
+        fill()
         try:
             for future in queue:
-                live.discard(future)
-                i = index[future.key]
-                yield i, self._outcome(future, chunks[i], address)
+                i, alone = live.pop(future)
+                if future.status == "error" and not alone and isinstance(_exception(future, address), KilledWorker):
+                    suspects.append(i)
+                else:
+                    yield i, self._outcome(future, chunks[i], address)
                 future.release()
-                nxt = submit()
-                if nxt is not None:
-                    live.add(nxt)
-                    queue.add(nxt)
+                fill()
         finally:
-            if live:
+            if live and client.status == "running":
                 try:
                     client.cancel(list(live))
                 except Exception:  # noqa: BLE001 - the scheduler may be gone already
@@ -291,17 +303,21 @@ class DaskExecutor:
             except Exception as exc:  # noqa: BLE001 - fetching the result lost the scheduler
                 raise BatchError(f"lost the Dask scheduler at {address}: {_first_line(exc)}") from None
         if status == "error":
-            try:
-                exc = future.exception()
-            except Exception as lost:  # noqa: BLE001
-                raise BatchError(f"lost the Dask scheduler at {address}: {_first_line(lost)}") from None
+            exc = _exception(future, address)
             if isinstance(exc, ImportError) and "collide" in str(exc):
                 raise BatchError(f"workers of the Dask scheduler at {address} cannot import collide "
                                  f"({_first_line(exc)}): install collide on every worker")
             if isinstance(exc, KilledWorker):
-                why = "the workers running it died twice"
+                why = "its workers died running it, again when it ran alone"
             else:
                 why = f"it failed twice on the cluster ({_first_line(exc)})"
             return ChunkResult([failure_row(spec, f"chunk not run: {why}") for spec in chunk], [])
         # Cancelled: the scheduler went away (or restarted) and took the task with it.
         raise BatchError(f"lost the Dask scheduler at {address} (the running chunks were {status})")
+
+
+def _exception(future: Any, address: str) -> BaseException:
+    try:
+        return future.exception()
+    except Exception as lost:  # noqa: BLE001
+        raise BatchError(f"lost the Dask scheduler at {address}: {_first_line(lost)}") from None
