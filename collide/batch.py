@@ -565,7 +565,9 @@ def run_batch(plan: Plan, *, integrator: str | None = None, dt: float | str | No
         progress(len(rows), total)
     try:
         if executor is not None:
-            settings = ChunkSettings(integrator, dt, tol, None if record_dir is None else str(record_dir), stride)
+            # An absolute folder: a worker elsewhere resolves a relative one against its own cwd.
+            folder = None if record_dir is None else str(record_dir.resolve())
+            settings = ChunkSettings(integrator, dt, tol, folder, stride)
             for _, result in executor.run(plan_chunks(todo, integrator, chunk_size), settings):
                 for row in result.rows:
                     failed += bool(row["error"])
@@ -581,11 +583,16 @@ def run_batch(plan: Plan, *, integrator: str | None = None, dt: float | str | No
                 while start < len(group):
                     chunk = group[start:start + size]
                     began = time.perf_counter()
-                    for spec, row, run, member in _run_chunk(chunk, integrator, dt, tol, record_dir is not None):
+                    finished = list(_run_chunk(chunk, integrator, dt, tol, record_dir is not None))
+                    for spec, row, _, _ in finished:
                         failed += bool(row["error"])
                         rows[spec.run_id] = row
-                        if journal is not None:
-                            journal.append([row])  # on disk before the recording: a recording always has its row
+                    if journal is not None:
+                        # One append and sync per sub-chunk (a sync costs milliseconds: one per run
+                        # would cost more than the runs), before the recordings: a recording always
+                        # has its row.
+                        journal.append([row for _, row, _, _ in finished])
+                    for spec, _, run, member in finished:
                         if run is not None and record_dir is not None:
                             from collide.recording import write_recording
 
