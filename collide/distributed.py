@@ -111,7 +111,8 @@ def connect(address: str, *, workers: int | None = None, threads: int | None = N
         with dask.config.set({"distributed.scheduler.allowed-failures": RETRIES}):
             try:
                 local = LocalCluster(n_workers=n_workers, threads_per_worker=n_threads, processes=True,
-                                     host="127.0.0.1", dashboard_address=None, silence_logs=logging.CRITICAL)
+                                     host="127.0.0.1", dashboard_address="127.0.0.1:0", silence_logs=logging.CRITICAL,
+                                     preload=["collide.distributed"])  # dask_setup below
             except Exception as exc:  # noqa: BLE001 - any failure to start is one line
                 raise BatchError(f"could not start a local Dask cluster: {_first_line(exc)}") from None
         target: Any = local
@@ -137,6 +138,17 @@ def connect(address: str, *, workers: int | None = None, threads: int | None = N
         cluster.close()
         raise
     return cluster
+
+
+def dask_setup(worker: Any) -> None:
+    """Run by Dask in each worker process of `--scheduler local` (a preload): Ctrl-C in the
+    terminal reaches the whole process group, but it is the client's to handle (it keeps the
+    finished chunks and closes the cluster); a worker that took it too would print a traceback."""
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _reach(address: str, timeout: float) -> None:

@@ -47,7 +47,7 @@ def cluster() -> Cluster:
     """Two single-threaded worker processes; a worker dying twice under one task fails it."""
     with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
         local = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                             dashboard_address=None)
+                             dashboard_address="127.0.0.1:0")
     client = Client(local, set_as_default=False)
     cluster = Cluster(client, str(local.scheduler_address), local)
     check(cluster)
@@ -210,12 +210,12 @@ sys.meta_path.insert(0, _NoCollide())
 
 
 @pytest.mark.slow
-@pytest.mark.filterwarnings("ignore:Port 8787 is already in use")  # a worker's own web page
 def test_workers_without_collide_are_one_line(tmp_path: Path) -> None:
     preload = tmp_path / "no_collide.py"
     preload.write_text(BLOCK_COLLIDE)
     local = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
-                         dashboard_address=None, preload=[str(preload)])  # noqa: E501
+                         dashboard_address="127.0.0.1:0",
+                         preload=[str(preload)])
     with Cluster(Client(local, set_as_default=False), "tcp://example:8786", local) as cluster:
         with pytest.raises(lib.BatchError, match=r"^1 worker\(s\) of the Dask scheduler at tcp://example:8786 "
                                                  r"cannot import collide \(e\.g\. .*ModuleNotFoundError"):
