@@ -14,7 +14,6 @@ what is left is submitting, scheduling, pickling and the round trips). Medians o
 from __future__ import annotations
 
 import argparse
-import logging
 import os
 import statistics
 import tempfile
@@ -38,22 +37,14 @@ def main() -> None:
     parser.add_argument("--empty-chunks", type=int, default=400)
     args = parser.parse_args()
 
-    import dask
-    from distributed import Client, LocalCluster
-
-    from collide.distributed import Cluster, DaskExecutor, _quiet, check
+    from collide.distributed import DaskExecutor, connect
 
     began = time.perf_counter()
     plan = lib.plan_batch(["demo-bonus"], sweeps=[lib.parse_sweep(f"contact.mu=0:1:{args.runs}")])
     planning = time.perf_counter() - began
 
     began = time.perf_counter()
-    _quiet()
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
-        local = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                             dashboard_address=None, silence_logs=logging.CRITICAL)
-    cluster = Cluster(Client(local, set_as_default=False), str(local.scheduler_address), local)
-    check(cluster)
+    cluster = connect("local", workers=args.workers, threads=1)  # as `--scheduler local` makes it
     executor = DaskExecutor(cluster)
     warm = lib.Plan(plan.specs[:4 * args.workers], plan.param_keys)
     lib.run_batch(warm, chunk_size=1, executor=executor)  # each worker loads the compiled engine
