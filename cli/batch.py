@@ -101,8 +101,11 @@ def batch(
                                    progress=bar.update,
                                    executor=None if cluster is None else DaskExecutor(cluster))
     except KeyboardInterrupt:
-        typer.echo(f"\ninterrupted: finished runs are kept in {summary}; run the same command with "
-                   "--resume to finish the rest", err=True)
+        if cluster is None and scheduler is not None:  # while connecting: nothing ran
+            typer.echo(f"\ninterrupted while connecting to the Dask scheduler at {scheduler}", err=True)
+        else:
+            typer.echo(f"\ninterrupted: finished runs are kept in {summary}; run the same command with "
+                       "--resume to finish the rest", err=True)
         raise SystemExit(130) from None
     except lib.BatchError as exc:
         if cluster is not None and "lost the Dask scheduler" in str(exc):
