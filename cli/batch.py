@@ -23,9 +23,9 @@ def batch(
         "--vary", help="Draw a scene key from a normal distribution: KEY=MEAN+-STD (repeatable).",
         show_default=False)] = None,
     samples: Annotated[int | None, typer.Option(
-        help="Draws per scene with --vary [default: 100].", min=1, show_default=False)] = None,
+        help="Draws per scene with --vary (default: 100).", min=1, show_default=False)] = None,
     seed: Annotated[int | None, typer.Option(
-        help="Random seed for --vary (same seed, same draws) [default: 0].", show_default=False)] = None,
+        help="Random seed for --vary (same seed, same draws) (default: 0).", show_default=False)] = None,
     set_: SetOption = None,
     integrator: IntegratorOption = None,
     dt: DtOption = None,
@@ -45,13 +45,13 @@ def batch(
     progress: Annotated[bool, typer.Option(help="Show a progress bar on stderr.")] = True,
     scheduler: Annotated[str | None, typer.Option(
         help="Run the chunks on a Dask cluster: its scheduler's address (tcp://HOST:8786), or 'local' to "
-        "start one on this machine. Needs pip install 'collide[dask]'; workers need collide, and --record "
+        "start one on this machine. Needs Dask (collide's 'dask' extra); workers need collide, and --record "
         "a folder every worker can reach.", show_default=False)] = None,
     workers: Annotated[int | None, typer.Option(
-        help="With --scheduler local: worker processes [default: one per core].", min=1,
+        help="With --scheduler local: worker processes (default: one per core).", min=1,
         show_default=False)] = None,
     threads: Annotated[int | None, typer.Option(
-        help="With --scheduler local: threads per worker [default: 1].", min=1, show_default=False)] = None,
+        help="With --scheduler local: threads per worker (default: 1).", min=1, show_default=False)] = None,
 ) -> None:
     """Run many scenes or a parameter sweep, vectorised; write a summary CSV (and recordings).
 
