@@ -107,7 +107,8 @@ def connect(address: str, *, workers: int | None = None, threads: int | None = N
     local = None
     if address == "local":
         n_workers, n_threads = local_shape(workers, threads)
-        # The worker running a task dies twice: the task fails (rather than Dask's 3 times).
+        # A task whose workers die twice fails (KilledWorker; Dask allows 3): DaskExecutor then runs
+        # it alone once more before it becomes error rows, so a culprit costs 4 deaths, not 8.
         with dask.config.set({"distributed.scheduler.allowed-failures": RETRIES}):
             try:
                 local = LocalCluster(n_workers=n_workers, threads_per_worker=n_threads, processes=True,
