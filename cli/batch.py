@@ -23,9 +23,9 @@ def batch(
         "--vary", help="Draw a scene key from a normal distribution: KEY=MEAN+-STD (repeatable).",
         show_default=False)] = None,
     samples: Annotated[int | None, typer.Option(
-        help="Draws per scene with --vary [default: 100].", min=1, show_default=False)] = None,
+        help="Draws per scene with --vary (default: 100).", min=1, show_default=False)] = None,
     seed: Annotated[int | None, typer.Option(
-        help="Random seed for --vary (same seed, same draws) [default: 0].", show_default=False)] = None,
+        help="Random seed for --vary (same seed, same draws) (default: 0).", show_default=False)] = None,
     set_: SetOption = None,
     integrator: IntegratorOption = None,
     dt: DtOption = None,
@@ -43,6 +43,15 @@ def batch(
     stride: Annotated[int, typer.Option(
         help="With --record: record every n-th contact step.", min=1)] = 1,
     progress: Annotated[bool, typer.Option(help="Show a progress bar on stderr.")] = True,
+    scheduler: Annotated[str | None, typer.Option(
+        help="Run the chunks on a Dask cluster: its scheduler's address (tcp://HOST:8786), or 'local' to "
+        "start one on this machine. Needs Dask (collide's 'dask' extra); workers need collide, and --record "
+        "a folder every worker can reach.", show_default=False)] = None,
+    workers: Annotated[int | None, typer.Option(
+        help="With --scheduler local: worker processes (default: one per core).", min=1,
+        show_default=False)] = None,
+    threads: Annotated[int | None, typer.Option(
+        help="With --scheduler local: threads per worker (default: 1).", min=1, show_default=False)] = None,
 ) -> None:
     """Run many scenes or a parameter sweep, vectorised; write a summary CSV (and recordings).
 
@@ -63,27 +72,49 @@ def batch(
       collide batch demo-bonus --vary contact.k=1500+-30 --vary contact.mu=0.5+-0.05 --samples 1000 --seed 1
 
       collide batch my_scenes/ textbook-glancing --dt auto --tol 1e-8
+
+      collide batch demo-bonus --sweep contact.mu=0:1:100000 --scheduler tcp://HOST:8786
     """
     from collide import batch as lib
 
     if not vary and (samples is not None or seed is not None):
         raise UserError("--samples and --seed go with --vary")
+    if scheduler is None and (workers is not None or threads is not None):
+        raise UserError("--workers and --threads go with --scheduler local")
     plan = lib.plan_batch(scenes or [], sets=set_ or [], sweeps=[lib.parse_sweep(s) for s in sweep or []],
                           varies=[lib.parse_vary(v) for v in vary or []],
                           samples=100 if samples is None else samples, seed=0 if seed is None else seed)
     for note in plan.notes:
         typer.echo(f"note: {note}", err=True)
     total = len(plan.specs)
-    bar = _Progress(total, enabled=progress)
+    step = parse_dt(dt)
+    cluster = None
     try:
+        if scheduler is not None:
+            from collide.distributed import DaskExecutor, connect
+
+            cluster = connect(scheduler, workers=workers, threads=threads)
+        bar = _Progress(total, enabled=progress)
         with bar:
-            result = lib.run_batch(plan, integrator=integrator, dt=parse_dt(dt), tol=tol, summary=summary,
+            result = lib.run_batch(plan, integrator=integrator, dt=step, tol=tol, summary=summary,
                                    record_dir=record, resume=resume, chunk_size=chunk, stride=stride,
-                                   progress=bar.update)
+                                   progress=bar.update,
+                                   executor=None if cluster is None else DaskExecutor(cluster))
     except KeyboardInterrupt:
-        typer.echo(f"\ninterrupted: finished runs are kept in {summary}; run the same command with "
-                   "--resume to finish the rest", err=True)
+        if cluster is None and scheduler is not None:  # while connecting: nothing ran
+            typer.echo(f"\ninterrupted while connecting to the Dask scheduler at {scheduler}", err=True)
+        else:
+            typer.echo(f"\ninterrupted: finished runs are kept in {summary}; run the same command with "
+                       "--resume to finish the rest", err=True)
         raise SystemExit(130) from None
+    except lib.BatchError as exc:
+        if cluster is not None and "lost the Dask scheduler" in str(exc):
+            raise lib.BatchError(f"{exc}; finished runs are kept in {summary}: run the same command with "
+                                 "--resume to finish the rest") from None
+        raise
+    finally:
+        if cluster is not None:
+            cluster.close()
     for note in result.notes[len(plan.notes):]:
         typer.echo(f"note: {note}", err=True)
     per_run = result.wall_time_s / result.ran if result.ran else 0.0

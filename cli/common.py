@@ -98,3 +98,20 @@ def progress_display(name: str):
         if shown[0]:
             sys.stderr.write("\r\033[K" if sys.stderr.isatty() else "\n")
             sys.stderr.flush()
+
+
+LARGE_SCENE = 16  # bodies: above this, interpreted kernels would take minutes to hours
+
+
+def compiled_for_large(bodies: int) -> None:
+    """On the first runs after install the kernels run interpreted while they compile in the
+    background (fine for a few spheres); a large scene would take hours that way, so the command
+    starts again with the compiled kernels (compiling them now, about two minutes, once)."""
+    from collide.engine import tier
+
+    command = os.path.basename(sys.argv[0]) if sys.argv else ""
+    if tier.COMPILED or not tier.BACKGROUND or bodies <= LARGE_SCENE or command not in ("collide", "main.py"):
+        return
+    sys.stderr.write(f"compiling the engine first for {bodies} bodies (once after install, about two minutes)\n")
+    sys.stderr.flush()
+    os.execve(sys.executable, [sys.executable, "-m", "cli.main", *sys.argv[1:]], dict(os.environ, COLLIDE_JIT="1"))

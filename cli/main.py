@@ -97,12 +97,13 @@ def run(
 
       collide run my_scene.toml --dt auto --tol 1e-9 --no-record
     """
-    from cli.common import progress_display
+    from cli.common import compiled_for_large, progress_display
     from collide.run import run_scene
     from collide.scene import load_scene
     from collide.summary import report_csv, run_summary
 
     loaded = load_scene(scene, set_ or [])
+    compiled_for_large(len(loaded.bodies))
     # The trajectory is kept only for what uses it: the recording and the CSV.
     keep = not no_record or csv is not None
     with progress_display(loaded.name) as show:

@@ -145,14 +145,31 @@ def validate_command(
     scan: Annotated[bool, typer.Option("--scan/--no-scan", help="Rerun at k x 10, x 100 to show the "
                                        "softness shrink.")] = True,
     as_json: Annotated[bool, typer.Option("--json", help="Print the rows as one JSON object.")] = False,
+    suite: Annotated[str, typer.Option(help="'report' (the textbook tables and rigid-limit cross-check) "
+                                       "or 'chung-ooi' (the eight DEM impact benchmarks of Chung & Ooi "
+                                       "2011).")] = "report",
+    plots: Annotated[Path | None, typer.Option(help="chung-ooi: write one PNG per test to this folder "
+                                               "(default recordings/chung-ooi).")] = None,
+    test: Annotated[list[int] | None, typer.Option("--test", help="chung-ooi: only this test, 1-8 "
+                                                   "(repeatable).")] = None,
 ) -> None:
     """Check the simulator: the report's textbook tables (Figs 3-6) and every built-in scene
-    against the rigid-body limit, separating discretisation error from model softness.
+    against the rigid-body limit, separating discretisation error from model softness; or,
+    with --suite chung-ooi, the Chung & Ooi (2011) impact benchmarks against their closed forms.
 
     Exit code 0: every residual within its stated tolerance; 1: some residual beyond it.
 
-    Example: collide validate --scene demo-bonus --json
+    Example: collide validate --scene demo-bonus --json; collide validate --suite chung-ooi
     """
+    if suite == "chung-ooi":
+        if scene:
+            _fail("--scene: the chung-ooi suite runs its own scenes; drop --scene")
+        _chung_ooi(plots, test, as_json)
+        return
+    if suite != "report":
+        _fail(f"--suite: unknown '{suite}' (choose from report, chung-ooi)")
+    if plots is not None or test:
+        _fail("--plots/--test: only with --suite chung-ooi")
     if not tol > 0:
         _fail(f"--tol: must be positive, got {tol}")
     try:
@@ -161,6 +178,46 @@ def validate_command(
         _fail(str(exc))
         return
     _emit(result, as_json, format_validation)
+    if not result.passed:
+        raise typer.Exit(1)
+
+
+def format_chung_ooi(result) -> str:
+    """The Chung & Ooi table: one row per check, relative error against the closed form."""
+    rows = []
+    for r in result.rows:
+        trend = r.passed is not None and not math.isfinite(r.tolerance)
+        rows.append([str(r.test), r.case, r.quantity, _num(r.measured), _num(r.expected),
+                     "-" if trend else f"{100 * r.rel_error:.3g}", "-" if trend else f"{100 * r.tolerance:.3g}",
+                     ("ok" if r.passed else "FAIL") + (" (trend)" if trend else "")])
+    text = table(["test", "case", "quantity", "measured", "expected", "err %", "tol %", ""], rows,
+                 right={0, 3, 4, 5, 6})
+    notes = sorted({f"test {r.test}: {r.note}" for r in result.rows if r.note})
+    footer = [f"dt = contact time / {result.steps_per_contact} (Hertz closed form of each impact), to 2 digits"] + notes
+    verdict = "all within tolerance" if result.passed else "SOME ROWS BEYOND TOLERANCE"
+    return "\n".join([text, "", *footer, "", f"Chung & Ooi: {verdict}"])
+
+
+def _chung_ooi(plots: Path | None, tests: list[int] | None, as_json: bool) -> None:
+    from collide import chung_ooi
+
+    bad = [t for t in tests or [] if not 1 <= t <= 8]
+    if bad:
+        _fail(f"--test: Chung & Ooi has tests 1 to 8, got {bad[0]}")
+    result = chung_ooi.run_suite(sorted(set(tests)) if tests else None)
+    folder = plots if plots is not None else chung_ooi.DEFAULT_PLOTS
+    try:
+        paths = chung_ooi.plot_suite(result, folder)
+    except OSError as exc:
+        _fail(f"--plots: cannot write to {folder}: {exc.strerror or exc}")
+        return
+    if as_json:
+        data = result.to_dict()
+        data["plots"] = [str(p) for p in paths]
+        typer.echo(json.dumps(_clean(data), indent=2))
+    else:
+        typer.echo(format_chung_ooi(result))
+        typer.echo(f"plots: {', '.join(str(p) for p in paths)}")
     if not result.passed:
         raise typer.Exit(1)
 

@@ -27,9 +27,10 @@ import os
 import re
 import time
 import uuid
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -449,6 +450,63 @@ class BatchResult:
 ProgressCallback = Callable[[int, int], None]
 
 
+@dataclass(frozen=True)
+class ChunkSettings:
+    """What every chunk of a batch runs with (sent along with each chunk to a cluster worker)."""
+
+    integrator: str | None = None
+    dt: float | str | None = None
+    tol: float | None = None
+    record_dir: str | None = None  # a folder every worker can reach (a shared file system)
+    stride: int = 1
+
+
+@dataclass
+class ChunkResult:
+    """A finished chunk: its rows (in the chunk's order) and the recordings it wrote."""
+
+    rows: list[dict[str, str]]
+    recordings: list[str]
+
+
+def run_chunk(specs: list[RunSpec], settings: ChunkSettings) -> ChunkResult:
+    """Run one chunk of a batch and write its recordings: the unit of work sent to a cluster.
+
+    A top-level function of picklable arguments, so that a Dask worker imports it by name.
+    Runs that fail become rows carrying their error; anything else that goes wrong raises.
+    """
+    rows: list[dict[str, str]] = []
+    recordings: list[str] = []
+    record_dir = None if settings.record_dir is None else Path(settings.record_dir)
+    for spec, row, run, member in _run_chunk(specs, settings.integrator, settings.dt, settings.tol,
+                                             record_dir is not None):
+        rows.append(row)
+        if run is not None and record_dir is not None:
+            from collide.recording import write_recording
+
+            path = record_dir / recording_name(spec)
+            recordings.append(str(write_recording(run.member(member), path, stride=settings.stride)))
+    return ChunkResult(rows, recordings)
+
+
+class ChunkExecutor(Protocol):
+    """Runs chunks somewhere else (a Dask cluster: `collide.distributed.DaskExecutor`).
+
+    `run` yields each chunk with its result as it finishes, in any order; it turns a chunk that
+    could not be run (its task failed twice) into rows carrying the error, and raises BatchError
+    when nothing more can run (the scheduler gone). Ctrl-C raises KeyboardInterrupt from it.
+    """
+
+    def run(self, chunks: list[list[RunSpec]], settings: ChunkSettings) -> Iterator[tuple[int, ChunkResult]]:
+        ...
+
+
+def plan_chunks(specs: list[RunSpec], integrator: str | None, chunk_size: int) -> list[list[RunSpec]]:
+    """Fixed chunks of at most `chunk_size` same-shaped runs, in run order within each shape."""
+    return [group[i:i + chunk_size] for group in _groups(specs, integrator)
+            for i in range(0, len(group), chunk_size)]
+
+
 def _groups(specs: list[RunSpec], integrator: str | None) -> list[list[RunSpec]]:
     """Specs that can share one vectorised run: same shape and integrator, in first-seen order."""
     groups: dict[tuple, list[RunSpec]] = {}
@@ -461,15 +519,18 @@ def _groups(specs: list[RunSpec], integrator: str | None) -> list[list[RunSpec]]
 def run_batch(plan: Plan, *, integrator: str | None = None, dt: float | str | None = None,
               tol: float | None = None, summary: Path | None = None, record_dir: Path | None = None,
               resume: bool = False, chunk_size: int = DEFAULT_CHUNK, stride: int = 1,
-              progress: ProgressCallback | None = None) -> BatchResult:
+              progress: ProgressCallback | None = None, executor: ChunkExecutor | None = None) -> BatchResult:
     """Run every spec of the plan; save each finished run's row (and recording) as it finishes.
 
-    Runs go to the stepper in sub-chunks of at most `chunk_size`, sized to take about
-    SUBCHUNK_SECONDS each; their rows are appended to `summary` and synced to disk right away,
-    each before its recording. `progress(done, total)` is called after each sub-chunk; raising
-    from it (or Ctrl-C, or a kill) stops the batch with every finished run on disk. With
-    `resume`, runs whose complete, well-formed row is already in `summary` (same run id, scene
-    and parameter values; with `record_dir`, its recording there too) are skipped.
+    In process (no `executor`), runs go to the stepper in sub-chunks of at most `chunk_size`,
+    sized to take about SUBCHUNK_SECONDS each; their rows are appended to `summary` and synced
+    to disk right away, each before its recording. With an `executor` (a Dask cluster), chunks
+    of `chunk_size` runs are run by `run_chunk` on its workers (which write the recordings) and
+    each chunk's rows are appended and synced as it comes back. `progress(done, total)` is called
+    after each chunk; raising from it (or Ctrl-C, or a kill) stops the batch with every finished
+    run on disk. With `resume`, runs whose complete, well-formed row is already in `summary`
+    (same run id, scene and parameter values; with `record_dir`, its recording there too) are
+    skipped. Either way the summary ends rewritten in run order.
     """
     if chunk_size < 1:
         raise BatchError(f"chunk size must be at least 1, got {chunk_size}")
@@ -503,27 +564,46 @@ def run_batch(plan: Plan, *, integrator: str | None = None, dt: float | str | No
     if progress is not None:
         progress(len(rows), total)
     try:
-        for group in _groups(todo, integrator):
-            start, size = 0, 1
-            while start < len(group):
-                chunk = group[start:start + size]
-                began = time.perf_counter()
-                for spec, row, run, member in _run_chunk(chunk, integrator, dt, tol, record_dir is not None):
+        if executor is not None:
+            # An absolute folder: a worker elsewhere resolves a relative one against its own cwd.
+            folder = None if record_dir is None else str(record_dir.resolve())
+            settings = ChunkSettings(integrator, dt, tol, folder, stride)
+            for _, result in executor.run(plan_chunks(todo, integrator, chunk_size), settings):
+                for row in result.rows:
                     failed += bool(row["error"])
-                    rows[spec.run_id] = row
-                    if journal is not None:
-                        journal.append([row])  # on disk before the recording: a recording always has its row
-                    if run is not None and record_dir is not None:
-                        from collide.recording import write_recording
-
-                        path = record_dir / recording_name(spec)
-                        recordings.append(write_recording(run.member(member), path, stride=stride))
-                start += len(chunk)
-                per_run = (time.perf_counter() - began) / len(chunk)
-                size = max(1, min(chunk_size, 2 * size, int(SUBCHUNK_SECONDS / max(per_run, 1e-9))))
+                    rows[row["run_id"]] = row
+                if journal is not None:
+                    journal.append(result.rows)
+                recordings += [Path(p) for p in result.recordings]
                 if progress is not None:
                     progress(len(rows), total)
-    except KeyboardInterrupt:
+        else:
+            for group in _groups(todo, integrator):
+                start, size = 0, 1
+                while start < len(group):
+                    chunk = group[start:start + size]
+                    began = time.perf_counter()
+                    finished = list(_run_chunk(chunk, integrator, dt, tol, record_dir is not None))
+                    for spec, row, _, _ in finished:
+                        failed += bool(row["error"])
+                        rows[spec.run_id] = row
+                    if journal is not None:
+                        # One append and sync per sub-chunk (a sync costs milliseconds: one per run
+                        # would cost more than the runs), before the recordings: a recording always
+                        # has its row.
+                        journal.append([row for _, row, _, _ in finished])
+                    for spec, _, run, member in finished:
+                        if run is not None and record_dir is not None:
+                            from collide.recording import write_recording
+
+                            path = record_dir / recording_name(spec)
+                            recordings.append(write_recording(run.member(member), path, stride=stride))
+                    start += len(chunk)
+                    per_run = (time.perf_counter() - began) / len(chunk)
+                    size = max(1, min(chunk_size, 2 * size, int(SUBCHUNK_SECONDS / max(per_run, 1e-9))))
+                    if progress is not None:
+                        progress(len(rows), total)
+    except (KeyboardInterrupt, BatchError):
         if journal is not None:
             journal.close()
         save_in_order()  # the rows appended so far, in run order (killed, the next resume does it)

@@ -26,7 +26,7 @@ HERTZ_TIME = 2.868  # t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5): Johnson, Contact M
 # Measured on a damped Hertz impact on a wall and a frictional oblique impact (benchmarks/
 # bench_dem.py prints it); padded by about 2x. Contacts switch at steps, so the error is first
 # order in dt whatever the integrator's own order.
-ERROR_CONSTANT, ERROR_ORDER = 2.0, 1
+ERROR_CONSTANT, ERROR_ORDER = 1.2, 1
 MIN_STEPS_PER_CONTACT, MAX_STEPS_PER_CONTACT = 50, 20_000
 FRAME_BUDGET = 2_000_000  # body-frames a recording keeps at most
 SKIN = 0.25  # neighbour-list skin, in smallest radii

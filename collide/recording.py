@@ -640,8 +640,14 @@ class _Writer:
         auto = getattr(run, "auto", None)
         if auto is not None:
             meta["auto"] = bool(auto[0])
-        for field in ("first_start", "last_end", "duration", "max_overlap"):
-            meta[f"contact_{field}"] = float(getattr(r.contacts, field)[0])
+        for field in ("first_start", "last_end", "duration", "max_overlap", "max_normal_force"):
+            value = getattr(r.contacts, field)
+            meta[f"contact_{field}"] = float("nan") if value is None else float(value[0])
+        if r.dissipation is not None:
+            for part, value in zip(DISSIPATION_PARTS, r.dissipation[0]):
+                meta[f"dissipation_{part}"] = float(value)
+        if r.final.stored is not None:
+            meta["final_stored"] = float(r.final.stored[0])
         meta["contact_count"] = int(r.contacts.count[0])
         for label, state in (("initial", r.initial), ("final", r.final)):
             meta[f"{label}_t"] = float(state.t[0])
@@ -812,6 +818,7 @@ def checksum(tables: dict[str, np.ndarray], meta: dict[str, Any]) -> str:
     return digest.hexdigest()
 
 
+DISSIPATION_PARTS = ("damping", "friction", "rolling")  # RunResult.dissipation's columns
 _TABLES = (("knots", "/collide/knots", int(kn.NK)), ("records", "/collide/contact_records", int(kn.NR)),
            ("intervals", "/collide/contact_intervals", 4))
 
@@ -894,18 +901,23 @@ def _rebuild(path: Path, tables: dict[str, np.ndarray], meta: dict[str, Any]) ->
             if width == 0:
                 return np.zeros((1, n, 0))
             return np.asarray(meta[f"{label}_{key}"], dtype=float).reshape(1, n, width)
+        stored = meta.get(f"{label}_stored")
         return State(np.array([meta[f"{label}_t"]], float), vec("s", d), vec("v", d), vec("w", k),
-                     vec("q", q_dim), np.array([meta[f"{label}_work"]], float))
+                     vec("q", q_dim), np.array([meta[f"{label}_work"]], float),
+                     None if stored is None else np.array([stored], float))
 
     log = ContactLog(*(np.array([meta[f"contact_{f}"]], float) for f in
                        ("first_start", "last_end", "duration", "max_overlap")),
-                     np.array([meta["contact_count"]], np.int64))
+                     np.array([meta["contact_count"]], np.int64),
+                     np.array([meta.get("contact_max_normal_force", float("nan"))], float))
     result = RunResult(model=model, initial=state("initial"), final=state("final"),
                        integrator=str(meta["integrator"]), dt=np.array([meta["dt"]], float),
                        steps=np.array([meta["steps"]], np.int64),
                        jumps=np.array([meta["jumps"]], np.int64),
                        wall_time_s=float(meta["wall_time_s"]), contacts=log, trajectories=[traj],
-                       warnings=[str(w) for w in (meta.get("warnings") or [])])
+                       warnings=[str(w) for w in (meta.get("warnings") or [])],
+                       dissipation=None if meta.get("dissipation_damping") is None else
+                       np.array([[float(meta[f"dissipation_{part}"]) for part in DISSIPATION_PARTS]]))
     request = meta.get("dt_request", "none")
     dt_request: float | str | None = None if request == "none" else \
         ("auto" if request == "auto" else float(request))

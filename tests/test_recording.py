@@ -34,7 +34,8 @@ def written(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple]:
     folder = tmp_path_factory.mktemp("rrd")
     out = {}
     scenes = {"demo-bonus": load_scene("demo-bonus"), "demo-1d": load_scene("demo-1d"),
-              "wall-3d": parse_scene(WALL_3D, "wall-3d")}
+              "wall-3d": parse_scene(WALL_3D, "wall-3d"), "bounce": load_scene("bounce"),
+              "break-3d": load_scene("break-3d")}
     for name, scene in scenes.items():
         run = run_scene(scene)
         path = write_recording(run, folder / "sub" / f"{name}.rrd")
@@ -42,7 +43,7 @@ def written(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple]:
     return out
 
 
-@pytest.mark.parametrize("name", ["demo-bonus", "demo-1d", "wall-3d"])
+@pytest.mark.parametrize("name", ["demo-bonus", "demo-1d", "wall-3d", "bounce", "break-3d"])
 def test_round_trip_is_exact(written: dict, name: str) -> None:
     run, path = written[name]
     back = read_recording(path)
