@@ -100,7 +100,9 @@ class Trajectory:
 
     @property
     def t(self) -> np.ndarray:
-        return self._rows[0][:, None]
+        # The knot times alone: asking for them must not sample every body at every knot
+        # (gas-box: 78 506 knot times x 1 000 bodies, gigabytes).
+        return self.knot_times[:, None]
 
     @property
     def s(self) -> np.ndarray:
