@@ -331,16 +331,21 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
 
 
 def set_path(raw: dict, key: str, value: Any) -> None:
-    """Set a dotted key in the raw scene table (bodies addressed by name, vectors by x/y/z)."""
+    """Set a dotted key in the raw scene table (bodies and materials addressed by name, vectors
+    by x/y/z)."""
     parts = key.split(".")
-    if parts[0] == "body":
+    if parts[0] in ("body", "material"):
+        kind = parts[0]
         if len(parts) < 3:
-            raise SceneError(f"override key '{key}': use body.NAME.FIELD")
-        bodies = raw.get("body", [])
-        matches = [b for b in bodies if b.get("name") == parts[1]]
+            raise SceneError(f"override key '{key}': use {kind}.NAME.FIELD")
+        tables = raw.get(kind, [])
+        matches = [b for b in tables if isinstance(b, dict) and b.get("name") == parts[1]] \
+            if isinstance(tables, list) else []
         if not matches:
-            names = ", ".join(str(b.get("name")) for b in bodies)
-            raise SceneError(f"override key '{key}': no body named '{parts[1]}' (bodies: {names})")
+            names = ", ".join(str(b.get("name")) for b in tables if isinstance(b, dict)) \
+                if isinstance(tables, list) else ""
+            plural = "bodies" if kind == "body" else "materials"
+            raise SceneError(f"override key '{key}': no {kind} named '{parts[1]}' ({plural}: {names or 'none'})")
         table, rest = matches[0], parts[2:]
     elif parts[0] == "wall":
         if len(parts) < 3 or not parts[1].isdigit():

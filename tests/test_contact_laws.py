@@ -295,3 +295,13 @@ def test_long_run_shows_progress_on_stderr_and_keeps_json_on_stdout():
     summary = json.loads(done.stdout)
     assert summary["scene"] == "break-3d" and summary["contact"]["max_normal_force"] > 0
     assert "break-3d: " in done.stderr and "steps/s" in done.stderr and "of 1.2 s" in done.stderr
+
+
+def test_materials_are_overridden_by_name():
+    from collide.scene import apply_overrides, read_raw
+
+    raw, _ = read_raw("break-3d")
+    scene = parse_scene(apply_overrides(raw, ["material.phenolic.restitution=0.7"]))
+    assert scene.materials[0].restitution == 0.7
+    with pytest.raises(SceneError, match="no material named 'wood' \\(materials: phenolic\\)"):
+        apply_overrides(raw, ["material.wood.mu=1"])
