@@ -19,7 +19,17 @@ from collide.engine import dem as dk
 from collide.engine import kernels as kn
 from collide.engine import tier
 from collide.model import KISSING, TABLE_ESTAR, TABLE_K, TABLE_REST, Model, State, select_model
-from collide.stepper import ContactLog, Progress, RunError, RunResult, Trajectory, approach_bound, unpack_state, watch
+from collide.stepper import (
+    ContactLog,
+    Progress,
+    RunError,
+    RunResult,
+    Trajectory,
+    _pad3,
+    approach_bound,
+    unpack_state,
+    watch,
+)
 
 HERTZ_TIME = 2.868  # t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5): Johnson, Contact Mechanics, 11.4
 # The outcome's relative error against steps per contact time n: ERROR_CONSTANT / n^ERROR_ORDER.
@@ -149,12 +159,6 @@ def _bodies(model: Model, b: int) -> np.ndarray:
     bd[:, dk.B_I] = model.inertia[b]
     bd[:, dk.B_MAT] = model.material[b]
     return bd
-
-
-def _pad3(x: np.ndarray) -> np.ndarray:
-    out = np.zeros(x.shape[:-1] + (3,))
-    out[..., :x.shape[-1]] = x
-    return out
 
 
 def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.ndarray, tail: np.ndarray,

@@ -32,6 +32,7 @@ import math
 
 import numpy as np
 
+from collide.engine.kernels import grow, turn
 from collide.engine.tier import jit
 
 # Bodies: B (N, NB).
@@ -66,15 +67,6 @@ ROLL_STEPS = 16
 for _name, _value in list(globals().items()):
     if _name.isupper() and type(_value) is int:
         globals()[_name] = np.int64(_value)
-
-
-@jit
-def _grow(buf, n):
-    if n < buf.shape[0]:
-        return buf
-    out = np.empty((max(2 * buf.shape[0] + 16, n + 1), buf.shape[1]))
-    out[:buf.shape[0]] = buf
-    return out
 
 
 @jit
@@ -355,7 +347,7 @@ def forces(X, V, W, F, T, PT, Bd, keys, hist, WH, WP, tabs, wtabs, grav, fl, dt,
         FG[G_OVERLAP] = max(FG[G_OVERLAP], delta)
         FG[G_FORCE] = max(FG[G_FORCE], fn)
         if record_now:
-            REC = _grow(REC, nrec)
+            REC = grow(REC, nrec)
             _record(REC, nrec, t, i, j, delta, fn, out)
             nrec += 1
     nw = WP.shape[0]
@@ -377,7 +369,7 @@ def forces(X, V, W, F, T, PT, Bd, keys, hist, WH, WP, tabs, wtabs, grav, fl, dt,
             FG[G_OVERLAP] = max(FG[G_OVERLAP], delta)
             FG[G_FORCE] = max(FG[G_FORCE], fn)
             if record_now:
-                REC = _grow(REC, nrec)
+                REC = grow(REC, nrec)
                 _record(REC, nrec, t, i, -1 - w, delta, fn, out)
                 nrec += 1
     return engaged, niv, nrec, IV, REC
@@ -394,7 +386,7 @@ def _open(hist, k, IV, niv, i, j, t, FG, ST, record):
         FG[G_FIRST] = t
     hist[k, H_IV] = -1.0
     if record:
-        IV = _grow(IV, niv)
+        IV = grow(IV, niv)
         IV[niv, 0], IV[niv, 1], IV[niv, 2], IV[niv, 3] = i, j, t, np.nan
         hist[k, H_IV] = niv
         niv += 1
@@ -453,7 +445,7 @@ def _stored(hist, WH):
 @jit
 def _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, free):
     """Every body's state at t (knots); `free`: free flight follows, in closed form."""
-    KN = _grow(KN, nkn + n)
+    KN = grow(KN, nkn + n)
     for a in range(n):
         r = nkn + a
         KN[r, 0], KN[r, 1], KN[r, 2] = t, a, free
@@ -506,24 +498,6 @@ def _free_time(X, V, Bd, keys, WP, grav, n, skin):
     if g > 0.0:
         return (-speed + math.sqrt(speed * speed + 2.0 * g * reach)) / g
     return reach / speed if speed > 0.0 else math.inf
-
-
-@jit
-def _turn(q, w0, w1, w2, tau, planar):
-    if planar:
-        q[0] += w2 * tau
-        return
-    rate = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-    if rate == 0.0:
-        return
-    half = 0.5 * rate * tau
-    s = math.sin(half) / rate
-    dw, dx, dy, dz = math.cos(half), s * w0, s * w1, s * w2
-    a, b, c, d = q[0], q[1], q[2], q[3]
-    q[0] = dw * a - dx * b - dy * c - dz * d
-    q[1] = dw * b + dx * a + dy * d - dz * c
-    q[2] = dw * c - dx * d + dy * a + dz * b
-    q[3] = dw * d + dx * c - dy * b + dz * a
 
 
 @jit
@@ -594,7 +568,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
                                          n, FG, ST, IV, niv, REC, nrec, record != 0)
     if record:
         KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
-        EP = _grow(EP, nep)
+        EP = grow(EP, nep)
         EP[nep, EP_T] = 0.0
         nep += 1
     next_frame = fp[P_FRAME]
@@ -622,7 +596,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
                         X[a, d] += V[a, d] * tau + 0.5 * grav[d] * tau * tau
                         V[a, d] += grav[d] * tau
                     if fl[F_SPIN]:
-                        _turn(Qo[a], W[a, 0], W[a, 1], W[a, 2], tau, planar)
+                        turn(Qo[a], W[a, 0], W[a, 1], W[a, 2], tau, planar)
                 t += tau
                 ST[S_JUMPS] += 1
                 if record:
@@ -643,7 +617,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             for d in range(3):
                 X[a, d] += h * V[a, d]
             if fl[F_SPIN]:
-                _turn(Qo[a], W[a, 0], W[a, 1], W[a, 2], h, planar)
+                turn(Qo[a], W[a, 0], W[a, 1], W[a, 2], h, planar)
             ddx, ddy, ddz = X[a, 0] - X0[a, 0], X[a, 1] - X0[a, 1], X[a, 2] - X0[a, 2]
             moved = max(moved, ddx * ddx + ddy * ddy + ddz * ddz)
         if 4.0 * moved > skin * skin:
@@ -665,7 +639,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         peak = max(peak, kinetic)
         if record_now:
             KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
-            EP = _grow(EP, nep)
+            EP = grow(EP, nep)
             EP[nep, EP_T] = t
             for c in range(3):
                 s = 0.0
