@@ -57,18 +57,12 @@ from pathlib import Path
 
 import numpy as np
 
+from collide.chung_ooi import Material
+
 ROOT = Path(__file__).resolve().parents[1]
 LIGGGHTS = shutil.which("liggghts") or "/usr/bin/liggghts"
 RIGID_E = 1e30  # Pa: LIGGGHTS's wall material; (1 - nu^2)/E of the wall vanishes next to the sphere's
 TIMEOUT_S = 1800.0
-
-
-@dataclass(frozen=True)
-class Material:
-    name: str
-    youngs_modulus: float  # Pa
-    poisson_ratio: float
-    density: float  # kg/m^3
 
 
 GLASS = Material("glass", 4.8e10, 0.20, 2800.0)  # Chung & Ooi test 1's glass
