@@ -159,6 +159,25 @@ def test_a_long_free_flight_records_a_bounded_number_of_frames(tmp_path: Path, m
     assert back.result.final.t[0] == pytest.approx(100.0)
 
 
+def test_no_record_keeps_no_steps_in_memory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                            capsys: pytest.CaptureFixture) -> None:
+    # 1.3 million Verlet steps: kept, the knots would take about 2 KB each (2.6 GB); not kept, the
+    # run's own arrays are a few kilobytes whatever the step count.
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        code, out, err = _main(["run", "demo-bonus", "--integrator", "verlet", "--dt", "1e-8", "--no-record",
+                                "--json"], monkeypatch, capsys, tmp_path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert (code, err) == (0, "")
+    assert json.loads(out)["steps"] > 1_000_000
+    assert peak < 40e6, f"peak {peak / 1e6:.0f} MB"
+    assert not (tmp_path / "recordings").exists()
+
+
 def test_a_scene_name_never_leaves_recordings(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                               capsys: pytest.CaptureFixture) -> None:
     code, _, err = _main(["run", "demo-1d", "--set", 'name="../../escaped"'], monkeypatch, capsys, tmp_path)
