@@ -100,6 +100,8 @@ MANY_BODIES = 24  # from this many bodies on, one instanced entity draws them al
 MANY_CONTACTS = 24  # from this many contacts on, one entity draws them all (no per-contact plots)
 TIMELINE = "sim_time"
 DEFAULT_FPS = 120.0  # frames per simulated second of free flight
+# Rerun's time axis counts int64 nanoseconds: a run ending later than this cannot be recorded.
+MAX_RECORDED_TIME = 9.0e9
 MAX_FREE_FRAMES = 100_000  # frames of free flight in one recording, at most (fps drops beyond)
 CONTACT_FRAMES = 100  # least frames across one contact in the 3D view
 
@@ -157,6 +159,10 @@ def write_recording(run: SceneRun, path: Path, *, stride: int = 1, fps: float = 
         raise ValueError("the run was not recorded (record=False): nothing to write")
     if stride < 1:
         raise ValueError(f"stride must be at least 1, got {stride}")
+    end = float(np.max(run.result.final.t))
+    if not end <= MAX_RECORDED_TIME:
+        raise ValueError(f"the run ends at {end:.3g} s, past the {MAX_RECORDED_TIME:.3g} s a recording's time axis "
+                         "holds (Rerun counts nanoseconds): shorten duration or tail, or use --no-record")
     if not fps > 0 or not math.isfinite(fps):
         raise ValueError(f"fps must be positive, got {fps}")
     if contact_frames < 1:

@@ -79,6 +79,7 @@ def _one_body(folder: Path) -> str:
     (["run", "demo-bonus", "--set", "contact.k=1e300", "--no-record"], "contact.k"),
     (["run", "demo-bonus", "--set", "duration=1e308", "--no-record"], "duration"),
     (["run", _one_body, "--no-record"], "one sphere and no walls"),
+    (["run", "textbook-1d", "--set", "tail=1e15", "--out", "x.rrd"], "time axis holds"),  # past Rerun's int64 ns
     (["run", "missing\nfile.toml", "--no-record"], "does not exist"),  # a message holding a newline
     (["run", "demo-bonus", "--stride", "1e3"], "--stride"),
     (["run", "demo-bonus", "--bogus"], "--bogus"),
