@@ -68,6 +68,32 @@ def oblique(b_frac: float, mu: float = 0.0, spin: float = 0.0, k: float = 1e9, v
                      {"name": "ball2", "mass": M, "radius": R, "position": [3 * R, 0.0], "velocity": [0.0, 0.0]}]}
 
 
+def _unit(x: list[float]) -> np.ndarray:
+    v = np.asarray(x, dtype=float)
+    return v / np.linalg.norm(v)
+
+
+def wall_3d(k: float, mu: float = 0.3, normal=(1.0, 2.0, 3.0), spin=(30.0, -50.0, 70.0)) -> dict:
+    """A ball thrown obliquely at a tilted wall, spinning about a skew axis: the slip starts off
+    every coordinate plane (3D friction), and the rigid limit is closed form."""
+    n = _unit(list(normal))
+    along = _unit(np.cross(n, [0.3, -1.0, 0.2]).tolist())
+    point = np.array([0.2, -0.1, 0.4])
+    return {"dim": 3, "contact": {"k": k, "mu": mu},
+            "body": [{"name": "ball1", "mass": M, "radius": R, "position": (point + n * (R + 0.02)).tolist(),
+                      "velocity": (-1.0 * n + 0.8 * along).tolist(), "spin": list(spin)}],
+            "wall": [{"point": point.tolist(), "normal": n.tolist()}]}
+
+
+def pair_3d(k: float, mu: float = 0.5) -> dict:
+    """Two balls meeting off-centre out of every coordinate plane, both spinning about skew axes."""
+    return {"dim": 3, "contact": {"k": k, "mu": mu},
+            "body": [{"name": "ball1", "mass": M, "radius": R, "position": [0.0, 0.01, -0.012],
+                      "velocity": [1.0, 0.1, 0.3], "spin": [20.0, -10.0, 30.0]},
+                     {"name": "ball2", "mass": 2 * M, "radius": R, "position": [3 * R, 0.0, 0.0],
+                      "velocity": [-0.5, 0.0, 0.0], "spin": [-10.0, 40.0, -50.0]}]}
+
+
 def cases() -> list[Case]:
     out: list[Case] = []
     for k in (1e-1, 1e1, 1e3, 1.5e3, 1e6, 1e9, 1e12):
@@ -88,6 +114,13 @@ def cases() -> list[Case]:
         out.append(Case("spin", f"w1 = {w:g} rad/s, mu = 0.5", oblique(0.3, mu=0.5, spin=w), "rigid"))
     for mu in (0.1, 1.0, 10.0):
         out.append(Case("friction", f"mu = {mu:g}", oblique(0.5, mu=mu), "rigid"))
+    # 3D friction (issue 10): slips that start off every coordinate plane and turn as they slow.
+    for k in (1e6, 1e9, 1e12):
+        out.append(Case("3D friction", f"tilted wall, skew spin, k = {k:g} N/m", wall_3d(k), "rigid"))
+    for mu in (0.05, 1.0):
+        out.append(Case("3D friction", f"tilted wall, skew spin, mu = {mu:g}", wall_3d(1e9, mu=mu), "rigid"))
+    for k in (1e6, 1e9):
+        out.append(Case("3D friction", f"pair out of plane, skew spins, k = {k:g} N/m", pair_3d(k), "rigid"))
     touching = head_on(M, M, 0.0, 0.0, 1e4, gap=0.0)
     out.append(Case("touching", "at rest", touching, "still"))
     slow = head_on(M, M, 1e-6, 0.0, 1e4, gap=0.0)
@@ -166,7 +199,8 @@ def run_case(case: Case, tol: float = 1e-7) -> CaseResult:
         label = "1D elastic closed form"
     else:
         reference = rigid.rigid_outcome(scene)
-        spins = (reference.w * np.array([R, R])[:, None]).ravel() if result.final.w.shape[-1] else np.empty(0)
+        radii = np.array([b.radius for b in scene.bodies])[:, None]
+        spins = (reference.w * radii).ravel() if result.final.w.shape[-1] else np.empty(0)
         ref = np.concatenate((reference.v.ravel(), spins))
         error = float(np.abs(final - ref).max() / scale)
         tolerance = rigid.softness_estimate(scene) + 10 * tol

@@ -1311,10 +1311,13 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     pending = False
     col = -1
     lo, hi, f_lo, f_hi = 0.0, 1.0, 0.0, 0.0
+    s_lo, s_hi = math.nan, math.nan
+    widths = (math.inf, math.inf)  # |value| at the last two trials of the pending root
+    passed = -1
     ta, fa, tb, fb = math.nan, math.nan, math.nan, math.nan
     past = math.inf
     shortest = 16.0 * EPS64 * (abs(t) + abs(h_full))
-    for _ in range(40):
+    for trial in range(40):
         frac = h / h_full
         first = math.inf
         for k in range(nq):
@@ -1349,35 +1352,55 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             guess = math.inf
             for k in range(modes):
                 e0, e1 = E[k, E_V0], E[k, E_V1]
-                if e0 > MODE_TOL and e1 < -MODE_TOL and e0 / (e0 - e1) * frac < guess:
+                if k != passed and e0 > MODE_TOL and e1 < -MODE_TOL and e0 / (e0 - e1) * frac < guess:
                     guess = e0 / (e0 - e1) * frac
                     best = k
             fresh = best >= 0 and (not pending or best != col)
             if fresh:
                 col = best
                 lo, f_lo, hi, f_hi = 0.0, E[col, E_V0], frac, E[col, E_V1]
+                s_lo, s_hi = E[col, E_R0] * h_full, E[col, E_R1] * h_full
                 ta, fa, tb, fb = math.nan, math.nan, 0.0, E[col, E_V0]
+                widths = (math.inf, math.inf)
                 pending = True
             if pending:
                 f = E[col, E_V1]
+                slope = E[col, E_R1] * h_full
                 if not fresh:
                     if f < 0:
-                        hi, f_hi = frac, f
+                        hi, f_hi, s_hi = frac, f, slope
                     else:
-                        lo, f_lo = frac, f
+                        lo, f_lo, s_lo = frac, f, slope
                 if abs(f) <= MODE_TOL and (best < 0 or best == col):
                     pending = False
                     if short:
                         theta = math.inf
+                elif (hi - lo) * h_full <= shortest:
+                    # A jump in the event value (a stuck contact's hold force can change sign at
+                    # once), bracketed as finely as the clock resolves: the step ends just past it.
+                    pending = False
+                    passed = col
+                    theta = hi
                 else:
                     estimate = bracketed_root(lo, f_lo, hi, f_hi, ta, fa, tb, fb, frac, f)
-                    slope = E[col, E_R1] * h_full
                     if fresh:
                         s0 = E[col, E_R0] * h
                         if math.isfinite(s0) and math.isfinite(slope):
                             estimate = hermite_root(E[col, E_V0], f, s0, slope * frac) * frac
-                    elif math.isfinite(slope) and slope != 0 and lo < frac - f / slope < hi:
-                        estimate = frac - f / slope
+                    else:
+                        # Newton from the bracket's end where the value changes fastest: past a
+                        # mode change the smoothed friction can leave the value nearly flat, and
+                        # a step from that end (or a secant through it) creeps.
+                        steep, end, f_end = s_lo, lo, f_lo
+                        if not (abs(s_lo) >= abs(s_hi)) or not math.isfinite(s_lo):
+                            steep, end, f_end = s_hi, hi, f_hi
+                        if math.isfinite(steep) and steep != 0 and lo < end - f_end / steep < hi:
+                            estimate = end - f_end / steep
+                        # Safeguard: after a few trials, a value that did not halve in two
+                        # (interpolation creeping along a flat side) is followed by a bisection.
+                        if trial >= 8 and abs(f) > 0.5 * widths[0]:
+                            estimate = 0.5 * (lo + hi)
+                    widths = (widths[1], abs(f))
                     theta = min(theta, estimate)
                     ta, fa, tb, fb = tb, fb, frac, f
         if modes and not pending:
