@@ -646,6 +646,9 @@ class _Writer:
         auto = getattr(run, "auto", None)
         if auto is not None:
             meta["auto"] = bool(auto[0])
+        method = getattr(run, "error_method", None)
+        if method is not None:
+            meta["error_method"] = str(method[0])
         for field in ("first_start", "last_end", "duration", "max_overlap", "max_normal_force"):
             value = getattr(r.contacts, field)
             meta[f"contact_{field}"] = float("nan") if value is None else float(value[0])
@@ -933,6 +936,8 @@ def _rebuild(path: Path, tables: dict[str, np.ndarray], meta: dict[str, Any]) ->
         run.error_estimate = np.array([float(meta["error_estimate"])])
     if "auto" in meta and hasattr(run, "auto"):
         run.auto = [bool(meta["auto"])]
+    if meta.get("error_method") in ("model", "measured"):
+        run.error_method = [str(meta["error_method"])]
     return run
 
 

@@ -46,6 +46,7 @@ def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
         # The error model's prediction for the outcome at this step (relative to the fastest
         # initial speed), and the report's own criterion: energy residual below 1%.
         "error_estimate": None if run.error_estimate is None else float(run.error_estimate[member]),
+        "error_method": None if run.error_method is None else run.error_method[member],
         "report_criterion_met": None if not math.isfinite(res.energy[member]) else bool(res.energy[member] < 0.01),
         "steps": int(r.steps[member]),
         "jumps": int(r.jumps[member]),

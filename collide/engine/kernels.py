@@ -1531,6 +1531,12 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                     ST[S_STATUS] = SINGULAR
                     FG[F_STATUS_T] = t
                     break
+                for k in range(2 * nc):
+                    # A mode that starts on its edge and leaves it (a slide that cannot be held
+                    # yet, a slip entering the band) may come back through it within the step:
+                    # counted as just inside, that return is an event like any other.
+                    if abs(E[k, E_V0]) <= MODE_TOL and E[k, E_R0] > 0:
+                        E[k, E_V0] = 2.0 * MODE_TOL
             for a in range(na):
                 for d in range(13):
                     X[a, X_S0 + d] = X[a, X_S + d]
@@ -1848,6 +1854,12 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
             small = YES if n <= 64 else NO
             tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, small, fp[FP_SLOW])
             if tau <= horizon or (small == YES and tau < math.inf):
+                if not min(t + tau, t_end) > t:
+                    # A contact due closer than the clock resolves that does not engage (bodies
+                    # far from the origin, where positions are coarse): refused, never a hang.
+                    ST[S_STATUS] = STALL
+                    FG[F_STATUS_T] = t
+                    break
                 t = min(t + tau, t_end)
                 search = 2.0 * tau if tau > 0 else search
                 continue
