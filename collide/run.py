@@ -216,6 +216,7 @@ def _measured(run: SceneRun, integ: str, record: bool, max_steps: int) -> SceneR
     scene, tol = run.scenes[0], float(run.tol[0])
     floor = TOL_FLOOR[integ]
     candidate, step_tol = run, tol
+    candidate_model = float(run.error_estimate[0])  # the model's estimate for the candidate
     spent = run.result.wall_time_s
     for _ in range(MEASURE_REFINEMENTS):
         finer_tol = step_tol / 10
@@ -229,12 +230,17 @@ def _measured(run: SceneRun, integ: str, record: bool, max_steps: int) -> SceneR
                                              f"{exc}); the estimate is the model's")
             break
         spent += finer.result.wall_time_s
-        error = max(_outcome_distance(candidate.result, finer.result, scene), float(candidate.error_estimate[0]))
+        model_estimate = float(candidate_model)
+        candidate_model = float(finer.error_estimate[0])
+        error = max(_outcome_distance(candidate.result, finer.result, scene), model_estimate)
         candidate.error_estimate = np.array([error])
         candidate.error_method = ["measured"]
         if error <= tol:
             break
-        finer.error_estimate = np.array([max(error / 10, float(finer.error_estimate[0]))])
+        # The tighter run is the candidate. Unless measured in turn, its estimate is the last
+        # difference (the coarser run's error): pessimistic, since extrapolating a shrinking
+        # series of differences failed where a tighter step changes an event's outcome.
+        finer.error_estimate = np.array([max(error, float(finer.error_estimate[0]))])
         finer.error_method = ["measured"]
         candidate, step_tol = finer, finer_tol
     # The user's tolerance stays what is reported; the steps are those of the run returned, the

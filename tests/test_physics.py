@@ -260,12 +260,18 @@ def test_gas_box_builtin_keeps_its_energy_and_stays_in_the_box():
 
 def test_billiards_break_builtin_balances_energy_with_friction():
     """Friction takes energy; kinetic energy plus the dissipated work stays what it was, to the
-    scene's tolerance (relative), and the run says nothing is off."""
+    scene's tolerance (relative). The rack's outcome is not settled by a tighter step to better
+    than about 1e-4 (simultaneous frictional contacts): the run measures that and says so."""
     scene = load_scene("billiards-break")
-    r = run_scene(scene, record=False).result
+    run = run_scene(scene, record=False)
+    r = run.result
     assert r.final.work[0] > 0  # friction did work: the balance is not trivially kinetic
     assert dg.residuals(r).energy[0] < 10 * scene.tol
-    assert not r.warnings
+    assert run.error_method == ["measured"]
+    if run.error_estimate[0] > scene.tol:
+        assert any("measured error" in w for w in r.warnings)
+    else:
+        assert not r.warnings
 
 
 def test_an_energy_balance_far_off_the_tolerance_is_a_warning():
