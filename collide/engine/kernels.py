@@ -1473,8 +1473,12 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         n_eng = 0
         for k in range(nq):
             d, r = overlap(G, GI, X, Q, QF, k, t, WP, grav)
-            Q[k, Q_ENG] = 1 if engaged(Q, k, d, r, WP, grav) else 0
-            n_eng += Q[k, Q_ENG]
+            # Contacts found late keep that mark through the restarts at this time: re-marked as
+            # ordinary ones, touching contacts easing apart in a rack dropped out and were found
+            # late again, one after another, until the run stalled. A step taken clears it.
+            on = engaged(Q, k, d, r, WP, grav)
+            Q[k, Q_ENG] = (LATE if Q[k, Q_ENG] == LATE else 1) if on else 0
+            n_eng += 1 if on else 0
         IV, OP = intervals(Q, nq, t, IV, OP, CNT, ST)
         if n_eng == 0:
             tau = math.inf
@@ -1562,6 +1566,9 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                     FG[F_STATUS_T], FG[F_STATUS_A] = t, 3.0
                 break
             restarts = 0
+            for k in range(nq):
+                if Q[k, Q_ENG] == LATE:
+                    Q[k, Q_ENG] = 1
             # After a step the turning limited, let the next ones grow back by doubling.
             grown = 2.0 * h if limited else (2.0 * grown if grown < dt else math.inf)
             if not ok:
