@@ -535,7 +535,7 @@ def test_a_preview_never_costs_more_than_the_run(integrator, tol):
     if integrator == "verlet":
         assert cost("verlet", 1e-3) > full  # the old preview
     preview = preview_settings(scene)
-    assert preview is None or (preview[1] >= scene.tol and cost(*preview) < 0.5 * full)
+    assert preview is None or (preview.tol >= scene.tol and cost(preview.integrator, preview.tol) < 0.5 * full)
 
 
 def test_frames_run_answers_like_a_view():
@@ -817,3 +817,56 @@ def test_controls_of_a_thousand_bodies_look_each_body_up_once(monkeypatch):
     # (through display units: mm and back, to the last bit)
     assert np.allclose([b.position for b in built.bodies], [b.position for b in scene.bodies], rtol=1e-15, atol=0)
     assert [b.velocity for b in built.bodies] == [b.velocity for b in scene.bodies]
+
+
+# ---------------------------------------------------------------------------------------------
+# Slider latency (issue 12: every built-in under 100 ms server side)
+
+
+def test_a_dem_scene_is_previewed_at_a_coarser_stable_step():
+    """break-3d (DEM, 236 000 steps of 5 us: 270-480 ms a run) had no preview: a drag waited
+    for every full run. Its preview takes 8 steps per contact time, within the step's
+    stability limit, and shows the same break."""
+    from viewer.params import AUTO, for_viewing
+    from viewer.session import preview_settings
+
+    scene = for_viewing(load_scene("break-3d"))
+    preview = preview_settings(scene)
+    assert preview is not None and preview.integrator == "dem" and preview.dt != AUTO
+    full = run_scene(scene, record=False).result
+    quick = run_scene(scene, integrator=preview.integrator, dt=preview.dt, tol=preview.tol, record=False).result
+    assert 4 * int(quick.steps[0]) < int(full.steps[0])
+    # The two front balls leave at the same speed and angle to a few per cent.
+    assert np.allclose(quick.final.v[0, 2:, :2], full.final.v[0, 2:, :2], rtol=0.03, atol=0.01)
+
+
+def test_a_new_run_of_the_same_scene_resends_only_what_changed(monkeypatch):
+    """A slider drag draws a new run ten times a second: the ground and walls that did not
+    move are not sent again, and each body's path is updated in place, not removed and added."""
+    import viser
+
+    from viewer.scene3d import SceneDrawer
+
+    scene = load_scene("break-3d")
+    views = [ViewRun(run_scene(replace(scene, bodies=[replace(scene.bodies[0], velocity=(v, 0.0, 0.0)),
+                                                      *scene.bodies[1:]]), integrator="dem", dt=2e-5))
+             for v in (2.0, 1.98)]
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        drawer = SceneDrawer(server.scene)
+        drawer.show_run(views[0])
+        added: list[str] = []
+        for name in ("add_line_segments", "add_box", "add_frame"):
+            real = getattr(server.scene, name)
+
+            def counting(path, *args, _real=real, **kwargs):
+                added.append(path)
+                return _real(path, *args, **kwargs)
+
+            monkeypatch.setattr(server.scene, name, counting)
+        paths = list(drawer._paths)
+        drawer.show_run(views[1])
+        assert added == [] and drawer._paths == paths
+        assert np.allclose(drawer._paths[0].points[-1, 1], views[1].paths[0][-1], atol=1e-6)
+    finally:
+        server.stop()

@@ -20,12 +20,14 @@ import traceback
 from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import viser
 from viser import _messages
 
+from collide import dem as cdem
+from collide.model import compile_scenes
 from collide.recording import RecordingError
 from collide.run import SceneRun, auto_dt, run_scene
 from collide.scene import INTEGRATORS, Scene, SceneError, load_scene
@@ -66,10 +68,13 @@ if TYPE_CHECKING:
 
 FPS = 30.0
 CURSOR_PERIOD = 0.25  # s between plot-cursor and values-table updates while playing
-PREVIEW_BUDGET = 0.08  # s: when a full run takes longer, a coarse preview is drawn first
+# s: when a full run takes longer, a coarse preview is drawn first; the run's share of a 100 ms
+# answer (preparing and drawing a run take 10-40 ms more)
+PREVIEW_BUDGET = 0.05
 PREVIEW_TOL = 1e-3  # the preview's accuracy (auto dt)
 STAGES = {"seed": 1, "verlet": 1, "yoshida4": 3, "kahan6": 9, "dem": 1}  # force evaluations per step
-DEM_PREVIEW_TOL = 4e-2  # a DEM preview: 50 steps per contact time, the DEM codes' usual step
+DEM_PREVIEW_STEPS = 8  # a DEM preview's steps per contact time (a full run takes at least 50)
+DEM_PREVIEW_MARGIN = 0.7  # of the DEM step's stability limit, at most
 SLOW_MOTION = 0.1  # playback rate inside contacts, relative to the chosen speed
 PLAYBACK_SECONDS = 5.0  # 'auto' speed plays a run in about this long
 SPEEDS = ["auto", "0.001x", "0.003x", "0.01x", "0.03x", "0.1x", "0.3x", "1x"]
@@ -94,13 +99,20 @@ class Request:
     stamp: float = 0.0
 
 
-def preview_settings(scene: Scene) -> tuple[str, float] | None:
-    """A cheaper integrator and tolerance for a first, coarse run while the user drags, or None
-    when no candidate costs less than half the scene's own run (force evaluations per contact:
-    stages / dt). A preview that costs more than the real run (issue 12, item 3) is never used."""
+class Preview(NamedTuple):
+    """A cheaper run drawn while the user drags: integrator, step (AUTO or seconds), tolerance."""
+
+    integrator: str
+    dt: float | str
+    tol: float
+
+
+def preview_settings(scene: Scene) -> Preview | None:
+    """A cheaper run for a first, coarse answer while the user drags, or None when none costs
+    less than half the scene's own run (force evaluations per contact: stages / dt). A preview
+    that costs more than the real run (issue 12, item 3) is never used."""
     if scene.integrator == "dem":
-        # The DEM step's error is first order in dt: a preview at the DEM codes' usual step.
-        return ("dem", DEM_PREVIEW_TOL) if scene.dt == AUTO and scene.tol < 0.5 * DEM_PREVIEW_TOL else None
+        return _dem_preview(scene)
 
     def cost(integrator: str, tol: float) -> float:
         if scene.dt != AUTO and integrator == scene.integrator and tol == scene.tol:
@@ -112,9 +124,33 @@ def preview_settings(scene: Scene) -> tuple[str, float] | None:
         full = cost(scene.integrator, scene.tol)
         candidates = [("verlet", max(PREVIEW_TOL, scene.tol)), (scene.integrator, max(PREVIEW_TOL, scene.tol))]
         best = min(candidates, key=lambda c: cost(*c))
-        return best if cost(*best) < 0.5 * full else None
+        return Preview(best[0], AUTO, best[1]) if cost(*best) < 0.5 * full else None
     except (RunError, SceneError, ValueError, ZeroDivisionError):
         return None
+
+
+def _dem_preview(scene: Scene) -> Preview | None:
+    """DEM_PREVIEW_STEPS steps per contact time, where the scene's own run takes at least 50
+    (the kernel's floor): the DEM step's error is first order, so the preview's outcome is off
+    by some per cent. The step keeps a margin to the kernel's stability limit, or no preview."""
+    if scene.dt != AUTO:
+        return None
+    try:
+        model, state = compile_scenes([scene])
+        t_c = float(cdem.contact_time(model, state)[0][0])
+        full = float(cdem.auto_dt(model, state, np.array([scene.tol]))[0])
+        for steps in (DEM_PREVIEW_STEPS, 2 * DEM_PREVIEW_STEPS):
+            dt = t_c / steps
+            if dt < 2 * full:
+                return None
+            try:
+                cdem.check_dem(model, state, np.array([dt / DEM_PREVIEW_MARGIN]), 2**62, np.array([np.inf]))
+            except RunError:
+                continue
+            return Preview("dem", float(dt), scene.tol)
+    except (RunError, SceneError, ValueError, ZeroDivisionError):
+        return None
+    return None
 
 
 class Session:
@@ -874,7 +910,7 @@ class Session:
                 preview = preview_settings(scene)
             t_build = lap()
             if preview is not None:
-                run = run_scene(scene, integrator=preview[0], dt=AUTO, tol=preview[1], record=True)
+                run = run_scene(scene, integrator=preview.integrator, dt=preview.dt, tol=preview.tol, record=True)
             else:
                 run = run_scene(scene, record=True)
             t_run = lap()
@@ -895,14 +931,14 @@ class Session:
             self._run_ensemble(scene, preview)
         return preview is not None
 
-    def _run_ensemble(self, scene: Scene, preview: tuple[str, float] | None) -> None:
+    def _run_ensemble(self, scene: Scene, preview: Preview | None) -> None:
         kind = self.ens_kind.value
         try:
             if kind not in ens.kinds_for(scene):
                 raise SceneError(f"'{kind}' needs a 2D or 3D scene")
             scenes = ens.ensemble_scenes(scene, kind, float(self.ens_spread.value), int(self.ens_members.value))
             if preview is not None:
-                scenes = [replace(s, integrator=preview[0], dt=AUTO, tol=preview[1]) for s in scenes]
+                scenes = [replace(s, integrator=preview.integrator, dt=preview.dt, tol=preview.tol) for s in scenes]
             paths, wall = ens.ensemble_paths(scenes)
         except (SceneError, RunError) as exc:
             self.ens_message.content = f"**Ensemble not run:** {_one_line(exc)}"
