@@ -14,10 +14,14 @@ Each change goes through the same path as a user's: the session reads the values
 re-simulates, the 3D scene, plots, values table and status are redrawn and flushed. Printed
 per scene (medians, milliseconds):
 
-  server   change -> run drawn and flushed (what the viewer controls)
+  first    change -> the first run drawn and flushed, server side: what a drag shows (the
+           scene's own run, or a coarse preview when its own run takes more than 80 ms)
+  final    change -> the scene's own run drawn, when a preview came first (it runs once the
+           slider has rested for 0.3 s: a drag shows previews, the release refines)
   browser  change -> the browser holds the new plot data (adds transfer and React/uPlot work)
-  sim      the core's simulate() wall time;  prepare  ViewRun (sampling, plots, residuals)
-  draw     scene + plot + table + status messages;  first  change -> first run drawn
+  preview  how many of the changes were answered by a preview first
+  sim      the first run's simulate() wall time;  prepare  its ViewRun (sampling, plots, residuals)
+  draw     its scene + plot + table + status messages
 
 Replay: a real recording (`--replay`, default recordings/gas-box.rrd when it exists: 1 000
 spheres, 78 506 steps; `collide run gas-box` writes it), opened as `collide view FILE` opens
@@ -78,7 +82,7 @@ def bench_scene(session, page, name: str, repeats: int) -> dict[str, list[float]
     session.worker.wait_idle(120)
     key = "contact.k" if "contact.k" in session.values else "contact.restitution"
     k0 = float(session.values[key])
-    out: dict[str, list[float]] = {k: [] for k in ("server", "browser", "first", "sim", "prepare", "draw")}
+    out: dict[str, list[float]] = {k: [] for k in ("first", "final", "browser", "preview", "sim", "prepare", "draw")}
     for r in range(repeats):
         n_before = len(session.timings)
         before = page.evaluate(PLOT_SUM_JS) if page is not None else None
@@ -100,12 +104,14 @@ def bench_scene(session, page, name: str, repeats: int) -> dict[str, list[float]
         if not drawn:
             print(f"  {name}: no run drawn ({session.error})")
             continue
-        final = drawn[-1]
-        out["server"].append(final["total"])
-        out["first"].append(drawn[0]["total"])
-        out["sim"].append(final["simulate"])
-        out["prepare"].append(final["prepare"])
-        out["draw"].append(final["draw"])
+        first = drawn[0]
+        out["first"].append(first["total"])
+        out["preview"].append(float(first["preview"]))
+        if first["preview"] and len(drawn) > 1:
+            out["final"].append(drawn[-1]["total"])
+        out["sim"].append(first["simulate"])
+        out["prepare"].append(first["prepare"])
+        out["draw"].append(first["draw"])
         if browser_t is not None:
             out["browser"].append(browser_t)
     return out
@@ -210,10 +216,12 @@ def main() -> None:
     if results:
         print(f"\nViewer latency, slider change -> new run drawn; median of {args.repeats} changes of "
               f"contact.k (ms), {mode}; {load}")
-        print(f"{'scene':<20} {'server':>8} {'browser':>8} {'first':>8} {'sim':>8} {'prepare':>8} {'draw':>8}")
+        print(f"{'scene':<20} {'first':>8} {'final':>8} {'browser':>8} {'preview':>8} {'sim':>8} {'prepare':>8} "
+              f"{'draw':>8}")
         for name, r in results.items():
-            print(f"{name:<20} {median_ms(r['server'])} {median_ms(r['browser'])} {median_ms(r['first'])} "
-                  f"{median_ms(r['sim'])} {median_ms(r['prepare'])} {median_ms(r['draw'])}")
+            print(f"{name:<20} {median_ms(r['first'])} {median_ms(r['final'])} {median_ms(r['browser'])} "
+                  f"{int(sum(r['preview'])):>4d}/{len(r['first']):<3d} {median_ms(r['sim'])} "
+                  f"{median_ms(r['prepare'])} {median_ms(r['draw'])}")
     if not do_replay:
         return
     bodies, read_s, prepare_s = opened
