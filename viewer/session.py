@@ -34,6 +34,7 @@ from collide.scene import INTEGRATORS, Scene, SceneError, load_scene
 from collide.stepper import RunError
 from viewer import ensemble as ens
 from viewer import files
+from viewer.background import BackgroundRunner, RunStopped
 from viewer.exports import png_bytes, run_csv
 from viewer.frames import FramesRun
 from viewer.geometry import fit_camera
@@ -72,6 +73,11 @@ CURSOR_PERIOD = 0.25  # s between plot-cursor and values-table updates while pla
 # answer (preparing and drawing a run take 10-40 ms more)
 PREVIEW_BUDGET = 0.05
 PREVIEW_TOL = 1e-3  # the preview's accuracy (auto dt)
+# A run expected to take longer than this (its last run did), or of more bodies than MANY_BODIES,
+# goes to a child process with a progress line and a Stop button (viewer.background), and starts
+# once the slider rests: a drag does not start a minute-long run for every value it passes.
+LONG_RUN_S = 1.0
+MANY_BODIES = 200
 STAGES = {"seed": 1, "verlet": 1, "yoshida4": 3, "kahan6": 9, "dem": 1}  # force evaluations per step
 DEM_PREVIEW_STEPS = 8  # a DEM preview's steps per contact time (a full run takes at least 50)
 DEM_PREVIEW_MARGIN = 0.7  # of the DEM step's stability limit, at most
@@ -198,6 +204,8 @@ class Session:
         self.worker: LatestWorker[Request] = LatestWorker(self._job, on_error=self._job_failed,
                                                           name=f"collide-sim-{client.client_id}")
         self.fps = FPS  # frames a second the player sends while playing
+        self.runner = BackgroundRunner()  # long runs (many bodies) in a child process
+        self._stop_run = threading.Event()
         self._player = threading.Thread(target=self._play_loop, name=f"collide-play-{client.client_id}",
                                         daemon=True)
         self._player.start()
@@ -212,6 +220,9 @@ class Session:
         gui.main_panel.set_width(340)
         gui.add_html(STYLE, order=-1)
         self.status = gui.add_markdown("Loading...", order=0)
+        self.progress = gui.add_markdown("", order=0.3)
+        self.stop_button = gui.add_button("Stop this run", icon=viser.Icon.PLAYER_STOP, order=0.4, visible=False,
+                                          hint="stop the run going in the background; the last run stays shown")
         self.notice = gui.add_markdown("", order=0.5)
         with gui.add_folder("Timeline", order=1):
             self.play_button = gui.add_button("Play", icon=viser.Icon.PLAYER_PLAY)
@@ -286,6 +297,7 @@ class Session:
         self.plot_panel.dock_below(gui.main_panel)
 
         self.play_button.on_click(lambda _e: self.toggle_play())
+        self.stop_button.on_click(lambda _e: self.stop_run())
         self.frame_buttons.on_click(lambda e: self._on_step("frame", self.frame_buttons.value))
         self.step_buttons.on_click(lambda e: self._on_step("step", self.step_buttons.value))
         self.time_slider.on_update(self._on_time)
@@ -624,6 +636,9 @@ class Session:
             self.drawer.show_ghosts(None)
             if label is not None and label in self.picker.options:
                 self.picker.value = label
+        # What the scene's runs cost is known from its own run only (chooses previews and
+        # background runs).
+        self._full_cost = run.result.wall_time_s if run is not None else None
         if run is not None:
             self._show_view(ViewRun(run, origin="live run"), refit=True)
         else:
@@ -657,6 +672,7 @@ class Session:
             if label not in self.picker.options:
                 self.picker.options = list(self.picker.options) + [label]
             self.picker.value = label
+        self._full_cost = view.result.wall_time_s
         self._show_view(view, refit=True)
         self.seek(view.t0)
         self._clear_notice()
@@ -905,12 +921,22 @@ class Session:
 
         try:
             scene = build_scene(req.controls, req.values, req.settings)
+            long = self._expect_long(scene)
+            if long and not final and not req.refit:
+                # Seconds to a minute of run: only once the slider rests (the worker calls back
+                # with final=True after its settle time, unless a newer value came).
+                self._show_progress(f"*{scene.name}: the run starts when the slider rests...*")
+                return True
             preview = None
-            if not final and self._full_cost is not None and self._full_cost > PREVIEW_BUDGET:
+            if not long and not final and self._full_cost is not None and self._full_cost > PREVIEW_BUDGET:
                 preview = preview_settings(scene)
             t_build = lap()
             if preview is not None:
                 run = run_scene(scene, integrator=preview.integrator, dt=preview.dt, tol=preview.tol, record=True)
+            elif long:
+                run = self._run_in_background(scene)
+                if run is None:
+                    return False
             else:
                 run = run_scene(scene, record=True)
             t_run = lap()
@@ -919,17 +945,62 @@ class Session:
             view = ViewRun(run, origin="live run", preview=preview is not None)
             t_view = lap()
         except (SceneError, RunError) as exc:
+            self._show_progress("")
             self._show_error(_one_line(exc))
             return False
         if req.controls is not self.controls:
             return False
         self._show_view(view, refit=req.refit, stamp=req.stamp)
+        if long:
+            self._show_progress("")
         self.timings.append({"stamp": req.stamp, "preview": preview is not None, "queued": clock[0] - req.stamp,
                              "build": t_build, "simulate": t_run, "core_wall": run.result.wall_time_s,
                              "prepare": t_view, "draw": lap(), "total": time.perf_counter() - req.stamp})
         if self.ens_on.value and not self.worker.pending():
             self._run_ensemble(scene, preview)
         return preview is not None
+
+    def _expect_long(self, scene: Scene) -> bool:
+        return len(scene.bodies) > MANY_BODIES or (self._full_cost is not None and self._full_cost > LONG_RUN_S)
+
+    def _run_in_background(self, scene: Scene) -> SceneRun | None:
+        """Run in the child process with a progress line; None when stopped (the Stop button,
+        a newer value, the tab closing)."""
+        self._stop_run.clear()
+        self.stop_button.visible = True
+        name = scene.name
+
+        at_rest = " (or sooner, at rest)" if scene.rest is not None else ""
+
+        def progress(t: float, t_end: float, steps: int, seconds: float) -> None:
+            done = f" ({100 * t / t_end:.0f} %)" if math.isfinite(t_end) and t_end > 0 and not at_rest else ""
+            self._show_progress(f"**Running {name}** in the background: {t:.4g} of {t_end:.4g} s{at_rest} "
+                                f"simulated{done}, {steps:,} steps, {seconds:.1f} s. The last run stays shown; "
+                                "moving a slider restarts it.")
+
+        self._show_progress(f"**Running {name}** in the background: starting...")
+        try:
+            run = self.runner.run(scene, progress=progress, record=True, stop=self._run_should_stop)
+        except RunStopped:
+            if self._stop_run.is_set():
+                self._show_progress(f"*{name}: run stopped; the last run is shown.*")
+            return None
+        finally:
+            self.stop_button.visible = False
+        self._full_cost = run.result.wall_time_s
+        self._show_progress(f"*{name}: run done in {run.result.wall_time_s:.1f} s; preparing the view...*")
+        return run
+
+    def _run_should_stop(self) -> bool:
+        return self._stop_run.is_set() or self.worker.pending() or self._closed.is_set()
+
+    def stop_run(self) -> None:
+        """Stop the run going in the background (the Stop button)."""
+        self._stop_run.set()
+
+    def _show_progress(self, text: str) -> None:
+        if not self._closed.is_set() and self.progress.content != text:
+            self.progress.content = text
 
     def _run_ensemble(self, scene: Scene, preview: Preview | None) -> None:
         kind = self.ens_kind.value
@@ -985,6 +1056,8 @@ class Session:
             self.runs_drawn += 1
             if stamp:
                 self.last_latency = time.perf_counter() - stamp
+        if self.controls is not None and (view.n_bodies > MANY_BODIES or (self._full_cost or 0.0) > LONG_RUN_S):
+            self.runner.warm()  # the next run will go to the background: its process is ready
         if refit or first:
             self.fit_camera()
 
@@ -1196,6 +1269,7 @@ class Session:
         for timer in list(self._typing.values()):
             timer.cancel()
         self.worker.close(timeout=2.0)
+        self.runner.close()
         self._player.join(timeout=2.0)
         if self.uploads is not None:
             self.uploads.close()
