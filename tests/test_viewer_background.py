@@ -1,6 +1,7 @@
-"""Long runs (many bodies) in a child process: progress while they go, a stop that stops them,
-and the session's slider path for them (issue 12: a slider on gas-box or pile must never freeze
-the page or start a minute-long run it cannot take back)."""
+"""The session without a browser (`viewer.testing.ServerClient`): long runs (many bodies) in a
+child process, with progress while they go and a stop that stops them (issue 12: a slider on
+gas-box or pile must never freeze the page or start a minute-long run it cannot take back), and
+controls that change nothing disabled (issue 12, item 5)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import pytest
 from collide.run import run_scene
 from collide.scene import SceneError, parse_scene
 from viewer.background import BackgroundRunner, RunStopped
-from viewer.testing import wait_until
+from viewer.testing import ServerClient, wait_until
 
 
 def _pile(n: int, duration: float) -> object:
@@ -83,15 +84,6 @@ def test_stopping_a_background_run_kills_its_process_at_once():
         runner.close()
 
 
-class _Client:
-    """A browser tab stand-in: the session draws into the server's own scene."""
-
-    def __init__(self, server) -> None:
-        self.gui, self.scene, self.client_id = server.gui, server.scene, 0
-        self.atomic, self.flush = server.atomic, server.flush
-        self.camera = type("Camera", (), {"on_update": staticmethod(lambda cb: cb)})()
-
-
 def test_a_slider_on_a_many_body_scene_runs_in_the_background_with_a_stop(tmp_path):
     """More than MANY_BODIES bodies: a moved slider waits for the slider to rest, then runs in
     the child process with a progress line and a Stop button; Stop keeps the last run on
@@ -103,7 +95,7 @@ def test_a_slider_on_a_many_body_scene_runs_in_the_background_with_a_stop(tmp_pa
     assert len(long.bodies) > MANY_BODIES
     app = ViewerApp("demo-1d", port=0, recordings_dir=tmp_path)
     app.start()
-    session = Session(app, _Client(app.server))  # type: ignore[arg-type]
+    session = Session(app, ServerClient(app.server))  # type: ignore[arg-type]
     session.fit_camera = lambda *a, **k: None  # no camera without a browser
     try:
         # The long scene, shown with a short run of it (its own takes half a minute).
@@ -126,6 +118,33 @@ def test_a_slider_on_a_many_body_scene_runs_in_the_background_with_a_stop(tmp_pa
         wait_until(lambda: session.runs_drawn == 3, 60, "the new run drawn")
         assert session.worker.wait_idle(30)
         assert session.view.scene.contact.mu == pytest.approx(0.4) and session.progress.content == ""
+    finally:
+        session.close()
+        app.stop()
+
+
+def test_a_slider_the_materials_override_is_disabled_with_the_reason(tmp_path):
+    """break-3d: [contact]'s restitution and mu reach no contact; their controls are disabled
+    and say why, and the material's and pair's own sliders are live."""
+    from viewer.app import ViewerApp
+    from viewer.session import Session
+
+    app = ViewerApp("demo-1d", port=0, recordings_dir=tmp_path)
+    app.start()
+    session = Session(app, ServerClient(app.server))  # type: ignore[arg-type]
+    session.fit_camera = lambda *a, **k: None
+    try:
+        session.load_scene("break-3d")
+        assert session.worker.wait_idle(120) and session.view is not None
+        for ident in ("contact.restitution", "contact.mu"):
+            assert session._param_handles[ident].disabled and session._param_boxes[ident].disabled
+            assert "materials and pairs" in session._param_handles[ident].hint
+        for ident in ("pair.0.restitution", "material.phenolic.restitution", "pair.0.mu"):
+            assert not session._param_handles[ident].disabled
+        before = session.view
+        assert session.apply_typed("pair.0.restitution", "0.5")
+        wait_until(lambda: session.view is not before and session.worker.idle(), 120, "the run with e = 0.5")
+        assert session.view.scene.pairs[0].restitution == 0.5
     finally:
         session.close()
         app.stop()

@@ -870,3 +870,51 @@ def test_a_new_run_of_the_same_scene_resends_only_what_changed(monkeypatch):
         assert np.allclose(drawer._paths[0].points[-1, 1], views[1].paths[0][-1], atol=1e-6)
     finally:
         server.stop()
+
+
+# ---------------------------------------------------------------------------------------------
+# Sliders that the materials override (issue 12, item 5)
+
+
+def test_break_3d_restitution_and_friction_sliders_act_on_its_materials_and_pair():
+    """break-3d's materials and pair table give every contact its own restitution and mu, so
+    [contact]'s sliders changed nothing. Those two are disabled with the reason; the material's
+    and the pair's own values get sliders, and moving one changes the run."""
+    scene = load_scene("break-3d")
+    controls = scene_controls(scene)
+    params = controls.by_ident()
+    for name in ("restitution", "mu"):
+        assert params[f"contact.{name}"].unused and "phenolic" in params[f"contact.{name}"].unused
+    assert params["pair.0.restitution"].value == 0.95 and params["material.phenolic.restitution"].value == 0.5
+    assert params["pair.0.mu"].value == 0.05 and not params["pair.0.restitution"].unused
+    values = values_of(scene, controls)
+    base = run_scene(build_scene(controls, values, controls.settings), record=False).result
+    values["pair.0.restitution"] = 0.5
+    softer = build_scene(controls, values, controls.settings)
+    assert softer.pairs[0].restitution == 0.5 and softer.materials[0].restitution == 0.5
+    run = run_scene(softer, record=False).result
+    # The cue keeps more of its speed after a less elastic hit on the rack.
+    assert float(run.final.v[0, 0, 0]) > float(base.final.v[0, 0, 0]) + 0.1
+
+
+def test_contact_sliders_stay_live_where_some_contact_uses_them():
+    """Where any contact takes [contact]'s value (no materials, a material without its own, a
+    pair of materials with no pair table), its slider stays live."""
+    from viewer.params import default_used
+
+    for name in ("pile", "bounce", "demo-bonus", "billiards-break"):
+        params = scene_controls(load_scene(name)).params
+        assert not any(p.unused for p in params), name
+    bodies = [{"name": "a", "material": "m1", "radius": 0.01, "position": [0, 0, 0.01], "velocity": [1, 0, 0]},
+              {"name": "b", "material": "m2", "radius": 0.01, "position": [0.1, 0, 0.01]}]
+    raw = {"dim": 3, "contact": {"model": "hertz", "restitution": 0.6},
+           "material": [{"name": "m1", "density": 1000.0, "youngs_modulus": 1e7, "restitution": 0.9},
+                        {"name": "m2", "density": 1000.0, "youngs_modulus": 1e7, "restitution": 0.8}],
+           "body": bodies}
+    assert not default_used(parse_scene(raw), "restitution")  # both give their own: the mixing rule
+    raw["material"][1].pop("restitution")
+    assert default_used(parse_scene(raw), "restitution")  # m2 takes [contact]'s for the a-b pair
+    raw["pair"] = [{"materials": ["m1", "m2"], "restitution": 0.7}]
+    assert not default_used(parse_scene(raw), "restitution")
+    raw["wall"] = [{"point": [0, 0, 0], "normal": [0, 0, 1]}]
+    assert default_used(parse_scene(raw), "restitution")  # b on the floor: m2 has none

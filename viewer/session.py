@@ -377,9 +377,16 @@ class Session:
     def _param_widgets(self, gui: viser.GuiApi, p: Param) -> None:
         value = self.values.get(p.ident, p.value)
         hint = p.hint or f"{p.key} in {p.unit or 'units of 1'}"
-        box = gui.add_text(p.title, format_value(value), hint=hint + " (type any number, e.g. 1e-7)")
-        slider = gui.add_slider("", min=p.lo, max=p.hi, step=p.step, initial_value=float(min(max(value, p.lo), p.hi)),
-                                hint=hint)
+        if p.unused:
+            # Disabled, saying why: moving it would change nothing (issue 12, item 5).
+            box = gui.add_text(f"{p.title} (not used)", format_value(value), hint=p.unused, disabled=True)
+            slider = gui.add_slider("", min=p.lo, max=p.hi, step=p.step,
+                                    initial_value=float(min(max(value, p.lo), p.hi)), hint=p.unused, disabled=True)
+            gui.add_markdown(f"<small>{p.unused}.</small>")
+        else:
+            box = gui.add_text(p.title, format_value(value), hint=hint + " (type any number, e.g. 1e-7)")
+            slider = gui.add_slider("", min=p.lo, max=p.hi, step=p.step,
+                                    initial_value=float(min(max(value, p.lo), p.hi)), hint=hint)
         box.on_update(lambda e, ident=p.ident: self._on_box(e, ident))
         slider.on_update(lambda e, ident=p.ident: self._on_slider(e, ident))
         self._param_boxes[p.ident] = box

@@ -50,6 +50,16 @@ def open_page(browser: Any, app: Any, *, width: int = 1280, height: int = 800, q
     return page
 
 
+class ServerClient:
+    """Stands in for a browser tab (benchmarks and tests without a browser): a `Session` given
+    it draws into the server's own scene and GUI, watched by nobody."""
+
+    def __init__(self, server: Any) -> None:
+        self.gui, self.scene, self.client_id = server.gui, server.scene, 0
+        self.atomic, self.flush = server.atomic, server.flush
+        self.camera = type("Camera", (), {"on_update": staticmethod(lambda cb: cb)})()
+
+
 def dom_id(handle: Any) -> str:
     """The DOM id viser gives a GUI element (its uuid)."""
     return handle._impl.uuid
