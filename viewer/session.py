@@ -85,6 +85,9 @@ SLOW_MOTION = 0.1  # playback rate inside contacts, relative to the chosen speed
 PLAYBACK_SECONDS = 5.0  # 'auto' speed plays a run in about this long
 SPEEDS = ["auto", "0.001x", "0.003x", "0.01x", "0.03x", "0.1x", "0.3x", "1x"]
 TYPING_SETTLE = 0.5  # s without a keystroke before a typed value is read
+# s after an upload's outcome when viser's own "uploaded successfully" is removed again: a
+# loaded browser may show it seconds late.
+UPLOAD_TOAST_REMOVALS = (0.4, 1.5, 4.0, 10.0)
 EXPANDED_BODIES = 4  # up to this many bodies: one open folder each
 FOLDED_BODIES = 12  # up to this many: one closed folder each; beyond: a body picker
 # viser's slider carries a number box that drops an "e" as it is typed (issue 12, item 2): hide
@@ -777,7 +780,7 @@ class Session:
                 self.client._websock_connection.queue_message(message)
 
         send()
-        for delay in (0.4, 1.5):
+        for delay in UPLOAD_TOAST_REMOVALS:
             timer = threading.Timer(delay, send)
             timer.daemon = True
             timer.start()
