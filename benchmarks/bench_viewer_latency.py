@@ -1,38 +1,44 @@
 """Viewer latency and replay rate: a slider change to the new run drawn, for every built-in
 scene; and a 1 000-sphere run replayed frame by frame.
 
-    python benchmarks/bench_viewer_latency.py [--repeats 9] [--no-browser] [--spheres 1000] [--replay FILE.rrd]
-                                              [--seconds 10]
+    python benchmarks/bench_viewer_latency.py [--repeats 9] [--no-browser] [--replay FILE.rrd | --synthetic N]
+                                              [--seconds 10] [--only latency|replay]
 
 Starts the viewer in-process (127.0.0.1, any free port), opens it in headless Chromium
 (Debian's /usr/bin/chromium through Playwright) unless --no-browser.
 
 Latency, per built-in scene of at most 200 bodies (gas-box and pile, 1 000 spheres, are runs of
-seconds to minutes, not slider material) at its default settings, contact.k (contact.restitution
-for a Hertz scene, which has no k) moved back and forth `repeats` times.
+seconds to minutes that go to the background) at its default settings, contact.k (a Hertz scene
+has none: its restitution, or where the materials set every contact's (break-3d) the first
+material's or pair's) moved back and forth `repeats` times.
 Each change goes through the same path as a user's: the session reads the values, the worker
 re-simulates, the 3D scene, plots, values table and status are redrawn and flushed. Printed
 per scene (medians, milliseconds):
 
-  server   change -> run drawn and flushed (what the viewer controls)
+  first    change -> the first run drawn and flushed, server side: what a drag shows (the
+           scene's own run, or a coarse preview when its own run takes more than 80 ms)
+  final    change -> the scene's own run drawn, when a preview came first (it runs once the
+           slider has rested for 0.3 s: a drag shows previews, the release refines)
   browser  change -> the browser holds the new plot data (adds transfer and React/uPlot work)
-  sim      the core's simulate() wall time;  prepare  ViewRun (sampling, plots, residuals)
-  draw     scene + plot + table + status messages;  first  change -> first run drawn
+  preview  how many of the changes were answered by a preview first
+  sim      the first run's simulate() wall time;  prepare  its ViewRun (sampling, plots, residuals)
+  draw     its scene + plot + table + status messages
 
-Replay: a synthetic pile of N spheres (`viewer.frames.settling_pile`: frames, not physics), or
-a recording (`--replay`), played for `seconds` with force chains and colour by contact count,
-the player asked for 30 and then 120 frames a second. (recordings/gas-box.rrd is not the
-default: reading its 78 506 steps back builds the dense every-body-at-every-knot view, about
-20 GB.) Printed: frame updates sent per second (server side: positions, colours, shadows and
-chains of every sphere queued to the browser), and the server's work per frame (median, 95th
-percentile) with the rate it allows. Without a browser the session draws into the server's
-scene with no client
-connected: the server columns only.
+Replay: a real recording (`--replay`, default recordings/gas-box.rrd when it exists: 1 000
+spheres, 78 506 steps; `collide run gas-box` writes it), opened as `collide view FILE` opens
+it (read in a child process, then prepared), or a synthetic pile of N spheres (`--synthetic N`,
+`viewer.frames.settling_pile`: frames, not physics), played for `seconds` with force chains
+and colour by contact count, the player asked for 30 and then 120 frames a second. Printed:
+the time to read and prepare the recording, frame updates sent per second (server side:
+positions, colours, shadows and chains of every sphere queued to the browser), and the
+server's work per frame (median, 95th percentile) with the rate it allows. Without a browser
+the session draws into the server's scene with no client connected: the server columns only.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -42,28 +48,20 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from collide.recording import read_recording  # noqa: E402
 from collide.scene import builtin_names, load_scene  # noqa: E402
 from viewer.app import ViewerApp  # noqa: E402
 from viewer.frames import settling_pile  # noqa: E402
+from viewer.reading import read_untrusted  # noqa: E402
 from viewer.state import ViewRun  # noqa: E402
-from viewer.testing import CHROMIUM, launch  # noqa: E402
+from viewer.testing import CHROMIUM, ServerClient, launch  # noqa: E402
 
+DEFAULT_REPLAY = Path("recordings/gas-box.rrd")
 PLOT_SUM_JS = """() => {
     const charts = Object.values(window.__viserTestpoints?.uplots || {}).map(u => u.chart);
     const c = charts.find(c => (c.root.innerText || '').startsWith('energy'));
     if (!c) return null;
     let s = 0; for (const a of c.data.slice(1)) for (const x of a) s += x; return s;
 }"""
-
-
-class _ServerClient:
-    """Stands in for a browser tab: the session draws into the server's (unwatched) scene."""
-
-    def __init__(self, server) -> None:
-        self.gui, self.scene, self.client_id = server.gui, server.scene, 0
-        self.atomic, self.flush = server.atomic, server.flush
-        self.camera = type("Camera", (), {"on_update": staticmethod(lambda cb: cb)})()
 
 
 def median_ms(values: list[float]) -> str:
@@ -74,14 +72,17 @@ def bench_scene(session, page, name: str, repeats: int) -> dict[str, list[float]
     print(f"  {name}...", file=sys.stderr, flush=True)
     session.load_scene(name)
     session.worker.wait_idle(120)
-    key = "contact.k" if "contact.k" in session.values else "contact.restitution"
+    # contact.k; a Hertz scene has none: its restitution, or the first material's or pair's own
+    # when the materials set every contact's (break-3d).
+    usable = [p.ident for p in session.controls.params if not p.unused]
+    key = next(k for k in usable if k == "contact.k" or k.endswith(".restitution"))
     k0 = float(session.values[key])
-    out: dict[str, list[float]] = {k: [] for k in ("server", "browser", "first", "sim", "prepare", "draw")}
+    out: dict[str, list[float]] = {k: [] for k in ("first", "final", "browser", "preview", "sim", "prepare", "draw")}
     for r in range(repeats):
         n_before = len(session.timings)
         before = page.evaluate(PLOT_SUM_JS) if page is not None else None
         # What a slider drag sets (a restitution moves down: 1 is its top).
-        up, down = (0.98, 0.96) if key == "contact.restitution" else (1.02, 0.98)
+        up, down = (0.98, 0.96) if key.endswith("restitution") else (1.02, 0.98)
         session.values[key] = k0 * (up if r % 2 == 0 else down)
         t0 = time.perf_counter()
         session.request_run()
@@ -91,30 +92,44 @@ def bench_scene(session, page, name: str, repeats: int) -> dict[str, list[float]
                 page.wait_for_function(f"() => {{ const f = {PLOT_SUM_JS}; const v = f(); "
                                        f"return v !== null && v !== {before!r}; }}", polling="raf", timeout=30_000)
                 browser_t = time.perf_counter() - t0
-            except Exception:  # the plots did not change (break-3d: its materials set the restitution)
+            except Exception:  # the plots did not change
                 browser_t = None
         session.worker.wait_idle(120)
         drawn = list(session.timings)[n_before:]
         if not drawn:
             print(f"  {name}: no run drawn ({session.error})")
             continue
-        final = drawn[-1]
-        out["server"].append(final["total"])
-        out["first"].append(drawn[0]["total"])
-        out["sim"].append(final["simulate"])
-        out["prepare"].append(final["prepare"])
-        out["draw"].append(final["draw"])
+        first = drawn[0]
+        out["first"].append(first["total"])
+        out["preview"].append(float(first["preview"]))
+        if first["preview"] and len(drawn) > 1:
+            out["final"].append(drawn[-1]["total"])
+        out["sim"].append(first["simulate"])
+        out["prepare"].append(first["prepare"])
+        out["draw"].append(first["draw"])
         if browser_t is not None:
             out["browser"].append(browser_t)
     return out
 
 
-def bench_replay(session, spheres: int, path: Path | None, seconds: float) -> list[tuple[float, float, float, float]]:
-    """(asked fps, frames sent per second, median and 95th-percentile work per frame in s)."""
+def open_replay(session, spheres: int, path: Path | None) -> tuple[int, float, float]:
+    """Show the run to replay: (bodies, s to read the recording, s to prepare its view)."""
     if path is None:
-        session.show_frames(settling_pile(spheres, duration=4.0, fps=60))
-    else:
-        session.show_recording(ViewRun(read_recording(path)), path.name)
+        run = settling_pile(spheres, duration=4.0, fps=60)
+        session.show_frames(run)
+        return run.n_bodies, 0.0, 0.0
+    print(f"  reading {path}...", file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
+    run = read_untrusted(path)
+    t1 = time.perf_counter()
+    view = ViewRun(run, origin=f"recording {path.name}")
+    t2 = time.perf_counter()
+    session.show_recording(view, path.name)
+    return view.n_bodies, t1 - t0, t2 - t1
+
+
+def bench_replay(session, seconds: float) -> list[tuple[float, float, float, float]]:
+    """(asked fps, frames sent per second, median and 95th-percentile work per frame in s)."""
     session.set_show(colour_by="contacts", chains=True, shadows=True)
     session.speed.value = "0.3x"
     session.loop.value = True
@@ -138,13 +153,22 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=9)
     parser.add_argument("--no-browser", action="store_true")
-    parser.add_argument("--spheres", type=int, default=1000)
-    parser.add_argument("--replay", type=Path, default=None)
+    parser.add_argument("--replay", type=Path, default=None,
+                        help=f"a recording to replay (default: {DEFAULT_REPLAY} if it exists)")
+    parser.add_argument("--synthetic", type=int, default=None, metavar="N",
+                        help="replay a synthetic pile of N spheres instead of a recording")
     parser.add_argument("--seconds", type=float, default=10.0)
+    parser.add_argument("--only", choices=("latency", "replay"), default=None)
     args = parser.parse_args()
-    spheres = args.spheres if args.replay is None else len(read_recording(args.replay).scene.bodies)
+    replay_path = args.replay
+    if replay_path is None and args.synthetic is None:
+        replay_path = DEFAULT_REPLAY if DEFAULT_REPLAY.exists() else None
+    if replay_path is not None and not replay_path.exists():
+        parser.error(f"{replay_path}: no such recording (collide run gas-box writes recordings/gas-box.rrd)")
+    spheres = args.synthetic or 1000
     # Slider scenes: every built-in a user would drag a slider on (1 000-sphere runs take seconds).
-    names = [n for n in builtin_names() if len(load_scene(n).bodies) <= 200]
+    names = [n for n in builtin_names() if len(load_scene(n).bodies) <= 200] if args.only != "replay" else []
+    do_replay = args.only != "latency"
     use_browser = not args.no_browser and CHROMIUM.exists()
     try:
         from playwright.sync_api import sync_playwright
@@ -153,7 +177,7 @@ def main() -> None:
 
     app = ViewerApp("demo-bonus", port=0, recordings_dir=Path("recordings"))
     app.start()
-    results, replay = {}, []
+    results, replay, opened = {}, [], (0, 0.0, 0.0)
     try:
         if use_browser:
             with sync_playwright() as p:
@@ -164,30 +188,44 @@ def main() -> None:
                 page.wait_for_function("() => document.body.innerText.includes('simulated in')", timeout=60_000)
                 for name in names:
                     results[name] = bench_scene(session, page, name, args.repeats)
-                replay = bench_replay(session, spheres, args.replay, args.seconds)
+                if do_replay:
+                    opened = open_replay(session, spheres, replay_path)
+                    replay = bench_replay(session, args.seconds)
                 browser.close()
         else:
             from viewer.session import Session
 
-            session = Session(app, _ServerClient(app.server))  # type: ignore[arg-type]
+            session = Session(app, ServerClient(app.server))  # type: ignore[arg-type]
             session.fit_camera = lambda *a, **k: None  # no camera without a browser
             for name in names:
                 results[name] = bench_scene(session, None, name, args.repeats)
-            replay = bench_replay(session, spheres, args.replay, args.seconds)
+            if do_replay:
+                opened = open_replay(session, spheres, replay_path)
+                replay = bench_replay(session, args.seconds)
             session.close()
     finally:
         app.stop()
 
     mode = "headless Chromium (software GL, fixedDpr=0.5)" if use_browser else "no browser"
-    print(f"\nViewer latency, slider change -> new run drawn; median of {args.repeats} changes of "
-          f"contact.k (ms), {mode}")
-    print(f"{'scene':<20} {'server':>8} {'browser':>8} {'first':>8} {'sim':>8} {'prepare':>8} {'draw':>8}")
-    for name, r in results.items():
-        print(f"{name:<20} {median_ms(r['server'])} {median_ms(r['browser'])} {median_ms(r['first'])} "
-              f"{median_ms(r['sim'])} {median_ms(r['prepare'])} {median_ms(r['draw'])}")
-    what = "synthetic pile" if args.replay is None else str(args.replay)
-    print(f"\nReplay of {what} ({spheres} spheres; force chains, colour by contacts, floor "
-          f"shadows), {args.seconds:g} s per row, {mode}")
+    load = "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg())
+    if results:
+        print(f"\nViewer latency, slider change -> new run drawn; median of {args.repeats} changes of "
+              f"contact.k (ms), {mode}; {load}")
+        print(f"{'scene':<20} {'first':>8} {'final':>8} {'browser':>8} {'preview':>8} {'sim':>8} {'prepare':>8} "
+              f"{'draw':>8}")
+        for name, r in results.items():
+            print(f"{name:<20} {median_ms(r['first'])} {median_ms(r['final'])} {median_ms(r['browser'])} "
+                  f"{int(sum(r['preview'])):>4d}/{len(r['first']):<3d} {median_ms(r['sim'])} "
+                  f"{median_ms(r['prepare'])} {median_ms(r['draw'])}")
+    if not do_replay:
+        return
+    bodies, read_s, prepare_s = opened
+    what = "synthetic pile (frames, not physics)" if replay_path is None else str(replay_path)
+    print(f"\nReplay of {what} ({bodies} spheres; force chains, colour by contacts, floor "
+          f"shadows), {args.seconds:g} s per row, {mode}; {load}")
+    if replay_path is not None:
+        print(f"opened in {read_s + prepare_s:.2f} s: read (child process) {read_s:.2f} s, "
+              f"view prepared {prepare_s:.2f} s")
     print(f"{'asked fps':>10} {'sent fps':>10} {'work/frame (ms) median':>24} {'p95':>8} {'allows (fps)':>14}")
     for fps, rate, median, p95 in replay:
         print(f"{fps:10.0f} {rate:10.1f} {median * 1e3:24.1f} {p95 * 1e3:8.1f} {1 / median:14.0f}")

@@ -10,19 +10,23 @@ import numpy as np
 import pytest
 
 from tests.conftest import BROWSER_MARKS
+from viewer.session import UPLOAD_TOAST_REMOVALS
 from viewer.testing import (
     canvas_box,
     canvas_shot,
     click_slider,
     colour_mask,
+    focus_input,
     image,
     open_page,
     plot,
     plots,
     project,
     row_input,
+    settle,
     upload,
     visible_text,
+    wait_for_text,
     wait_until,
 )
 
@@ -69,7 +73,7 @@ def load(page, source):
     session.load_scene(source)
     wait_until(lambda: session.view is not None and session.view.scene.name == name and session.worker.idle(),
                120, name)
-    page.wait_for_timeout(300)
+    settle(page)  # a new scene's first frames compile its shaders
     return session
 
 
@@ -123,24 +127,19 @@ def test_typed_value_that_cannot_be_used_is_refused_not_changed(page):
     session = page.session
     t_before = session.t
     box = row_input(page, "time (ms)")
-    box.scroll_into_view_if_needed()
-    box.click()
-    box.press("Control+a")
+    focus_input(page, box)  # click and Ctrl+A
     box.press_sequentially("1e9", delay=40)
     box.press("Tab")
-    page.wait_for_function("() => document.body.innerText.includes('1e9')", timeout=10_000)
-    page.wait_for_timeout(800)
-    text = visible_text(page)
+    # The refusal names the value: waited for (the message is the outcome, however slow the page).
+    text = wait_for_text(page, "1e9", "not applied")
     assert "time (ms)" in text and "not applied" in text, text[:2000]
     assert session.t == t_before  # neither 19 ms nor the end of the run
     # Letters, or a number the run cannot take: refused with the reason, value unchanged.
     k_before = session.view.scene.contact.k
     box = row_input(page, "k (N/m)")
-    box.click()
-    box.press("Control+a")
+    focus_input(page, box)
     box.press_sequentially("15OO", delay=40)
-    page.wait_for_function("() => document.body.innerText.includes('15OO')", timeout=10_000)
-    page.wait_for_timeout(800)
+    wait_for_text(page, "15OO", "not applied")
     assert session.worker.wait_idle(30) and session.view.scene.contact.k == k_before
 
 
@@ -249,8 +248,12 @@ def test_refused_upload_says_so_at_the_top(page, app, name, content):
     stem = name.rsplit(".", 1)[0]
     page.wait_for_function(f"() => document.body.innerText.includes('{stem}') && "
                            "(document.body.innerText.includes('Cannot open') || "
-                           "document.body.innerText.includes('refused'))", timeout=60_000)
-    page.wait_for_timeout(1500)
+                           "document.body.innerText.includes('refused'))", timeout=120_000)
+    # viser's own "File uploaded successfully" may show after the outcome (its removal is sent
+    # until UPLOAD_TOAST_REMOVALS[-1] s after): gone by then, and not back.
+    wait_until(lambda: "uploaded successfully" not in visible_text(page), UPLOAD_TOAST_REMOVALS[-1] + 30,
+               "viser's upload notification to go")
+    page.wait_for_timeout(1000)
     text = visible_text(page)
     assert "uploaded successfully" not in text
     assert ".upload-" not in text and ".part" not in text and str(app.recordings_dir) not in text

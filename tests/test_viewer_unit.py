@@ -12,7 +12,7 @@ import pytest
 
 from collide import diagnostics as dg
 from collide.run import run_scene
-from collide.scene import SceneError, load_scene, parse_scene
+from collide.scene import Scene, SceneError, load_scene, parse_scene
 from collide.stepper import RunError
 from viewer import ensemble as ens
 from viewer import files
@@ -535,7 +535,7 @@ def test_a_preview_never_costs_more_than_the_run(integrator, tol):
     if integrator == "verlet":
         assert cost("verlet", 1e-3) > full  # the old preview
     preview = preview_settings(scene)
-    assert preview is None or (preview[1] >= scene.tol and cost(*preview) < 0.5 * full)
+    assert preview is None or (preview.tol >= scene.tol and cost(preview.integrator, preview.tol) < 0.5 * full)
 
 
 def test_frames_run_answers_like_a_view():
@@ -647,3 +647,274 @@ def test_untrusted_recordings_are_read_in_a_child(tmp_path):
     with pytest.raises(RecordingError) as info:
         read_untrusted(tmp_path / "junk.rrd", name="mine.rrd")
     assert str(info.value).startswith("mine.rrd: ") and str(tmp_path) not in str(info.value)
+
+
+# ---------------------------------------------------------------------------------------------
+# Many bodies: what viewing a large run costs (issue 12: gas-box and pile were OOM-killed)
+
+
+def _gas(n: int, duration: float, seed: int = 1) -> Scene:
+    """n spheres with random velocities in a closed box (gas-box's recipe, smaller)."""
+    rng = np.random.default_rng(seed)
+    per = int(np.ceil(n ** (1 / 3)))
+    side = per * 0.05
+    cells = np.stack(np.meshgrid(*[np.arange(per)] * 3, indexing="ij"), -1).reshape(-1, 3)[:n]
+    pos = (cells + 0.5) * 0.05 + rng.uniform(-0.005, 0.005, (n, 3))
+    bodies = [{"name": f"p{k + 1}", "mass": 0.01, "radius": 0.01, "position": list(pos[k]),
+               "velocity": list(rng.normal(0.0, 1.0, 3))} for k in range(n)]
+    walls = [{"point": [side * (s < 0) if a == c else 0.0 for c in range(3)],
+              "normal": [float(s) if a == c else 0.0 for c in range(3)]} for a in range(3) for s in (1, -1)]
+    return parse_scene({"name": "gas", "dim": 3, "dt": "auto", "integrator": "kahan6", "tol": 1e-7,
+                        "duration": duration, "contact": {"k": 1e5}, "body": bodies, "wall": walls}, "gas")
+
+
+def _pile(n: int, duration: float, seed: int = 2) -> Scene:
+    """n spheres dropped from a loose lattice into an open box (the built-in pile's recipe, DEM)."""
+    rng = np.random.default_rng(seed)
+    per = 6
+    cells = [(i, j, k) for k in range(n // per**2 + 1) for i in range(per) for j in range(per)][:n]
+    bodies = [{"name": f"g{m + 1}", "material": "glass", "radius": 0.005,
+               "position": [(i + 0.5) * 0.011 + rng.uniform(-1e-4, 1e-4), (j + 0.5) * 0.011 + rng.uniform(-1e-4, 1e-4),
+                            0.007 + k * 0.011],
+               "velocity": [*rng.normal(0.0, 0.05, 2), 0.0]} for m, (i, j, k) in enumerate(cells)]
+    walls = [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]
+    walls += [{"point": [0.066 * (s < 0) if a == c else 0.0 for c in range(3)],
+               "normal": [float(s) if a == c else 0.0 for c in range(3)]} for a in range(2) for s in (1, -1)]
+    return parse_scene({"name": "pile", "dim": 3, "dt": "auto", "integrator": "dem", "tol": 4e-2,
+                        "duration": duration, "gravity": [0.0, 0.0, -9.81],
+                        "contact": {"model": "hertz", "restitution": 0.3, "tangential": "spring", "mu": 0.5,
+                                    "rolling_friction": 0.05},
+                        "material": [{"name": "glass", "density": 2500.0, "youngs_modulus": 5e6,
+                                      "poisson_ratio": 0.25}],
+                        "body": bodies, "wall": walls}, "pile")
+
+
+def _held_elements(view: ViewRun) -> int:
+    """Elements of the numpy arrays a ViewRun holds beyond the run it was given."""
+    run_arrays = {id(a) for a in (view.traj.knots, view.traj.records, view.traj.intervals)}
+    seen: set[int] = set()
+
+    def count(x, depth: int = 0) -> int:
+        if id(x) in seen or depth > 6 or x is view.run or x is view.result or x is view.model or x is view.traj:
+            return 0
+        seen.add(id(x))
+        if isinstance(x, np.ndarray):
+            return 0 if id(x) in run_arrays else x.size
+        if isinstance(x, dict):
+            return sum(count(v, depth + 1) for v in x.values())
+        if isinstance(x, (list, tuple)):
+            return sum(count(v, depth + 1) for v in x)
+        if hasattr(x, "__dict__") and type(x).__module__.startswith(("viewer", "collide")):
+            return sum(count(v, depth + 1) for v in vars(x).values())
+        return 0
+
+    return count(view)
+
+
+@pytest.mark.parametrize("make", [lambda: _gas(200, 0.5), lambda: _pile(150, 0.1)], ids=["gas", "pile"])
+def test_a_many_body_run_is_viewed_in_memory_bounded_by_its_frames_and_contacts(make):
+    """Preparing the view of a run costs O(bodies x plot points + the run's own tables), not
+    bodies x knot times (gas-box: 70 000 knot times x 1 000 bodies) or contacts x plot times:
+    both the peak while preparing (tracemalloc sees numpy's buffers) and what the view holds."""
+    import tracemalloc
+
+    from viewer.state import MAX_PLOT_POINTS
+
+    run = run_scene(make())
+    traj = run.result.trajectory
+    n = run.result.model.n_bodies
+    tables = traj.knots.nbytes + traj.records.nbytes + traj.intervals.nbytes
+    # The gas has thousands of knot times: dense sampling would be bodies x knots.
+    assert traj.n_steps * n > 20 * n * MAX_PLOT_POINTS or len(traj.records) > 100_000
+    sampled = 8 * n * MAX_PLOT_POINTS  # bytes of one float per body and plot point
+    tracemalloc.start()
+    try:
+        view = ViewRun(run)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 40 * sampled + 2 * tables + 32e6, (peak, sampled, tables)
+    assert _held_elements(view) * 8 < 20 * sampled + tables
+    # Still the run: frames, contacts and plots are there.
+    frame = view.frame(0.5 * (view.t0 + view.t1))
+    assert frame.positions.shape == (n, 3) and len(frame.links.i) > 0
+    assert len(view.plots.times) <= MAX_PLOT_POINTS + 1 and view.plots.compression is not None
+
+
+def test_sampling_all_bodies_at_once_matches_diagnostics():
+    """viewer.sampling gives diagnostics.sample's states, bit for bit, in 1D, 2D and 3D, event
+    engine and DEM, and the same free-flight rows as Trajectory.free."""
+    from viewer.sampling import Knots
+
+    for scene in (load_scene("demo-1d"), load_scene("demo-bonus"), _scene_3d(), load_scene("break-3d"),
+                  _gas(30, 0.2)):
+        run = run_scene(scene)
+        traj, model = run.result.trajectory, run.result.model
+        knots = Knots(model, traj)
+        t = traj.knot_times
+        times = np.sort(np.concatenate((np.linspace(t[0] - 0.01, t[-1] + 0.01, 301), t[::3])))
+        a, b = dg.sample(model, traj, times), knots.sample(times)
+        for field in ("t", "s", "v", "w", "q", "work"):
+            assert np.array_equal(getattr(a, field), getattr(b, field)), (scene.name, field)
+        assert np.array_equal(~knots.stepped(t), traj.free[:, 0]), scene.name
+
+
+def test_engaged_contacts_match_the_dense_contact_series():
+    """The contacts found from the run's intervals are those diagnostics.contact_series finds
+    pressed at every time (DEM too: its frames are far apart), with the same values."""
+    from viewer.contacts import ContactIndex
+    from viewer.sampling import Knots
+    from viewer.state import ROUND_OFF
+
+    for scene in (load_scene("demo-bonus"), load_scene("billiards-break"), load_scene("break-3d"), _gas(30, 0.2)):
+        run = run_scene(scene)
+        traj, model = run.result.trajectory, run.result.model
+        knots = Knots(model, traj)
+        index = ContactIndex(model, traj, knots)
+        t = traj.knot_times
+        times = np.union1d(np.linspace(t[0], t[-1], 997), t[::5])
+        states = knots.sample(times)
+        dense = dg.contact_series(model, traj, times, states)
+        pressed = dense.overlap[:, 0] > ROUND_OFF * model.radius.max()
+        e = index.at(times, states.s[:, 0])
+        keep = e.overlap > ROUND_OFF * model.radius.max()
+        found = np.zeros_like(pressed)
+        found[e.tk[keep], e.ck[keep]] = True
+        assert pressed.any() and np.array_equal(found, pressed), scene.name
+        tk, ck = e.tk[keep], e.ck[keep]
+        assert index.names == dense.names
+        assert np.array_equal(dense.point[tk, 0, ck], e.point[keep])
+        assert np.array_equal(dense.normal_force[tk, 0, ck], e.normal_force[keep])
+        if dense.friction_force is not None:
+            assert np.array_equal(dense.friction_force[tk, 0, ck], e.friction_force[keep])
+
+
+def test_controls_of_a_thousand_bodies_look_each_body_up_once(monkeypatch):
+    """gas-box's 11 000 controls: reading their values and building the scene back find each
+    body by name once, not by scanning all 1 000 for every control (seconds a run); the scene
+    built back is the scene."""
+    import viewer.params as vp
+    from collide.scene import Scene as SceneClass
+
+    scene = load_scene("gas-box")
+    controls = scene_controls(scene)
+    scans: list[int] = []
+    real_set_path, real_index = vp.set_path, SceneClass.body_index
+
+    def set_path(raw, key, value):
+        scans.append(len(raw.get("body", [])) if key.startswith("body.") else 0)
+        real_set_path(raw, key, value)
+
+    def body_index(self, name):
+        scans.append(len(self.bodies))
+        return real_index(self, name)
+
+    monkeypatch.setattr(vp, "set_path", set_path)
+    monkeypatch.setattr(SceneClass, "body_index", body_index)
+    values = values_of(scene, controls)
+    built = build_scene(controls, values, controls.settings)
+    assert len(scans) >= 1000 and max(scans) <= 1
+    # (through display units: mm and back, to the last bit)
+    assert np.allclose([b.position for b in built.bodies], [b.position for b in scene.bodies], rtol=1e-15, atol=0)
+    assert [b.velocity for b in built.bodies] == [b.velocity for b in scene.bodies]
+
+
+# ---------------------------------------------------------------------------------------------
+# Slider latency (issue 12: every built-in under 100 ms server side)
+
+
+def test_a_dem_scene_is_previewed_at_a_coarser_stable_step():
+    """break-3d (DEM, 236 000 steps of 5 us: 270-480 ms a run) had no preview: a drag waited
+    for every full run. Its preview takes 8 steps per contact time, within the step's
+    stability limit, and shows the same break."""
+    from viewer.params import AUTO, for_viewing
+    from viewer.session import preview_settings
+
+    scene = for_viewing(load_scene("break-3d"))
+    preview = preview_settings(scene)
+    assert preview is not None and preview.integrator == "dem" and preview.dt != AUTO
+    full = run_scene(scene, record=False).result
+    quick = run_scene(scene, integrator=preview.integrator, dt=preview.dt, tol=preview.tol, record=False).result
+    assert 4 * int(quick.steps[0]) < int(full.steps[0])
+    # The two front balls leave at the same speed and angle to a few per cent.
+    assert np.allclose(quick.final.v[0, 2:, :2], full.final.v[0, 2:, :2], rtol=0.03, atol=0.01)
+
+
+def test_a_new_run_of_the_same_scene_resends_only_what_changed(monkeypatch):
+    """A slider drag draws a new run ten times a second: the ground and walls that did not
+    move are not sent again, and each body's path is updated in place, not removed and added."""
+    import viser
+
+    from viewer.scene3d import SceneDrawer
+
+    scene = load_scene("break-3d")
+    views = [ViewRun(run_scene(replace(scene, bodies=[replace(scene.bodies[0], velocity=(v, 0.0, 0.0)),
+                                                      *scene.bodies[1:]]), integrator="dem", dt=2e-5))
+             for v in (2.0, 1.98)]
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        drawer = SceneDrawer(server.scene)
+        drawer.show_run(views[0])
+        added: list[str] = []
+        for name in ("add_line_segments", "add_box", "add_frame"):
+            real = getattr(server.scene, name)
+
+            def counting(path, *args, _real=real, **kwargs):
+                added.append(path)
+                return _real(path, *args, **kwargs)
+
+            monkeypatch.setattr(server.scene, name, counting)
+        paths = list(drawer._paths)
+        drawer.show_run(views[1])
+        assert added == [] and drawer._paths == paths
+        assert np.allclose(drawer._paths[0].points[-1, 1], views[1].paths[0][-1], atol=1e-6)
+    finally:
+        server.stop()
+
+
+# ---------------------------------------------------------------------------------------------
+# Sliders that the materials override (issue 12, item 5)
+
+
+def test_break_3d_restitution_and_friction_sliders_act_on_its_materials_and_pair():
+    """break-3d's materials and pair table give every contact its own restitution and mu, so
+    [contact]'s sliders changed nothing. Those two are disabled with the reason; the material's
+    and the pair's own values get sliders, and moving one changes the run."""
+    scene = load_scene("break-3d")
+    controls = scene_controls(scene)
+    params = controls.by_ident()
+    for name in ("restitution", "mu"):
+        assert params[f"contact.{name}"].unused and "phenolic" in params[f"contact.{name}"].unused
+    assert params["pair.0.restitution"].value == 0.95 and params["material.phenolic.restitution"].value == 0.5
+    assert params["pair.0.mu"].value == 0.05 and not params["pair.0.restitution"].unused
+    values = values_of(scene, controls)
+    base = run_scene(build_scene(controls, values, controls.settings), record=False).result
+    values["pair.0.restitution"] = 0.5
+    softer = build_scene(controls, values, controls.settings)
+    assert softer.pairs[0].restitution == 0.5 and softer.materials[0].restitution == 0.5
+    run = run_scene(softer, record=False).result
+    # The cue keeps more of its speed after a less elastic hit on the rack.
+    assert float(run.final.v[0, 0, 0]) > float(base.final.v[0, 0, 0]) + 0.1
+
+
+def test_contact_sliders_stay_live_where_some_contact_uses_them():
+    """Where any contact takes [contact]'s value (no materials, a material without its own, a
+    pair of materials with no pair table), its slider stays live."""
+    from viewer.params import default_used
+
+    for name in ("pile", "bounce", "demo-bonus", "billiards-break"):
+        params = scene_controls(load_scene(name)).params
+        assert not any(p.unused for p in params), name
+    bodies = [{"name": "a", "material": "m1", "radius": 0.01, "position": [0, 0, 0.01], "velocity": [1, 0, 0]},
+              {"name": "b", "material": "m2", "radius": 0.01, "position": [0.1, 0, 0.01]}]
+    raw = {"dim": 3, "contact": {"model": "hertz", "restitution": 0.6},
+           "material": [{"name": "m1", "density": 1000.0, "youngs_modulus": 1e7, "restitution": 0.9},
+                        {"name": "m2", "density": 1000.0, "youngs_modulus": 1e7, "restitution": 0.8}],
+           "body": bodies}
+    assert not default_used(parse_scene(raw), "restitution")  # both give their own: the mixing rule
+    raw["material"][1].pop("restitution")
+    assert default_used(parse_scene(raw), "restitution")  # m2 takes [contact]'s for the a-b pair
+    raw["pair"] = [{"materials": ["m1", "m2"], "restitution": 0.7}]
+    assert not default_used(parse_scene(raw), "restitution")
+    raw["wall"] = [{"point": [0, 0, 0], "normal": [0, 0, 1]}]
+    assert default_used(parse_scene(raw), "restitution")  # b on the floor: m2 has none

@@ -55,6 +55,7 @@ class Param:
     hint: str = ""
     positive: bool = False
     nonneg: bool = False
+    unused: str = ""  # why the parameter changes nothing in this scene (its control is disabled)
 
     @property
     def ident(self) -> str:
@@ -275,8 +276,19 @@ def scene_controls(scene: Scene) -> Controls:
             continue
         x = float(getattr(scene.contact, row.name))
         lo, hi, step = row.span(x)
+        own = _own_values(scene, row.name)
+        unused = ""
+        if own and not default_used(scene, row.name):
+            unused = (f"[contact] {row.name} reaches no contact here: the materials and pairs set every "
+                      f"contact's own ({', '.join(label for label, _, _ in own)}: their sliders below)")
         params.append(Param(f"contact.{row.name}", row.label, "contact", row.unit, 1.0, lo, hi, step, x,
-                            hint=row.hint, positive=row.positive, nonneg=row.nonneg))
+                            hint=row.hint, positive=row.positive, nonneg=row.nonneg, unused=unused))
+        # A material's or a pair's own value: a slider of its own (break-3d's balls bounce at
+        # 0.95 off each other and 0.5 off the cloth).
+        for label, key, value in own:
+            lo, hi, step = row.span(value)
+            params.append(Param(key, f"{row.label} ({label})", "contact", row.unit, 1.0, lo, hi, step, value,
+                                hint=f"{row.hint}; {label} only", positive=row.positive, nonneg=row.nonneg))
     if scene.gravity is not None:
         for c in range(dim):
             g = scene.gravity[c]
@@ -290,6 +302,43 @@ def scene_controls(scene: Scene) -> Controls:
     if f"{scene.tol:.0e}" not in tol_choices:
         tol_choices.append(f"{scene.tol:.0e}")
     return Controls(scene, params, settings, dt_choices, tol_choices)
+
+
+def _own_values(scene: Scene, name: str) -> list[tuple[str, str, float]]:
+    """(label, key, value) of every material and pair table that gives its own `name` (mu,
+    restitution): keys `material.NAME.FIELD` and `pair.INDEX.FIELD` (the pair tables in order)."""
+    out = [(m.name, f"material.{m.name}.{name}", float(getattr(m, name))) for m in scene.materials
+           if hasattr(m, name) and getattr(m, name) is not None]
+    out += [("–".join(p.materials), f"pair.{k}.{name}", float(getattr(p, name))) for k, p in enumerate(scene.pairs)
+            if hasattr(p, name) and getattr(p, name) is not None]
+    return out
+
+
+def default_used(scene: Scene, name: str) -> bool:
+    """Whether some contact the scene can have takes [contact]'s `name` (mu, restitution): a
+    body without a material, a sphere on a wall whose material gives none, or a pair of
+    materials with no pair table where either material gives none (the mixing rule takes
+    [contact]'s for it)."""
+    materials = {m.name: m for m in scene.materials}
+
+    def own(material: str | None) -> bool:
+        return material is not None and getattr(materials.get(material), name, None) is not None
+
+    used = [b.material for b in scene.bodies]
+    if any(m is None for m in used):
+        return True
+    if scene.walls and not all(own(m) for m in used):
+        return True
+    tables = {frozenset(p.materials) for p in scene.pairs if getattr(p, name, None) is not None}
+    count = {m: used.count(m) for m in set(used)}
+    kinds = sorted(count)
+    for x, a in enumerate(kinds):
+        for b in kinds[x:]:
+            if a == b and count[a] < 2:
+                continue  # one body of a material: no pair of it
+            if frozenset((a, b)) not in tables and not (own(a) and own(b)):
+                return True
+    return False
 
 
 def parse_dt_choice(text: str) -> float | str:
@@ -328,6 +377,18 @@ def build_scene(controls: Controls, values: dict[str, float], settings: Settings
     (e.g. spheres overlapping at the start), naming the control.
     """
     raw = copy.deepcopy(controls.scene.source)
+    # Each body's table found by name once: set_path alone looks it up by scanning every body,
+    # (bodies x parameters per body) for each run, seconds for 1 000 spheres.
+    tables = {t.get("name"): {"body": [t]} for t in raw.get("body", []) if isinstance(t, dict)} \
+        if isinstance(raw.get("body"), list) else {}
+
+    def put(key: str, value: float | list[float]) -> None:
+        parts = key.split(".")
+        if parts[0] == "pair":  # pair tables are found by their order (they have no name)
+            raw["pair"][int(parts[1])][parts[2]] = value
+            return
+        set_path(tables.get(parts[1], raw) if parts[0] == "body" else raw, key, value)
+
     vectors: dict[str, list[float]] = {}
     for param in controls.params:
         display = float(values.get(param.ident, param.value))
@@ -337,11 +398,11 @@ def build_scene(controls: Controls, values: dict[str, float], settings: Settings
             raise SceneError(f"{where} = {display:g}: {problem}")
         si = display / param.scale
         if param.component is None:
-            set_path(raw, param.key, si)
+            put(param.key, si)
         else:
             vectors.setdefault(param.key, [0.0] * controls.scene.dim)[param.component] = si
     for key, vector in vectors.items():
-        set_path(raw, key, vector[0] if controls.scene.dim == 1 and key != "gravity" else vector)
+        put(key, vector[0] if controls.scene.dim == 1 and key != "gravity" else vector)
     raw["integrator"] = settings.integrator
     raw["dt"] = settings.dt
     raw["tol"] = settings.tol
@@ -359,11 +420,16 @@ def build_scene(controls: Controls, values: dict[str, float], settings: Settings
 def values_of(scene: Scene, controls: Controls) -> dict[str, float]:
     """Display values of a scene's parameters under `controls` (e.g. after loading a recording)."""
     out = {}
+    bodies = {body.name: body for body in scene.bodies}
     for param in controls.params:
         parts = param.key.split(".")
         if parts[0] == "body":
-            body = scene.bodies[scene.body_index(parts[1])]
+            body = bodies[parts[1]]
             value = getattr(body, parts[2])
+        elif parts[0] == "material":
+            value = getattr(next(m for m in scene.materials if m.name == parts[1]), parts[2])
+        elif parts[0] == "pair":
+            value = getattr(scene.pairs[int(parts[1])], parts[2])
         elif parts[0] == "contact":
             value = getattr(scene.contact, parts[1])
         else:

@@ -24,6 +24,7 @@ radius off under a tilted camera: issue 12, item 4.)
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -164,6 +165,8 @@ class SceneDrawer:
         self._past: list = []
         self._paths: list = []
         self._shape: tuple | None = None
+        self._ground_key: tuple | None = None
+        self._walls_key: tuple | None = None
         self._ghosts: list = []
         self._colours = np.zeros((0, 3), np.uint8)
         self._colour_range = (0.0, 1.0)
@@ -206,12 +209,21 @@ class SceneDrawer:
             ground = float(self._floor[0][2])
         else:
             ground = float(lo[2]) - 0.02 * extent
-        self._show_ground(centre, half, cell, ground)
-        self._show_walls(view, walls, lo, hi, extent, r_max, planar)
+        # What did not change is not sent again (a slider drag redraws a run ten times a second).
+        ground_key = (tuple(np.round(centre[:2] / cell).astype(int)), float(half), float(cell), float(ground))
+        if ground_key != self._ground_key:
+            self._show_ground(centre, half, cell, ground)
+            self._ground_key = ground_key
+        self._show_walls(view, walls, lo, hi, extent, r_max, planar, cell)
         # Paths: the whole run faint, the part already travelled in the body's colour.
-        self._clear_paths()
         colours = body_colours(view.n_bodies)
-        if self.options.trails and view.paths is not None and not self.many:
+        trails = self.options.trails and view.paths is not None and not self.many
+        if trails and len(self._paths) == view.n_bodies:
+            for i in range(view.n_bodies):
+                self._paths[i].points = _segments(view.paths[i]).astype(np.float32)
+                self._past[i].points = _segments(view.paths[i][:2]).astype(np.float32)
+        elif trails:
+            self._clear_paths()
             for i in range(view.n_bodies):
                 colour = tuple(int(c) for c in colours[i])
                 self._paths.append(scene.add_line_segments(
@@ -220,6 +232,8 @@ class SceneDrawer:
                 self._past.append(scene.add_line_segments(
                     f"/paths/{i}/past", _segments(view.paths[i][:2]), colour, thickness=3.0,
                     thickness_units="screen"))
+        else:
+            self._clear_paths()
         if shape != self._shape:
             self._build_bodies(view)
             self._shape = shape
@@ -255,7 +269,15 @@ class SceneDrawer:
                                      thickness_units="screen")
 
     def _show_walls(self, view: ViewRun, walls: list, lo: np.ndarray, hi: np.ndarray, extent: float,
-                    r_max: float, planar: bool) -> None:
+                    r_max: float, planar: bool, cell: float) -> None:
+        # On the ground's grid: the walls of the next run of a slider drag are the same boxes.
+        extent = cell * math.ceil(extent / cell)
+        lo, hi = np.floor(lo / cell) * cell, np.ceil(hi / cell) * cell
+        key = (planar, extent, float(r_max), tuple(lo), tuple(hi),
+               tuple((tuple(p), tuple(n)) for p, n in walls), self._floor is not None)
+        if key == self._walls_key:
+            return
+        self._walls_key = key
         handle = self.scene.get_handle_by_name("/world/walls")
         if handle is not None:
             handle.remove()

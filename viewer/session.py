@@ -20,18 +20,21 @@ import traceback
 from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import viser
 from viser import _messages
 
+from collide import dem as cdem
+from collide.model import compile_scenes
 from collide.recording import RecordingError
 from collide.run import SceneRun, auto_dt, run_scene
 from collide.scene import INTEGRATORS, Scene, SceneError, load_scene
 from collide.stepper import RunError
 from viewer import ensemble as ens
 from viewer import files
+from viewer.background import BackgroundRunner, RunStopped
 from viewer.exports import png_bytes, run_csv
 from viewer.frames import FramesRun
 from viewer.geometry import fit_camera
@@ -66,14 +69,25 @@ if TYPE_CHECKING:
 
 FPS = 30.0
 CURSOR_PERIOD = 0.25  # s between plot-cursor and values-table updates while playing
-PREVIEW_BUDGET = 0.08  # s: when a full run takes longer, a coarse preview is drawn first
+# s: when a full run takes longer, a coarse preview is drawn first; the run's share of a 100 ms
+# answer (preparing and drawing a run take 10-40 ms more)
+PREVIEW_BUDGET = 0.05
 PREVIEW_TOL = 1e-3  # the preview's accuracy (auto dt)
+# A run expected to take longer than this (its last run did), or of more bodies than MANY_BODIES,
+# goes to a child process with a progress line and a Stop button (viewer.background), and starts
+# once the slider rests: a drag does not start a minute-long run for every value it passes.
+LONG_RUN_S = 1.0
+MANY_BODIES = 200
 STAGES = {"seed": 1, "verlet": 1, "yoshida4": 3, "kahan6": 9, "dem": 1}  # force evaluations per step
-DEM_PREVIEW_TOL = 4e-2  # a DEM preview: 50 steps per contact time, the DEM codes' usual step
+DEM_PREVIEW_STEPS = 8  # a DEM preview's steps per contact time (a full run takes at least 50)
+DEM_PREVIEW_MARGIN = 0.7  # of the DEM step's stability limit, at most
 SLOW_MOTION = 0.1  # playback rate inside contacts, relative to the chosen speed
 PLAYBACK_SECONDS = 5.0  # 'auto' speed plays a run in about this long
 SPEEDS = ["auto", "0.001x", "0.003x", "0.01x", "0.03x", "0.1x", "0.3x", "1x"]
 TYPING_SETTLE = 0.5  # s without a keystroke before a typed value is read
+# s after an upload's outcome when viser's own "uploaded successfully" is removed again: a
+# loaded browser may show it seconds late.
+UPLOAD_TOAST_REMOVALS = (0.4, 1.5, 4.0, 10.0)
 EXPANDED_BODIES = 4  # up to this many bodies: one open folder each
 FOLDED_BODIES = 12  # up to this many: one closed folder each; beyond: a body picker
 # viser's slider carries a number box that drops an "e" as it is typed (issue 12, item 2): hide
@@ -94,13 +108,20 @@ class Request:
     stamp: float = 0.0
 
 
-def preview_settings(scene: Scene) -> tuple[str, float] | None:
-    """A cheaper integrator and tolerance for a first, coarse run while the user drags, or None
-    when no candidate costs less than half the scene's own run (force evaluations per contact:
-    stages / dt). A preview that costs more than the real run (issue 12, item 3) is never used."""
+class Preview(NamedTuple):
+    """A cheaper run drawn while the user drags: integrator, step (AUTO or seconds), tolerance."""
+
+    integrator: str
+    dt: float | str
+    tol: float
+
+
+def preview_settings(scene: Scene) -> Preview | None:
+    """A cheaper run for a first, coarse answer while the user drags, or None when none costs
+    less than half the scene's own run (force evaluations per contact: stages / dt). A preview
+    that costs more than the real run (issue 12, item 3) is never used."""
     if scene.integrator == "dem":
-        # The DEM step's error is first order in dt: a preview at the DEM codes' usual step.
-        return ("dem", DEM_PREVIEW_TOL) if scene.dt == AUTO and scene.tol < 0.5 * DEM_PREVIEW_TOL else None
+        return _dem_preview(scene)
 
     def cost(integrator: str, tol: float) -> float:
         if scene.dt != AUTO and integrator == scene.integrator and tol == scene.tol:
@@ -112,9 +133,33 @@ def preview_settings(scene: Scene) -> tuple[str, float] | None:
         full = cost(scene.integrator, scene.tol)
         candidates = [("verlet", max(PREVIEW_TOL, scene.tol)), (scene.integrator, max(PREVIEW_TOL, scene.tol))]
         best = min(candidates, key=lambda c: cost(*c))
-        return best if cost(*best) < 0.5 * full else None
+        return Preview(best[0], AUTO, best[1]) if cost(*best) < 0.5 * full else None
     except (RunError, SceneError, ValueError, ZeroDivisionError):
         return None
+
+
+def _dem_preview(scene: Scene) -> Preview | None:
+    """DEM_PREVIEW_STEPS steps per contact time, where the scene's own run takes at least 50
+    (the kernel's floor): the DEM step's error is first order, so the preview's outcome is off
+    by some per cent. The step keeps a margin to the kernel's stability limit, or no preview."""
+    if scene.dt != AUTO:
+        return None
+    try:
+        model, state = compile_scenes([scene])
+        t_c = float(cdem.contact_time(model, state)[0][0])
+        full = float(cdem.auto_dt(model, state, np.array([scene.tol]))[0])
+        for steps in (DEM_PREVIEW_STEPS, 2 * DEM_PREVIEW_STEPS):
+            dt = t_c / steps
+            if dt < 2 * full:
+                return None
+            try:
+                cdem.check_dem(model, state, np.array([dt / DEM_PREVIEW_MARGIN]), 2**62, np.array([np.inf]))
+            except RunError:
+                continue
+            return Preview("dem", float(dt), scene.tol)
+    except (RunError, SceneError, ValueError, ZeroDivisionError):
+        return None
+    return None
 
 
 class Session:
@@ -162,6 +207,8 @@ class Session:
         self.worker: LatestWorker[Request] = LatestWorker(self._job, on_error=self._job_failed,
                                                           name=f"collide-sim-{client.client_id}")
         self.fps = FPS  # frames a second the player sends while playing
+        self.runner = BackgroundRunner()  # long runs (many bodies) in a child process
+        self._stop_run = threading.Event()
         self._player = threading.Thread(target=self._play_loop, name=f"collide-play-{client.client_id}",
                                         daemon=True)
         self._player.start()
@@ -176,6 +223,9 @@ class Session:
         gui.main_panel.set_width(340)
         gui.add_html(STYLE, order=-1)
         self.status = gui.add_markdown("Loading...", order=0)
+        self.progress = gui.add_markdown("", order=0.3)
+        self.stop_button = gui.add_button("Stop this run", icon=viser.Icon.PLAYER_STOP, order=0.4, visible=False,
+                                          hint="stop the run going in the background; the last run stays shown")
         self.notice = gui.add_markdown("", order=0.5)
         with gui.add_folder("Timeline", order=1):
             self.play_button = gui.add_button("Play", icon=viser.Icon.PLAYER_PLAY)
@@ -250,6 +300,7 @@ class Session:
         self.plot_panel.dock_below(gui.main_panel)
 
         self.play_button.on_click(lambda _e: self.toggle_play())
+        self.stop_button.on_click(lambda _e: self.stop_run())
         self.frame_buttons.on_click(lambda e: self._on_step("frame", self.frame_buttons.value))
         self.step_buttons.on_click(lambda e: self._on_step("step", self.step_buttons.value))
         self.time_slider.on_update(self._on_time)
@@ -329,9 +380,16 @@ class Session:
     def _param_widgets(self, gui: viser.GuiApi, p: Param) -> None:
         value = self.values.get(p.ident, p.value)
         hint = p.hint or f"{p.key} in {p.unit or 'units of 1'}"
-        box = gui.add_text(p.title, format_value(value), hint=hint + " (type any number, e.g. 1e-7)")
-        slider = gui.add_slider("", min=p.lo, max=p.hi, step=p.step, initial_value=float(min(max(value, p.lo), p.hi)),
-                                hint=hint)
+        if p.unused:
+            # Disabled, saying why: moving it would change nothing (issue 12, item 5).
+            box = gui.add_text(f"{p.title} (not used)", format_value(value), hint=p.unused, disabled=True)
+            slider = gui.add_slider("", min=p.lo, max=p.hi, step=p.step,
+                                    initial_value=float(min(max(value, p.lo), p.hi)), hint=p.unused, disabled=True)
+            gui.add_markdown(f"<small>{p.unused}.</small>")
+        else:
+            box = gui.add_text(p.title, format_value(value), hint=hint + " (type any number, e.g. 1e-7)")
+            slider = gui.add_slider("", min=p.lo, max=p.hi, step=p.step,
+                                    initial_value=float(min(max(value, p.lo), p.hi)), hint=hint)
         box.on_update(lambda e, ident=p.ident: self._on_box(e, ident))
         slider.on_update(lambda e, ident=p.ident: self._on_slider(e, ident))
         self._param_boxes[p.ident] = box
@@ -588,6 +646,9 @@ class Session:
             self.drawer.show_ghosts(None)
             if label is not None and label in self.picker.options:
                 self.picker.value = label
+        # What the scene's runs cost is known from its own run only (chooses previews and
+        # background runs).
+        self._full_cost = run.result.wall_time_s if run is not None else None
         if run is not None:
             self._show_view(ViewRun(run, origin="live run"), refit=True)
         else:
@@ -621,6 +682,7 @@ class Session:
             if label not in self.picker.options:
                 self.picker.options = list(self.picker.options) + [label]
             self.picker.value = label
+        self._full_cost = view.result.wall_time_s
         self._show_view(view, refit=True)
         self.seek(view.t0)
         self._clear_notice()
@@ -718,7 +780,7 @@ class Session:
                 self.client._websock_connection.queue_message(message)
 
         send()
-        for delay in (0.4, 1.5):
+        for delay in UPLOAD_TOAST_REMOVALS:
             timer = threading.Timer(delay, send)
             timer.daemon = True
             timer.start()
@@ -869,12 +931,22 @@ class Session:
 
         try:
             scene = build_scene(req.controls, req.values, req.settings)
+            long = self._expect_long(scene)
+            if long and not final and not req.refit:
+                # Seconds to a minute of run: only once the slider rests (the worker calls back
+                # with final=True after its settle time, unless a newer value came).
+                self._show_progress(f"*{scene.name}: the run starts when the slider rests...*")
+                return True
             preview = None
-            if not final and self._full_cost is not None and self._full_cost > PREVIEW_BUDGET:
+            if not long and not final and self._full_cost is not None and self._full_cost > PREVIEW_BUDGET:
                 preview = preview_settings(scene)
             t_build = lap()
             if preview is not None:
-                run = run_scene(scene, integrator=preview[0], dt=AUTO, tol=preview[1], record=True)
+                run = run_scene(scene, integrator=preview.integrator, dt=preview.dt, tol=preview.tol, record=True)
+            elif long:
+                run = self._run_in_background(scene)
+                if run is None:
+                    return False
             else:
                 run = run_scene(scene, record=True)
             t_run = lap()
@@ -883,11 +955,14 @@ class Session:
             view = ViewRun(run, origin="live run", preview=preview is not None)
             t_view = lap()
         except (SceneError, RunError) as exc:
+            self._show_progress("")
             self._show_error(_one_line(exc))
             return False
         if req.controls is not self.controls:
             return False
         self._show_view(view, refit=req.refit, stamp=req.stamp)
+        if long:
+            self._show_progress("")
         self.timings.append({"stamp": req.stamp, "preview": preview is not None, "queued": clock[0] - req.stamp,
                              "build": t_build, "simulate": t_run, "core_wall": run.result.wall_time_s,
                              "prepare": t_view, "draw": lap(), "total": time.perf_counter() - req.stamp})
@@ -895,14 +970,56 @@ class Session:
             self._run_ensemble(scene, preview)
         return preview is not None
 
-    def _run_ensemble(self, scene: Scene, preview: tuple[str, float] | None) -> None:
+    def _expect_long(self, scene: Scene) -> bool:
+        return len(scene.bodies) > MANY_BODIES or (self._full_cost is not None and self._full_cost > LONG_RUN_S)
+
+    def _run_in_background(self, scene: Scene) -> SceneRun | None:
+        """Run in the child process with a progress line; None when stopped (the Stop button,
+        a newer value, the tab closing)."""
+        self._stop_run.clear()
+        self.stop_button.visible = True
+        name = scene.name
+
+        at_rest = " (or sooner, at rest)" if scene.rest is not None else ""
+
+        def progress(t: float, t_end: float, steps: int, seconds: float) -> None:
+            done = f" ({100 * t / t_end:.0f} %)" if math.isfinite(t_end) and t_end > 0 and not at_rest else ""
+            self._show_progress(f"**Running {name}** in the background: {t:.4g} of {t_end:.4g} s{at_rest} "
+                                f"simulated{done}, {steps:,} steps, {seconds:.1f} s. The last run stays shown; "
+                                "moving a slider restarts it.")
+
+        self._show_progress(f"**Running {name}** in the background: starting...")
+        try:
+            run = self.runner.run(scene, progress=progress, record=True, stop=self._run_should_stop)
+        except RunStopped:
+            if self._stop_run.is_set():
+                self._show_progress(f"*{name}: run stopped; the last run is shown.*")
+            return None
+        finally:
+            self.stop_button.visible = False
+        self._full_cost = run.result.wall_time_s
+        self._show_progress(f"*{name}: run done in {run.result.wall_time_s:.1f} s; preparing the view...*")
+        return run
+
+    def _run_should_stop(self) -> bool:
+        return self._stop_run.is_set() or self.worker.pending() or self._closed.is_set()
+
+    def stop_run(self) -> None:
+        """Stop the run going in the background (the Stop button)."""
+        self._stop_run.set()
+
+    def _show_progress(self, text: str) -> None:
+        if not self._closed.is_set() and self.progress.content != text:
+            self.progress.content = text
+
+    def _run_ensemble(self, scene: Scene, preview: Preview | None) -> None:
         kind = self.ens_kind.value
         try:
             if kind not in ens.kinds_for(scene):
                 raise SceneError(f"'{kind}' needs a 2D or 3D scene")
             scenes = ens.ensemble_scenes(scene, kind, float(self.ens_spread.value), int(self.ens_members.value))
             if preview is not None:
-                scenes = [replace(s, integrator=preview[0], dt=AUTO, tol=preview[1]) for s in scenes]
+                scenes = [replace(s, integrator=preview.integrator, dt=preview.dt, tol=preview.tol) for s in scenes]
             paths, wall = ens.ensemble_paths(scenes)
         except (SceneError, RunError) as exc:
             self.ens_message.content = f"**Ensemble not run:** {_one_line(exc)}"
@@ -949,6 +1066,8 @@ class Session:
             self.runs_drawn += 1
             if stamp:
                 self.last_latency = time.perf_counter() - stamp
+        if self.controls is not None and (view.n_bodies > MANY_BODIES or (self._full_cost or 0.0) > LONG_RUN_S):
+            self.runner.warm()  # the next run will go to the background: its process is ready
         if refit or first:
             self.fit_camera()
 
@@ -1160,6 +1279,7 @@ class Session:
         for timer in list(self._typing.values()):
             timer.cancel()
         self.worker.close(timeout=2.0)
+        self.runner.close()
         self._player.join(timeout=2.0)
         if self.uploads is not None:
             self.uploads.close()

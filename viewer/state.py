@@ -18,14 +18,16 @@ from collide import diagnostics as dg
 from collide.engine import kernels as kn
 from collide.model import State
 from collide.run import SceneRun
-from collide.stepper import Trajectory
+from viewer.contacts import SLICE, ContactIndex
 from viewer.geometry import embed3, orientation_wxyz
+from viewer.sampling import Knots
 
 MAX_PLOT_POINTS = 400
 MAX_PATH_POINTS = 400
 ROUND_OFF = 1e-12  # relative: overlaps and spreads below this are float64 round-off, not physics
 FLAT = 1e-9  # relative spread below which a conserved line is drawn flat (round-off accumulates)
 MAX_COMPRESSION_LINES = 6
+CONTACT_LIST_BODIES = 200  # above this, a frame's contacts are arrays only (Frame.links)
 
 
 @dataclass
@@ -114,13 +116,13 @@ class PlotData:
     all: list[Series] = field(default_factory=list)
 
 
-def plot_times(traj: Trajectory, max_points: int = MAX_PLOT_POINTS) -> np.ndarray:
+def plot_times(t: np.ndarray, free: np.ndarray, max_points: int = MAX_PLOT_POINTS) -> np.ndarray:
     """A time grid with half its points spread evenly over the run and half over the contact
-    steps, so both the approach and the millisecond-long contact are resolved."""
-    t = traj.t[:, 0]
+    steps, so both the approach and the millisecond-long contact are resolved. t (S,) are the
+    knot times, free (S,) whether the segment ending at each was free flight for every body."""
     t0, t1 = float(t[0]), float(t[-1])
     even = np.linspace(t0, t1, max_points // 2) if t1 > t0 else np.array([t0])
-    steps = np.flatnonzero(~traj.free[1:, 0]) + 1
+    steps = np.flatnonzero(~free[1:]) + 1
     contact_t = np.union1d(t[steps], t[steps - 1]) if len(steps) else np.empty(0)
     if len(contact_t) > max_points // 2:
         contact_t = contact_t[np.linspace(0, len(contact_t) - 1, max_points // 2).round().astype(int)]
@@ -155,15 +157,20 @@ class ViewRun:
         self.spin_dim = self.model.spin_dim
         self.friction = bool(self.model.friction)
         self.n_walls = self.model.n_walls
-        t = self.traj.t[:, 0]
+        # Sampling and contacts indexed once: nothing below is dense in bodies x knots or in
+        # contacts x times (a 1 000-sphere gas: 70 000 knot times, 7 700 contacts).
+        self._knots = Knots(self.model, self.traj)
+        self._contacts = ContactIndex(self.model, self.traj, self._knots)
+        t = self.traj.knot_times
         self.t0, self.t1 = float(t[0]), float(t[-1])
-        self.times = plot_times(self.traj)
+        self._free = ~self._knots.stepped(t)
+        self.times = plot_times(t, self._free)
         states = self.sample(self.times)
-        self._plot_states = states
-        self.plots = self._make_plots(states)
-        path_t = _subsample(self.times, MAX_PATH_POINTS)
-        self.path_times = path_t
-        path_s = embed3(self.sample(path_t).s[:, 0])
+        engaged = self._contacts.overlaps(self.times, states.s[:, 0])
+        self.plots = self._make_plots(states, engaged)
+        path_k = _subsample(np.arange(len(self.times)), MAX_PATH_POINTS)
+        self.path_times = self.times[path_k]
+        path_s = embed3(states.s[path_k, 0])
         self.paths = path_s.transpose(1, 0, 2)
         self.com_path = (self.mass[None, :, None] * path_s).sum(axis=1) / self.mass.sum()
         self.walls = [(embed3(np.asarray(w.point, float)), embed3(np.asarray(w.normal, float)))
@@ -178,16 +185,15 @@ class ViewRun:
         res = dg.residuals(result)
         self.residuals = {"energy": float(res.energy[0]), "momentum": float(res.momentum[0]),
                           "angular_momentum": float(res.angular_momentum[0])}
-        series = dg.contact_series(self.model, self.traj, self.times, states)
-        self.max_normal_force = float(np.max(np.linalg.norm(series.normal_force, axis=-1), initial=0.0))
-        touching = series.overlap[:, 0] > ROUND_OFF * float(self.radius.max())  # (T, C)
-        counts = np.zeros((len(self.times), self.n_bodies))
-        for c, (i, j) in enumerate(series.pairs):
-            counts[:, i] += touching[:, c]
-            if j >= 0:
-                counts[:, j] += touching[:, c]
-        self.max_contacts = int(counts.max(initial=0))
-        self.max_links = int(touching.sum(axis=1).max(initial=0))  # contacts at once, at most
+        tk, ck, overlap = engaged
+        self.max_normal_force = float(np.max(self._contacts.normal_force(ck, overlap), initial=0.0))
+        touching = overlap > ROUND_OFF * float(self.radius.max())
+        tk, ck = tk[touching], ck[touching]
+        i, j = self._contacts.pairs[ck, 0], self._contacts.pairs[ck, 1]
+        n = self.n_bodies
+        ends = np.concatenate((tk * n + i, (tk * n + j)[j >= 0]))
+        self.max_contacts = int(np.bincount(ends, minlength=1).max(initial=0))
+        self.max_links = int(np.bincount(tk, minlength=1).max(initial=0))  # contacts at once, at most
         records = self.traj.records
         if self.model.friction and len(records):
             force = records[:, kn.R_FX:kn.R_FX + self.dim]
@@ -196,7 +202,7 @@ class ViewRun:
             self.max_friction_force = 0.0
         self.contact_windows = self._contact_windows()
         # Every contact step's start and end: what "one contact step" moves between.
-        on = ~self.traj.free[1:, 0] & (t[1:] > t[:-1])
+        on = ~self._free[1:] & (t[1:] > t[:-1])
         self.step_times = np.union1d(t[:-1][on], t[1:][on])
         self.before = self.sample(np.array([self.t0]))
         self.after = self.sample(np.array([self.t1]))
@@ -206,8 +212,8 @@ class ViewRun:
 
     def sample(self, times: np.ndarray) -> State:
         """States at these times (T, 1, N, D): exact in free flight, quintic inside contact steps
-        (`diagnostics.sample`)."""
-        return dg.sample(self.model, self.traj, np.asarray(times, dtype=float))
+        (`diagnostics.sample`'s values, all bodies at once: `viewer.sampling`)."""
+        return self._knots.sample(np.asarray(times, dtype=float))
 
     # ------------------------------------------------------------------------------------------
     # Frames
@@ -238,43 +244,50 @@ class ViewRun:
         return body_values_arrays(self.mass, self.model.inertia[0], st.v[0, 0], st.w[0, 0])
 
     def frame(self, t: float) -> Frame:
-        """Bodies and active contacts at time t (clamped to the run)."""
+        """Bodies and active contacts at time t (clamped to the run). Above CONTACT_LIST_BODIES
+        bodies the contacts come as arrays only (`Frame.links`): thousands of them a frame."""
         t = self.clamp_time(t)
         times = np.array([t])
         st = self.sample(times)
         positions = embed3(st.s[0, 0])
         velocities = embed3(st.v[0, 0])
         wxyz = orientation_wxyz(st.q[0, 0])
-        series = dg.contact_series(self.model, self.traj, times, st)
+        e = self._contacts.at(times, st.s[:, 0])
+        # Spheres that touch only to round-off (an overlap of 1e-17 m) are not in contact.
+        e = e.select(e.overlap > ROUND_OFF * float(self.radius.max()))
+        links = Links(e.i, np.where(e.j >= 0, e.j, -1), embed3(e.point), np.linalg.norm(e.normal_force, axis=-1))
         contacts = []
-        for c, name in enumerate(series.names):
-            overlap = float(series.overlap[0, 0, c])
-            # Spheres that touch only to round-off (an overlap of 1e-17 m) are not in contact.
-            if overlap <= ROUND_OFF * float(self.radius.max()):
-                continue
-            i, j = (int(x) for x in series.pairs[c])
-            if j >= 0:
-                d = positions[j] - positions[i]
-                normal = d / np.linalg.norm(d)
-            else:
-                normal = -embed3(self.model.wall_normal[-1 - j])
-                j = None
-            friction = None
-            if series.friction_force is not None:
-                friction = embed3(series.friction_force[0, 0, c])
-            comp = series.compression[0, 0, c]
-            contacts.append(ContactFrame(name, i, j, embed3(series.point[0, 0, c]), normal,
-                                         embed3(series.normal_force[0, 0, c]), friction, overlap,
-                                         (float(comp[0]), float(comp[1]))))
+        if self.n_bodies <= CONTACT_LIST_BODIES:
+            names = self._contacts.names
+            for k in range(len(e.ck)):
+                i, j = int(e.i[k]), int(e.j[k])
+                if j >= 0:
+                    d = positions[j] - positions[i]
+                    normal = d / np.linalg.norm(d)
+                else:
+                    normal = -embed3(self.model.wall_normal[-1 - j])
+                    j = None
+                friction = None if e.friction_force is None else embed3(e.friction_force[k])
+                comp = e.compression[k]
+                contacts.append(ContactFrame(names[int(e.ck[k])], i, j, embed3(e.point[k]), normal,
+                                             embed3(e.normal_force[k]), friction, float(e.overlap[k]),
+                                             (float(comp[0]), float(comp[1]))))
         com = self.mass @ positions / self.mass.sum()
-        return Frame(t, positions, wxyz, contacts, velocities, com)
+        return Frame(t, positions, wxyz, contacts, velocities, com, links)
 
     # ------------------------------------------------------------------------------------------
     # Plots
 
-    def _make_plots(self, states: State) -> PlotData:
-        series = dg.contact_series(self.model, self.traj, self.times, states)
-        con = dg.conserved(self.model, states.t, states.s, states.v, states.w, states.work, series.pairs)
+    def _make_plots(self, states: State, engaged: tuple[np.ndarray, np.ndarray, np.ndarray]) -> PlotData:
+        # The springs' energy summed over the contacts engaged at each time (no others hold any).
+        tk, ck, overlap = engaged
+        spring = np.zeros(len(self.times))
+        for a in range(0, len(tk), SLICE):  # in slices: the law's temporaries, a million entries
+            part = slice(a, a + SLICE)
+            held = dg.elastic_energy(self.model, self._contacts.pairs[ck[part]], np.maximum(overlap[part], 0.0))[0]
+            spring += np.bincount(tk[part], weights=held, minlength=len(self.times))
+        con = dg.conserved(self.model, states.t, states.s, states.v, states.w, states.work,
+                           np.zeros((0, 2), np.int64), stored=spring[:, None])
         energy = {"kinetic": con.kinetic[:, 0]}
         if con.rotational is not None:
             energy["rotational"] = con.rotational[:, 0]
@@ -294,13 +307,18 @@ class ViewRun:
         if con.angular_momentum is not None:
             # Inside a contact step, straight between the steps' own values: interpolated spins
             # and velocities need not balance there when friction changes within the step.
-            rows = dg.trajectory_conserved(self.model, self.traj).angular_momentum[:, 0]
-            t = self.traj.t[:, 0]
+            # Only the steps' ends around such times are evaluated (not every knot of the run).
+            t = self.traj.knot_times
             k = np.clip(np.searchsorted(t, self.times, side="right") - 1, 0, max(len(t) - 2, 0))
-            inside = ~self.traj.free[np.minimum(k + 1, len(t) - 1), 0] & (self.times > t[k])
+            inside = ~self._free[np.minimum(k + 1, len(t) - 1)] & (self.times > t[k])
             values = con.angular_momentum[:, 0].copy()
-            for c in range(values.shape[-1]):
-                values[inside, c] = np.interp(self.times[inside], t, rows[:, c])
+            if inside.any():
+                ends = np.union1d(t[k[inside]], t[np.minimum(k[inside] + 1, len(t) - 1)])
+                at = self.sample(ends)
+                rows = dg.conserved(self.model, at.t, at.s, at.v, at.w, at.work,
+                                    np.zeros((0, 2), np.int64)).angular_momentum[:, 0]
+                for c in range(values.shape[-1]):
+                    values[inside, c] = np.interp(self.times[inside], ends, rows[:, c])
             comps = ("z",) if values.shape[-1] == 1 else ("x", "y", "z")
             # Its natural size: sum |s x m v| + I |w| (the residual's scale), largest over the run.
             arm = np.linalg.norm(np.atleast_3d(_cross(s, mass * v)), axis=-1).sum(axis=-1)
@@ -310,20 +328,45 @@ class ViewRun:
             angular = _conserved_series("angular momentum", "kg m²/s",
                                         {f"L{a}": values[:, c] for c, a in enumerate(comps)},
                                         float(np.max(arm, initial=0.0)))
-        compression = {}
-        for c, name in enumerate(series.names):
-            comp = series.compression[:, 0, c, 0]
-            if np.any(comp > ROUND_OFF * self.radius.max()):
-                compression[name] = comp * 1e3
+        compression = self._compression_lines(engaged)
         e_scale = float(np.max(np.abs(energy["total"]), initial=0.0))
         energy_series = _conserved_series("energy", "J", energy, e_scale)
         plots = PlotData(self.times, energy_series, _conserved_series("momentum", "kg m/s", momentum, p_scale),
-                         angular, Series("compression", "mm", _top_lines(compression),
+                         angular, Series("compression", "mm", compression,
                                          float(max((v.max() for v in compression.values()), default=0.0)))
                          if compression else None)
         plots.all = [s for s in (plots.energy, plots.momentum, plots.angular_momentum, plots.compression)
                      if s is not None]
         return plots
+
+    def _compression_lines(self, engaged: tuple[np.ndarray, np.ndarray, np.ndarray]) -> dict[str, np.ndarray]:
+        """Compression (mm) of each contact that was pressed beyond round-off, in the order the
+        contacts began; above MAX_COMPRESSION_LINES the largest ones and an 'others (max)' line
+        (a pile has thousands of contacts)."""
+        n_t, c = len(self.times), len(self._contacts)
+        tk, ck, overlap = engaged
+        comp = self._contacts.compression(ck, overlap) * 1e3
+        peak = np.zeros(c)
+        np.maximum.at(peak, ck, comp)
+        pressed = np.flatnonzero(peak > ROUND_OFF * self.radius.max() * 1e3)
+        if len(pressed) > MAX_COMPRESSION_LINES:
+            top = pressed[np.argsort(-peak[pressed], kind="stable")]
+            shown, rest = top[: MAX_COMPRESSION_LINES - 1], top[MAX_COMPRESSION_LINES - 1:]
+        else:
+            shown, rest = pressed, pressed[:0]
+        lines = {}
+        names = self._contacts.names
+        for k in shown:
+            y = np.zeros(n_t)
+            mine = ck == k
+            y[tk[mine]] = comp[mine]
+            lines[names[int(k)]] = y
+        if len(rest):
+            others = np.zeros(n_t)
+            mine = np.isin(ck, rest)
+            np.maximum.at(others, tk[mine], comp[mine])
+            lines[f"{len(rest)} others (max)"] = others
+        return lines
 
     # ------------------------------------------------------------------------------------------
     # Summary
@@ -333,25 +376,20 @@ class ViewRun:
             # The DEM kernel steps (not free) whenever spheres are within its neighbour skin,
             # touching or not: its contact phases are the windows (overlapping ones merged).
             windows: list[tuple[float, float]] = []
-            for a, b in sorted((float(a), float(b)) for a, b in self.traj.intervals[:, 2:4]):
+            ivals = self.traj.intervals[:, 2:4]
+            ends = np.where(np.isnan(ivals[:, 1]), self.t1, ivals[:, 1])  # still engaged at the end
+            for a, b in sorted(zip(ivals[:, 0].tolist(), ends.tolist())):
                 if windows and a <= windows[-1][1]:
                     windows[-1] = (windows[-1][0], max(windows[-1][1], b))
                 else:
                     windows.append((a, b))
             return windows
-        t = self.traj.t[:, 0]
-        contact = ~self.traj.free[1:, 0]
-        windows = []
-        start = None
-        for k, on in enumerate(contact):
-            if on and start is None:
-                start = float(t[k])
-            if not on and start is not None:
-                windows.append((start, float(t[k])))
-                start = None
-        if start is not None:
-            windows.append((start, float(t[-1])))
-        return windows
+        t = self.traj.knot_times
+        contact = np.concatenate(([False], ~self._free[1:], [False])).astype(np.int8)
+        # Runs of contact segments: segment k (t[k] .. t[k + 1]) is a contact step.
+        starts = np.flatnonzero(np.diff(contact) == 1)
+        ends = np.flatnonzero(np.diff(contact) == -1)
+        return [(float(t[a]), float(t[b])) for a, b in zip(starts, ends)]
 
     @property
     def duration(self) -> float:
@@ -437,17 +475,6 @@ def _conserved_series(title: str, unit: str, lines: dict[str, np.ndarray], scale
         else:
             out[name] = y
     return Series(title, unit, out, scale, tuple(flat))
-
-
-def _top_lines(lines: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """At most MAX_COMPRESSION_LINES lines, the largest ones; the rest folded into one
-    'others (max)' line (a pile has hundreds of contacts)."""
-    if len(lines) <= MAX_COMPRESSION_LINES:
-        return lines
-    order = sorted(lines, key=lambda k: -float(lines[k].max()))
-    keep = {k: lines[k] for k in order[: MAX_COMPRESSION_LINES - 1]}
-    keep[f"{len(order) - len(keep)} others (max)"] = np.max([lines[k] for k in order[len(keep):]], axis=0)
-    return keep
 
 
 def format_residual(x: float) -> str:

@@ -46,8 +46,57 @@ def open_page(browser: Any, app: Any, *, width: int = 1280, height: int = 800, q
     assert session.worker.wait_idle(120)
     page.wait_for_function("() => document.body.innerText.includes('simulated in') || "
                            "document.body.innerText.includes('replayed')", timeout=60_000)
+    settle(page)
     page.session = session
     return page
+
+
+# One frame drawn: rAF runs before a frame is drawn, the timeout after it.
+_FRAME_JS = ("() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame("
+             "() => setTimeout(() => r(1), 0))))")
+
+
+def settle(page: Any, timeout: float = 180.0, quick: float = 0.5, rounds: int = 3) -> None:
+    """Wait until the page draws frames promptly again (`rounds` in a row under `quick` s).
+
+    Software WebGL compiles the scene's shaders at its first frames after the page (or a new
+    scene) arrives: the page's one thread is then busy for 4-8 s on a quiet machine and far
+    longer under load, and the first click, scroll or locator in a test waited on it until its
+    own timeout (issue 12: one browser test timed out per full run, a different one each time).
+    Waiting here, once, with a long limit, leaves the tests' own waits for what they check."""
+    deadline = time.monotonic() + timeout
+    fast = 0
+    while fast < rounds:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise AssertionError(f"the page stayed busy for {timeout:g} s")
+        start = time.monotonic()
+        page.wait_for_function(_FRAME_JS, timeout=left * 1e3)
+        fast = fast + 1 if time.monotonic() - start < quick else 0
+
+
+def wait_for_text(page: Any, *texts: str, timeout: float = 60.0) -> str:
+    """Wait until the page's text holds every one of `texts`; the text then."""
+    page.wait_for_function("(texts) => texts.every(t => document.body.innerText.includes(t))", arg=list(texts),
+                           timeout=timeout * 1e3)
+    return visible_text(page)
+
+
+def focus_input(page: Any, box: Any) -> None:
+    """Scroll a text input into view, focus it and select what it holds, as a click and Ctrl+A
+    would, through the DOM (no wait for the element to stop moving, which rarely happens while
+    software WebGL draws)."""
+    box.evaluate("e => { e.scrollIntoView({block: 'center'}); e.focus(); e.select(); }")
+
+
+class ServerClient:
+    """Stands in for a browser tab (benchmarks and tests without a browser): a `Session` given
+    it draws into the server's own scene and GUI, watched by nobody."""
+
+    def __init__(self, server: Any) -> None:
+        self.gui, self.scene, self.client_id = server.gui, server.scene, 0
+        self.atomic, self.flush = server.atomic, server.flush
+        self.camera = type("Camera", (), {"on_update": staticmethod(lambda cb: cb)})()
 
 
 def dom_id(handle: Any) -> str:
