@@ -569,7 +569,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     if record:
         KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
         EP = grow(EP, nep)
-        EP[nep, EP_T] = 0.0
+        EP[nep, :] = 0.0  # nothing done yet (grow leaves new rows unset)
         nep += 1
     next_frame = fp[P_FRAME]
     peak = _kinetic(V, W, Bd, n)
