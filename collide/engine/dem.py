@@ -33,7 +33,7 @@ import math
 import numpy as np
 
 from collide.engine.kernels import grow, turn
-from collide.engine.tier import jit
+from collide.engine.tier import jit, jit_inline
 
 # Bodies: B (N, NB).
 B_IM, B_II, B_R, B_M, B_I, B_MAT = range(6)
@@ -69,7 +69,7 @@ for _name, _value in list(globals().items()):
         globals()[_name] = np.int64(_value)
 
 
-@jit
+@jit_inline
 def _cell(x, size):
     return np.int64(math.floor(x / size))
 
@@ -146,22 +146,22 @@ def carry_history(old_keys, old_hist, new_keys):
 # (flags fixed when the scene is compiled), as LAMMPS' pair_style granular composes sub-models.
 
 
-@jit
-def normal_elastic(hertz, tab, rstar, delta):
+@jit_inline
+def normal_elastic(hertz, k, estar, rstar, delta):
     """Elastic normal force and stiffness dF/d delta: linear k delta, or Hertz 4/3 E* sqrt(R*) delta^1.5."""
     if hertz:
         root = math.sqrt(rstar * delta)
-        return 4.0 / 3.0 * tab[T_ESTAR] * root * delta, 2.0 * tab[T_ESTAR] * root
-    return tab[T_K] * delta, tab[T_K]
+        return 4.0 / 3.0 * estar * root * delta, 2.0 * estar * root
+    return k * delta, k
 
 
-@jit
+@jit_inline
 def normal_damping(zeta, mstar, kn, vn):
     """The dashpot for the restitution: 2 zeta sqrt(m* k_n) times the overlap's rate."""
     return 2.0 * zeta * math.sqrt(mstar * kn) * vn
 
 
-@jit
+@jit_inline
 def tangential_spring(hist, k, nx, ny, nz, tx, ty, tz, kt, gt, cap, dt):
     """History spring with dashpot, capped at `cap`: the friction force on i and its mode (2
     stick, 1 slip). The stretch is turned into the current tangent plane at its length; after a
@@ -189,7 +189,7 @@ def tangential_spring(hist, k, nx, ny, nz, tx, ty, tz, kt, gt, cap, dt):
     return sx, sy, sz, mode
 
 
-@jit
+@jit_inline
 def coulomb_slip(tx, ty, tz, cap, eps):
     """The report's law: cap against any slip faster than the dead band eps, else nothing."""
     slip = math.sqrt(tx * tx + ty * ty + tz * tz)
@@ -199,7 +199,7 @@ def coulomb_slip(tx, ty, tz, cap, eps):
     return 0.0, 0.0, 0.0, 0.0
 
 
-@jit
+@jit_inline
 def rolling_resistance(W, T, PT, Bd, i, j, cap, dt):
     """Torque up to `cap` against the relative rotation (rolling and twisting alike: LAMMPS
     composes a twisting model, here it shares mu_r, since a sphere left spinning about its
@@ -222,12 +222,12 @@ def rolling_resistance(W, T, PT, Bd, i, j, cap, dt):
             PT[j, 9 + d] += g * wd
 
 
-@jit
-def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tab, hist, k, fl, dt, out):
+@jit_inline
+def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, hist, k, fl, dt, out):
     """Add contact (i, j)'s forces and torques (j < 0: a rigid wall along -n) to F, T, and by
     part to PT (damping force, friction force, friction torque, rolling torque: columns 0, 3,
-    6, 9). n points from i into j. Returns the normal force; `out` gets the friction force on
-    i (3) and the mode."""
+    6, 9). n points from i into j; the law's coefficients are tabs[mi, mj]. Returns the normal
+    force; `out` gets the friction force on i (3) and the mode."""
     tspring, spin = fl[F_TSPRING], fl[F_SPIN]
     ri = Bd[i, B_R]
     if j >= 0:
@@ -255,22 +255,22 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tab, hist, k, 
             vz += W[j, 0] * ny * aj - W[j, 1] * nx * aj
     vn = vx * nx + vy * ny + vz * nz  # the overlap's rate: > 0 while approaching
     tx, ty, tz = vx - vn * nx, vy - vn * ny, vz - vn * nz
-    elastic, kn = normal_elastic(fl[F_HERTZ], tab, rstar, delta)
-    zeta = tab[T_ZETA]
+    elastic, kn = normal_elastic(fl[F_HERTZ], tabs[mi, mj, T_K], tabs[mi, mj, T_ESTAR], rstar, delta)
+    zeta = tabs[mi, mj, T_ZETA]
     damp = normal_damping(zeta, mstar, kn, vn) if zeta > 0.0 else 0.0
     fn = elastic + damp
     press = max(fn, 0.0)
     fx, fy, fz = -fn * nx, -fn * ny, -fn * nz  # on i
     mode = 0.0
     sx, sy, sz = 0.0, 0.0, 0.0  # friction on i
-    mu = tab[T_MU]
+    mu = tabs[mi, mj, T_MU]
     if spin and (mu > 0.0 or tspring):
         if tspring:
-            kt = tab[T_KTR] * kn
+            kt = tabs[mi, mj, T_KTR] * kn
             sx, sy, sz, mode = tangential_spring(hist, k, nx, ny, nz, tx, ty, tz, kt,
                                                  2.0 * zeta * math.sqrt(mstar * kt), mu * press, dt)
         else:
-            sx, sy, sz, mode = coulomb_slip(tx, ty, tz, mu * press, tab[T_EPS])
+            sx, sy, sz, mode = coulomb_slip(tx, ty, tz, mu * press, tabs[mi, mj, T_EPS])
         fx += sx
         fy += sy
         fz += sz
@@ -289,7 +289,7 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tab, hist, k, 
             PT[j, 3] -= sx
             PT[j, 4] -= sy
             PT[j, 5] -= sz
-    roll = tab[T_ROLL]
+    roll = tabs[mi, mj, T_ROLL]
     if spin and roll > 0.0 and press > 0.0:
         rolling_resistance(W, T, PT, Bd, i, j, roll * rstar * press, dt)
     F[i, 0] += fx
@@ -311,10 +311,11 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tab, hist, k, 
 
 
 @jit
-def forces(X, V, W, F, T, PT, Bd, keys, hist, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST, IV, niv, REC, nrec,
-           record_now):
+def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST, IV, niv,
+           REC, nrec, record_now):
     """Forces and torques of every engaged contact (F, T, and by part PT) and the run's contact
-    figures. Returns (engaged, niv, nrec, IV, REC)."""
+    figures, over the listed pairs (PI, PJ) and body-wall pairs (WL: i * walls + w); wtabs is
+    the wall table as (materials, 1, columns). Returns (engaged, niv, nrec, IV, REC)."""
     record = fl[F_RECORD]
     for a in range(n):
         for d in range(3):
@@ -324,9 +325,15 @@ def forces(X, V, W, F, T, PT, Bd, keys, hist, WH, WP, tabs, wtabs, grav, fl, dt,
             PT[a, d] = 0.0
     out = np.zeros(4)
     engaged = 0
-    for k in range(keys.shape[0]):
-        i = keys[k] // n
-        j = keys[k] - i * n
+    # Room for every listed contact to open and be recorded, so that no array is replaced
+    # inside the loops (that costs reference counting per contact).
+    most = PI.shape[0] + WL.shape[0]
+    if record:
+        IV = grow(IV, niv + most)
+    if record_now:
+        REC = grow(REC, nrec + most)
+    for k in range(PI.shape[0]):
+        i, j = PI[k], PJ[k]
         dx = X[j, 0] - X[i, 0]
         dy = X[j, 1] - X[i, 1]
         dz = X[j, 2] - X[i, 2]
@@ -339,44 +346,43 @@ def forces(X, V, W, F, T, PT, Bd, keys, hist, WH, WP, tabs, wtabs, grav, fl, dt,
         dist = math.sqrt(d2)
         delta = reach - dist
         if hist[k, H_ON] == 0.0:
-            niv, IV = _open(hist, k, IV, niv, i, j, t, FG, ST, record)
+            niv = _open(hist, k, IV, niv, i, j, t, FG, ST, record)
         engaged += 1
-        tab = tabs[np.int64(Bd[i, B_MAT]), np.int64(Bd[j, B_MAT])]
-        fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx / dist, dy / dist, dz / dist, delta, tab, hist, k, fl,
-                           dt, out)
+        fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx / dist, dy / dist, dz / dist, delta, tabs, MAT[i], MAT[j],
+                           hist, k, fl, dt, out)
         FG[G_OVERLAP] = max(FG[G_OVERLAP], delta)
         FG[G_FORCE] = max(FG[G_FORCE], fn)
         if record_now:
-            REC = grow(REC, nrec)
             _record(REC, nrec, t, i, j, delta, fn, out)
             nrec += 1
     nw = WP.shape[0]
-    for i in range(n):
-        for w in range(nw):
-            k = i * nw + w
-            h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
-                 + (X[i, 2] - WP[w, 2]) * WP[w, 5])
-            delta = Bd[i, B_R] - h
-            if delta <= 0.0:
-                if WH[k, H_ON] != 0.0:
-                    _close(WH, k, IV, t, FG)
-                continue
-            if WH[k, H_ON] == 0.0:
-                niv, IV = _open(WH, k, IV, niv, i, -1 - w, t, FG, ST, record)
-            engaged += 1
-            fn = contact_force(X, V, W, F, T, PT, Bd, i, -1 - w, -WP[w, 3], -WP[w, 4], -WP[w, 5], delta,
-                               wtabs[np.int64(Bd[i, B_MAT])], WH, k, fl, dt, out)
-            FG[G_OVERLAP] = max(FG[G_OVERLAP], delta)
-            FG[G_FORCE] = max(FG[G_FORCE], fn)
-            if record_now:
-                REC = grow(REC, nrec)
-                _record(REC, nrec, t, i, -1 - w, delta, fn, out)
-                nrec += 1
+    for m in range(WL.shape[0]):
+        k = WL[m]
+        i = k // nw
+        w = k - i * nw
+        h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
+             + (X[i, 2] - WP[w, 2]) * WP[w, 5])
+        delta = Bd[i, B_R] - h
+        if delta <= 0.0:
+            if WH[k, H_ON] != 0.0:
+                _close(WH, k, IV, t, FG)
+            continue
+        if WH[k, H_ON] == 0.0:
+            niv = _open(WH, k, IV, niv, i, -1 - w, t, FG, ST, record)
+        engaged += 1
+        fn = contact_force(X, V, W, F, T, PT, Bd, i, -1 - w, -WP[w, 3], -WP[w, 4], -WP[w, 5], delta, wtabs, MAT[i], 0,
+                           WH, k, fl, dt, out)
+        FG[G_OVERLAP] = max(FG[G_OVERLAP], delta)
+        FG[G_FORCE] = max(FG[G_FORCE], fn)
+        if record_now:
+            _record(REC, nrec, t, i, -1 - w, delta, fn, out)
+            nrec += 1
     return engaged, niv, nrec, IV, REC
 
 
-@jit
+@jit_inline
 def _open(hist, k, IV, niv, i, j, t, FG, ST, record):
+    """Start contact k's history (and its interval row, IV having room). Returns niv."""
     hist[k, H_ON] = 1.0
     for c in range(3):
         hist[k, H_XI + c] = 0.0
@@ -386,14 +392,13 @@ def _open(hist, k, IV, niv, i, j, t, FG, ST, record):
         FG[G_FIRST] = t
     hist[k, H_IV] = -1.0
     if record:
-        IV = grow(IV, niv)
         IV[niv, 0], IV[niv, 1], IV[niv, 2], IV[niv, 3] = i, j, t, np.nan
         hist[k, H_IV] = niv
         niv += 1
-    return niv, IV
+    return niv
 
 
-@jit
+@jit_inline
 def _close(hist, k, IV, t, FG):
     hist[k, H_ON] = 0.0
     # A spring released stores nothing; what it held was given back as it unloaded.
@@ -406,18 +411,21 @@ def _close(hist, k, IV, t, FG):
     hist[k, H_IV] = -1.0
 
 
-@jit
+@jit_inline
 def _record(REC, row, t, i, j, delta, fn, out):
     REC[row, 0], REC[row, 1], REC[row, 2], REC[row, 3], REC[row, 4] = t, i, j, delta, fn
     REC[row, 5], REC[row, 6], REC[row, 7], REC[row, 8] = out[0], out[1], out[2], out[3]
 
 
 @jit
-def kick(V, W, F, T, PT, Bd, h2, n, WK):
+def kick(V, W, F, T, PT, Bd, h2, n, WK, parts):
     """A half kick of h2, and the work each part of the contact forces did in it, from the
     kinetic energy it changed: F . (v_before + v_after) / 2 h2 per body (exact for a kick, and
     additive over the parts). WK (N, 3) gathers minus that: damping, friction (with what the
-    tangential springs hold), rolling resistance."""
+    tangential springs hold), rolling resistance; `parts` (3,) says which the scene has (the
+    others' PT columns stay zero). Returns the kinetic energy after the kick."""
+    damping, friction, rolling = parts[0], parts[1], parts[2]
+    e = 0.0
     for a in range(n):
         vb0, vb1, vb2 = V[a, 0], V[a, 1], V[a, 2]
         wb0, wb1, wb2 = W[a, 0], W[a, 1], W[a, 2]
@@ -426,10 +434,16 @@ def kick(V, W, F, T, PT, Bd, h2, n, WK):
             W[a, d] += h2 * T[a, d] * Bd[a, B_II]
         v0, v1, v2 = 0.5 * (vb0 + V[a, 0]), 0.5 * (vb1 + V[a, 1]), 0.5 * (vb2 + V[a, 2])
         w0, w1, w2 = 0.5 * (wb0 + W[a, 0]), 0.5 * (wb1 + W[a, 1]), 0.5 * (wb2 + W[a, 2])
-        WK[a, 0] -= h2 * (PT[a, 0] * v0 + PT[a, 1] * v1 + PT[a, 2] * v2)
-        WK[a, 1] -= h2 * (PT[a, 3] * v0 + PT[a, 4] * v1 + PT[a, 5] * v2
-                          + (PT[a, 6] * w0 + PT[a, 7] * w1 + PT[a, 8] * w2) * (Bd[a, B_II] > 0.0))
-        WK[a, 2] -= h2 * (PT[a, 9] * w0 + PT[a, 10] * w1 + PT[a, 11] * w2) * (Bd[a, B_II] > 0.0)
+        if damping:
+            WK[a, 0] -= h2 * (PT[a, 0] * v0 + PT[a, 1] * v1 + PT[a, 2] * v2)
+        if friction:
+            WK[a, 1] -= h2 * (PT[a, 3] * v0 + PT[a, 4] * v1 + PT[a, 5] * v2
+                              + (PT[a, 6] * w0 + PT[a, 7] * w1 + PT[a, 8] * w2) * (Bd[a, B_II] > 0.0))
+        if rolling:
+            WK[a, 2] -= h2 * (PT[a, 9] * w0 + PT[a, 10] * w1 + PT[a, 11] * w2) * (Bd[a, B_II] > 0.0)
+        e += 0.5 * Bd[a, B_M] * (V[a, 0] ** 2 + V[a, 1] ** 2 + V[a, 2] ** 2)
+        e += 0.5 * Bd[a, B_I] * (W[a, 0] ** 2 + W[a, 1] ** 2 + W[a, 2] ** 2)
+    return e
 
 
 @jit
@@ -463,31 +477,50 @@ def _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, free):
 
 
 @jit
-def _rebuild(X, X0, Bd, n, dim, skin, keys, hist, ST):
-    """A fresh neighbour list, the listed pairs' history carried over."""
+def wall_list(X, Bd, WP, WH, n, skin):
+    """Body-wall pairs (i * walls + w, ascending) within the skin of touching, and those still
+    engaged: with the list rebuilt when a body has moved half the skin, no other can touch."""
+    nw = WP.shape[0]
+    out = np.empty(n * nw, np.int64)
+    count = 0
+    for i in range(n):
+        for w in range(nw):
+            h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
+                 + (X[i, 2] - WP[w, 2]) * WP[w, 5])
+            if h - Bd[i, B_R] < skin or WH[i * nw + w, H_ON] != 0.0:
+                out[count] = i * nw + w
+                count += 1
+    return out[:count].copy()
+
+
+@jit
+def _rebuild(X, X0, Bd, WP, WH, n, dim, skin, keys, hist, ST):
+    """Fresh neighbour lists (pairs as keys i * n + j and as (i, j); body-wall pairs), the
+    listed pairs' history carried over."""
     fresh = build_pairs(X, Bd, n, dim, skin)
     hist = carry_history(keys, hist, fresh)
     X0[:, :] = X
     ST[S_BUILDS] += 1
-    return fresh, hist
+    return fresh, fresh // n, fresh % n, hist, wall_list(X, Bd, WP, WH, n, skin)
 
 
 @jit
-def _free_time(X, V, Bd, keys, WP, grav, n, skin):
+def _free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin):
     """How long every body can fly freely with no contact able to begin: until the fastest could
     have covered half the smallest gap (listed pairs, walls; an unlisted pair's gap is at least
-    the skin, the list being fresh), gravity included."""
+    the skin, the lists being fresh), gravity included."""
     gap = skin
-    for k in range(keys.shape[0]):
-        i = keys[k] // n
-        j = keys[k] - i * n
+    for k in range(PI.shape[0]):
+        i, j = PI[k], PJ[k]
         dx, dy, dz = X[j, 0] - X[i, 0], X[j, 1] - X[i, 1], X[j, 2] - X[i, 2]
         gap = min(gap, math.sqrt(dx * dx + dy * dy + dz * dz) - Bd[i, B_R] - Bd[j, B_R])
-    for i in range(n):
-        for w in range(WP.shape[0]):
-            h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
-                 + (X[i, 2] - WP[w, 2]) * WP[w, 5])
-            gap = min(gap, h - Bd[i, B_R])
+    nw = WP.shape[0]
+    for m in range(WL.shape[0]):
+        i = WL[m] // nw
+        w = WL[m] - i * nw
+        h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
+             + (X[i, 2] - WP[w, 2]) * WP[w, 5])
+        gap = min(gap, h - Bd[i, B_R])
     if gap <= 0.0:
         return 0.0
     speed = 0.0
@@ -556,20 +589,32 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     IV = np.zeros((0, 4))
     EP = np.zeros((0, NEP))
     nkn, nrec, niv, nep = 0, 0, 0, 0
-    keys = build_pairs(X, Bd, n, dim, skin)
-    hist = carry_history(np.zeros(0, np.int64), np.zeros((0, NH)), keys)
-    ST[S_BUILDS] = 1
+    MAT = np.empty(n, np.int64)
+    for a in range(n):
+        MAT[a] = np.int64(Bd[a, B_MAT])
+    wt = wtabs.reshape((wtabs.shape[0], 1, wtabs.shape[1]))
+    # Which parts of the work the contacts can do (the kick books only those).
+    parts = np.zeros(3, np.int64)
+    for table in (tabs.reshape((-1, tabs.shape[-1])), wtabs):
+        for r in range(table.shape[0]):
+            if table[r, T_ZETA] > 0.0:
+                parts[0] = 1
+            if fl[F_SPIN] and (table[r, T_MU] > 0.0 or fl[F_TSPRING]):
+                parts[1] = 1
+            if fl[F_SPIN] and table[r, T_ROLL] > 0.0:
+                parts[2] = 1
     WH = np.zeros((n * WP.shape[0], NH))
     for k in range(WH.shape[0]):
         WH[k, H_IV] = -1.0
     X0 = X.copy()
+    keys, PI, PJ, hist, WL = _rebuild(X, X0, Bd, WP, WH, n, dim, skin, np.zeros(0, np.int64), np.zeros((0, NH)), ST)
     t = 0.0
-    engaged, niv, nrec, IV, REC = forces(X, V, W, F, T, PT, Bd, keys, hist, WH, WP, tabs, wtabs, grav, fl, 0.0, t,
-                                         n, FG, ST, IV, niv, REC, nrec, record != 0)
+    engaged, niv, nrec, IV, REC = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl,
+                                         0.0, t, n, FG, ST, IV, niv, REC, nrec, record != 0)
     if record:
         KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
         EP = grow(EP, nep)
-        EP[nep, EP_T] = 0.0
+        EP[nep, :] = 0.0  # nothing done yet (grow leaves new rows unset)
         nep += 1
     next_frame = fp[P_FRAME]
     peak = _kinetic(V, W, Bd, n)
@@ -580,8 +625,8 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         if engaged == 0:
             # Nothing touches: fly in closed form as far as no contact can begin (free flight is
             # not stepped, as in the event engine), then step again.
-            keys, hist = _rebuild(X, X0, Bd, n, dim, skin, keys, hist, ST)
-            tau = _free_time(X, V, Bd, keys, WP, grav, n, skin)
+            keys, PI, PJ, hist, WL = _rebuild(X, X0, Bd, WP, WH, n, dim, skin, keys, hist, ST)
+            tau = _free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin)
             if t + tau >= t_end * (1.0 - 1e-12):
                 tau = t_end - t
             if tau > 2.0 * dt:
@@ -611,7 +656,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             last = True
         if h <= 0.0:
             break
-        kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK)
+        kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, parts)
         moved = 0.0
         for a in range(n):
             for d in range(3):
@@ -621,17 +666,16 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             ddx, ddy, ddz = X[a, 0] - X0[a, 0], X[a, 1] - X0[a, 1], X[a, 2] - X0[a, 2]
             moved = max(moved, ddx * ddx + ddy * ddy + ddz * ddz)
         if 4.0 * moved > skin * skin:
-            keys, hist = _rebuild(X, X0, Bd, n, dim, skin, keys, hist, ST)
+            keys, PI, PJ, hist, WL = _rebuild(X, X0, Bd, WP, WH, n, dim, skin, keys, hist, ST)
         t = t + h
         steps += 1
         record_now = record != 0 and (t >= next_frame or last)
-        engaged, niv, nrec, IV, REC = forces(X, V, W, F, T, PT, Bd, keys, hist, WH, WP, tabs, wtabs, grav, fl, h, t,
-                                             n, FG, ST, IV, niv, REC, nrec, record_now)
-        kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK)
+        engaged, niv, nrec, IV, REC = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav,
+                                             fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now)
+        kinetic = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, parts)
         if engaged:
             FG[G_TOUCH] += h
             ever = True
-        kinetic = _kinetic(V, W, Bd, n)
         if not math.isfinite(kinetic):
             ST[S_STATUS] = NONFINITE
             FG[G_STATUS_T] = t
