@@ -24,7 +24,6 @@ radius off under a tilted camera: issue 12, item 4.)
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,6 +55,7 @@ GHOST_COLOUR_MIX = 0.55
 SUBDIVISIONS = 3
 FEW_BODIES = 12  # above this, instanced spheres
 CHAIN_OPACITY = 0.3  # spheres while the force chains are shown
+WALL_KEEP = 0.03  # of the scene's extent: walls that moved less are not sent again
 MIN_ARROW = 0.08  # arrows shorter than this many radii are not drawn (no heads on round-off)
 COLOUR_MODES = ("body", "speed", "kinetic energy", "contacts")
 
@@ -166,7 +166,7 @@ class SceneDrawer:
         self._paths: list = []
         self._shape: tuple | None = None
         self._ground_key: tuple | None = None
-        self._walls_key: tuple | None = None
+        self._walls_drawn: list | None = None  # the wall boxes sent: (centre, wxyz, dims), is floor
         self._ghosts: list = []
         self._colours = np.zeros((0, 3), np.uint8)
         self._colour_range = (0.0, 1.0)
@@ -214,7 +214,7 @@ class SceneDrawer:
         if ground_key != self._ground_key:
             self._show_ground(centre, half, cell, ground)
             self._ground_key = ground_key
-        self._show_walls(view, walls, lo, hi, extent, r_max, planar, cell)
+        self._show_walls(view, walls, lo, hi, extent, r_max, planar)
         # Paths: the whole run faint, the part already travelled in the body's colour.
         colours = body_colours(view.n_bodies)
         trails = self.options.trails and view.paths is not None and not self.many
@@ -269,22 +269,9 @@ class SceneDrawer:
                                      thickness_units="screen")
 
     def _show_walls(self, view: ViewRun, walls: list, lo: np.ndarray, hi: np.ndarray, extent: float,
-                    r_max: float, planar: bool, cell: float) -> None:
-        # On the ground's grid: the walls of the next run of a slider drag are the same boxes.
-        extent = cell * math.ceil(extent / cell)
-        lo, hi = np.floor(lo / cell) * cell, np.ceil(hi / cell) * cell
-        key = (planar, extent, float(r_max), tuple(lo), tuple(hi),
-               tuple((tuple(p), tuple(n)) for p, n in walls), self._floor is not None)
-        if key == self._walls_key:
-            return
-        self._walls_key = key
-        handle = self.scene.get_handle_by_name("/world/walls")
-        if handle is not None:
-            handle.remove()
-        if not walls:
-            return
-        self.scene.add_frame("/world/walls", show_axes=False)
-        for k, (point, normal) in enumerate(walls):
+                    r_max: float, planar: bool) -> None:
+        boxes = []
+        for point, normal in walls:
             if planar:
                 c, wxyz, dims = wall_box(point, normal, 1.6 * extent, 0.04 * r_max + 0.01 * extent, True, 2.4 * r_max)
             else:
@@ -296,10 +283,25 @@ class SceneDrawer:
                 c, wxyz, dims = wall_box(foot, normal, 1.3 * extent, thickness, False, 1.3 * extent)
             is_floor = self._floor is not None and np.allclose(point, self._floor[0]) and np.allclose(
                 normal, self._floor[1])
+            boxes.append((np.concatenate((c, wxyz, dims)), is_floor))
+        # The next run of a slider drag has walls within a few per cent of these: kept, not sent.
+        old = self._walls_drawn
+        if old is not None and len(old) == len(boxes) and all(
+                f == g and np.allclose(a, b, rtol=0, atol=WALL_KEEP * extent) for (a, f), (b, g) in zip(old, boxes)):
+            return
+        self._walls_drawn = boxes
+        handle = self.scene.get_handle_by_name("/world/walls")
+        if handle is not None:
+            handle.remove()
+        if not walls:
+            return
+        self.scene.add_frame("/world/walls", show_axes=False)
+        for k, (spec, is_floor) in enumerate(boxes):
+            c, wxyz, dims = spec[:3], spec[3:7], spec[7:]
             # Walls other than the floor are glass: the sides of a bin stand between the camera
             # and the pile (at 0.85 opaque they hid it and its force chains).
             self.scene.add_box(f"/world/walls/{k}", color=(222, 224, 228) if is_floor else (150, 158, 170),
-                               dimensions=dims, position=tuple(c), wxyz=tuple(wxyz),
+                               dimensions=tuple(dims), position=tuple(c), wxyz=tuple(wxyz),
                                opacity=None if is_floor else (0.85 if planar else 0.2), cast_shadow=False,
                                receive_shadow=True)
 
