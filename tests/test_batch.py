@@ -406,7 +406,7 @@ def test_sigkill_at_random_moments_then_resume_equals_uninterrupted(tmp_path: Pa
             "--chunk", "20", "--resume"]
     rng = random.Random(14)
     kills = 0
-    for _ in range(10):
+    for attempt in range(10):
         proc = subprocess.Popen([str(COLLIDE), *args], cwd=tmp_path, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.PIPE, text=True)
         deadline = time.monotonic() + 120
@@ -415,6 +415,12 @@ def test_sigkill_at_random_moments_then_resume_equals_uninterrupted(tmp_path: Pa
             line = proc.stderr.readline() if ready else ""
             if line.startswith("runs: ") or (not line and proc.poll() is not None):
                 break
+        # Under load a run can take longer than every random moment below: the last kill waits
+        # for a first finished row, so the batch is killed part way, not before it began.
+        summary = tmp_path / "s.csv"
+        while attempt == 9 and not (summary.exists() and summary.read_text().count("\n") > 1) \
+                and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
         time.sleep(rng.uniform(0.0, 2.0))
         if proc.poll() is None:
             os.kill(proc.pid, signal.SIGKILL)
