@@ -46,7 +46,7 @@ def _alive(pid: int) -> bool:
 
 
 def test_a_background_run_reports_progress_and_gives_the_same_run():
-    scene = _pile(216, 0.12)
+    scene = _pile(216, 0.3)  # a second or more of run: progress comes every 0.25 s
     runner = BackgroundRunner()
     seen: list[tuple[float, float, int, float]] = []
     try:
