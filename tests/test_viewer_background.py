@@ -46,7 +46,7 @@ def _alive(pid: int) -> bool:
 
 
 def test_a_background_run_reports_progress_and_gives_the_same_run():
-    scene = _pile(216, 0.12)
+    scene = _pile(216, 0.3)  # a second or more of run: progress comes every 0.25 s
     runner = BackgroundRunner()
     seen: list[tuple[float, float, int, float]] = []
     try:
@@ -145,6 +145,33 @@ def test_a_slider_the_materials_override_is_disabled_with_the_reason(tmp_path):
         assert session.apply_typed("pair.0.restitution", "0.5")
         wait_until(lambda: session.view is not before and session.worker.idle(), 120, "the run with e = 0.5")
         assert session.view.scene.pairs[0].restitution == 0.5
+    finally:
+        session.close()
+        app.stop()
+
+
+def test_a_slow_scene_with_a_quick_preview_previews_while_dragging(tmp_path):
+    """break-3d on a loaded machine: its run took over LONG_RUN_S, so the final run goes to the
+    background once the slider rests; its DEM preview (a sixth of the steps) is still drawn at
+    once while dragging (it was skipped: every change waited for the background run)."""
+    from viewer.app import ViewerApp
+    from viewer.session import LONG_RUN_S, Session
+
+    app = ViewerApp("demo-1d", port=0, recordings_dir=tmp_path)
+    app.start()
+    session = Session(app, ServerClient(app.server))  # type: ignore[arg-type]
+    session.fit_camera = lambda *a, **k: None
+    try:
+        session.load_scene("break-3d")
+        assert session.worker.wait_idle(120)
+        session._full_cost = 2 * LONG_RUN_S  # as measured under load
+        n = len(session.timings)
+        session.values["pair.0.restitution"] = 0.9
+        session.request_run()
+        wait_until(lambda: len(session.timings) >= n + 2 and session.worker.idle(), 120, "preview and final run")
+        first, final = list(session.timings)[n:n + 2]
+        assert first["preview"] and not final["preview"]
+        assert session.view.scene.pairs[0].restitution == 0.9 and not session.view.preview
     finally:
         session.close()
         app.stop()

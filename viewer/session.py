@@ -932,14 +932,16 @@ class Session:
         try:
             scene = build_scene(req.controls, req.values, req.settings)
             long = self._expect_long(scene)
-            if long and not final and not req.refit:
-                # Seconds to a minute of run: only once the slider rests (the worker calls back
-                # with final=True after its settle time, unless a newer value came).
+            preview = None
+            if (not final and self._full_cost is not None and self._full_cost > PREVIEW_BUDGET
+                    and len(scene.bodies) <= MANY_BODIES):
+                preview = preview_settings(scene)
+            if long and preview is None and not final and not req.refit:
+                # Seconds to a minute of run and no quick preview: only once the slider rests
+                # (the worker calls back with final=True after its settle time, unless a newer
+                # value came).
                 self._show_progress(f"*{scene.name}: the run starts when the slider rests...*")
                 return True
-            preview = None
-            if not long and not final and self._full_cost is not None and self._full_cost > PREVIEW_BUDGET:
-                preview = preview_settings(scene)
             t_build = lap()
             if preview is not None:
                 run = run_scene(scene, integrator=preview.integrator, dt=preview.dt, tol=preview.tol, record=True)

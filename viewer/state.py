@@ -204,8 +204,11 @@ class ViewRun:
         # Every contact step's start and end: what "one contact step" moves between.
         on = ~self._free[1:] & (t[1:] > t[:-1])
         self.step_times = np.union1d(t[:-1][on], t[1:][on])
-        self.before = self.sample(np.array([self.t0]))
-        self.after = self.sample(np.array([self.t1]))
+        # The values at the run's ends (the table's before and after, asked at every draw): the
+        # plot grid's first and last rows.
+        self._end_values = {float(self.times[k]): body_values_arrays(self.mass, self.model.inertia[0],
+                                                                     states.v[k, 0], states.w[k, 0])
+                            for k in (0, -1) if float(self.times[k]) in (self.t0, self.t1)}
 
     # ------------------------------------------------------------------------------------------
     # Sampling
@@ -240,7 +243,10 @@ class ViewRun:
     def body_values(self, t: float) -> dict[str, np.ndarray]:
         """Per body at time t: velocity (N, D) m/s, speed (N,), momentum (N, D), kinetic energy
         (N,) J (translational), spin (N, K) rad/s and rotational energy (N,) J."""
-        st = self.sample(np.array([self.clamp_time(t)]))
+        t = self.clamp_time(t)
+        if t in self._end_values:
+            return {key: value.copy() for key, value in self._end_values[t].items()}
+        st = self.sample(np.array([t]))
         return body_values_arrays(self.mass, self.model.inertia[0], st.v[0, 0], st.w[0, 0])
 
     def frame(self, t: float) -> Frame:
