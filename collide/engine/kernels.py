@@ -1420,7 +1420,13 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             if turned > max_turn:
                 # The turning angle grows about in proportion to the step near the edge.
                 limited = True
-                theta = min(theta, frac * max(0.8 * max_turn / turned, 0.05))
+                limit = frac * max(0.8 * max_turn / turned, 0.05)
+                if limit < theta:
+                    # A contact's start or end beyond the shortened step is the next step's:
+                    # aimed at again from there, the search went round in a cycle between the
+                    # crossing and the turning limit, and the step ran past the crossing.
+                    theta = limit
+                    past = math.inf
         if not (theta < math.inf and abs(theta - frac) > 1e-12 * max(frac, 1e-300)):
             break
         # Never shorter than a few ticks of the clock: an event closer than that is taken as passed.
