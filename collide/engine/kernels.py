@@ -466,9 +466,17 @@ def slide_direction(X, C, CI, c, vc, wc, spin, span):
     the mode's boundary (a slip reversing through the band) still sees a smooth force. In the
     plane this is the held side of the tangent, whatever the slip."""
     sx, sy, sz = slip(X, C, CI, c, vc, wc, spin)
+    nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
     if span != 0.0:
         k = span * response(X, C, CI, c, spin)
         sx, sy, sz = sx - k * C[c, C_FF], sy - k * C[c, C_FF + 1], sz - k * C[c, C_FF + 2]
+        # The impulse taken out acts in the tangent plane only. A normal part left in (C_FF from
+        # another geometry, round-off) would come back amplified by span K mu F_n / |slip| at
+        # every fixed-point pass of the kick, which exceeds 1 where a substep's span is
+        # negative (kahan6) and the slip small: the friction turned into the normal and the
+        # kick never settled (a symmetric rack's middle ball got spun).
+        sn = sx * nx + sy * ny + sz * nz
+        sx, sy, sz = sx - sn * nx, sy - sn * ny, sz - sn * nz
     hx, hy, hz = C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2]
     a = sx * hx + sy * hy + sz * hz
     eps = C[c, C_EPS]
@@ -476,7 +484,6 @@ def slide_direction(X, C, CI, c, vc, wc, spin, span):
         return sx, sy, sz
     shift = 0.25 * eps + a * a / max(eps, 1e-300) - a
     sx, sy, sz = sx + shift * hx, sy + shift * hy, sz + shift * hz
-    nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
     sn = sx * nx + sy * ny + sz * nz
     return sx - sn * nx, sy - sn * ny, sz - sn * nz
 
@@ -1340,9 +1347,14 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             gap = past - frac
             first = math.inf
             for k in range(nq):
-                d1, dp = QF[k, QF_D1], QF[k, QF_DP]
+                d0, d1, dp = QF[k, QF_D0], QF[k, QF_D1], QF[k, QF_DP]
                 if (d1 > tol and dp < -tol) or (d1 < -tol and dp > tol):
                     first = min(first, hermite_root(d1, dp, QF[k, QF_R1] * gap * h_full, QF[k, QF_RP] * gap * h_full))
+                elif abs(d1) <= tol and ((d0 > tol and dp < -tol) or (d0 < -tol and dp > tol)):
+                    # Landed on a crossing (within the touch tolerance): this trial is the event.
+                    # Aiming past it at a later contact's crossing instead went round in a cycle
+                    # when two contacts of a rack ended a hair apart (the step then ran past both).
+                    first = 0.0
             if first < math.inf:
                 theta = frac + first * gap
         if modes:
