@@ -61,6 +61,14 @@ def page(browser, app):
 ARROW_RED = (237, 37, 107)  # the normal-force arrows' (170, 0, 20) as lit and tone-mapped by the page
 
 
+def arrow_pixels(shot: np.ndarray) -> np.ndarray:
+    """The force arrows' pixels, wherever they pass: red over the blue ball comes out (185, 47,
+    115) and over the orange one (210, 49, 82), so one colour and a tolerance would catch one
+    side only, and the centre would shift with the draw order of the page."""
+    r, g, b = shot[..., 0], shot[..., 1], shot[..., 2]
+    return (r >= 150) & (g <= 70) & (b >= 40) & (b <= 150) & (r - b >= 50)
+
+
 def near(shot: np.ndarray, point: np.ndarray, radius: float) -> np.ndarray:
     """Pixels within `radius` of a point (x, y): away from the axes gizmo in the corner."""
     ys, xs = np.mgrid[: shot.shape[0], : shot.shape[1]]
@@ -195,14 +203,23 @@ def test_force_arrows_are_drawn_at_the_contact_point(page):
     session.seek(0.5 * (a + b))
     frame = view.frame(session.t)
     point = frame.contacts[0].point
-    page.wait_for_timeout(1500)
     box = canvas_box(page)
-    shot = image(canvas_shot(page))
-    height, width = shot.shape[:2]
-    expected = project(session.client.camera, point[None], width, height)[0]
-    r_px = abs(project(session.client.camera, np.array([point, point + [view.radius[0], 0, 0]]),
-                       width, height)[1, 0] - expected[0])
-    red = colour_mask(shot, ARROW_RED, 50) & near(shot, expected, 4 * r_px)
+    seen = {}
+
+    def measure() -> bool:
+        shot = image(canvas_shot(page))
+        height, width = shot.shape[:2]
+        expected = project(session.client.camera, point[None], width, height)[0]
+        r_px = abs(project(session.client.camera, np.array([point, point + [view.radius[0], 0, 0]]),
+                           width, height)[1, 0] - expected[0])
+        red = arrow_pixels(shot) & near(shot, expected, 4 * r_px)
+        seen.update(expected=expected, r_px=r_px, red=red)
+        ys, xs = np.nonzero(red)
+        return red.sum() > 20 and abs(xs.mean() - expected[0]) < 0.15 * r_px
+
+    # Under load the canvas shows the seeked frame a few frames late: wait for it, then check.
+    wait_until(measure, 30, "the arrows drawn at the seeked contact")
+    expected, r_px, red = seen["expected"], seen["r_px"], seen["red"]
     assert red.sum() > 20, "the normal-force arrows are visible"
     ys, xs = np.nonzero(red)
     # The arrows (action and reaction, symmetric about the contact point) are centred on it.

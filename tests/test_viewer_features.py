@@ -189,6 +189,8 @@ def test_more_and_fewer_balls(page):
     assert session.balls.visible
     group_button(page, session.balls, "more balls").click()
     wait_until(lambda: session.view.n_bodies == 3 and session.worker.idle(), 60, "a third ball")
+    # The page shows the new ball's controls a moment after the server has them (seconds under load).
+    page.wait_for_function("() => document.body.innerText.includes('ball3')", timeout=30_000)
     assert "ball3" in visible_text(page)
     assert session.view.scene.bodies[2].velocity[0] > 0
     group_button(page, session.balls, "fewer balls").click()
