@@ -398,6 +398,12 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
         if record:
             trajectories.append(Trajectory(knots, recs, ivals, select_model(model, b)))
     wall_time = time.perf_counter() - started
+    for b in np.flatnonzero(stats[:, kn.S_UNLOCATED]):
+        member = f"run {b}: " if b_count > 1 else ""
+        count = int(stats[b, kn.S_UNLOCATED])
+        warnings.append(f"{member}{count} step(s) ran out of trials locating an event (first at t = "
+                        f"{figures[b, kn.F_UNLOCATED_T]:.6g} s) and may have passed it: the outcome can be off "
+                        "by more than its error estimate; try another --tol")
     parts = [unpack_state(model, G, t) for t, G, _ in finals]
     final = State(np.array([t for t, _, _ in finals]), np.stack([p[0] for p in parts]),
                   np.stack([p[1] for p in parts]), np.stack([p[2] for p in parts]),

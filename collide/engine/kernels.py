@@ -93,10 +93,10 @@ R_T, R_I, R_J, R_DELTA, R_FN, R_FX, R_FY, R_FZ, R_MODE = range(9)
 NR = 9
 V_I, V_J, V_START, V_END = range(4)
 CN_KNOTS, CN_RECS, CN_IVALS, CN_OPEN = range(4)
-S_STEPS, S_WINDOWS, S_STATUS, S_CONTACTS, S_RETRIES = range(5)
-NS = 5
-F_MAX_OVERLAP, F_DT_MIN, F_STATUS_T, F_STATUS_A, F_STATUS_B, F_MAX_FORCE = range(6)
-NF = 6
+S_STEPS, S_WINDOWS, S_STATUS, S_CONTACTS, S_RETRIES, S_UNLOCATED = range(6)
+NS = 6
+F_MAX_OVERLAP, F_DT_MIN, F_STATUS_T, F_STATUS_A, F_STATUS_B, F_MAX_FORCE, F_UNLOCATED_T = range(7)
+NF = 7
 OK, NONFINITE, ENERGY, STALL, MAXSTEPS, SINGULAR = range(6)
 YES, NO = 1, 0
 # Numba compiles one specialisation per literal int an argument is called with: as numpy ints
@@ -1300,12 +1300,13 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     `max_turn` (rad) a step: just after it leaves the band's edge it turns on a time scale of
     eps over its rate, far below a step, and the step is shortened to follow it.
     Returns (h taken, work, ok, whether the turning limited the step, a candidate that began
-    pressing from touching within the step: -1 if none, else the step was not taken)."""
+    pressing from touching within the step: -1 if none, else the step was not taken, whether
+    the search landed: False if it ran out of trials, and the step may have passed an event)."""
     h = h_full
     limited = False
     work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl)
     if not ok:
-        return h, work, False, limited, -1
+        return h, work, False, limited, -1, True
     tol = TOUCH_TOL
     # A contact touching at the start with no approach speed that presses by the end began with
     # the step: it is engaged from the start and the step taken again (a Newton's cradle).
@@ -1313,7 +1314,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
         if Q[k, Q_ENG] == 0 and -tol <= QF[k, QF_D0] <= tol:
             d1, r1 = overlap(G, GI, X, Q, QF, k, t + h, WP, grav)
             if d1 > tol:
-                return 0.0, work, True, limited, k
+                return 0.0, work, True, limited, k, True
     modes = 2 * nc if fl[FL_FRICTION] else 0
     pending = False
     col = -1
@@ -1324,6 +1325,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     ta, fa, tb, fb = math.nan, math.nan, math.nan, math.nan
     past = math.inf
     shortest = 16.0 * EPS64 * (abs(t) + abs(h_full))
+    located = False
     for trial in range(40):
         frac = h / h_full
         first = math.inf
@@ -1359,7 +1361,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                 theta = frac + first * gap
         if modes:
             if not mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale):
-                return h, work, False, limited, -1
+                return h, work, False, limited, -1, True
             best = -1
             guess = math.inf
             for k in range(modes):
@@ -1428,13 +1430,14 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                     theta = limit
                     past = math.inf
         if not (theta < math.inf and abs(theta - frac) > 1e-12 * max(frac, 1e-300)):
+            located = True
             break
         # Never shorter than a few ticks of the clock: an event closer than that is taken as passed.
         h = max(h_full * max(theta, 1e-12), shortest)
         work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl)
         if not ok:
-            return h, work, False, limited, -1
-    return h, work, True, limited, -1
+            return h, work, False, limited, -1, True
+    return h, work, True, limited, -1, located
 
 
 @jit
@@ -1569,8 +1572,12 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             for k in range(nq):
                 QF[k, QF_D0], QF[k, QF_R0] = overlap(G, GI, X, Q, QF, k, t, WP, grav)
             h_full = min(dt, W - t, grown)
-            h, work, ok, limited, late = step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP,
-                                                     grav, stuck, A, b, fl, scale, max_turn)
+            h, work, ok, limited, late, located = step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full,
+                                                              weights, WP, grav, stuck, A, b, fl, scale, max_turn)
+            if not located:
+                if ST[S_UNLOCATED] == 0:
+                    FG[F_UNLOCATED_T] = t
+                ST[S_UNLOCATED] += 1
             if late >= 0:
                 # Engage it from here: back to the step's start, and a new phase.
                 for a in range(na):
