@@ -30,6 +30,11 @@ app = typer.Typer(
 )
 
 
+def wall_text(seconds: float) -> str:
+    """A wall time as people read it: 1.47 ms, 25.7 s (not 2.57e+04 ms)."""
+    return f"{seconds * 1e3:.3g} ms" if seconds < 1.0 else f"{seconds:.3g} s"
+
+
 def _fmt(x: Any) -> str:
     if x is None:
         return "n/a"
@@ -59,7 +64,7 @@ def print_summary(summary: dict[str, Any], recording: Path | None) -> None:
     else:
         typer.echo("  contacts: none")
     typer.echo(f"  {summary['steps']} steps, {summary['jumps']} free-flight jumps, "
-               f"{summary['sim_time']:.6g} s simulated in {summary['wall_time_s'] * 1e3:.3g} ms")
+               f"{summary['sim_time']:.6g} s simulated in {wall_text(summary['wall_time_s'])}")
     for warning in summary.get("warnings", []):
         typer.echo(f"  warning: {warning}")
     if recording is not None:

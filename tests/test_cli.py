@@ -72,3 +72,10 @@ def test_scenes_lists_and_shows():
         assert name in out.stdout
     show = collide("scenes", "--show", "demo-bonus")
     assert "mu = 0.5" in show.stdout and "[[body]]" in show.stdout
+
+
+def test_wall_times_read_as_people_write_them():
+    from cli.main import wall_text
+
+    assert wall_text(0.00147) == "1.47 ms"
+    assert wall_text(25.7) == "25.7 s"
