@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -31,12 +33,22 @@ from viewer.testing import (  # noqa: E402
 )
 
 
-def gas_box(browser, recording: Path, out: Path) -> None:
+@contextmanager
+def viewer_page(browser, recording: Path) -> Iterator:
+    """A 1280 x 800 page of a viewer on `recording`, notifications hidden; the viewer stops after."""
     app = ViewerApp(str(recording), port=0)
     app.start()
     try:
         page = open_page(browser, app, width=1280, height=800)
         hide_notifications(page)
+        yield page
+        page.close()
+    finally:
+        app.stop()
+
+
+def gas_box(browser, recording: Path, out: Path) -> None:
+    with viewer_page(browser, recording) as page:
         session = page.session
         session.seek(0.25)
         session.set_show(colour_by="speed", chains=False)
@@ -45,17 +57,10 @@ def gas_box(browser, recording: Path, out: Path) -> None:
         settle(page)
         page.wait_for_timeout(3000)
         page.screenshot(path=str(out), timeout=180_000)
-        page.close()
-    finally:
-        app.stop()
 
 
 def background_run(browser, recording: Path, out: Path) -> None:
-    app = ViewerApp(str(recording), port=0)
-    app.start()
-    try:
-        page = open_page(browser, app, width=1280, height=800)
-        hide_notifications(page)
+    with viewer_page(browser, recording) as page:
         session = page.session
         session.seek(session.view.t1)
         session.set_show(colour_by="contacts", chains=True)
@@ -68,9 +73,6 @@ def background_run(browser, recording: Path, out: Path) -> None:
         page.screenshot(path=str(out), timeout=180_000)
         session.stop_run()
         wait_until(lambda: session.worker.idle(), 60, "the run to stop")
-        page.close()
-    finally:
-        app.stop()
 
 
 def main() -> None:

@@ -6,6 +6,8 @@ controls that change nothing disabled (issue 12, item 5)."""
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 
 import numpy as np
@@ -36,6 +38,22 @@ def _pile(n: int, duration: float) -> object:
                                       "poisson_ratio": 0.25}],
                         "body": bodies, "wall": walls}, "small-pile")
 
+
+@contextmanager
+def _headless_session(tmp_path) -> Iterator[object]:
+    """A viewer session without a browser (no camera to fit), closed and stopped after."""
+    from viewer.app import ViewerApp
+    from viewer.session import Session
+
+    app = ViewerApp("demo-1d", port=0, recordings_dir=tmp_path)
+    app.start()
+    session = Session(app, ServerClient(app.server))  # type: ignore[arg-type]
+    session.fit_camera = lambda *a, **k: None  # no camera without a browser
+    try:
+        yield session
+    finally:
+        session.close()
+        app.stop()
 
 def _alive(pid: int) -> bool:
     try:
@@ -88,16 +106,11 @@ def test_a_slider_on_a_many_body_scene_runs_in_the_background_with_a_stop(tmp_pa
     """More than MANY_BODIES bodies: a moved slider waits for the slider to rest, then runs in
     the child process with a progress line and a Stop button; Stop keeps the last run on
     screen; a run let finish is drawn."""
-    from viewer.app import ViewerApp
-    from viewer.session import MANY_BODIES, Session
+    from viewer.session import MANY_BODIES
 
     long, short = _pile(216, 2.0), _pile(216, 0.03)
     assert len(long.bodies) > MANY_BODIES
-    app = ViewerApp("demo-1d", port=0, recordings_dir=tmp_path)
-    app.start()
-    session = Session(app, ServerClient(app.server))  # type: ignore[arg-type]
-    session.fit_camera = lambda *a, **k: None  # no camera without a browser
-    try:
+    with _headless_session(tmp_path) as session:
         # The long scene, shown with a short run of it (its own takes half a minute).
         session.load_scene(long, run=run_scene(replace(long, duration=0.01)))
         assert session.runs_drawn == 1
@@ -118,22 +131,12 @@ def test_a_slider_on_a_many_body_scene_runs_in_the_background_with_a_stop(tmp_pa
         wait_until(lambda: session.runs_drawn == 3, 60, "the new run drawn")
         assert session.worker.wait_idle(30)
         assert session.view.scene.contact.mu == pytest.approx(0.4) and session.progress.content == ""
-    finally:
-        session.close()
-        app.stop()
 
 
 def test_a_slider_the_materials_override_is_disabled_with_the_reason(tmp_path):
     """break-3d: [contact]'s restitution and mu reach no contact; their controls are disabled
     and say why, and the material's and pair's own sliders are live."""
-    from viewer.app import ViewerApp
-    from viewer.session import Session
-
-    app = ViewerApp("demo-1d", port=0, recordings_dir=tmp_path)
-    app.start()
-    session = Session(app, ServerClient(app.server))  # type: ignore[arg-type]
-    session.fit_camera = lambda *a, **k: None
-    try:
+    with _headless_session(tmp_path) as session:
         session.load_scene("break-3d")
         assert session.worker.wait_idle(120) and session.view is not None
         for ident in ("contact.restitution", "contact.mu"):
@@ -145,23 +148,15 @@ def test_a_slider_the_materials_override_is_disabled_with_the_reason(tmp_path):
         assert session.apply_typed("pair.0.restitution", "0.5")
         wait_until(lambda: session.view is not before and session.worker.idle(), 120, "the run with e = 0.5")
         assert session.view.scene.pairs[0].restitution == 0.5
-    finally:
-        session.close()
-        app.stop()
 
 
 def test_a_slow_scene_with_a_quick_preview_previews_while_dragging(tmp_path):
     """break-3d on a loaded machine: its run took over LONG_RUN_S, so the final run goes to the
     background once the slider rests; its DEM preview (a sixth of the steps) is still drawn at
     once while dragging (it was skipped: every change waited for the background run)."""
-    from viewer.app import ViewerApp
-    from viewer.session import LONG_RUN_S, Session
+    from viewer.session import LONG_RUN_S
 
-    app = ViewerApp("demo-1d", port=0, recordings_dir=tmp_path)
-    app.start()
-    session = Session(app, ServerClient(app.server))  # type: ignore[arg-type]
-    session.fit_camera = lambda *a, **k: None
-    try:
+    with _headless_session(tmp_path) as session:
         session.load_scene("break-3d")
         assert session.worker.wait_idle(120)
         session._full_cost = 2 * LONG_RUN_S  # as measured under load
@@ -172,6 +167,3 @@ def test_a_slow_scene_with_a_quick_preview_previews_while_dragging(tmp_path):
         first, final = list(session.timings)[n:n + 2]
         assert first["preview"] and not final["preview"]
         assert session.view.scene.pairs[0].restitution == 0.9 and not session.view.preview
-    finally:
-        session.close()
-        app.stop()
