@@ -461,10 +461,15 @@ def slide_direction(X, C, CI, c, vc, wc, spin, span):
     exact whatever the step (a fixed point on it would diverge once span K mu F_n > |slip|).
 
     While the slip's component a along the way it slid at the step's start (held) is above eps / 2,
-    that slip itself, so friction follows the slip as it turns; below, the slip shifted along held
-    by phi(a) - a, phi(a) = eps / 4 + a^2 / eps (C^1 at eps / 2), so that a trial step overshooting
-    the mode's boundary (a slip reversing through the band) still sees a smooth force. In the
-    plane this is the held side of the tangent, whatever the slip."""
+    that slip itself, so friction follows the slip as it turns. At or below -eps / 2 the slip
+    reversed: the slip's reverse. That is the implicit kick's other root, the one on the held
+    side: where a substep's span is negative (kahan6) and the slip small (just after a stick to
+    slide, where its direction is slaved to the other forces on a time scale of eps over its rate)
+    the kick's slip before its own impulse points backwards, and its reverse is the direction the
+    slide takes there; holding the direction at the step's start instead lost the order and made
+    the error erratic in the step. Between, a C^1 blend: held times phi(a) = eps / 4 + a^2 / eps
+    plus the rest of the slip times a / phi(a). In the plane all of these are the held side of
+    the tangent, whatever the slip."""
     sx, sy, sz = slip(X, C, CI, c, vc, wc, spin)
     nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
     if span != 0.0:
@@ -482,8 +487,11 @@ def slide_direction(X, C, CI, c, vc, wc, spin, span):
     eps = C[c, C_EPS]
     if a >= 0.5 * eps:
         return sx, sy, sz
-    shift = 0.25 * eps + a * a / max(eps, 1e-300) - a
-    sx, sy, sz = sx + shift * hx, sy + shift * hy, sz + shift * hz
+    if a <= -0.5 * eps:
+        return -sx, -sy, -sz
+    phi = 0.25 * eps + a * a / max(eps, 1e-300)
+    rest = a / phi
+    sx, sy, sz = phi * hx + rest * (sx - a * hx), phi * hy + rest * (sy - a * hy), phi * hz + rest * (sz - a * hz)
     sn = sx * nx + sy * ny + sz * nz
     return sx - sn * nx, sy - sn * ny, sz - sn * nz
 
