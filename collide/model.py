@@ -195,6 +195,38 @@ def contact_tables(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     return pair, wall
 
 
+PLANE_TOL = 1e-12  # relative: what round-off leaves of a scene turned into another plane
+
+
+def moves_in_a_plane(model: Model, state: State, b: int) -> bool:
+    """Whether run b stays in one plane, of any orientation: centres, velocities, gravity and
+    wall normals all lie in a plane whose normal every spin is along. Only outside such a plane
+    can a sliding contact's slip turn."""
+    if model.dim < 3:
+        return True
+    rows = [state.s[b] - state.s[b, :1], state.v[b], model.wall_normal]
+    if model.gravity is not None:
+        rows.append(model.gravity[b][None])
+    in_plane = np.concatenate(rows)
+    spins = state.w[b] if model.spin_dim == 3 else np.zeros((0, 3))
+    size = max(float(np.abs(in_plane).max(initial=0.0)), 1e-300)
+    _, singular, axes = np.linalg.svd(in_plane)
+    rank = int((singular > PLANE_TOL * size).sum())
+    if rank == 3:
+        return False
+    if rank == 2:
+        normal = axes[2]
+    else:
+        spin_size = np.linalg.norm(spins, axis=1) if len(spins) else np.zeros(0)
+        if not len(spin_size) or spin_size.max() == 0.0:
+            return True  # on a line or at rest, with no spin: in any plane through it
+        normal = spins[int(spin_size.argmax())] / spin_size.max()
+        if np.abs(in_plane @ normal).max() > PLANE_TOL * size:
+            return False
+    off_normal = np.linalg.norm(np.cross(spins, normal), axis=1) if len(spins) else np.zeros(0)
+    return bool((off_normal <= PLANE_TOL * max(float(np.abs(spins).max(initial=0.0)), 1e-300)).all())
+
+
 def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
     """Pack B scenes of the same shape (dim, bodies, walls) into one model and state."""
     if not scenes:
