@@ -57,6 +57,7 @@ STALL_LIMIT = 64
 # the band is caught a step before it gets there.
 STIFF_SLIDE_IMPULSES = 2.0
 STIFF_SLIDE_POWER = 0.9
+DIP_SAMPLES = 16  # points of a trial step where a mode value's cubic is checked for a dip below zero
 TINY_LIMIT = 20000  # steps in a row under a thousandth of the contact's step
 LATE = 2  # Q_ENG of a contact engaged from a step's start after the step found it pressing
 MAX_RETRIES = 24  # a window redone this often, each 4x shorter, has met a contact it cannot foresee
@@ -800,8 +801,9 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     mu F_n) or band (not against it). A stuck slip is held along its hold force's reverse; in 3D
     a slip that reaches the edge off that direction is turned onto it (the limit of the fast
     turning along the edge that the law gives there). Returns (work dissipated, ok)."""
-    spin, planar = fl[FL_SPIN], fl[FL_PLANAR]
+    spin, planar, seed = fl[FL_SPIN], fl[FL_PLANAR], fl[FL_SEED]
     tol = EDGE_TOL * scale
+    retried = np.zeros(nc, np.bool_)
     for c in range(nc):
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
         mag = math.sqrt(sx * sx + sy * sy + sz * sz)
@@ -815,10 +817,32 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
             CI[c, CI_MODE] = SLIDE
         else:
             CI[c, CI_MODE] = BAND
-    for _ in range(nc + 1):
+    for _ in range(2 * nc + 2):
         if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES):
             return 0.0, False
         changed = False
+        # An edge contact that another's change left sliding with its slip heading into the band,
+        # or in the band with its slip heading out, is in no consistent mode: it is held again
+        # (once) and judged by its hold force with the others' modes as they now are. Left so,
+        # the slide crossed the band unseen within the step (its value starts at zero) and the
+        # outcome moved by 1e-3 between tolerances (two balls and a floor changing at once).
+        for a in range(na):
+            for d in range(3):
+                X[a, X_T + d] = X[a, X_A + d] + X[a, X_F + d]
+        for c in range(nc):
+            if CI[c, CI_EDGE] != 1 or CI[c, CI_MODE] == STICK or retried[c]:
+                continue
+            sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
+            gx, gy, gz = slip_rate(X, C, CI, c, X_V, X_W, X_T, X_L, spin, seed, YES)
+            mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+            outward = (sx * gx + sy * gy + sz * gz) / mag if mag > 0 else 0.0
+            limit = tol / STICK_SCALE
+            if (CI[c, CI_MODE] == SLIDE and outward < -limit) or (CI[c, CI_MODE] == BAND and outward > limit):
+                CI[c, CI_MODE] = STICK
+                retried[c] = True
+                changed = True
+        if changed:
+            continue
         for c in range(nc):
             if CI[c, CI_MODE] != STICK:
                 continue
@@ -1321,6 +1345,31 @@ def stiff_slide(X, C, CI, nc, dt, spin):
 
 
 @jit
+def mode_dip(E, modes, frac, h_full, passed):
+    """Where (a fraction of h_full) a mode value positive at both ends of a trial step of `frac`
+    first goes below zero on the cubic Hermite through its values and closed-form rates: a
+    slip that reaches the band's edge and leaves it again inside the step, which the signs at
+    its ends do not show. inf if none is seen."""
+    first = math.inf
+    for k in range(modes):
+        e0, e1 = E[k, E_V0], E[k, E_V1]
+        r0, r1 = E[k, E_R0] * h_full * frac, E[k, E_R1] * h_full * frac
+        if k == passed or not (e0 > MODE_TOL and e1 > MODE_TOL and math.isfinite(r0) and math.isfinite(r1)):
+            continue
+        if r0 >= 0.0 and r1 <= 0.0:
+            continue  # a hump, not a dip
+        for i in range(1, DIP_SAMPLES):
+            u = i / DIP_SAMPLES
+            u2, u3 = u * u, u * u * u
+            p = ((2 * u3 - 3 * u2 + 1) * e0 + (u3 - 2 * u2 + u) * r0 + (3 * u2 - 2 * u3) * e1
+                 + (u3 - u2) * r1)
+            if p < -MODE_TOL:
+                first = min(first, u * frac)
+                break
+    return first
+
+
+@jit
 def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
                 max_turn):
     """One step from the start state; where an event would happen inside it, shortened to land
@@ -1357,6 +1406,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     past = math.inf
     shortest = 16.0 * EPS64 * (abs(t) + abs(h_full))
     located = False
+    dipped = False
     for trial in range(40):
         frac = h / h_full
         first = math.inf
@@ -1448,6 +1498,14 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                     widths = (widths[1], abs(f))
                     theta = min(theta, estimate)
                     ta, fa, tb, fb = tb, fb, frac, f
+        if modes and not pending and not dipped:
+            dip = mode_dip(E, modes, frac, h_full, passed)
+            if dip < theta:
+                # A slip that comes back to the band's edge and leaves it again within the step
+                # (it may stick there) shows no change of sign at the step's ends: the step is
+                # shortened into the dip, and the crossing is then bracketed as any other.
+                theta = dip
+                dipped = True
         if modes and not pending:
             turned = slip_turn(X, C, CI, nc, fl)
             if turned > max_turn:
