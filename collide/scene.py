@@ -163,18 +163,6 @@ class Scene:
             return False
         return self.has_friction or any(any(c != 0.0 for c in b.spin) for b in self.bodies)
 
-    @property
-    def stays_in_plane(self) -> bool:
-        """Whether the motion stays in a plane z = const: 1D, 2D, or 3D with every centre at the
-        same z, no z velocity, spins about z only, and gravity and wall normals in the plane."""
-        if self.dim < 3:
-            return True
-        z = {b.position[2] for b in self.bodies}
-        return (len(z) == 1 and all(b.velocity[2] == 0.0 and b.spin[0] == 0.0 and b.spin[1] == 0.0
-                                    for b in self.bodies)
-                and (self.gravity is None or self.gravity[2] == 0.0)
-                and all(w.normal[2] == 0.0 for w in self.walls))
-
     def body_index(self, name: str) -> int:
         for i, body in enumerate(self.bodies):
             if body.name == name:
