@@ -213,3 +213,34 @@ def test_oblique_wall_impacts_in_3d_match_the_rigid_answer_like_2d() -> None:
         error2, steps2 = _rigid_error(_wall_impact(n2, flat, float(np.linalg.norm(spin)), 1e12, "contact", 2))
         assert error < 1e-5 and error2 < 1e-5
         assert steps <= 2 * steps2
+
+
+def test_a_run_knows_whether_it_stays_in_a_plane_of_any_orientation():
+    """Only out of every plane can a slip turn (and its stiff layer need shorter steps)."""
+    from collide.model import compile_scenes, moves_in_a_plane
+
+    def planar(raw: dict) -> bool:
+        model, state = compile_scenes([parse_scene(raw)])
+        return moves_in_a_plane(model, state, 0)
+
+    floor = [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]
+
+    def ball(spin) -> dict:
+        return {"name": "b", "mass": 0.1, "radius": 0.05, "position": [0.0, 0.0, 0.2], "velocity": [1.0, 0.0, 0.0],
+                "spin": spin}
+
+    assert not planar(tilted_bonus())
+    assert planar(load_scene("demo-bonus").source)
+    # A ball bouncing along x on a floor moves in the x-z plane; topspin about y keeps it there.
+    bounce = {"dim": 3, "gravity": [0.0, 0.0, -9.81], "contact": {"k": 1e6, "mu": 0.3}, "wall": floor}
+    assert planar(bounce | {"body": [ball([0.0, 3.0, 0.0])]})
+    assert not planar(bounce | {"body": [ball([0.0, 3.0, 1.0])]})
+    # The bonus demo turned as a whole into a tilted plane.
+    raw2 = load_scene("demo-bonus").source
+    axis = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    turn = np.eye(3) + np.sin(0.7) * k + (1 - np.cos(0.7)) * k @ k
+    turned = dict(raw2, dim=3, body=[dict(b, position=(turn @ [*b["position"], 0.0]).tolist(),
+                                           velocity=(turn @ [*b["velocity"], 0.0]).tolist(),
+                                           spin=(turn @ [0.0, 0.0, b["spin"]]).tolist()) for b in raw2["body"]])
+    assert planar(turned)
