@@ -106,9 +106,8 @@ def tilted_bonus(**changes) -> dict:
     return raw
 
 
-def test_bonus_demo_in_any_plane_is_the_2d_run():
-    """No preferred axes: the bonus demo turned as a whole into a tilted plane takes the same
-    steps as in z = 0 and gives the turned 2D answer."""
+def _bonus_turned() -> tuple[dict, dict, np.ndarray]:
+    """The bonus demo (2D) and the same turned as a whole into a tilted plane (3D), with the turn."""
     raw2 = load_scene("demo-bonus").source
     axis = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
     k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
@@ -120,6 +119,13 @@ def test_bonus_demo_in_any_plane_is_the_2d_run():
     raw3 = dict(raw2, dim=3, body=[dict(b, position=turned(b["position"]), velocity=turned(b["velocity"]),
                                         spin=(turn @ np.array([0.0, 0.0, b["spin"]])).tolist())
                                    for b in raw2["body"]])
+    return raw2, raw3, turn
+
+
+def test_bonus_demo_in_any_plane_is_the_2d_run():
+    """No preferred axes: the bonus demo turned as a whole into a tilted plane takes the same
+    steps as in z = 0 and gives the turned 2D answer."""
+    raw2, raw3, turn = _bonus_turned()
     flat = run_scene(parse_scene(raw2), record=False).result
     tilted = run_scene(parse_scene(raw3), record=False).result
     back = tilted.final.v[0] @ turn
@@ -236,11 +242,4 @@ def test_a_run_knows_whether_it_stays_in_a_plane_of_any_orientation():
     assert planar(bounce | {"body": [ball([0.0, 3.0, 0.0])]})
     assert not planar(bounce | {"body": [ball([0.0, 3.0, 1.0])]})
     # The bonus demo turned as a whole into a tilted plane.
-    raw2 = load_scene("demo-bonus").source
-    axis = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    turn = np.eye(3) + np.sin(0.7) * k + (1 - np.cos(0.7)) * k @ k
-    turned = dict(raw2, dim=3, body=[dict(b, position=(turn @ [*b["position"], 0.0]).tolist(),
-                                           velocity=(turn @ [*b["velocity"], 0.0]).tolist(),
-                                           spin=(turn @ [0.0, 0.0, b["spin"]]).tolist()) for b in raw2["body"]])
-    assert planar(turned)
+    assert planar(_bonus_turned()[1])
