@@ -208,23 +208,15 @@ def moves_in_a_plane(model: Model, state: State, b: int) -> bool:
     if model.gravity is not None:
         rows.append(model.gravity[b][None])
     in_plane = np.concatenate(rows)
-    spins = state.w[b] if model.spin_dim == 3 else np.zeros((0, 3))
     size = max(float(np.abs(in_plane).max(initial=0.0)), 1e-300)
-    _, singular, axes = np.linalg.svd(in_plane)
-    rank = int((singular > PLANE_TOL * size).sum())
-    if rank == 3:
-        return False
-    if rank == 2:
-        normal = axes[2]
-    else:
-        spin_size = np.linalg.norm(spins, axis=1) if len(spins) else np.zeros(0)
-        if not len(spin_size) or spin_size.max() == 0.0:
-            return True  # on a line or at rest, with no spin: in any plane through it
-        normal = spins[int(spin_size.argmax())] / spin_size.max()
-        if np.abs(in_plane @ normal).max() > PLANE_TOL * size:
-            return False
-    off_normal = np.linalg.norm(np.cross(spins, normal), axis=1) if len(spins) else np.zeros(0)
-    return bool((off_normal <= PLANE_TOL * max(float(np.abs(spins).max(initial=0.0)), 1e-300)).all())
+    spins = state.w[b] if model.spin_dim == 3 else np.zeros((0, 3))
+    spin_size = np.linalg.norm(spins, axis=1)
+    if not spin_size.any():
+        return bool(np.linalg.matrix_rank(in_plane, tol=PLANE_TOL * size) < 3)
+    # Spinning: the plane's normal can only be the spins' common axis.
+    normal = spins[int(spin_size.argmax())] / spin_size.max()
+    return bool(np.abs(in_plane @ normal).max() <= PLANE_TOL * size
+                and np.linalg.norm(np.cross(spins, normal), axis=1).max() <= PLANE_TOL * spin_size.max())
 
 
 def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:

@@ -378,7 +378,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
         spin = model.spin_dim > 0
         friction = bool(model.friction and model.mu[b] > 0 and model.dim > 1)
         fl = np.array([spin, friction, model.seed_lever, model.dim < 3, record, bool(auto[b]) and integ.events,
-                       max_steps, model.dim, not moves_in_a_plane(model, initial, b)], dtype=np.int64)
+                       max_steps, model.dim, friction and not moves_in_a_plane(model, initial, b)], dtype=np.int64)
         speed = max(float(np.sqrt((initial.v[b] ** 2).sum(-1)).max()), 10 * float(model.eps[b]) + 1e-300)
         t_end = duration[b] if np.isfinite(duration[b]) else np.inf
         # Closing speeds under 1e-9 of the fastest are round-off, not an approach.
