@@ -650,12 +650,21 @@ def turn(q, w0, w1, w2, tau, planar):
     if planar:
         q[0] += w2 * tau
         return
-    rate = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-    if rate == 0.0 or tau == 0.0:
+    x2 = 0.25 * tau * tau * (w0 * w0 + w1 * w1 + w2 * w2)  # (half the angle turned)^2
+    if x2 == 0.0:
         return
-    half = 0.5 * rate * tau
-    s = math.sin(half) / rate
-    dw, dx, dy, dz = math.cos(half), s * w0, s * w1, s * w2
+    if x2 < 0.01:
+        # A small turn (every body, every DEM step): cos and sin(x)/x by their series to x^8,
+        # exact to round-off (the terms left out are below 3e-17) and without sqrt, sin, cos
+        # and a division, which were a tenth of the DEM kernel's time.
+        dw = 1.0 - x2 * (1.0 / 2.0 - x2 * (1.0 / 24.0 - x2 * (1.0 / 720.0 - x2 * (1.0 / 40320.0))))
+        s = 0.5 * tau * (1.0 - x2 * (1.0 / 6.0 - x2 * (1.0 / 120.0 - x2 * (1.0 / 5040.0 - x2 * (1.0 / 362880.0)))))
+    else:
+        rate = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        half = 0.5 * rate * tau
+        s = math.sin(half) / rate
+        dw = math.cos(half)
+    dx, dy, dz = s * w0, s * w1, s * w2
     a, b, c, d = q[0], q[1], q[2], q[3]
     q[0] = dw * a - dx * b - dy * c - dz * d
     q[1] = dw * b + dx * a + dy * d - dz * c
