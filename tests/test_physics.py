@@ -293,11 +293,12 @@ def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.concatenate([[math.cos(angle / 2)], math.sin(angle / 2) * axis / np.linalg.norm(axis)])
 
 
-@pytest.mark.parametrize("half", [1e-9, 1e-4, 0.0999, 0.1001, 0.7])
+@pytest.mark.parametrize("half", [1e-9, 1e-4, 0.00316, 0.00317, 0.0999, 0.1001, 0.7])
 def test_turn_is_the_rotation_about_the_spin(half):
-    """kernels.turn takes small turns (half angle under 0.1) by series and larger ones by sin and
-    cos: on either side of the switch, and from an arbitrary start, it is the rotation by
-    |w| tau about w (a unit quaternion product) to round-off."""
+    """kernels.turn takes small turns by series (to x^4 below a half angle of sqrt(1e-5), to x^8
+    below 0.1) and larger ones by sin and cos: on either side of each switch, and from an
+    arbitrary start, it is the rotation by |w| tau about w (a unit quaternion product) to
+    round-off."""
     w = np.array([3.0, -4.0, 12.0])  # |w| = 13
     tau = 2.0 * half / 13.0
     start = _axis_angle(np.array([1.0, 2.0, -0.5]), 0.8)
