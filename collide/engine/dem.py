@@ -189,9 +189,9 @@ def normal_elastic(hertz, k, estar, rstar, delta):
 
 
 @jit_inline
-def normal_damping(zeta, mstar, kn, vn):
-    """The dashpot for the restitution: 2 zeta sqrt(m* k_n) times the overlap's rate."""
-    return 2.0 * zeta * math.sqrt(mstar * kn) * vn
+def dashpot(zeta, mstar, k):
+    """The dashpot for the restitution with a spring of stiffness k: 2 zeta sqrt(m* k)."""
+    return 2.0 * zeta * math.sqrt(mstar * k)
 
 
 @jit_inline
@@ -200,23 +200,24 @@ def tangential_spring(hist, k, nx, ny, nz, tx, ty, tz, kt, gt, cap, dt):
     stick, 1 slip). The stretch is turned into the current tangent plane at its length; after a
     slip the spring alone holds the capped force (module docstring)."""
     hx, hy, hz = hist[k, H_XI], hist[k, H_XI + 1], hist[k, H_XI + 2]
-    before = math.sqrt(hx * hx + hy * hy + hz * hz)
     hn = hx * nx + hy * ny + hz * nz
-    hx, hy, hz = hx - hn * nx, hy - hn * ny, hz - hn * nz
-    after = math.sqrt(hx * hx + hy * hy + hz * hz)
-    if after > 0.0:
-        scale = before / after
-        hx, hy, hz = hx * scale, hy * scale, hz * scale
+    if hn != 0.0:
+        before = hx * hx + hy * hy + hz * hz
+        hx, hy, hz = hx - hn * nx, hy - hn * ny, hz - hn * nz
+        after = hx * hx + hy * hy + hz * hz
+        if after > 0.0:
+            scale = math.sqrt(before / after)
+            hx, hy, hz = hx * scale, hy * scale, hz * scale
     hx, hy, hz = hx + tx * dt, hy + ty * dt, hz + tz * dt
     sx, sy, sz = -kt * hx - gt * tx, -kt * hy - gt * ty, -kt * hz - gt * tz
-    mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+    mag2 = sx * sx + sy * sy + sz * sz
     mode = 2.0
-    if mag > cap:
+    if mag2 > cap * cap:
         mode = 1.0
-        if mag > 0.0:
-            ratio = cap / mag
-            sx, sy, sz = sx * ratio, sy * ratio, sz * ratio
-            hx, hy, hz = -sx / kt, -sy / kt, -sz / kt
+        ratio = cap / math.sqrt(mag2)
+        sx, sy, sz = sx * ratio, sy * ratio, sz * ratio
+        inv = 1.0 / kt
+        hx, hy, hz = -sx * inv, -sy * inv, -sz * inv
     hist[k, H_XI], hist[k, H_XI + 1], hist[k, H_XI + 2] = hx, hy, hz
     hist[k, H_KT] = kt
     return sx, sy, sz, mode
@@ -289,7 +290,8 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, 
     tx, ty, tz = vx - vn * nx, vy - vn * ny, vz - vn * nz
     elastic, kn = normal_elastic(fl[F_HERTZ], tabs[mi, mj, T_K], tabs[mi, mj, T_ESTAR], rstar, delta)
     zeta = tabs[mi, mj, T_ZETA]
-    damp = normal_damping(zeta, mstar, kn, vn) if zeta > 0.0 else 0.0
+    gn = dashpot(zeta, mstar, kn) if zeta > 0.0 else 0.0
+    damp = gn * vn
     fn = elastic + damp
     press = max(fn, 0.0)
     fx, fy, fz = -fn * nx, -fn * ny, -fn * nz  # on i
@@ -298,9 +300,9 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, 
     mu = tabs[mi, mj, T_MU]
     if spin and (mu > 0.0 or tspring):
         if tspring:
-            kt = tabs[mi, mj, T_KTR] * kn
-            sx, sy, sz, mode = tangential_spring(hist, k, nx, ny, nz, tx, ty, tz, kt,
-                                                 2.0 * zeta * math.sqrt(mstar * kt), mu * press, dt)
+            ktr = tabs[mi, mj, T_KTR]
+            sx, sy, sz, mode = tangential_spring(hist, k, nx, ny, nz, tx, ty, tz, ktr * kn, gn * math.sqrt(ktr),
+                                                 mu * press, dt)
         else:
             sx, sy, sz, mode = coulomb_slip(tx, ty, tz, mu * press, tabs[mi, mj, T_EPS])
         fx += sx
@@ -344,7 +346,7 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, 
 def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST, IV, niv,
            REC, nrec, record_now):
     """Forces and torques of every engaged contact (F, T, and by part PT) and the run's contact
-    figures, over the listed pairs (PI, PJ) and body-wall pairs (WL: i * walls + w); wtabs is
+    figures, over the listed pairs (PI, PJ) and body-wall pairs (WL: rows k = i * walls + w, i, w); wtabs is
     the wall table as (materials, 1, columns). Returns (engaged, niv, nrec, IV, REC)."""
     record = fl[F_RECORD]
     g0, g1, g2 = grav[0], grav[1], grav[2]
@@ -375,22 +377,20 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
                 _close(hist, k, IV, t, FG)
             continue
         dist = math.sqrt(d2)
+        inv = 1.0 / dist
         delta = reach - dist
         if hist[k, H_ON] == 0.0:
             niv = _open(hist, k, IV, niv, i, j, t, FG, ST, record)
         engaged += 1
-        fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx / dist, dy / dist, dz / dist, delta, tabs, MAT[i], MAT[j],
+        fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j],
                            hist, k, fl, dt, out)
         deepest = max(deepest, delta)
         strongest = max(strongest, fn)
         if record_now:
             _record(REC, nrec, t, i, j, delta, fn, out)
             nrec += 1
-    nw = WP.shape[0]
     for m in range(WL.shape[0]):
-        k = WL[m]
-        i = k // nw
-        w = k - i * nw
+        k, i, w = WL[m, 0], WL[m, 1], WL[m, 2]
         h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
              + (X[i, 2] - WP[w, 2]) * WP[w, 5])
         delta = Bd[i, B_R] - h
@@ -450,12 +450,12 @@ def _record(REC, row, t, i, j, delta, fn, out):
 
 
 @jit
-def kick(V, W, F, T, PT, Bd, h2, n, WK, rolling):
+def kick(V, W, F, T, PT, Bd, h2, n, WK, rolling, energy):
     """A half kick of h2, and the work each part of the contact forces did in it, from the
     kinetic energy it changed: F . (v_before + v_after) / 2 h2 per body (exact for a kick, and
     additive over the parts). WK (N, 3) gathers minus that: damping, friction (with what the
     tangential springs hold), rolling resistance (if the scene has it). Returns the kinetic
-    energy after the kick."""
+    energy after the kick if asked (`energy`), else 0."""
     e = 0.0
     for a in range(n):
         # A body's numbers are read before any is written (the compiler cannot tell that the
@@ -480,9 +480,25 @@ def kick(V, W, F, T, PT, Bd, h2, n, WK, rolling):
                           + ((tx - rx) * w0 + (ty - ry) * w1 + (tz - rz) * w2) * spins)
         if rolling:
             WK[a, 2] -= h2 * (rx * w0 + ry * w1 + rz * w2) * spins
-        e += 0.5 * Bd[a, B_M] * (va0 ** 2 + va1 ** 2 + va2 ** 2)
-        e += 0.5 * Bd[a, B_I] * (wa0 ** 2 + wa1 ** 2 + wa2 ** 2)
+        if energy:
+            e += 0.5 * Bd[a, B_M] * (va0 ** 2 + va1 ** 2 + va2 ** 2)
+            e += 0.5 * Bd[a, B_I] * (wa0 ** 2 + wa1 ** 2 + wa2 ** 2)
     return e
+
+
+@jit
+def drift(X, X0, V, W, Qo, h, n, spin, planar):
+    """Move and turn every body for h at its velocity and spin. Returns the largest squared
+    distance a body is from where the neighbour lists were built (X0)."""
+    moved = 0.0
+    for a in range(n):
+        for d in range(3):
+            X[a, d] += h * V[a, d]
+        if spin:
+            turn(Qo[a], W[a, 0], W[a, 1], W[a, 2], h, planar)
+        ddx, ddy, ddz = X[a, 0] - X0[a, 0], X[a, 1] - X0[a, 1], X[a, 2] - X0[a, 2]
+        moved = max(moved, ddx * ddx + ddy * ddy + ddz * ddz)
+    return moved
 
 
 @jit
@@ -518,17 +534,17 @@ def _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, free):
 
 @jit
 def wall_list(X, Bd, WP, WH, n, skin):
-    """Body-wall pairs (i * walls + w, ascending) within the skin of touching, and those still
-    engaged: with the list rebuilt when a body has moved half the skin, no other can touch."""
+    """Body-wall pairs within the skin of touching, and those still engaged (with the list rebuilt
+    when a body has moved half the skin, no other can touch), in order: rows (i * walls + w, i, w)."""
     nw = WP.shape[0]
-    out = np.empty(n * nw, np.int64)
+    out = np.empty((n * nw, 3), np.int64)
     count = 0
     for i in range(n):
         for w in range(nw):
             h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
                  + (X[i, 2] - WP[w, 2]) * WP[w, 5])
             if h - Bd[i, B_R] < skin or WH[i * nw + w, H_ON] != 0.0:
-                out[count] = i * nw + w
+                out[count, 0], out[count, 1], out[count, 2] = i * nw + w, i, w
                 count += 1
     return out[:count].copy()
 
@@ -554,10 +570,8 @@ def _free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin):
         i, j = PI[k], PJ[k]
         dx, dy, dz = X[j, 0] - X[i, 0], X[j, 1] - X[i, 1], X[j, 2] - X[i, 2]
         gap = min(gap, math.sqrt(dx * dx + dy * dy + dz * dz) - Bd[i, B_R] - Bd[j, B_R])
-    nw = WP.shape[0]
     for m in range(WL.shape[0]):
-        i = WL[m] // nw
-        w = WL[m] - i * nw
+        i, w = WL[m, 1], WL[m, 2]
         h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
              + (X[i, 2] - WP[w, 2]) * WP[w, 5])
         gap = min(gap, h - Bd[i, B_R])
@@ -691,15 +705,8 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             last = True
         if h <= 0.0:
             break
-        kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling)
-        moved = 0.0
-        for a in range(n):
-            for d in range(3):
-                X[a, d] += h * V[a, d]
-            if fl[F_SPIN]:
-                turn(Qo[a], W[a, 0], W[a, 1], W[a, 2], h, planar)
-            ddx, ddy, ddz = X[a, 0] - X0[a, 0], X[a, 1] - X0[a, 1], X[a, 2] - X0[a, 2]
-            moved = max(moved, ddx * ddx + ddy * ddy + ddz * ddz)
+        kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, False)
+        moved = drift(X, X0, V, W, Qo, h, n, fl[F_SPIN], planar)
         if 4.0 * moved > skin * skin:
             keys, PI, PJ, hist, WL = _rebuild(X, X0, Bd, WP, WH, n, dim, skin, keys, hist, ST)
         t = t + h
@@ -707,7 +714,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         record_now = record != 0 and (t >= next_frame or last)
         engaged, niv, nrec, IV, REC = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav,
                                              fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now)
-        kinetic = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling)
+        kinetic = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, True)
         if engaged:
             FG[G_TOUCH] += h
             ever = True
