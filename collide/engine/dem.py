@@ -41,9 +41,14 @@ NB = 6
 # Contact tables (as collide.model, with the restitution column turned into the damping ratio
 # zeta by `collide.dem.kernel_tables`): k, mu, eps, E*, zeta, rolling friction, k_t / k_n.
 T_K, T_MU, T_EPS, T_ESTAR, T_ZETA, T_ROLL, T_KTR = range(7)
-# History per contact: tangential spring (3), its stored energy, open interval row, engaged.
-H_XI, H_U, H_IV, H_ON = 0, 3, 4, 5
+# History per contact: tangential spring (3), its stiffness (for the energy it stores: read
+# only when recorded), open interval row, engaged.
+H_XI, H_KT, H_IV, H_ON = 0, 3, 4, 5
 NH = 6
+# The contact forces' parts, per body (N, NPT): damping force, friction force, rolling torque.
+# (Friction's torque is the rest of the torque: no other part has one.)
+PT_DAMP, PT_FRIC, PT_ROLL = 0, 3, 6
+NPT = 9
 # Flags and figures.
 F_DIM, F_SPIN, F_HERTZ, F_TSPRING, F_RECORD, F_MAXSTEPS = range(6)
 NFLAG = 6
@@ -76,54 +81,82 @@ def _cell(x, size):
 
 @jit
 def build_pairs(P, Bd, n, dim, reach_pad):
-    """Pairs (i < j) whose gap is under reach_pad, sorted by i * n + j: a hashed cell grid."""
+    """Pairs (i < j) whose gap is under reach_pad, as keys i * n + j in ascending order: a
+    hashed cell grid whose buckets hold their bodies contiguously (a counting sort), searched
+    by `_gather_pairs`."""
     rmax = 0.0
     for i in range(n):
         rmax = max(rmax, Bd[i, B_R])
     size = 2.0 * rmax + reach_pad
     table = 1
-    while table < 2 * n:
+    while table < 8 * n:  # (few hash collisions: a collision's bodies are visited for nothing)
         table *= 2
-    head = np.full(table, -1, np.int64)
-    nxt = np.full(n, -1, np.int64)
-    cells = np.zeros((n, 3), np.int64)
+    cells = np.empty((n, 3), np.int64)
+    bucket = np.empty(n, np.int64)
+    start = np.zeros(table + 1, np.int64)
     for i in range(n):
         h = 0
         for d in range(3):
             c = _cell(P[i, d], size) if d < dim else 0
             cells[i, d] = c
             h ^= c * HASH_PRIMES[d]
-        h = h & (table - 1)
-        nxt[i] = head[h]
-        head[h] = i
-    keys = np.empty(16 * n + 16, np.int64)
+        bucket[i] = h & (table - 1)
+        start[bucket[i] + 1] += 1
+    for b in range(table):
+        start[b + 1] += start[b]
+    order = np.empty(n, np.int64)
+    fill = start[:table].copy()
+    for i in range(n):
+        order[fill[bucket[i]]] = i
+        fill[bucket[i]] += 1
+    keys = np.empty(8 * n + 16, np.int64)
+    while True:
+        count = _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, keys)
+        if count >= 0:
+            return keys[:count]
+        # Out of room: start again with twice as much (rare; growing in the search loop would
+        # count references to `keys` at every cell visited, which cost more than the search).
+        keys = np.empty(2 * keys.shape[0], np.int64)
+
+
+@jit
+def _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, keys):
+    """The pairs of `build_pairs` into keys, each body's partners gathered from the 3^dim cells
+    around it and sorted among themselves. Returns their number, or -1 if keys is too short."""
     count = 0
     reach = 1 if dim >= 1 else 0
     ry = 1 if dim >= 2 else 0
     rz = 1 if dim >= 3 else 0
     for i in range(n):
+        first = count
         for ox in range(-reach, reach + 1):
             for oy in range(-ry, ry + 1):
                 for oz in range(-rz, rz + 1):
                     cx, cy, cz = cells[i, 0] + ox, cells[i, 1] + oy, cells[i, 2] + oz
-                    h = (cx * HASH_PRIMES[0]) ^ (cy * HASH_PRIMES[1]) ^ (cz * HASH_PRIMES[2])
-                    j = head[h & (table - 1)]
-                    while j >= 0:
-                        # Hash collisions bring other cells' bodies: take j from its own cell only.
-                        if j > i and cells[j, 0] == cx and cells[j, 1] == cy and cells[j, 2] == cz:
-                            dx = P[j, 0] - P[i, 0]
-                            dy = P[j, 1] - P[i, 1]
-                            dz = P[j, 2] - P[i, 2]
-                            lim = Bd[i, B_R] + Bd[j, B_R] + reach_pad
-                            if dx * dx + dy * dy + dz * dz < lim * lim:
-                                if count >= keys.shape[0]:
-                                    more = np.empty(2 * keys.shape[0], np.int64)
-                                    more[:count] = keys[:count]
-                                    keys = more
-                                keys[count] = i * n + j
-                                count += 1
-                        j = nxt[j]
-    return np.sort(keys[:count])
+                    h = ((cx * HASH_PRIMES[0]) ^ (cy * HASH_PRIMES[1]) ^ (cz * HASH_PRIMES[2])) & (table - 1)
+                    if count + start[h + 1] - start[h] > keys.shape[0]:
+                        return -1
+                    for m in range(start[h], start[h + 1]):
+                        j = order[m]
+                        dx = P[j, 0] - P[i, 0]
+                        dy = P[j, 1] - P[i, 1]
+                        dz = P[j, 2] - P[i, 2]
+                        lim = Bd[i, B_R] + Bd[j, B_R] + reach_pad
+                        # Written always, kept if j is a partner: a branch here is a coin toss
+                        # (j > i) that the processor mispredicts half the time. Hash collisions
+                        # bring other cells' bodies: j counts from its own cell only.
+                        keys[count] = i * n + j
+                        count += ((j > i) & (cells[j, 0] == cx) & (cells[j, 1] == cy) & (cells[j, 2] == cz)
+                                  & (dx * dx + dy * dy + dz * dz < lim * lim))
+        # i's row ascending (a handful of partners: insertion sort).
+        for a in range(first + 1, count):
+            key = keys[a]
+            at = a
+            while at > first and keys[at - 1] > key:
+                keys[at] = keys[at - 1]
+                at -= 1
+            keys[at] = key
+    return count
 
 
 @jit
@@ -156,9 +189,9 @@ def normal_elastic(hertz, k, estar, rstar, delta):
 
 
 @jit_inline
-def normal_damping(zeta, mstar, kn, vn):
-    """The dashpot for the restitution: 2 zeta sqrt(m* k_n) times the overlap's rate."""
-    return 2.0 * zeta * math.sqrt(mstar * kn) * vn
+def dashpot(zeta, mstar, k):
+    """The dashpot for the restitution with a spring of stiffness k: 2 zeta sqrt(m* k)."""
+    return 2.0 * zeta * math.sqrt(mstar * k)
 
 
 @jit_inline
@@ -167,25 +200,26 @@ def tangential_spring(hist, k, nx, ny, nz, tx, ty, tz, kt, gt, cap, dt):
     stick, 1 slip). The stretch is turned into the current tangent plane at its length; after a
     slip the spring alone holds the capped force (module docstring)."""
     hx, hy, hz = hist[k, H_XI], hist[k, H_XI + 1], hist[k, H_XI + 2]
-    before = math.sqrt(hx * hx + hy * hy + hz * hz)
     hn = hx * nx + hy * ny + hz * nz
-    hx, hy, hz = hx - hn * nx, hy - hn * ny, hz - hn * nz
-    after = math.sqrt(hx * hx + hy * hy + hz * hz)
-    if after > 0.0:
-        scale = before / after
-        hx, hy, hz = hx * scale, hy * scale, hz * scale
+    if hn != 0.0:
+        before = hx * hx + hy * hy + hz * hz
+        hx, hy, hz = hx - hn * nx, hy - hn * ny, hz - hn * nz
+        after = hx * hx + hy * hy + hz * hz
+        if after > 0.0:
+            scale = math.sqrt(before / after)
+            hx, hy, hz = hx * scale, hy * scale, hz * scale
     hx, hy, hz = hx + tx * dt, hy + ty * dt, hz + tz * dt
     sx, sy, sz = -kt * hx - gt * tx, -kt * hy - gt * ty, -kt * hz - gt * tz
-    mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+    mag2 = sx * sx + sy * sy + sz * sz
     mode = 2.0
-    if mag > cap:
+    if mag2 > cap * cap:
         mode = 1.0
-        if mag > 0.0:
-            ratio = cap / mag
-            sx, sy, sz = sx * ratio, sy * ratio, sz * ratio
-            hx, hy, hz = -sx / kt, -sy / kt, -sz / kt
+        ratio = cap / math.sqrt(mag2)
+        sx, sy, sz = sx * ratio, sy * ratio, sz * ratio
+        inv = 1.0 / kt
+        hx, hy, hz = -sx * inv, -sy * inv, -sz * inv
     hist[k, H_XI], hist[k, H_XI + 1], hist[k, H_XI + 2] = hx, hy, hz
-    hist[k, H_U] = 0.5 * kt * (hx * hx + hy * hy + hz * hz)
+    hist[k, H_KT] = kt
     return sx, sy, sz, mode
 
 
@@ -216,17 +250,16 @@ def rolling_resistance(W, T, PT, Bd, i, j, cap, dt):
     g = min(cap, ieff * rate / (ROLL_STEPS * dt)) / rate
     for d, wd in ((0, wx), (1, wy), (2, wz)):
         T[i, d] -= g * wd
-        PT[i, 9 + d] -= g * wd
+        PT[i, PT_ROLL + d] -= g * wd
         if j >= 0:
             T[j, d] += g * wd
-            PT[j, 9 + d] += g * wd
+            PT[j, PT_ROLL + d] += g * wd
 
 
 @jit_inline
 def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, hist, k, fl, dt, out):
     """Add contact (i, j)'s forces and torques (j < 0: a rigid wall along -n) to F, T, and by
-    part to PT (damping force, friction force, friction torque, rolling torque: columns 0, 3,
-    6, 9). n points from i into j; the law's coefficients are tabs[mi, mj]. Returns the normal
+    part to PT. n points from i into j; the law's coefficients are tabs[mi, mj]. Returns the normal
     force; `out` gets the friction force on i (3) and the mode."""
     tspring, spin = fl[F_TSPRING], fl[F_SPIN]
     ri = Bd[i, B_R]
@@ -257,7 +290,8 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, 
     tx, ty, tz = vx - vn * nx, vy - vn * ny, vz - vn * nz
     elastic, kn = normal_elastic(fl[F_HERTZ], tabs[mi, mj, T_K], tabs[mi, mj, T_ESTAR], rstar, delta)
     zeta = tabs[mi, mj, T_ZETA]
-    damp = normal_damping(zeta, mstar, kn, vn) if zeta > 0.0 else 0.0
+    gn = dashpot(zeta, mstar, kn) if zeta > 0.0 else 0.0
+    damp = gn * vn
     fn = elastic + damp
     press = max(fn, 0.0)
     fx, fy, fz = -fn * nx, -fn * ny, -fn * nz  # on i
@@ -266,9 +300,9 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, 
     mu = tabs[mi, mj, T_MU]
     if spin and (mu > 0.0 or tspring):
         if tspring:
-            kt = tabs[mi, mj, T_KTR] * kn
-            sx, sy, sz, mode = tangential_spring(hist, k, nx, ny, nz, tx, ty, tz, kt,
-                                                 2.0 * zeta * math.sqrt(mstar * kt), mu * press, dt)
+            ktr = tabs[mi, mj, T_KTR]
+            sx, sy, sz, mode = tangential_spring(hist, k, nx, ny, nz, tx, ty, tz, ktr * kn, gn * math.sqrt(ktr),
+                                                 mu * press, dt)
         else:
             sx, sy, sz, mode = coulomb_slip(tx, ty, tz, mu * press, tabs[mi, mj, T_EPS])
         fx += sx
@@ -278,17 +312,15 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, 
         cx, cy, cz = ny * sz - nz * sy, nz * sx - nx * sz, nx * sy - ny * sx
         for d, c in ((0, cx), (1, cy), (2, cz)):
             T[i, d] += ai * c
-            PT[i, 6 + d] += ai * c
             if j >= 0:
                 T[j, d] += aj * c
-                PT[j, 6 + d] += aj * c
-        PT[i, 3] += sx
-        PT[i, 4] += sy
-        PT[i, 5] += sz
+        PT[i, PT_FRIC] += sx
+        PT[i, PT_FRIC + 1] += sy
+        PT[i, PT_FRIC + 2] += sz
         if j >= 0:
-            PT[j, 3] -= sx
-            PT[j, 4] -= sy
-            PT[j, 5] -= sz
+            PT[j, PT_FRIC] -= sx
+            PT[j, PT_FRIC + 1] -= sy
+            PT[j, PT_FRIC + 2] -= sz
     roll = tabs[mi, mj, T_ROLL]
     if spin and roll > 0.0 and press > 0.0:
         rolling_resistance(W, T, PT, Bd, i, j, roll * rstar * press, dt)
@@ -296,16 +328,16 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, 
     F[i, 1] += fy
     F[i, 2] += fz
     dx, dy, dz = -damp * nx, -damp * ny, -damp * nz
-    PT[i, 0] += dx
-    PT[i, 1] += dy
-    PT[i, 2] += dz
+    PT[i, PT_DAMP] += dx
+    PT[i, PT_DAMP + 1] += dy
+    PT[i, PT_DAMP + 2] += dz
     if j >= 0:
         F[j, 0] -= fx
         F[j, 1] -= fy
         F[j, 2] -= fz
-        PT[j, 0] -= dx
-        PT[j, 1] -= dy
-        PT[j, 2] -= dz
+        PT[j, PT_DAMP] -= dx
+        PT[j, PT_DAMP + 1] -= dy
+        PT[j, PT_DAMP + 2] -= dz
     out[0], out[1], out[2], out[3] = sx, sy, sz, mode
     return fn
 
@@ -314,17 +346,18 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, 
 def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST, IV, niv,
            REC, nrec, record_now):
     """Forces and torques of every engaged contact (F, T, and by part PT) and the run's contact
-    figures, over the listed pairs (PI, PJ) and body-wall pairs (WL: i * walls + w); wtabs is
+    figures, over the listed pairs (PI, PJ) and body-wall pairs (WL: rows k = i * walls + w, i, w); wtabs is
     the wall table as (materials, 1, columns). Returns (engaged, niv, nrec, IV, REC)."""
     record = fl[F_RECORD]
+    g0, g1, g2 = grav[0], grav[1], grav[2]
     for a in range(n):
-        for d in range(3):
-            F[a, d] = Bd[a, B_M] * grav[d]
-            T[a, d] = 0.0
-        for d in range(12):
-            PT[a, d] = 0.0
+        m = Bd[a, B_M]
+        F[a, 0], F[a, 1], F[a, 2] = m * g0, m * g1, m * g2
+    T[:, :] = 0.0
+    PT[:, :] = 0.0
     out = np.zeros(4)
     engaged = 0
+    deepest, strongest = FG[G_OVERLAP], FG[G_FORCE]
     # Room for every listed contact to open and be recorded, so that no array is replaced
     # inside the loops (that costs reference counting per contact).
     most = PI.shape[0] + WL.shape[0]
@@ -344,22 +377,20 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
                 _close(hist, k, IV, t, FG)
             continue
         dist = math.sqrt(d2)
+        inv = 1.0 / dist
         delta = reach - dist
         if hist[k, H_ON] == 0.0:
             niv = _open(hist, k, IV, niv, i, j, t, FG, ST, record)
         engaged += 1
-        fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx / dist, dy / dist, dz / dist, delta, tabs, MAT[i], MAT[j],
+        fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j],
                            hist, k, fl, dt, out)
-        FG[G_OVERLAP] = max(FG[G_OVERLAP], delta)
-        FG[G_FORCE] = max(FG[G_FORCE], fn)
+        deepest = max(deepest, delta)
+        strongest = max(strongest, fn)
         if record_now:
             _record(REC, nrec, t, i, j, delta, fn, out)
             nrec += 1
-    nw = WP.shape[0]
     for m in range(WL.shape[0]):
-        k = WL[m]
-        i = k // nw
-        w = k - i * nw
+        k, i, w = WL[m, 0], WL[m, 1], WL[m, 2]
         h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
              + (X[i, 2] - WP[w, 2]) * WP[w, 5])
         delta = Bd[i, B_R] - h
@@ -372,11 +403,12 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
         engaged += 1
         fn = contact_force(X, V, W, F, T, PT, Bd, i, -1 - w, -WP[w, 3], -WP[w, 4], -WP[w, 5], delta, wtabs, MAT[i], 0,
                            WH, k, fl, dt, out)
-        FG[G_OVERLAP] = max(FG[G_OVERLAP], delta)
-        FG[G_FORCE] = max(FG[G_FORCE], fn)
+        deepest = max(deepest, delta)
+        strongest = max(strongest, fn)
         if record_now:
             _record(REC, nrec, t, i, -1 - w, delta, fn, out)
             nrec += 1
+    FG[G_OVERLAP], FG[G_FORCE] = deepest, strongest
     return engaged, niv, nrec, IV, REC
 
 
@@ -386,7 +418,7 @@ def _open(hist, k, IV, niv, i, j, t, FG, ST, record):
     hist[k, H_ON] = 1.0
     for c in range(3):
         hist[k, H_XI + c] = 0.0
-    hist[k, H_U] = 0.0
+    hist[k, H_KT] = 0.0
     ST[S_CONTACTS] += 1
     if not FG[G_FIRST] <= t:
         FG[G_FIRST] = t
@@ -418,41 +450,65 @@ def _record(REC, row, t, i, j, delta, fn, out):
 
 
 @jit
-def kick(V, W, F, T, PT, Bd, h2, n, WK, parts):
+def kick(V, W, F, T, PT, Bd, h2, n, WK, rolling, energy):
     """A half kick of h2, and the work each part of the contact forces did in it, from the
     kinetic energy it changed: F . (v_before + v_after) / 2 h2 per body (exact for a kick, and
     additive over the parts). WK (N, 3) gathers minus that: damping, friction (with what the
-    tangential springs hold), rolling resistance; `parts` (3,) says which the scene has (the
-    others' PT columns stay zero). Returns the kinetic energy after the kick."""
-    damping, friction, rolling = parts[0], parts[1], parts[2]
+    tangential springs hold), rolling resistance (if the scene has it). Returns the kinetic
+    energy after the kick if asked (`energy`), else 0."""
     e = 0.0
     for a in range(n):
+        # A body's numbers are read before any is written (the compiler cannot tell that the
+        # arrays do not overlap, and would read them again after every store); a part a scene
+        # lacks adds zeros, but for rolling resistance, whose booking is an eighth of the kick.
+        im, ii, spins = Bd[a, B_IM], Bd[a, B_II], Bd[a, B_II] > 0.0
         vb0, vb1, vb2 = V[a, 0], V[a, 1], V[a, 2]
         wb0, wb1, wb2 = W[a, 0], W[a, 1], W[a, 2]
-        for d in range(3):
-            V[a, d] += h2 * F[a, d] * Bd[a, B_IM]
-            W[a, d] += h2 * T[a, d] * Bd[a, B_II]
-        v0, v1, v2 = 0.5 * (vb0 + V[a, 0]), 0.5 * (vb1 + V[a, 1]), 0.5 * (vb2 + V[a, 2])
-        w0, w1, w2 = 0.5 * (wb0 + W[a, 0]), 0.5 * (wb1 + W[a, 1]), 0.5 * (wb2 + W[a, 2])
-        if damping:
-            WK[a, 0] -= h2 * (PT[a, 0] * v0 + PT[a, 1] * v1 + PT[a, 2] * v2)
-        if friction:
-            WK[a, 1] -= h2 * (PT[a, 3] * v0 + PT[a, 4] * v1 + PT[a, 5] * v2
-                              + (PT[a, 6] * w0 + PT[a, 7] * w1 + PT[a, 8] * w2) * (Bd[a, B_II] > 0.0))
+        tx, ty, tz = T[a, 0], T[a, 1], T[a, 2]
+        rx, ry, rz = 0.0, 0.0, 0.0
         if rolling:
-            WK[a, 2] -= h2 * (PT[a, 9] * w0 + PT[a, 10] * w1 + PT[a, 11] * w2) * (Bd[a, B_II] > 0.0)
-        e += 0.5 * Bd[a, B_M] * (V[a, 0] ** 2 + V[a, 1] ** 2 + V[a, 2] ** 2)
-        e += 0.5 * Bd[a, B_I] * (W[a, 0] ** 2 + W[a, 1] ** 2 + W[a, 2] ** 2)
+            rx, ry, rz = PT[a, PT_ROLL], PT[a, PT_ROLL + 1], PT[a, PT_ROLL + 2]
+        va0, va1, va2 = vb0 + h2 * F[a, 0] * im, vb1 + h2 * F[a, 1] * im, vb2 + h2 * F[a, 2] * im
+        wa0, wa1, wa2 = wb0 + h2 * tx * ii, wb1 + h2 * ty * ii, wb2 + h2 * tz * ii
+        V[a, 0], V[a, 1], V[a, 2] = va0, va1, va2
+        W[a, 0], W[a, 1], W[a, 2] = wa0, wa1, wa2
+        v0, v1, v2 = 0.5 * (vb0 + va0), 0.5 * (vb1 + va1), 0.5 * (vb2 + va2)
+        w0, w1, w2 = 0.5 * (wb0 + wa0), 0.5 * (wb1 + wa1), 0.5 * (wb2 + wa2)
+        WK[a, 0] -= h2 * (PT[a, PT_DAMP] * v0 + PT[a, PT_DAMP + 1] * v1 + PT[a, PT_DAMP + 2] * v2)
+        # Friction's torque is all the torque but rolling resistance's.
+        WK[a, 1] -= h2 * (PT[a, PT_FRIC] * v0 + PT[a, PT_FRIC + 1] * v1 + PT[a, PT_FRIC + 2] * v2
+                          + ((tx - rx) * w0 + (ty - ry) * w1 + (tz - rz) * w2) * spins)
+        if rolling:
+            WK[a, 2] -= h2 * (rx * w0 + ry * w1 + rz * w2) * spins
+        if energy:
+            e += 0.5 * Bd[a, B_M] * (va0 ** 2 + va1 ** 2 + va2 ** 2)
+            e += 0.5 * Bd[a, B_I] * (wa0 ** 2 + wa1 ** 2 + wa2 ** 2)
     return e
 
 
 @jit
+def drift(X, X0, V, W, Qo, h, n, spin, planar):
+    """Move and turn every body for h at its velocity and spin. Returns the largest squared
+    distance a body is from where the neighbour lists were built (X0)."""
+    moved = 0.0
+    for a in range(n):
+        for d in range(3):
+            X[a, d] += h * V[a, d]
+        if spin:
+            turn(Qo[a], W[a, 0], W[a, 1], W[a, 2], h, planar)
+        ddx, ddy, ddz = X[a, 0] - X0[a, 0], X[a, 1] - X0[a, 1], X[a, 2] - X0[a, 2]
+        moved = max(moved, ddx * ddx + ddy * ddy + ddz * ddz)
+    return moved
+
+
+@jit
 def _stored(hist, WH):
+    """The energy the tangential springs hold: 1/2 k_t |xi|^2 each."""
     total = 0.0
-    for k in range(hist.shape[0]):
-        total += hist[k, H_U]
-    for k in range(WH.shape[0]):
-        total += WH[k, H_U]
+    for H in (hist, WH):
+        for k in range(H.shape[0]):
+            hx, hy, hz = H[k, H_XI], H[k, H_XI + 1], H[k, H_XI + 2]
+            total += 0.5 * H[k, H_KT] * (hx * hx + hy * hy + hz * hz)
     return total
 
 
@@ -478,17 +534,17 @@ def _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, free):
 
 @jit
 def wall_list(X, Bd, WP, WH, n, skin):
-    """Body-wall pairs (i * walls + w, ascending) within the skin of touching, and those still
-    engaged: with the list rebuilt when a body has moved half the skin, no other can touch."""
+    """Body-wall pairs within the skin of touching, and those still engaged (with the list rebuilt
+    when a body has moved half the skin, no other can touch), in order: rows (i * walls + w, i, w)."""
     nw = WP.shape[0]
-    out = np.empty(n * nw, np.int64)
+    out = np.empty((n * nw, 3), np.int64)
     count = 0
     for i in range(n):
         for w in range(nw):
             h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
                  + (X[i, 2] - WP[w, 2]) * WP[w, 5])
             if h - Bd[i, B_R] < skin or WH[i * nw + w, H_ON] != 0.0:
-                out[count] = i * nw + w
+                out[count, 0], out[count, 1], out[count, 2] = i * nw + w, i, w
                 count += 1
     return out[:count].copy()
 
@@ -514,10 +570,8 @@ def _free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin):
         i, j = PI[k], PJ[k]
         dx, dy, dz = X[j, 0] - X[i, 0], X[j, 1] - X[i, 1], X[j, 2] - X[i, 2]
         gap = min(gap, math.sqrt(dx * dx + dy * dy + dz * dz) - Bd[i, B_R] - Bd[j, B_R])
-    nw = WP.shape[0]
     for m in range(WL.shape[0]):
-        i = WL[m] // nw
-        w = WL[m] - i * nw
+        i, w = WL[m, 1], WL[m, 2]
         h = ((X[i, 0] - WP[w, 0]) * WP[w, 3] + (X[i, 1] - WP[w, 1]) * WP[w, 4]
              + (X[i, 2] - WP[w, 2]) * WP[w, 5])
         gap = min(gap, h - Bd[i, B_R])
@@ -582,7 +636,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     FG[G_STATUS_T] = np.nan
     F = np.zeros((n, 3))
     T = np.zeros((n, 3))
-    PT = np.zeros((n, 12))
+    PT = np.zeros((n, NPT))
     WK = np.zeros((n, 3))
     KN = np.zeros((0, NK))
     REC = np.zeros((0, NR))
@@ -593,16 +647,11 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     for a in range(n):
         MAT[a] = np.int64(Bd[a, B_MAT])
     wt = wtabs.reshape((wtabs.shape[0], 1, wtabs.shape[1]))
-    # Which parts of the work the contacts can do (the kick books only those).
-    parts = np.zeros(3, np.int64)
-    for table in (tabs.reshape((-1, tabs.shape[-1])), wtabs):
-        for r in range(table.shape[0]):
-            if table[r, T_ZETA] > 0.0:
-                parts[0] = 1
-            if fl[F_SPIN] and (table[r, T_MU] > 0.0 or fl[F_TSPRING]):
-                parts[1] = 1
-            if fl[F_SPIN] and table[r, T_ROLL] > 0.0:
-                parts[2] = 1
+    rolling = False  # whether any contact has rolling resistance (the kick books it only then)
+    if fl[F_SPIN]:
+        for table in (tabs.reshape((-1, tabs.shape[-1])), wtabs):
+            for r in range(table.shape[0]):
+                rolling |= table[r, T_ROLL] > 0.0
     WH = np.zeros((n * WP.shape[0], NH))
     for k in range(WH.shape[0]):
         WH[k, H_IV] = -1.0
@@ -656,15 +705,8 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             last = True
         if h <= 0.0:
             break
-        kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, parts)
-        moved = 0.0
-        for a in range(n):
-            for d in range(3):
-                X[a, d] += h * V[a, d]
-            if fl[F_SPIN]:
-                turn(Qo[a], W[a, 0], W[a, 1], W[a, 2], h, planar)
-            ddx, ddy, ddz = X[a, 0] - X0[a, 0], X[a, 1] - X0[a, 1], X[a, 2] - X0[a, 2]
-            moved = max(moved, ddx * ddx + ddy * ddy + ddz * ddz)
+        kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, False)
+        moved = drift(X, X0, V, W, Qo, h, n, fl[F_SPIN], planar)
         if 4.0 * moved > skin * skin:
             keys, PI, PJ, hist, WL = _rebuild(X, X0, Bd, WP, WH, n, dim, skin, keys, hist, ST)
         t = t + h
@@ -672,7 +714,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         record_now = record != 0 and (t >= next_frame or last)
         engaged, niv, nrec, IV, REC = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav,
                                              fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now)
-        kinetic = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, parts)
+        kinetic = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, True)
         if engaged:
             FG[G_TOUCH] += h
             ever = True

@@ -95,10 +95,10 @@ if COMPILED:
     # error_model="numpy": a division by zero gives inf or NaN (checked after each step) instead
     # of raising, which also keeps the compiled code smaller.
     jit = njit(cache=True, error_model="numpy", nogil=True)
-    # The per-contact pieces of a contact law, which allocate nothing: inlined into the contact
-    # loop, and without reference counting (`_nrt=False`, as numba's own sort and string
-    # helpers): a call per contact, and the atomic counts of each array passed to it, cost more
-    # than the physics (a quarter of the DEM step, measured).
+    # Small pieces called per contact or per body (the pieces of a contact law, a body's turn),
+    # which allocate nothing: inlined into the loops, and without reference counting (`_nrt=False`,
+    # as numba's own sort and string helpers): a call each time, and the atomic counts of each
+    # array passed, cost more than the physics (a quarter of the DEM step, measured).
     jit_inline = njit(cache=True, error_model="numpy", nogil=True, forceinline=True, _nrt=False)
 else:
     def jit(function):
