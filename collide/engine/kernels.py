@@ -582,15 +582,30 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl):
     spin = fl[FL_SPIN]
     work = 0.0
     if h_end != 0.0:
+        # Started from the last kick's friction (C_FF and its accelerations, at the step's
+        # modes), which differs from this one's by a substep's change: a pass fewer than from
+        # none. Not with a slide out of the plane: its kick can have two roots (see
+        # slide_direction), and a start off the one the kick's own impulse defines can settle on
+        # the other (measured: a random 3D scene stopped converging with the tolerance).
+        # In the plane a slide's friction is mu F_n on the held side whatever the velocities:
+        # with nothing stuck one pass is the fixed point.
+        planar = fl[FL_PLANAR] == YES
+        warm, one_pass = True, planar
+        for c in range(nc):
+            if CI[c, CI_MODE] == STICK:
+                one_pass = False
+            elif CI[c, CI_MODE] == SLIDE and not planar:
+                warm = False
+        start = h_end if warm else 0.0
         for a in range(na):
             for d in range(3):
                 X[a, X_V + d] += h_end * X[a, X_A + d]
-                X[a, X_V1 + d] = X[a, X_V + d]
-                X[a, X_W1 + d] = X[a, X_W + d]
+                X[a, X_V1 + d] = X[a, X_V + d] + start * X[a, X_F + d]
+                X[a, X_W1 + d] = X[a, X_W + d] + start * X[a, X_L + d]
         last = math.inf
         for it in range(FIXED_POINT):
-            # The first pass sees no friction yet in V1; later ones take each contact's own back out.
-            if not friction(X, C, CI, na, nc, X_V1, X_W1, stuck, A, b, fl, h_end if it > 0 else 0.0,
+            # Each pass but a cold first takes each contact's own friction in V1 back out.
+            if not friction(X, C, CI, na, nc, X_V1, X_W1, stuck, A, b, fl, h_end if warm or it > 0 else 0.0,
                             YES if it == 0 else NO):
                 return work, False
             change = 0.0
@@ -604,10 +619,10 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl):
                     X[a, X_V1 + d] = nv
                     X[a, X_W1 + d] = nw
             # Done when what is left is round-off: the change itself, or the next one as the last
-            # two passes' contraction predicts it (a stuck contact's hold force follows the
+            # two passes of the same map predict it (a stuck contact's hold force follows the
             # velocities as the contact frame turns, ratio about h v / dist: one pass fewer).
-            if change <= 4.0 * EPS64 * size or (it >= 2 and change < 0.5 * last
-                                                  and change * change <= 4.0 * EPS64 * size * last):
+            if one_pass or change <= 4.0 * EPS64 * size or ((it >= 1 if warm else it >= 2) and change < 0.5 * last
+                                                            and change * change <= 4.0 * EPS64 * size * last):
                 break
             last = change
         work += kinetic_drop(X, na, X_V, X_W, X_V1, X_W1, spin)
