@@ -103,16 +103,21 @@ def run(
       collide run my_scene.toml --dt auto --tol 1e-9 --no-record
     """
     from cli.common import compiled_for_large, progress_display
-    from collide.run import run_scene
+    from collide.engine.hint import prefer_interpreted
     from collide.scene import load_scene
-    from collide.summary import report_csv, run_summary
 
     loaded = load_scene(scene, set_ or [])
+    step = parse_dt(dt)
+    # A few spheres meeting a few times run sooner interpreted than a process loads numba.
+    prefer_interpreted(loaded, integrator, step, tol)
     compiled_for_large(len(loaded.bodies))
+    from collide.run import run_scene  # the engine: compiled or interpreted from here on
+    from collide.summary import report_csv, run_summary
+
     # The trajectory is kept only for what uses it: the recording and the CSV.
     keep = not no_record or csv is not None
     with progress_display(loaded.name) as show:
-        result = run_scene(loaded, integrator=integrator, dt=parse_dt(dt), tol=tol, record=keep, progress=show)
+        result = run_scene(loaded, integrator=integrator, dt=step, tol=tol, record=keep, progress=show)
     summary = run_summary(result)
     if csv is not None:
         every = csv_every if csv_every is not None else 100 * float(result.result.dt[0])
@@ -197,8 +202,8 @@ def main() -> None:
     import os
     import warnings
 
+    from collide.errors import RunError
     from collide.scene import SceneError
-    from collide.stepper import RunError
 
     try:
         with warnings.catch_warnings():

@@ -20,6 +20,7 @@ import numpy as np
 
 from collide.engine import kernels as kn
 from collide.engine import tier
+from collide.errors import RunError
 from collide.integrators import INTEGRATORS, Integrator
 from collide.model import Model, State, max_frequency, moves_in_a_plane, reference_frequency, select_model, select_state
 
@@ -54,10 +55,6 @@ def watch(progress: Progress | None, fp: np.ndarray, now: int, t_end: float, mem
     finally:
         done.set()
         thread.join()
-
-
-class RunError(RuntimeError):
-    """A run that cannot be trusted: unstable step, blow-up, non-finite numbers, runaway length."""
 
 
 @dataclass

@@ -24,8 +24,11 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from collide.rigid import reference_speed, rigid_outcome, softness_estimate
-from collide.run import run_scene, run_scenes
 from collide.scene import Scene, apply_overrides, builtin_names, load_scene, parse_scene, with_settings
+
+# collide.run (the engine) is imported by the functions that run scenes: the command line imports
+# this module to list its commands, before a run decides compiled or interpreted kernels
+# (collide.engine.hint).
 
 DEFAULT_TOL = 1e-4
 MAX_HALVINGS = 4
@@ -111,6 +114,8 @@ def textbook_table(scenes: list[str] | None = None, *, tol: float = DEFAULT_TOL,
     table to those scene names. `finals` maps scene name
     to final velocities (N, D) already computed (e.g. by `cross_check`); others are run here.
     """
+    from collide.run import run_scene
+
     finals = dict(finals or {})
     rows = []
     for problem in TEXTBOOK:
@@ -217,6 +222,8 @@ def cross_check(scene: Scene, *, tol: float = DEFAULT_TOL, max_halvings: int = M
     change (order >= 1; kahan6 converges at sixth order, first order only for friction whose slip
     turns out of its plane, so its error is far below the change).
     """
+    from collide.run import run_scene, run_scenes
+
     if max_halvings < 2:
         raise ValueError(f"max_halvings: need at least 2 to see convergence, got {max_halvings}")
     started = time.perf_counter()
@@ -315,6 +322,8 @@ def _contact_omega(scene: Scene) -> float:
 def softness_scan(scene: Scene | str, factors: tuple[float, ...] = SCAN_FACTORS) -> SoftnessScan:
     """Rerun a scene at k x factors (overrides `contact.k=...`) with omega dt fixed, in one batch,
     and measure the distance of the outcome from the rigid limit at each k."""
+    from collide.run import run_scenes
+
     base = load_scene(scene) if isinstance(scene, str) else scene
     scenes = []
     for factor in factors:

@@ -8,6 +8,10 @@ process, once; every later run loads the compiled code.
 
 COLLIDE_JIT=1 compiles (waiting for it if needed), COLLIDE_JIT=0 interprets, unset means auto.
 The decision is made once, when the engine is first imported.
+
+A command that runs one small scene can ask for the interpreted kernels even when the compiled
+ones are ready (`collide.engine.hint`): loading numba and the compiled cache costs a process
+more than such a run takes interpreted.
 """
 
 from __future__ import annotations
@@ -18,6 +22,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+from collide.engine.hint import HINT_VARIABLE
 
 _KERNELS = Path(__file__).with_name("kernels.py")
 
@@ -74,20 +80,25 @@ def _start_background_compile() -> None:
         pass  # a read-only install: runs stay interpreted; `python -m collide.engine.warm` compiles
 
 
-def _choose() -> bool:
+# Set by a command for a run that is quicker interpreted (collide.engine.hint); read once and
+# removed, so that no child process (a background compile, a viewer) inherits it.
+_HINT = os.environ.pop(HINT_VARIABLE, "")
+
+
+def _choose() -> tuple[bool, bool]:
+    """(compiled, compiling in the background while this process interprets)."""
     setting = os.environ.get("COLLIDE_JIT", "auto").strip().lower()
     if setting in ("1", "yes", "true", "on"):
-        return True
+        return True, False
     if setting in ("0", "no", "false", "off"):
-        return False
+        return False, False
     if compiled_ready():
-        return True
+        return _HINT != "interpreted", False
     _start_background_compile()
-    return False
+    return False, True
 
 
-COMPILED = _choose()
-BACKGROUND = not COMPILED and os.environ.get("COLLIDE_JIT", "auto").strip().lower() not in ("0", "no", "false", "off")
+COMPILED, BACKGROUND = _choose()
 
 if COMPILED:
     from numba import njit

@@ -1,0 +1,80 @@
+"""Which kernels a command runs: a small run stays interpreted (loading numba costs a process
+more than such a run takes), every other run loads the compiled ones, and both give the same
+numbers."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from collide.engine.hint import quick
+from collide.scene import load_scene
+
+QUICK = ["demo-1d", "demo-2d-moving", "demo-2d-stationary", "demo-bonus", "textbook-1d", "textbook-glancing",
+         "textbook-unequal", "newtons-cradle"]
+SLOW = ["billiards-break", "bounce", "break-3d", "gas-box", "pile"]
+
+# Runs `collide` in this process's interpreter and reports on stderr whether numba was loaded.
+PROBE = ("import sys\n"
+         "sys.argv = ['collide'] + sys.argv[1:]\n"
+         "from cli.main import main\n"
+         "try:\n    main()\nexcept SystemExit:\n    pass\n"
+         "print('numba loaded' if 'numba' in sys.modules else 'numba not loaded', file=sys.stderr)\n")
+
+
+def _probe(*args: str, jit: str | None = None) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k not in ("COLLIDE_JIT", "COLLIDE_JIT_HINT")}
+    if jit is not None:
+        env["COLLIDE_JIT"] = jit
+    return subprocess.run([sys.executable, "-c", PROBE, *args], capture_output=True, text=True, env=env, timeout=600)
+
+
+@pytest.mark.parametrize("name", QUICK)
+def test_a_few_spheres_without_walls_or_gravity_are_quick(name: str) -> None:
+    assert quick(load_scene(name))
+
+
+@pytest.mark.parametrize("name", SLOW)
+def test_many_bodies_walls_gravity_or_dem_are_not_quick(name: str) -> None:
+    assert not quick(load_scene(name))
+
+
+def test_settings_that_take_many_steps_are_not_quick() -> None:
+    scene = load_scene("demo-bonus")
+    assert not quick(scene, integrator="seed")  # the report's fixed step: 1e-5 s, thousands of steps
+    assert not quick(scene, dt=1e-6)
+    assert not quick(scene, tol=1e-12)
+    assert not quick(load_scene("demo-bonus", ["gravity=[0,-9.81]"]))
+
+
+def test_a_quick_run_does_not_load_numba_and_gives_the_compiled_numbers() -> None:
+    interpreted = _probe("run", "demo-bonus", "--json", "--no-record")
+    compiled = _probe("run", "demo-bonus", "--json", "--no-record", jit="1")
+    assert interpreted.returncode == 0 and compiled.returncode == 0, interpreted.stderr + compiled.stderr
+    assert interpreted.stderr.strip().endswith("numba not loaded")
+    assert compiled.stderr.strip().endswith("numba loaded")
+    a, b = json.loads(interpreted.stdout), json.loads(compiled.stdout)
+    a.pop("wall_time_s"), b.pop("wall_time_s")
+    assert a == b  # the same code either way, operation for operation
+
+
+def test_a_run_that_is_not_quick_loads_the_compiled_kernels_when_ready() -> None:
+    from collide.engine import tier
+
+    if not tier.compiled_ready():
+        pytest.skip("the compiled kernels are not built here (python -m collide.engine.warm)")
+    out = _probe("run", "demo-bonus", "--json", "--no-record", "--tol", "1e-12")
+    assert out.returncode == 0, out.stderr
+    assert out.stderr.strip().endswith("numba loaded")
+
+
+def test_the_hint_is_not_inherited_by_child_processes() -> None:
+    code = ("import os\nimport collide.engine.tier\n"
+            "print(os.environ.get('COLLIDE_JIT_HINT', 'gone'))\n")
+    env = dict(os.environ, COLLIDE_JIT_HINT="interpreted")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
+    assert out.stdout.strip() == "gone", out.stderr
