@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,17 +78,27 @@ def error_regime(scene: Scene) -> str:
     return "friction" if scene.has_friction else "smooth"
 
 
+def _error_model(integrator: str, regimes: list[str]) -> Callable[[np.ndarray], np.ndarray]:
+    """The error model of `predicted_error` for these scenes, as a function of omega h (B,): the
+    scenes grouped by regime once (the auto step's bisection asks it 60 times a run)."""
+    names = np.array(regimes)
+    groups = [(names == regime, ERROR_MODELS[integrator][regime]) for regime in set(regimes)]
+
+    def model(omega_h: np.ndarray) -> np.ndarray:
+        out = np.empty(len(regimes))
+        for mine, terms in groups:
+            x = omega_h[mine]
+            out[mine] = sum(c * x**p for c, p in terms)
+        return out
+
+    return model
+
+
 def predicted_error(integrator: str, regimes: list[str], omega_h: np.ndarray) -> np.ndarray:
     """The error model: expected relative error (B,) of the outcome at this omega h, for scenes in
     these regimes (`error_regime`)."""
     omega_h = np.broadcast_to(np.asarray(omega_h, dtype=float), (len(regimes),))
-    out = np.empty(len(regimes))
-    names = np.array(regimes)
-    for regime in set(regimes):
-        mine = names == regime
-        x = omega_h[mine]
-        out[mine] = sum(c * x**p for c, p in ERROR_MODELS[integrator][regime])
-    return out
+    return _error_model(integrator, regimes)(omega_h)
 
 
 def auto_omega_h(scenes: list[Scene], integrator: str, tol: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -102,12 +113,13 @@ def auto_omega_h(scenes: list[Scene], integrator: str, tol: np.ndarray) -> tuple
                        "round-off); use a looser --tol")
     regimes = [error_regime(scene) for scene in scenes]
     ceiling = min(MAX_OMEGA_H[integrator], 0.5 * INTEGRATORS[integrator].stability)
+    model = _error_model(integrator, regimes)
     lo, hi = np.full(len(scenes), 1e-6), np.full(len(scenes), ceiling)
     for _ in range(60):  # bisection in log(omega h): the model is monotonic
         mid = np.sqrt(lo * hi)
-        ok = predicted_error(integrator, regimes, mid) <= tol
+        ok = model(mid) <= tol
         lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
-    omega_h = np.where(predicted_error(integrator, regimes, hi) <= tol, hi, lo)
+    omega_h = np.where(model(hi) <= tol, hi, lo)
     steps = np.pi / omega_h
     if (steps > MAX_AUTO_STEPS_PER_CONTACT).any():
         b = int(np.argmax(steps))
@@ -117,7 +129,7 @@ def auto_omega_h(scenes: list[Scene], integrator: str, tol: np.ndarray) -> tuple
             advice = "give the seed integrator a step with --dt (the report's steps are in the README)"
         raise RunError(f"--tol {tol[b]:.3g} would need about {steps[b]:.2g} steps per contact with "
                        f"'{integrator}' (order {INTEGRATORS[integrator].order}); {advice}")
-    return omega_h, predicted_error(integrator, regimes, omega_h)
+    return omega_h, model(omega_h)
 
 
 def auto_dt(scenes: list[Scene], integrator: str, tol: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
