@@ -19,6 +19,16 @@ from collide.integrators import INTEGRATORS
 from collide.scene import Scene
 
 HINT_VARIABLE = "COLLIDE_JIT_HINT"
+
+
+def jit_setting() -> str:
+    """COLLIDE_JIT as the engine reads it: "compiled", "interpreted" or "auto" (unset or other)."""
+    setting = os.environ.get("COLLIDE_JIT", "auto").strip().lower()
+    if setting in ("1", "yes", "true", "on"):
+        return "compiled"
+    if setting in ("0", "no", "false", "off"):
+        return "interpreted"
+    return "auto"
 QUICK_BODIES = 5  # a Newton's cradle of 5: 36 steps, 0.67 s a process interpreted
 QUICK_TOL = 1e-9  # steps grow as tol^(-1/6) (kahan6): 23 for the bonus demo at 1e-9
 
@@ -39,7 +49,7 @@ def prefer_interpreted(scene: Scene, integrator: str | None = None, dt: float | 
                        tol: float | None = None) -> bool:
     """Ask for the interpreted kernels in this process when the run is `quick`, the engine is
     not imported yet and COLLIDE_JIT does not choose. Returns whether it asked."""
-    if "collide.engine.tier" in sys.modules or os.environ.get("COLLIDE_JIT", "auto").strip().lower() != "auto":
+    if "collide.engine.tier" in sys.modules or jit_setting() != "auto":
         return False
     if not quick(scene, integrator, dt, tol):
         return False

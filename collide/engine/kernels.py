@@ -837,6 +837,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     spin, planar, seed = fl[FL_SPIN], fl[FL_PLANAR], fl[FL_SEED]
     tol = EDGE_TOL * scale
     retried = np.zeros(nc, np.bool_)
+    edges = 0
     for c in range(nc):
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
         mag = math.sqrt(sx * sx + sy * sy + sz * sz)
@@ -846,6 +847,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
         if abs(mag - C[c, C_EPS]) <= tol:
             CI[c, CI_MODE] = STICK
             CI[c, CI_EDGE] = 1
+            edges += 1
         elif mag > C[c, C_EPS]:
             CI[c, CI_MODE] = SLIDE
         else:
@@ -859,21 +861,22 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
         # (once) and judged by its hold force with the others' modes as they now are. Left so,
         # the slide crossed the band unseen within the step (its value starts at zero) and the
         # outcome moved by 1e-3 between tolerances (two balls and a floor changing at once).
-        for a in range(na):
-            for d in range(3):
-                X[a, X_T + d] = X[a, X_A + d] + X[a, X_F + d]
-        for c in range(nc):
-            if CI[c, CI_EDGE] != 1 or CI[c, CI_MODE] == STICK or retried[c]:
-                continue
-            sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
-            gx, gy, gz = slip_rate(X, C, CI, c, X_V, X_W, X_T, X_L, spin, seed, YES)
-            mag = math.sqrt(sx * sx + sy * sy + sz * sz)
-            outward = (sx * gx + sy * gy + sz * gz) / mag if mag > 0 else 0.0
+        if edges:
+            for a in range(na):
+                for d in range(3):
+                    X[a, X_T + d] = X[a, X_A + d] + X[a, X_F + d]
             limit = tol / STICK_SCALE
-            if (CI[c, CI_MODE] == SLIDE and outward < -limit) or (CI[c, CI_MODE] == BAND and outward > limit):
-                CI[c, CI_MODE] = STICK
-                retried[c] = True
-                changed = True
+            for c in range(nc):
+                if CI[c, CI_EDGE] != 1 or CI[c, CI_MODE] == STICK or retried[c]:
+                    continue
+                sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
+                gx, gy, gz = slip_rate(X, C, CI, c, X_V, X_W, X_T, X_L, spin, seed, YES)
+                mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+                outward = (sx * gx + sy * gy + sz * gz) / mag if mag > 0 else 0.0
+                if (CI[c, CI_MODE] == SLIDE and outward < -limit) or (CI[c, CI_MODE] == BAND and outward > limit):
+                    CI[c, CI_MODE] = STICK
+                    retried[c] = True
+                    changed = True
         if changed:
             continue
         for c in range(nc):

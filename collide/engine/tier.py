@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from collide.engine.hint import HINT_VARIABLE
+from collide.engine.hint import HINT_VARIABLE, jit_setting
 
 _KERNELS = Path(__file__).with_name("kernels.py")
 
@@ -87,11 +87,9 @@ _HINT = os.environ.pop(HINT_VARIABLE, "")
 
 def _choose() -> tuple[bool, bool]:
     """(compiled, compiling in the background while this process interprets)."""
-    setting = os.environ.get("COLLIDE_JIT", "auto").strip().lower()
-    if setting in ("1", "yes", "true", "on"):
-        return True, False
-    if setting in ("0", "no", "false", "off"):
-        return False, False
+    setting = jit_setting()
+    if setting != "auto":
+        return setting == "compiled", False
     if compiled_ready():
         return _HINT != "interpreted", False
     _start_background_compile()
