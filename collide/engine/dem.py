@@ -344,27 +344,22 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, 
 
 @jit
 def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST, IV, niv,
-           REC, nrec, record_now):
+           REC, nrec, record_now, out):
     """Forces and torques of every engaged contact (F, T, and by part PT) and the run's contact
     figures, over the listed pairs (PI, PJ) and body-wall pairs (WL: rows k = i * walls + w, i, w); wtabs is
-    the wall table as (materials, 1, columns). Returns (engaged, niv, nrec, IV, REC)."""
+    the wall table as (materials, 1, columns). IV and REC have room for every listed contact
+    (the caller grows them); out is scratch (4,). Returns (engaged, niv, nrec): no array is made
+    or returned here, which at a few bodies costs a step as much as its contacts."""
     record = fl[F_RECORD]
     g0, g1, g2 = grav[0], grav[1], grav[2]
     for a in range(n):
         m = Bd[a, B_M]
         F[a, 0], F[a, 1], F[a, 2] = m * g0, m * g1, m * g2
-    T[:, :] = 0.0
-    PT[:, :] = 0.0
-    out = np.zeros(4)
+        T[a, 0], T[a, 1], T[a, 2] = 0.0, 0.0, 0.0
+        for c in range(PT.shape[1]):
+            PT[a, c] = 0.0
     engaged = 0
     deepest, strongest = FG[G_OVERLAP], FG[G_FORCE]
-    # Room for every listed contact to open and be recorded, so that no array is replaced
-    # inside the loops (that costs reference counting per contact).
-    most = PI.shape[0] + WL.shape[0]
-    if record:
-        IV = grow(IV, niv + most)
-    if record_now:
-        REC = grow(REC, nrec + most)
     for k in range(PI.shape[0]):
         i, j = PI[k], PJ[k]
         dx = X[j, 0] - X[i, 0]
@@ -409,7 +404,7 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
             _record(REC, nrec, t, i, -1 - w, delta, fn, out)
             nrec += 1
     FG[G_OVERLAP], FG[G_FORCE] = deepest, strongest
-    return engaged, niv, nrec, IV, REC
+    return engaged, niv, nrec
 
 
 @jit_inline
@@ -658,8 +653,15 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     X0 = X.copy()
     keys, PI, PJ, hist, WL = _rebuild(X, X0, Bd, WP, WH, n, dim, skin, np.zeros(0, np.int64), np.zeros((0, NH)), ST)
     t = 0.0
-    engaged, niv, nrec, IV, REC = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl,
-                                         0.0, t, n, FG, ST, IV, niv, REC, nrec, record != 0)
+    scratch = np.zeros(4)
+    # IV and REC get room for every listed contact to open and be recorded before forces runs,
+    # so that no array is replaced inside its loops (that costs reference counting per contact);
+    # checked here, as a call returning the arrays costs as much at a few bodies.
+    if record:
+        IV = grow(IV, niv + PI.shape[0] + WL.shape[0])
+        REC = grow(REC, nrec + PI.shape[0] + WL.shape[0])
+    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl,
+                                0.0, t, n, FG, ST, IV, niv, REC, nrec, record != 0, scratch)
     if record:
         KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
         EP = grow(EP, nep)
@@ -712,8 +714,12 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         t = t + h
         steps += 1
         record_now = record != 0 and (t >= next_frame or last)
-        engaged, niv, nrec, IV, REC = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav,
-                                             fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now)
+        if record and niv + PI.shape[0] + WL.shape[0] >= IV.shape[0]:
+            IV = grow(IV, niv + PI.shape[0] + WL.shape[0])
+        if record_now and nrec + PI.shape[0] + WL.shape[0] >= REC.shape[0]:
+            REC = grow(REC, nrec + PI.shape[0] + WL.shape[0])
+        engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav,
+                                    fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now, scratch)
         kinetic = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, True)
         if engaged:
             FG[G_TOUCH] += h
