@@ -238,6 +238,21 @@ def _angular_scale(model: Model, s: np.ndarray, v: np.ndarray, w: np.ndarray) ->
 
 
 def residuals(result: RunResult) -> Residuals:
+    """Relative energy, momentum and angular momentum residuals of a run (B,). Kept on the result
+    for its initial and final states: the run, its summary and the viewer all ask (3 ms each for
+    the viewer's 3D scenes, at every slider change)."""
+    kept = getattr(result, "_residuals", None)
+    if kept is not None and kept[0] is result.initial and kept[1] is result.final:
+        return kept[2]
+    out = _residuals(result)
+    try:
+        result._residuals = (result.initial, result.final, out)
+    except AttributeError:  # a result without room for it (slots): computed each time
+        pass
+    return out
+
+
+def _residuals(result: RunResult) -> Residuals:
     model, a, b = result.model, result.initial, result.final
     c0, c1 = state_conserved(model, a), state_conserved(model, b)
     with np.errstate(divide="ignore", invalid="ignore"):
