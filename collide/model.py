@@ -295,29 +295,30 @@ def select_state(state: State, index: int) -> State:
 def reference_frequency(model: Model) -> np.ndarray:
     """The stiffest single contact's angular frequency (B,): sqrt(k (1/m_i + 1/m_j)) for the
     pair of materials and bodies that maximise it, sqrt(k / m) on a wall. The auto step is
-    omega h over it; an island of several contacts steps by its own (stiffer) frequency."""
-    out = np.zeros(model.batch)
-    for b in range(model.batch):
-        inv = model.inv_mass[b]
-        mats = model.material[b]
-        best = 0.0
-        present = np.unique(mats)
-        top: dict[int, np.ndarray] = {int(m): np.sort(inv[mats == m])[::-1][:2] for m in present}
-        for a in present:
-            for c in present:
-                if a > c:
-                    continue
-                if a == c:
-                    if len(top[int(a)]) < 2:
-                        continue
-                    reduced = top[int(a)][0] + top[int(a)][1]
-                else:
-                    reduced = top[int(a)][0] + top[int(c)][0]
-                best = max(best, model.pair_table[b, a, c, TABLE_K] * reduced)
-            if model.n_walls:
-                best = max(best, model.wall_table[b, a, TABLE_K] * top[int(a)][0])
-        out[b] = np.sqrt(best)
-    return out
+    omega h over it; an island of several contacts steps by its own (stiffer) frequency.
+    Vectorised over the batch (a loop per member was 44 us each, three times a run)."""
+    n_mat = model.pair_table.shape[1]
+    # Each material's two largest inverse masses (B, M, 2); -inf where it has fewer bodies.
+    top = np.full((model.batch, n_mat, 2), -np.inf)
+    for m in range(n_mat):
+        mine = np.where(model.material == m, model.inv_mass, -np.inf)
+        if mine.shape[1] >= 2:
+            largest = -np.partition(-mine, 1, axis=1)[:, :2]
+        else:
+            largest = np.concatenate((mine, np.full((model.batch, 1), -np.inf)), axis=1)
+        top[:, m] = largest
+    best = np.zeros(model.batch)
+    for a in range(n_mat):
+        for c in range(a, n_mat):
+            reduced = top[:, a, 0] + (top[:, a, 1] if a == c else top[:, c, 0])
+            held = np.isfinite(reduced)
+            best = np.maximum(best, np.where(held, model.pair_table[:, a, c, TABLE_K] * np.where(held, reduced, 0.0),
+                                             0.0))
+        if model.n_walls:
+            held = np.isfinite(top[:, a, 0])
+            best = np.maximum(best, np.where(held, model.wall_table[:, a, TABLE_K] * np.where(held, top[:, a, 0], 0.0),
+                                             0.0))
+    return np.sqrt(best)
 
 
 def max_frequency(model: Model) -> np.ndarray:
