@@ -27,8 +27,8 @@ from collide.stepper import (
     Trajectory,
     _pad3,
     approach_bound,
+    run_members,
     unpack_state,
-    watch,
 )
 
 HERTZ_TIME = 2.868  # t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5): Johnson, Contact Mechanics, 11.4
@@ -173,7 +173,7 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
     finals, trajectories, parts = [], [] if record else None, []
     stats = np.zeros((b_count, int(dk.NSTAT)), np.int64)
     figures = np.zeros((b_count, int(dk.NFIG)))
-    wall_time = 0.0
+    members = []
     for b in range(b_count):
         X, V = _pad3(initial.s[b]), _pad3(initial.v[b])
         W = np.zeros((model.n_bodies, 3))
@@ -197,12 +197,14 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
         fp = np.array([dt[b], t_end, rest[b] if np.isfinite(rest[b]) else 0.0, 0.0, frame,
                        SKIN * float(model.radius[b].min()), 0.0, 0.0])
         pair, wall = kernel_tables(model, b)
-        args = (X, V, W, Q, _bodies(model, b), pair, wall, WP, grav, fl, fp)
-        _load_compiled(*args)
-        started = time.perf_counter()
-        with watch(progress, fp, int(dk.P_NOW), t_end, b, b_count):
-            t, WK, KN, REC, IV, EP, st, fg = dk.dem_run(*args)
-        wall_time += time.perf_counter() - started
+        members.append(((X, V, W, Q, _bodies(model, b), pair, wall, WP, grav, fl, fp), t_end))
+    _load_compiled(*members[0][0])
+    started = time.perf_counter()
+    outcomes = run_members(b_count, lambda b: dk.dem_run(*members[b][0]), progress,
+                           [(m[0][-1], int(dk.P_NOW), m[1]) for m in members])
+    wall_time = time.perf_counter() - started
+    for b, (t, WK, KN, REC, IV, EP, st, fg) in enumerate(outcomes):
+        (X, V, W, Q, _, _, _, _, grav, _, _), t_end = members[b]
         if st[dk.S_STATUS] == dk.NONFINITE:
             raise RunError(f"non-finite numbers at t = {fg[dk.G_STATUS_T]:.6g} s: the DEM step is unstable; "
                            "try a smaller dt")

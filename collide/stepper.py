@@ -393,24 +393,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
         return kn.seed_run(G, tables, WP, grav, fl, fp)
 
     started = time.perf_counter()
-    threads = _batch_threads(b_count, progress)
-    if threads > 1:
-        # The compiled kernels release the GIL: members run side by side, each exactly as alone;
-        # every thread takes every threads-th member (one task each: a task per member cost
-        # 40 us of locking).
-        outcomes = [None] * b_count
-
-        def run_share(first: int) -> None:
-            for b in range(first, b_count, threads):
-                outcomes[b] = run_member(b)
-
-        with ThreadPoolExecutor(threads) as pool:
-            list(pool.map(run_share, range(threads)))
-    else:
-        outcomes = []
-        for b in range(b_count):
-            with watch(progress, members[b][5], int(kn.FP_NOW), members[b][6], b, b_count):
-                outcomes.append(run_member(b))
+    outcomes = run_members(b_count, run_member, progress, [(m[5], int(kn.FP_NOW), m[6]) for m in members])
     wall_time = time.perf_counter() - started
     for b, (t, knots, recs, ivals, st, fg) in enumerate(outcomes):
         G = members[b][0]
@@ -445,13 +428,31 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
                      dt_min=dt_min, windows=stats[:, kn.S_WINDOWS].copy())
 
 
-def _batch_threads(b_count: int, progress: Progress | None) -> int:
-    """Threads to run a batch's members on: one per core the process may use, for a batch of
-    compiled runs (interpreted kernels hold the GIL); one when a run reports its progress."""
-    if b_count < 2 or progress is not None or not tier.COMPILED:
-        return 1
+def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Progress | None,
+                watched: list[tuple[np.ndarray, int, float]]) -> list[tuple]:
+    """run_member(b) for every member, in order. A batch of compiled runs goes side by side,
+    one thread per core the process may use (the kernels release the GIL; each member is
+    stepped exactly as alone), every thread taking every threads-th member (a task per member
+    cost 40 us of locking). Interpreted kernels hold the GIL, and a run that reports progress
+    (watched: each member's (fp, index of its time reached, end)) is one member at a time."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return max(1, min(cores, b_count))
+    threads = min(cores, b_count) if progress is None and tier.COMPILED else 1
+    if threads < 2:
+        outcomes = []
+        for b in range(b_count):
+            fp, now, t_end = watched[b]
+            with watch(progress, fp, now, t_end, b, b_count):
+                outcomes.append(run_member(b))
+        return outcomes
+    outcomes: list[tuple] = [()] * b_count
+
+    def run_share(first: int) -> None:
+        for b in range(first, b_count, threads):
+            outcomes[b] = run_member(b)
+
+    with ThreadPoolExecutor(threads) as pool:
+        list(pool.map(run_share, range(threads)))
+    return outcomes
 
 
 _LOADED: set[bool] = set()
