@@ -118,7 +118,7 @@ for _name, _value in list(globals().items()):
 # Contact mechanics of an island
 
 
-@jit
+@jit_inline
 def geometry(X, C, CI, nc, WP, seed):
     """Normals, overlaps, lever arms and spring forces of the engaged contacts at X's positions.
 
@@ -159,7 +159,7 @@ def geometry(X, C, CI, nc, WP, seed):
         C[c, C_FN] = C[c, C_K] * delta
 
 
-@jit
+@jit_inline
 def springs(X, C, CI, na, nc, grav):
     """Accelerations X_A from the springs and gravity."""
     for a in range(na):
@@ -178,7 +178,7 @@ def springs(X, C, CI, na, nc, grav):
             X[a, X_A + d] = X[a, X_FO + d] * X[a, X_IM] + grav[d]
 
 
-@jit
+@jit_inline
 def slip(X, C, CI, c, vc, wc, spin):
     """Slip of i's surface relative to j's (or the wall's) at contact c, at the velocities in
     columns vc, wc: P_t (v_i - v_j) + (l_i w_i + l_j w_j) x n, with the slip lever arms."""
@@ -206,7 +206,7 @@ def slip(X, C, CI, c, vc, wc, spin):
     return sx, sy, sz
 
 
-@jit
+@jit_inline
 def slip_rate(X, C, CI, c, vc, wc, ac, lc, spin, seed, velocity_terms):
     """Rate of change of contact c's tangential slip at velocities (vc, wc) under linear and
     angular accelerations in columns (ac, lc); the hold rate G when those leave out stuck
@@ -275,7 +275,7 @@ def slip_rate(X, C, CI, c, vc, wc, ac, lc, spin, seed, velocity_terms):
     return gx, gy, gz
 
 
-@jit
+@jit_inline
 def response(X, C, CI, c, spin):
     """K: the change of contact c's slip per unit tangential impulse on it, the same in every
     tangent direction for spheres: 1/m_i + 1/m_j + l_i a_i / I_i + l_j a_j / I_j."""
@@ -291,7 +291,7 @@ def response(X, C, CI, c, spin):
     return k
 
 
-@jit
+@jit_inline
 def add_force(X, C, CI, c, fx, fy, fz, ac, lc, spin):
     """Add to columns (ac, lc) the accelerations of friction force f on i (and -f on j) at
     contact c: torques l_i (n x f) on i and l_j (n x f) on j (both arms reach the contact)."""
@@ -318,7 +318,7 @@ def add_force(X, C, CI, c, fx, fy, fz, ac, lc, spin):
             X[j, lc + 2] += s * cz
 
 
-@jit
+@jit_inline
 def set_basis(C, c):
     """Two unit tangents (e1, e2 = n x e1) of contact c's normal; in the z = 0 plane, e1 lies in
     it (a 2D scene's tangent)."""
@@ -333,7 +333,7 @@ def set_basis(C, c):
     C[c, C_B + 3], C[c, C_B + 4], C[c, C_B + 5] = ny * ez - nz * ey, nz * ex - nx * ez, nx * ey - ny * ex
 
 
-@jit
+@jit_inline
 def factor(A, piv, m):
     """LU-factor A[:m, :m] in place with partial pivoting (row swaps in piv). False if singular."""
     for k in range(m):
@@ -356,7 +356,7 @@ def factor(A, piv, m):
     return True
 
 
-@jit
+@jit_inline
 def solve_factored(A, piv, b, m):
     """Solve with the factors from `factor`; b holds the solution."""
     for k in range(m):
@@ -375,7 +375,7 @@ def solve_factored(A, piv, b, m):
         b[k] = s / A[k, k]
 
 
-@jit
+@jit_inline
 def _share(CI, c, a):
     """+1 if body a is contact c's first body, -1 if its second, 0 if neither."""
     if CI[c, CI_I] == a:
@@ -385,7 +385,7 @@ def _share(CI, c, a):
     return 0.0
 
 
-@jit
+@jit_inline
 def couple_block(X, C, CI, c, d, a, spin, A, row, col):
     """Add to A[row:row+2, col:col+2] what a friction force along d's tangents does to c's slip
     rate along c's tangents through their shared body a: a force f on it (sign s_d) moves it by
@@ -412,7 +412,7 @@ def couple_block(X, C, CI, c, d, a, spin, A, row, col):
                                            + rz * C[c, C_B + 3 * alpha + 2])
 
 
-@jit
+@jit_inline
 def hold_matrix(X, C, CI, stuck, m, A, piv, spin):
     """Build and factor W (2m x 2m) for the stuck contacts: block (c, d) is the rate of change of
     c's slip per unit friction force at d; a contact's own block is K times the identity, and
@@ -432,7 +432,7 @@ def hold_matrix(X, C, CI, stuck, m, A, piv, spin):
     return factor(A, piv, 2 * m)
 
 
-@jit
+@jit_inline
 def hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, fresh):
     """Solve W f = b for the stuck contacts `stuck[:m]` (b in tangent coordinates, 2 per contact;
     see `hold_matrix`); with `fresh` W is built and factored here, else the factors in A from the
@@ -459,7 +459,7 @@ def hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, fresh):
     return True
 
 
-@jit
+@jit_inline
 def slide_direction(X, C, CI, c, vc, wc, spin, span):
     """The slip that sliding friction opposes at contact c, for the velocities in (vc, wc).
 
@@ -504,7 +504,7 @@ def slide_direction(X, C, CI, c, vc, wc, spin, span):
     return sx - sn * nx, sy - sn * ny, sz - sn * nz
 
 
-@jit
+@jit_inline
 def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh):
     """Friction forces (C_FF, on body i) of every contact at the velocities in columns (vc, wc),
     by mode, and their accelerations (X_F, X_L); X_A holds everything else's. Stuck contacts'
@@ -561,7 +561,7 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh):
     return True
 
 
-@jit
+@jit_inline
 def kinetic_drop(X, na, vc, wc, vd, wd, spin):
     """Kinetic energy lost going from the velocities in (vc, wc) to those in (vd, wd)."""
     e = 0.0
@@ -573,7 +573,7 @@ def kinetic_drop(X, na, vc, wc, vd, wd, spin):
     return e
 
 
-@jit
+@jit_inline
 def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl):
     """The kicks at one geometry between two Verlet substeps, on (X_V, X_W): the close of one
     (springs over h_end, then friction at the end velocities: implicit) and the opening of the
@@ -645,7 +645,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl):
     return work, True
 
 
-@jit
+@jit_inline
 def settle(X, C, CI, na, nc, stuck, A, b, fl):
     """Put stuck slips on the band's edge, at eps along their held direction (carried onto the
     tangent plane), with the impulses that do exactly that, solved together. Returns (work,
@@ -719,7 +719,7 @@ def turn(q, w0, w1, w2, tau, planar):
     q[3] = dw * d + dx * c - dy * b + dz * a
 
 
-@jit
+@jit_inline
 def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl):
     """One step of h from the start state (X_S0...): a symmetric composition of Verlet
     (kick-drift-kick) substeps gamma h (`weights`); the kicks between two substeps share one
@@ -774,7 +774,7 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl):
 # Friction modes and their events
 
 
-@jit
+@jit_inline
 def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale):
     """Friction mode event values (2C) into E[:, vcol] and their rates into E[:, rcol], in speed
     units over `scale`, at the state in X (geometry in C, X_A set). Slide: |slip| - eps; band:
@@ -911,7 +911,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     return work, ok
 
 
-@jit
+@jit_inline
 def hermite_root(d0, d1, r0, r1):
     """Root in (0, 1) of the cubic Hermite through (0, d0, r0) and (1, d1, r1) (r per step), by
     safeguarded Newton on the cubic, kept inside the bracket."""
@@ -938,7 +938,7 @@ def hermite_root(d0, d1, r0, r1):
     return theta
 
 
-@jit
+@jit_inline
 def bracketed_root(lo, f_lo, hi, f_hi, a, fa, b, fb, c, fc):
     """Next estimate of a root bracketed in [lo, hi] (f_lo >= 0 > f_hi) from the latest three
     trials (c the latest): inverse quadratic interpolation through them, else the secant through
@@ -961,7 +961,7 @@ def bracketed_root(lo, f_lo, hi, f_hi, a, fa, b, fb, c, fc):
 # Bodies in free flight and candidate contacts
 
 
-@jit
+@jit_inline
 def free_state(G, i, t, grav):
     """Position and velocity of body i at time t in free flight from its base state."""
     tau = t - G[i, G_TB]
@@ -985,7 +985,7 @@ def bring(G, i, t, grav, fl):
     G[i, G_TB] = t
 
 
-@jit
+@jit_inline
 def body_pv(G, GI, X, i, t, grav):
     """Body i at time t: from its island's step if it is being stepped, else in free flight."""
     a = GI[i, GI_LOC]
@@ -994,7 +994,7 @@ def body_pv(G, GI, X, i, t, grav):
     return free_state(G, i, t, grav)
 
 
-@jit
+@jit_inline
 def overlap(G, GI, X, Q, QF, k, t, WP, grav):
     """Candidate k's overlap over its touching distance, and that ratio's rate."""
     i, j = Q[k, Q_I], Q[k, Q_J]
@@ -1010,7 +1010,7 @@ def overlap(G, GI, X, Q, QF, k, t, WP, grav):
     return (reach - h) / reach, -(ux * WP[w, 3] + uy * WP[w, 4] + uz * WP[w, 5]) / reach
 
 
-@jit
+@jit_inline
 def engaged(Q, k, d, r, WP, grav):
     """A contact is engaged when pressing, or touching and approaching (or, on a wall, resting
     with gravity pressing it in), or touching and not separating if it was engaged already (a
@@ -1305,7 +1305,7 @@ def gather(G, GI, X, XI, C, CI, Q, QF, nq, bodies_params):
     return na, nc
 
 
-@jit
+@jit_inline
 def island_omega(X, C, CI, na, nc):
     """The stiffest frequency of the engaged contacts: exact for one contact, otherwise a
     Gershgorin bound on the mass-symmetrised stiffness matrix (rows k/m_i + k/sqrt(m_i m_j))."""
@@ -1329,7 +1329,7 @@ def island_omega(X, C, CI, na, nc):
     return math.sqrt(top)
 
 
-@jit
+@jit_inline
 def energy(X, C, na, nc, grav, spin):
     """Kinetic, rotational, gravitational and spring energy of the island's stepped bodies."""
     e = 0.0
@@ -1343,7 +1343,7 @@ def energy(X, C, na, nc, grav, spin):
     return e
 
 
-@jit
+@jit_inline
 def slip_turn(X, C, CI, nc, fl):
     """The largest angle (rad) a sliding contact's slip turned by over the step just taken, seen
     in the contact's frame: from its direction at the step's start (held, carried onto the end's
@@ -1364,7 +1364,7 @@ def slip_turn(X, C, CI, nc, fl):
     return top
 
 
-@jit
+@jit_inline
 def stiff_slide(X, C, CI, nc, dt, spin):
     """Whether a sliding contact's slip is within STIFF_SLIDE_IMPULSES steps' friction impulse
     (|slip| < n mu F_n K dt): there, out of the plane, its direction is slaved to the other
@@ -1380,7 +1380,7 @@ def stiff_slide(X, C, CI, nc, dt, spin):
     return False
 
 
-@jit
+@jit_inline
 def mode_dip(E, modes, frac, h_full, passed):
     """Where (a fraction of h_full) a mode value positive at both ends of a trial step of `frac`
     first goes below zero on the cubic Hermite through its values and closed-form rates: a
