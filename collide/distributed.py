@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from collide.batch import BatchError, ChunkResult, ChunkSettings, RunSpec, failure_row, run_chunk
+from collide.stepper import THREADS_VARIABLE
 
 CONNECT_TIMEOUT_S = 5.0  # an unreachable address fails within this, not after minutes
 WORKER_WAIT_S = 30.0  # a scheduler without workers: how long to wait for the first one
@@ -144,12 +145,16 @@ def connect(address: str, *, workers: int | None = None, threads: int | None = N
 def dask_setup(worker: Any) -> None:
     """Run by Dask in each worker process of `--scheduler local` (a preload): Ctrl-C in the
     terminal reaches the whole process group, but it is the client's to handle (it keeps the
-    finished chunks and closes the cluster); a worker that took it too would print a traceback."""
+    finished chunks and closes the cluster); a worker that took it too would print a traceback.
+    Its batches step their members one after another: the local cluster is shaped to the cores
+    already (workers x threads), and each of its tasks stepping on every core too would
+    oversubscribe them."""
     import signal
     import threading
 
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+    os.environ[THREADS_VARIABLE] = "1"
 
 
 def _reach(address: str, timeout: float) -> None:

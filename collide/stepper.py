@@ -34,6 +34,9 @@ EDGE_TOL = float(kn.EDGE_TOL)
 # simulated time reached, simulated end (inf if open), steps so far, seconds since it started).
 Progress = Callable[[int, int, float, float, int, float], None]
 PROGRESS_PERIOD = 0.25
+# At most this many threads step a batch's members (default: every core the process may use);
+# a Dask worker sets 1, its cluster being shaped to the cores already.
+THREADS_VARIABLE = "COLLIDE_THREADS"
 
 
 @contextmanager
@@ -433,9 +436,13 @@ def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Prog
     """run_member(b) for every member, in order. A batch of compiled runs goes side by side,
     one thread per core the process may use (the kernels release the GIL; each member is
     stepped exactly as alone), every thread taking every threads-th member (a task per member
-    cost 40 us of locking). Interpreted kernels hold the GIL, and a run that reports progress
-    (watched: each member's (fp, index of its time reached, end)) is one member at a time."""
+    cost 40 us of locking; COLLIDE_THREADS caps the threads). Interpreted kernels hold the GIL,
+    and a run that reports progress (watched: each member's (fp, index of its time reached,
+    end)) is one member at a time."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    cap = os.environ.get(THREADS_VARIABLE, "")
+    if cap.isdigit() and int(cap) > 0:
+        cores = min(cores, int(cap))
     threads = min(cores, b_count) if progress is None and tier.COMPILED else 1
     if threads < 2:
         outcomes = []

@@ -444,3 +444,33 @@ def test_a_sweep_too_large_for_memory_is_refused_before_it_is_built() -> None:
     sweeps = [parse_sweep("contact.mu=0:1:10000"), parse_sweep("contact.k=1000:2000:10000")]
     with pytest.raises(BatchError, match="1e\\+08 runs"):
         plan_batch(["demo-bonus"], sweeps=sweeps)
+
+
+def test_batch_members_run_side_by_side_unless_capped(monkeypatch):
+    """Compiled members go one thread per core, every member's outcome in its place;
+    COLLIDE_THREADS=1 (set in Dask workers) and a progress display keep them on one thread."""
+    import threading
+
+    from collide.engine import tier
+    from collide.stepper import run_members
+
+    monkeypatch.setattr(tier, "COMPILED", True)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    seen: list[int] = []
+
+    def member(b: int) -> tuple:
+        seen.append(threading.get_ident())
+        time.sleep(0.02)  # long enough that both threads take members
+        return (b,)
+
+    watched = [(np.zeros(8), 6, 1.0)] * 6
+    assert run_members(6, member, None, watched) == [(b,) for b in range(6)]
+    assert len(set(seen)) == 2
+    seen.clear()
+    monkeypatch.setenv("COLLIDE_THREADS", "1")
+    assert run_members(6, member, None, watched) == [(b,) for b in range(6)]
+    assert len(set(seen)) == 1
+    seen.clear()
+    monkeypatch.delenv("COLLIDE_THREADS")
+    assert run_members(6, member, lambda *args: None, watched) == [(b,) for b in range(6)]
+    assert len(set(seen)) == 1
