@@ -22,10 +22,10 @@ def accuracy(
     repeats: Annotated[int, typer.Option(help="Timed repeats per point (median).", min=1)] = 3,
     budget: Annotated[float, typer.Option(help="Stop an integrator's ladder after a run this long (s).")] = 2.0,
     plot: Annotated[
-        Path | None, typer.Option(help="Work-precision PNG [default: recordings/<scene>-accuracy.png].")
+        Path | None, typer.Option(help="Work-precision PNG.", show_default="recordings/<scene>-accuracy.png")
     ] = None,
     out: Annotated[
-        Path | None, typer.Option(help="Rerun recording [default: recordings/<scene>-accuracy.rrd].")
+        Path | None, typer.Option(help="Rerun recording.", show_default="recordings/<scene>-accuracy.rrd")
     ] = None,
     json_: Annotated[bool, typer.Option("--json", help="Print the table as JSON.")] = False,
 ) -> None:

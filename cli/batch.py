@@ -118,9 +118,12 @@ def batch(
     for note in result.notes[len(plan.notes):]:
         typer.echo(f"note: {note}", err=True)
     per_run = result.wall_time_s / result.ran if result.ran else 0.0
-    skipped = f", {result.skipped} already in the summary" if result.skipped else ""
-    typer.echo(f"{total} runs: {result.ran} run in {result.wall_time_s:.3g} s ({per_run * 1e3:.3g} ms each)"
-               f"{skipped}, {result.failed} failed")
+    timing = f"in {result.wall_time_s:.3g} s ({per_run * 1e3:.3g} ms each)"
+    if result.skipped:
+        done = f"{total} runs: {result.ran} {timing}, {result.skipped} already in the summary"
+    else:
+        done = f"{total} runs {timing}"
+    typer.echo(f"{done}, {result.failed} failed")
     for row in [r for r in result.rows if r.get("error")][:5]:
         typer.echo(f"  failed: run {row['run_id']} ({row['scene']}): {row['error']}")
     if vary:

@@ -31,13 +31,13 @@ SetOption = Annotated[
                  "(repeatable; TOML values; bodies by name; vector components as .x/.y/.z)."),
 ]
 IntegratorOption = Annotated[
-    str | None, typer.Option(help="seed (the report's update), verlet, yoshida4 or kahan6 [default: the scene's].")
+    str | None, typer.Option(help="seed (the report's update), verlet, yoshida4 or kahan6.", show_default="the scene's")
 ]
-DtOption = Annotated[str | None, typer.Option(help="Time step in seconds, or 'auto' [default: the scene's].")]
+DtOption = Annotated[str | None, typer.Option(help="Time step in seconds, or 'auto'.", show_default="the scene's")]
 TolOption = Annotated[
     float | None,
     typer.Option(help="With --dt auto: the error allowed in the final velocities and spins, relative to "
-                 "the fastest initial speed [default: the scene's, 1e-6]."),
+                 "the fastest initial speed.", show_default="the scene's, 1e-6"),
 ]
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 from pathlib import Path
@@ -81,11 +82,11 @@ def run(
     json_: Annotated[bool, typer.Option("--json", help="Print the JSON summary (DESIGN section 4) only.")] = False,
     csv: Annotated[Path | None, typer.Option(help="Write the report's CSV columns to this file.")] = None,
     csv_every: Annotated[float | None, typer.Option(
-        help="CSV row interval in seconds [default: 100 steps, as the report printed]")] = None,
+        help="CSV row interval in seconds.", show_default="100 steps, as the report printed")] = None,
     csv_layout: Annotated[str, typer.Option(
         help="'aligned' (every column at the row's time) or 'report' (the report program's own "
         "output: positions one step ahead, %f numbers)")] = "aligned",
-    out: Annotated[Path | None, typer.Option(help="Recording file [default: recordings/<scene>.rrd].")] = None,
+    out: Annotated[Path | None, typer.Option(help="Recording file.", show_default="recordings/<scene>.rrd")] = None,
     no_record: Annotated[bool, typer.Option("--no-record", help="Do not write a recording.")] = False,
     stride: Annotated[int, typer.Option(help="Record every n-th contact step.", min=1)] = 1,
     spawn: Annotated[bool, typer.Option(help="Open the recording in the Rerun viewer.")] = False,
@@ -186,6 +187,17 @@ def _register_optional() -> None:
                 raise
             continue
         mod.register(app)
+    _one_line_summaries()
+
+
+def _one_line_summaries() -> None:
+    """Each command's line in `collide --help` is its docstring's first paragraph as one
+    sentence: typer keeps the docstring's line breaks there (issue 12: sentences broken in the
+    command list); a command's own --help reflows them."""
+    for info in app.registered_commands:
+        if info.short_help is None and info.help is None and info.callback is not None:
+            doc = inspect.getdoc(info.callback) or ""
+            info.short_help = " ".join(doc.split("\n\n")[0].split())
 
 
 _register_optional()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import select
 import signal
 import subprocess
@@ -251,6 +252,9 @@ def test_cli_sweep_prints_paths_and_writes_rows(tmp_path: Path, monkeypatch: pyt
     out, err = capsys.readouterr()
     assert "summary: recordings/batch-summary.csv" in out and "recordings: rrd/ (3 written)" in out
     assert "runs: 3/3" in err  # progress on stderr
+    # One sentence a reader can take in: "3 runs in 0.1 s (33 ms each), 0 failed" (issue 12:
+    # it read "3 runs: 3 run in").
+    assert re.search(r"^3 runs in [0-9.e+-]+ s \([0-9.e+-]+ ms each\), 0 failed$", out, re.M), out
     header, rows = read_summary(tmp_path / "recordings" / "batch-summary.csv")
     assert header[:3] == ["run_id", "scene", "contact.k"] and "ball1.velocity.x" in header
     assert [r["contact.k"] for r in rows] == ["1000.0", "1500.0", "2000.0"]
