@@ -321,8 +321,13 @@ def test_an_energy_balance_far_off_the_tolerance_is_a_warning():
 
 def test_engine_buffers_grow_to_any_row_asked_for():
     """An island opening more contacts at once than a buffer's doubling gave room for wrote past
-    its end (a 64-sphere drop on a floor aborted the process): growth reaches the row asked for."""
-    for grow, dtype in ((kernels.grow, float), (kernels.grow_int, np.int64)):
+    its end (a 64-sphere drop on a floor aborted the process): growth reaches the row asked for.
+    The rule is checked as Python source (`py_func` when compiled): the kernels call it inside
+    compiled code, and calling this helper's compiled dispatcher from Python, after a run has
+    loaded the kernels that use it from numba's cache, fails in numba's boxing ("'descr' is
+    NULL") on a freshly warmed cache."""
+    for kernel, dtype in ((kernels.grow, float), (kernels.grow_int, np.int64)):
+        grow = getattr(kernel, "py_func", kernel)
         buf = np.arange(64, dtype=dtype).reshape(16, 4)
         out = grow(buf, 500)
         assert out.shape[0] > 500 and out.shape[1] == 4
