@@ -298,26 +298,19 @@ def reference_frequency(model: Model) -> np.ndarray:
     omega h over it; an island of several contacts steps by its own (stiffer) frequency.
     Vectorised over the batch (a loop per member was 44 us each, three times a run)."""
     n_mat = model.pair_table.shape[1]
-    # Each material's two largest inverse masses (B, M, 2); -inf where it has fewer bodies.
-    top = np.full((model.batch, n_mat, 2), -np.inf)
+    # Each material's two largest inverse masses (B, M, 2); NaN where it has fewer bodies, which
+    # np.fmax passes over (a pair that does not exist sets no frequency).
+    top = np.full((model.batch, n_mat, 2), np.nan)
+    pick = min(2, model.n_bodies)
     for m in range(n_mat):
-        mine = np.where(model.material == m, model.inv_mass, -np.inf)
-        if mine.shape[1] >= 2:
-            largest = -np.partition(-mine, 1, axis=1)[:, :2]
-        else:
-            largest = np.concatenate((mine, np.full((model.batch, 1), -np.inf)), axis=1)
-        top[:, m] = largest
+        mine = np.where(model.material == m, model.inv_mass, np.nan)
+        top[:, m, :pick] = -np.partition(-mine, pick - 1, axis=1)[:, :pick]  # NaN sorts last
     best = np.zeros(model.batch)
     for a in range(n_mat):
         for c in range(a, n_mat):
-            reduced = top[:, a, 0] + (top[:, a, 1] if a == c else top[:, c, 0])
-            held = np.isfinite(reduced)
-            best = np.maximum(best, np.where(held, model.pair_table[:, a, c, TABLE_K] * np.where(held, reduced, 0.0),
-                                             0.0))
+            best = np.fmax(best, model.pair_table[:, a, c, TABLE_K] * (top[:, a, 0] + top[:, c, 1 if a == c else 0]))
         if model.n_walls:
-            held = np.isfinite(top[:, a, 0])
-            best = np.maximum(best, np.where(held, model.wall_table[:, a, TABLE_K] * np.where(held, top[:, a, 0], 0.0),
-                                             0.0))
+            best = np.fmax(best, model.wall_table[:, a, TABLE_K] * top[:, a, 0])
     return np.sqrt(best)
 
 

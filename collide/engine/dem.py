@@ -657,9 +657,10 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     # IV and REC get room for every listed contact to open and be recorded before forces runs,
     # so that no array is replaced inside its loops (that costs reference counting per contact);
     # checked here, as a call returning the arrays costs as much at a few bodies.
+    most = PI.shape[0] + WL.shape[0]
     if record:
-        IV = grow(IV, niv + PI.shape[0] + WL.shape[0])
-        REC = grow(REC, nrec + PI.shape[0] + WL.shape[0])
+        IV = grow(IV, niv + most)
+        REC = grow(REC, nrec + most)
     engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl,
                                 0.0, t, n, FG, ST, IV, niv, REC, nrec, record != 0, scratch)
     if record:
@@ -714,10 +715,11 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         t = t + h
         steps += 1
         record_now = record != 0 and (t >= next_frame or last)
-        if record and niv + PI.shape[0] + WL.shape[0] >= IV.shape[0]:
-            IV = grow(IV, niv + PI.shape[0] + WL.shape[0])
-        if record_now and nrec + PI.shape[0] + WL.shape[0] >= REC.shape[0]:
-            REC = grow(REC, nrec + PI.shape[0] + WL.shape[0])
+        most = PI.shape[0] + WL.shape[0]  # the lists may have been rebuilt
+        if record and niv + most >= IV.shape[0]:
+            IV = grow(IV, niv + most)
+        if record_now and nrec + most >= REC.shape[0]:
+            REC = grow(REC, nrec + most)
         engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav,
                                     fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now, scratch)
         kinetic = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, True)
