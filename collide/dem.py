@@ -203,6 +203,7 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
     outcomes = run_members(b_count, lambda b: dk.dem_run(*members[b][0]), progress,
                            [(m[0][-1], int(dk.P_NOW), m[1]) for m in members])
     wall_time = time.perf_counter() - started
+    body_tables = np.zeros((b_count, model.n_bodies, int(kn.NG)))
     for b, (t, WK, KN, REC, IV, EP, st, fg) in enumerate(outcomes):
         (X, V, W, Q, _, _, _, _, grav, _, _), t_end = members[b]
         if st[dk.S_STATUS] == dk.NONFINITE:
@@ -214,25 +215,22 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
             X += V * tail[b] + 0.5 * grav * tail[b] ** 2  # free flight after the last contact
             V += grav * tail[b]
             t += tail[b]
-        G = np.zeros((model.n_bodies, int(kn.NG)))
+        G = body_tables[b]
         G[:, kn.G_S:kn.G_S + 3], G[:, kn.G_V:kn.G_V + 3] = X, V
         G[:, kn.G_W:kn.G_W + 3], G[:, kn.G_Q:kn.G_Q + 4] = W, Q
         if model.spin_dim == 1:
             G[:, kn.G_Q] = Q[:, 0]
-        finals.append((t, G, float(WK.sum()), float(fg[dk.G_STORED])))
+        finals.append((t, float(WK.sum()), float(fg[dk.G_STORED])))
         stats[b], figures[b] = st, fg
         parts.append(EP)
         if record:
             traj = Trajectory(KN, REC, IV, select_model(model, b))
             traj.energy_parts = EP
             trajectories.append(traj)
-    unpacked = [unpack_state(model, G, t) for t, G, _, _ in finals]
-    final = State(np.array([f[0] for f in finals]), np.stack([p[0] for p in unpacked]),
-                  np.stack([p[1] for p in unpacked]), np.stack([p[2] for p in unpacked]),
-                  np.stack([p[3] for p in unpacked]),
+    final = State(np.array([f[0] for f in finals]), *unpack_state(model, body_tables),
                   # The kernel's friction work includes what the tangential springs still hold:
                   # that is elastic energy (State.stored), not dissipated.
-                  initial.work + np.array([f[2] - f[3] for f in finals]), np.array([f[3] for f in finals]))
+                  initial.work + np.array([f[1] - f[2] for f in finals]), np.array([f[2] for f in finals]))
     log = ContactLog(figures[:, dk.G_FIRST].copy(), figures[:, dk.G_LAST].copy(), figures[:, dk.G_TOUCH].copy(),
                      figures[:, dk.G_OVERLAP].copy(), stats[:, dk.S_CONTACTS].copy(), figures[:, dk.G_FORCE].copy())
     result = RunResult(model=model, initial=initial, final=final, integrator="dem", dt=dt.copy(),

@@ -297,44 +297,44 @@ def _pad3(x: np.ndarray) -> np.ndarray:
     return out
 
 
-def kernel_inputs(model: Model, state: State, b: int) -> tuple:
-    """Member b's body table G, contact tables and walls, gravity, as the kernels take them."""
-    n = model.n_bodies
-    G = np.zeros((n, int(kn.NG)))
-    G[:, kn.G_S:kn.G_S + 3] = _pad3(state.s[b])
-    G[:, kn.G_V:kn.G_V + 3] = _pad3(state.v[b])
+def kernel_inputs(model: Model, state: State) -> tuple:
+    """The batch's body tables G (B, N, NG), walls WP (N_W, 6) and gravity (B, 3), as the kernels
+    take them (member b: G[b], its contact tables model.pair_table[b], model.wall_table[b])."""
+    b_count, n = model.batch, model.n_bodies
+    G = np.zeros((b_count, n, int(kn.NG)))
+    G[..., kn.G_S:kn.G_S + 3] = _pad3(state.s)
+    G[..., kn.G_V:kn.G_V + 3] = _pad3(state.v)
     if model.spin_dim == 1:
-        G[:, kn.G_W + 2] = state.w[b, :, 0]
-        G[:, kn.G_Q] = state.q[b, :, 0]
+        G[..., kn.G_W + 2] = state.w[..., 0]
+        G[..., kn.G_Q] = state.q[..., 0]
     elif model.spin_dim == 3:
-        G[:, kn.G_W:kn.G_W + 3] = state.w[b]
-        G[:, kn.G_Q:kn.G_Q + 4] = state.q[b]
-    G[:, kn.G_TB] = state.t[b]
-    G[:, kn.G_IM] = model.inv_mass[b]
-    G[:, kn.G_II] = model.inv_inertia[b] if model.spin_dim else 0.0
-    G[:, kn.G_R] = model.radius[b]
-    G[:, kn.G_M] = model.mass[b]
-    G[:, kn.G_I] = model.inertia[b]
-    G[:, kn.G_MAT] = model.material[b]
-    tables = (np.ascontiguousarray(model.pair_table[b]), np.ascontiguousarray(model.wall_table[b]))
+        G[..., kn.G_W:kn.G_W + 3] = state.w
+        G[..., kn.G_Q:kn.G_Q + 4] = state.q
+    G[..., kn.G_TB] = state.t[:, None]
+    G[..., kn.G_IM] = model.inv_mass
+    G[..., kn.G_II] = model.inv_inertia if model.spin_dim else 0.0
+    G[..., kn.G_R] = model.radius
+    G[..., kn.G_M] = model.mass
+    G[..., kn.G_I] = model.inertia
+    G[..., kn.G_MAT] = model.material
     WP = np.zeros((model.n_walls, 6))
     if model.n_walls:
         WP[:, :3] = _pad3(model.wall_point)
         WP[:, 3:] = _pad3(model.wall_normal)
-    grav = _pad3(model.gravity[b]) if model.gravity is not None else np.zeros(3)
-    return G, tables, WP, grav
+    grav = _pad3(model.gravity) if model.gravity is not None else np.zeros((b_count, 3))
+    return G, WP, grav
 
 
-def unpack_state(model: Model, G: np.ndarray, t: float) -> tuple:
-    """s, v, w, q of one member from its final body table."""
+def unpack_state(model: Model, G: np.ndarray) -> tuple:
+    """s, v, w, q of the members from their final body tables G (B, N, NG)."""
     d = model.dim
-    s, v = G[:, kn.G_S:kn.G_S + d].copy(), G[:, kn.G_V:kn.G_V + d].copy()
+    s, v = G[..., kn.G_S:kn.G_S + d].copy(), G[..., kn.G_V:kn.G_V + d].copy()
     if model.spin_dim == 1:
-        w, q = G[:, kn.G_W + 2:kn.G_W + 3].copy(), G[:, kn.G_Q:kn.G_Q + 1].copy()
+        w, q = G[..., kn.G_W + 2:kn.G_W + 3].copy(), G[..., kn.G_Q:kn.G_Q + 1].copy()
     elif model.spin_dim == 3:
-        w, q = G[:, kn.G_W:kn.G_W + 3].copy(), G[:, kn.G_Q:kn.G_Q + 4].copy()
+        w, q = G[..., kn.G_W:kn.G_W + 3].copy(), G[..., kn.G_Q:kn.G_Q + 4].copy()
     else:
-        w, q = np.zeros((model.n_bodies, 0)), np.zeros((model.n_bodies, 0))
+        w, q = np.zeros(G.shape[:2] + (0,)), np.zeros(G.shape[:2] + (0,))
     return s, v, w, q
 
 
@@ -369,60 +369,63 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     tail = np.full(b_count, np.nan) if tail is None else np.asarray(tail, dtype=float)
     event_tol = np.broadcast_to(np.asarray(event_tol, dtype=float), (b_count,))
     weights = np.asarray(integ.weights, dtype=float)
-    finals = []
     trajectories = [] if record else None
     stats = np.zeros((b_count, int(kn.NS)), np.int64)
     figures = np.zeros((b_count, int(kn.NF)))
-    logs = np.zeros((b_count, 5))
-    members = []
-    for b in range(b_count):
-        G, tables, WP, grav = kernel_inputs(model, initial, b)
-        spin = model.spin_dim > 0
-        friction = bool(model.friction and model.mu[b] > 0 and model.dim > 1)
-        fl = np.array([spin, friction, model.seed_lever, model.dim < 3, record, bool(auto[b]) and integ.events,
-                       max_steps, model.dim, friction and not moves_in_a_plane(model, initial, b)], dtype=np.int64)
-        speed = max(float(np.sqrt((initial.v[b] ** 2).sum(-1)).max()), 10 * float(model.eps[b]) + 1e-300)
-        t_end = duration[b] if np.isfinite(duration[b]) else np.inf
-        # Closing speeds under 1e-9 of the fastest are round-off, not an approach.
-        fp = np.array([dt[b], omega_h[b], t_end, tail[b], speed * event_tol[b] / EDGE_TOL, 1e-9 * speed, 0.0, 0.0])
-        members.append((G, tables, WP, grav, fl, fp, t_end))
-    G, tables, WP, grav, fl, fp, _ = members[0]
-    _load_compiled(integ.events, G, tables, WP, grav, weights, fl, fp)  # loading is not simulating
+    # The members' tables, built for the whole batch at once (per member they cost as much Python
+    # as a small member's run).
+    G, WP, grav = kernel_inputs(model, initial)
+    spin = model.spin_dim > 0
+    friction = model.friction & (model.mu > 0) & (model.dim > 1)
+    turns = friction & ~np.array([moves_in_a_plane(model, initial, b) if friction[b] and model.dim == 3 else True
+                                  for b in range(b_count)])
+    fl = np.zeros((b_count, int(kn.NFL)), np.int64)
+    fl[:, kn.FL_SPIN], fl[:, kn.FL_FRICTION], fl[:, kn.FL_SEED] = spin, friction, model.seed_lever
+    fl[:, kn.FL_PLANAR], fl[:, kn.FL_RECORD], fl[:, kn.FL_AUTO] = model.dim < 3, record, auto & integ.events
+    fl[:, kn.FL_MAXSTEPS], fl[:, kn.FL_DIM], fl[:, kn.FL_TURNS] = max_steps, model.dim, turns
+    speed = np.maximum(np.sqrt((initial.v ** 2).sum(-1)).max(-1), 10 * model.eps + 1e-300)
+    t_end = np.where(np.isfinite(duration), duration, np.inf)
+    fp = np.zeros((b_count, int(kn.NFP)))
+    fp[:, kn.FP_DT], fp[:, kn.FP_OMEGA_H], fp[:, kn.FP_TEND], fp[:, kn.FP_TAIL] = dt, omega_h, t_end, tail
+    fp[:, kn.FP_SCALE] = speed * event_tol / EDGE_TOL
+    fp[:, kn.FP_SLOW] = 1e-9 * speed  # closing speeds under 1e-9 of the fastest are round-off, not an approach
+    # Contiguous already (stacked per scene); a strided view would compile the kernel anew.
+    tables = [(np.ascontiguousarray(model.pair_table[b]), np.ascontiguousarray(model.wall_table[b]))
+              for b in range(b_count)]
+    _load_compiled(integ.events, G[0], tables[0], WP, grav[0], weights, fl[0], fp[0])  # loading is not simulating
 
     def run_member(b: int) -> tuple:
-        G, tables, WP, grav, fl, fp, _ = members[b]
         if integ.events:
-            return kn.simulate(G, tables, WP, grav, weights, fl, fp)
-        return kn.seed_run(G, tables, WP, grav, fl, fp)
+            return kn.simulate(G[b], tables[b], WP, grav[b], weights, fl[b], fp[b])
+        return kn.seed_run(G[b], tables[b], WP, grav[b], fl[b], fp[b])
 
     started = time.perf_counter()
-    outcomes = run_members(b_count, run_member, progress, [(m[5], int(kn.FP_NOW), m[6]) for m in members])
+    outcomes = run_members(b_count, run_member, progress, [(fp[b], int(kn.FP_NOW), t_end[b]) for b in range(b_count)])
     wall_time = time.perf_counter() - started
-    for b, (t, knots, recs, ivals, st, fg) in enumerate(outcomes):
-        G = members[b][0]
+    t_final = np.zeros(b_count)
+    ivals = []
+    for b, (t, knots, recs, ival, st, fg) in enumerate(outcomes):
         _check_status(model, b, st, fg, dt, integ)
-        finals.append((t, G, float(G[:, kn.G_WK].sum())))
+        t_final[b] = t
         stats[b], figures[b] = st, fg
-        logs[b] = _contact_log(ivals, t)
+        ivals.append(ival)
         if record:
-            trajectories.append(Trajectory(knots, recs, ivals, select_model(model, b)))
+            trajectories.append(Trajectory(knots, recs, ival, select_model(model, b)))
+    logs = contact_logs(ivals, t_final)
     for b in np.flatnonzero(stats[:, kn.S_UNLOCATED]):
         member = f"run {b}: " if b_count > 1 else ""
         count = int(stats[b, kn.S_UNLOCATED])
         warnings.append(f"{member}{count} step(s) ran out of trials locating an event (first at t = "
                         f"{figures[b, kn.F_UNLOCATED_T]:.6g} s) and may have passed it: the outcome can be off "
                         "by more than its error estimate; try another --tol")
-    parts = [unpack_state(model, G, t) for t, G, _ in finals]
-    final = State(np.array([t for t, _, _ in finals]), np.stack([p[0] for p in parts]),
-                  np.stack([p[1] for p in parts]), np.stack([p[2] for p in parts]),
-                  np.stack([p[3] for p in parts]), initial.work + np.array([w for _, _, w in finals]))
+    final = State(t_final, *unpack_state(model, G), initial.work + G[..., kn.G_WK].sum(-1))
     if integ.events:
         max_force = figures[:, kn.F_MAX_FORCE].copy()
     elif not model.n_walls:  # the seed's grid: pairs only, each a spring k_pair delta
         max_force = model.pair_table[:, 0, 0, 0] * figures[:, kn.F_MAX_OVERLAP]
     else:
         max_force = np.full(b_count, np.nan)
-    log = ContactLog(logs[:, 0], logs[:, 1], logs[:, 2], logs[:, 3] * 0 + figures[:, kn.F_MAX_OVERLAP],
+    log = ContactLog(logs[:, 0], logs[:, 1], logs[:, 2], figures[:, kn.F_MAX_OVERLAP].copy(),
                      stats[:, kn.S_CONTACTS].copy(), max_force)
     dt_min = np.where(np.isfinite(figures[:, kn.F_DT_MIN]), figures[:, kn.F_DT_MIN], dt)
     return RunResult(model=model, initial=initial, final=final, integrator=integrator, dt=dt,
@@ -478,21 +481,25 @@ def _load_compiled(events: bool, *args) -> None:
     _LOADED.add(events)
 
 
-def _contact_log(ivals: np.ndarray, t_end: float) -> np.ndarray:
-    """first start, last end, time with any contact engaged, (overlap filled in later), count."""
-    if not len(ivals):
-        return np.array([np.nan, np.nan, 0.0, 0.0, 0.0])
-    start, end = ivals[:, kn.V_START], np.where(np.isnan(ivals[:, kn.V_END]), t_end, ivals[:, kn.V_END])
-    order = np.argsort(start)
-    total, cur_a, cur_b = 0.0, start[order[0]], end[order[0]]
-    for a, b in zip(start[order[1:]], end[order[1:]]):
-        if a > cur_b:
-            total += cur_b - cur_a
-            cur_a, cur_b = a, b
-        else:
-            cur_b = max(cur_b, b)
-    total += cur_b - cur_a
-    return np.array([start.min(), end.max(), total, 0.0, float(len(ivals))])
+def contact_logs(ivals: list[np.ndarray], t_end: np.ndarray) -> np.ndarray:
+    """Each member's (B, 3) first contact start, last end (an open one ends at t_end) and time
+    with any contact engaged (the union of its intervals)."""
+    out = np.zeros((len(ivals), 3))
+    out[:, :2] = np.nan
+    for b, iv in enumerate(ivals):
+        if len(iv) == 1:  # a sweep's usual member: plain floats (numpy calls cost 10 us a member)
+            start, end = float(iv[0, kn.V_START]), float(iv[0, kn.V_END])
+            end = float(t_end[b]) if math.isnan(end) else end
+            out[b] = start, end, end - start
+        elif len(iv):
+            start, end = iv[:, kn.V_START], np.where(np.isnan(iv[:, kn.V_END]), t_end[b], iv[:, kn.V_END])
+            order = np.argsort(start, kind="stable")
+            s, e = start[order], end[order]
+            # Each interval adds what reaches past the ends of those that started before it.
+            reached = np.maximum.accumulate(e)[:-1]
+            added = np.maximum(e[1:] - np.maximum(s[1:], reached), 0.0)
+            out[b] = start.min(), end.max(), (e[0] - s[0]) + added.sum()
+    return out
 
 
 def _check_status(model: Model, b: int, st: np.ndarray, fg: np.ndarray, dt: np.ndarray, integ: Integrator) -> None:

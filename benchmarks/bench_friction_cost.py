@@ -1,0 +1,71 @@
+"""What friction costs the event engine (issue 9: the billiards break with mu = 0.1 against the
+frictionless one; issue 10: a ball set down sliding on a floor against demo-bonus). Each run is
+timed twice: the kernel alone (`wall_time_s` of a run whose error is not measured) and as
+`collide run` does it (error measured where the model does not cover it). Runs of the scenes
+alternate within one process, the compiled kernels loaded first; prints medians and ratios,
+never asserts.
+
+    python benchmarks/bench_friction_cost.py [--repeat 7] [--tol 1e-6]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+from collide.run import run_scene
+from collide.scene import load_scene, parse_scene
+
+
+def rolling_ball(tol: float):
+    """A ball (m 0.1 kg, r 0.05 m, k 1e7 N/m, mu 0.3) set down touching a floor, sliding at 1 m/s."""
+    return parse_scene({
+        "name": "rolling-ball", "dim": 3, "dt": "auto", "integrator": "kahan6", "tol": tol, "duration": 0.5,
+        "gravity": [0.0, 0.0, -9.81], "contact": {"k": 1e7, "mu": 0.3},
+        "wall": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}],
+        "body": [{"name": "ball", "mass": 0.1, "radius": 0.05, "position": [0.0, 0.0, 0.05],
+                  "velocity": [1.0, 0.0, 0.0]}],
+    })
+
+
+def timed(scene, measure: bool) -> tuple[float, float, int]:
+    """(kernel seconds, whole call seconds, steps) of one run."""
+    start = time.perf_counter()
+    run = run_scene(scene, record=False, measure=measure)
+    whole = time.perf_counter() - start
+    return run.result.wall_time_s, whole, int(run.result.steps[0])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=7)
+    parser.add_argument("--tol", type=float, default=1e-6)
+    args = parser.parse_args()
+    cases = {
+        "billiards-break mu = 0.1": load_scene("billiards-break", [f"tol={args.tol}"]),
+        "billiards-break mu = 0": load_scene("billiards-break", [f"tol={args.tol}", "contact.mu=0"]),
+        "rolling ball, 0.5 s": rolling_ball(args.tol),
+        "demo-bonus": load_scene("demo-bonus"),
+    }
+    for scene in cases.values():
+        timed(scene, True)  # load the compiled kernels, outside the clock
+    figures: dict[str, dict[bool, list]] = {name: {False: [], True: []} for name in cases}
+    for _ in range(args.repeat):
+        for name, scene in cases.items():
+            for measure in (False, True):
+                figures[name][measure].append(timed(scene, measure))
+    med = {name: {m: statistics.median(x[0] for x in runs[m]) for m in runs} for name, runs in figures.items()}
+    print(f"tol {args.tol:g} (demo-bonus at its own), medians of {args.repeat}, ms of wall_time_s")
+    print("| run | steps | kernel, error not measured | as `collide run` (error measured) |")
+    print("|---|---|---|---|")
+    for name, runs in figures.items():
+        print(f"| {name} | {runs[False][0][2]} | {med[name][False] * 1e3:.2f} | {med[name][True] * 1e3:.2f} |")
+    for a, b, bar in (("billiards-break mu = 0.1", "billiards-break mu = 0", 5),
+                      ("rolling ball, 0.5 s", "demo-bonus", 50)):
+        print(f"{a} / {b}: {med[a][False] / med[b][False]:.1f}x unmeasured, "
+              f"{med[a][True] / med[b][True]:.1f}x as run (bar {bar}x)")
+
+
+if __name__ == "__main__":
+    main()
