@@ -142,7 +142,7 @@ def bench_sweep(runs: int, single_runs: int, chunk: int, folder: Path) -> None:
     for spec in pick:
         t0 = time.perf_counter()
         one = run_scene(spec.scene, record=False)
-        lib.outcome_row(spec, one, 0, one.result.wall_time_s)
+        lib.outcome_rows([spec], one, one.result.wall_time_s)
         single.append(time.perf_counter() - t0)
     single_per_run = _median(single)
     print(f"  single runs:   {single_per_run * 1e3:.2f} ms per run (median of {len(pick)} spread over the "

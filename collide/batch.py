@@ -35,6 +35,7 @@ from typing import Protocol
 import numpy as np
 
 from collide.diagnostics import Residuals, residuals
+from collide.engine import tier
 from collide.model import shape_key
 from collide.run import SceneRun, run_scenes
 from collide.scene import Scene, SceneError, apply_overrides, parse_scene, read_raw
@@ -283,6 +284,11 @@ def summary_columns(plan: Plan) -> Columns:
     return Columns(plan.param_keys, outcomes)
 
 
+def _float_text(value: float) -> str:
+    """A Python float's exact CSV text (empty for NaN and infinities)."""
+    return repr(value) if math.isfinite(value) else ""
+
+
 def _text(value: float | int | str | None) -> str:
     """Exact CSV text: repr for floats (reads back bit for bit), empty for none or NaN."""
     if value is None:
@@ -292,51 +298,66 @@ def _text(value: float | int | str | None) -> str:
     return str(value)
 
 
-def deflection_deg(v0: np.ndarray, v1: np.ndarray) -> float:
-    """Angle between initial and final velocity in degrees; NaN when either is zero.
-
-    atan2 of the cross and dot products keeps small angles exact (acos loses them).
-    """
-    if not np.any(v0) or not np.any(v1):
-        return math.nan
-    if len(v0) == 1:
-        return 0.0 if v0[0] * v1[0] > 0 else 180.0
-    if len(v0) == 2:
-        cross = abs(float(v0[0] * v1[1] - v0[1] * v1[0]))
+def deflection_deg(v0: np.ndarray, v1: np.ndarray) -> np.ndarray:
+    """Angle between initial and final velocities (..., dim) in degrees (...); NaN where either
+    is zero. atan2 of the cross and dot products keeps small angles exact (acos loses them)."""
+    v0, v1 = np.asarray(v0, dtype=float), np.asarray(v1, dtype=float)
+    dot = np.einsum("...i,...i->...", v0, v1)
+    if v0.shape[-1] == 1:
+        angle = np.where(dot > 0, 0.0, 180.0)
     else:
-        cross = float(np.linalg.norm(np.cross(v0, v1)))
-    return math.degrees(math.atan2(cross, float(np.dot(v0, v1))))
+        if v0.shape[-1] == 2:
+            cross = np.abs(v0[..., 0] * v1[..., 1] - v0[..., 1] * v1[..., 0])
+        else:
+            normal = np.cross(v0, v1)
+            cross = np.sqrt(np.einsum("...i,...i->...", normal, normal))
+        # math's atan2 and degrees, as the summaries of earlier versions (numpy's differ in the
+        # last bit).
+        angle = np.array([math.degrees(math.atan2(c, d)) for c, d in zip(cross.ravel().tolist(),
+                                                                       dot.ravel().tolist())]).reshape(dot.shape)
+    return np.where(v0.any(-1) & v1.any(-1), angle, np.nan)
 
 
-def outcome_row(spec: RunSpec, run: SceneRun, member: int, wall_time_s: float,
-                res: Residuals | None = None) -> dict[str, str]:
-    """The summary row of one member of a batch run (`res`: the run's residuals, if known)."""
+def outcome_rows(specs: list[RunSpec], run: SceneRun, wall_time_s: float,
+                 res: Residuals | None = None) -> list[dict[str, str]]:
+    """The summary rows of a batch run's members, one per spec (`wall_time_s`: each run's
+    share; `res`: the run's residuals, if known). Columns are filled from whole arrays, turned
+    into Python floats once (per value, numpy scalars cost a row as much as its run)."""
     r = run.result
-    scene = spec.scene
-    row: dict[str, str] = {"run_id": spec.run_id, "scene": scene.name}
-    row.update({k: _text(v) for k, v in spec.params.items()})
-    for n, body in enumerate(scene.bodies):
-        v1 = r.final.v[member, n]
-        for a, x in zip("xyz", v1):
-            row[f"{body.name}.velocity.{a}"] = _text(x)
-        if scene.dim > 1:
-            w = r.final.w[member, n] if r.model.spin_dim else np.zeros(scene.spin_dim)
-            if scene.dim == 2:
-                row[f"{body.name}.spin"] = _text(w[0])
-            else:
-                for a, x in zip("xyz", w):
-                    row[f"{body.name}.spin.{a}"] = _text(x)
-        row[f"{body.name}.deflection_deg"] = _text(deflection_deg(r.initial.v[member, n], v1))
+    scene = specs[0].scene
+    text, num = _text, _float_text
+    v = r.final.v.tolist()
+    w = r.final.w.tolist() if r.model.spin_dim else None
+    angle = deflection_deg(r.initial.v, r.final.v).tolist()
     res = residuals(r) if res is None else res
-    row["residual.energy"] = _text(res.energy[member])
-    row["residual.momentum"] = _text(res.momentum[member])
-    row["residual.angular_momentum"] = _text(res.angular_momentum[member])
-    row["steps"] = _text(int(r.steps[member]))
-    row["dt"] = _text(r.dt[member])
-    row["sim_time"] = _text(r.final.t[member])
-    row["wall_time_s"] = _text(wall_time_s)
-    row["error"] = ""
-    return row
+    energy, momentum, angular = res.energy.tolist(), res.momentum.tolist(), res.angular_momentum.tolist()
+    steps, dt, sim_time = r.steps.tolist(), r.dt.tolist(), r.final.t.tolist()
+    share = text(wall_time_s)
+    rows = []
+    for m, spec in enumerate(specs):
+        row: dict[str, str] = {"run_id": spec.run_id, "scene": spec.scene.name}
+        row.update({k: text(x) for k, x in spec.params.items()})
+        for n, body in enumerate(scene.bodies):
+            for axis, x in zip("xyz", v[m][n]):
+                row[f"{body.name}.velocity.{axis}"] = num(x)
+            if scene.dim > 1:
+                spin = w[m][n] if w is not None else [0.0] * scene.spin_dim
+                if scene.dim == 2:
+                    row[f"{body.name}.spin"] = num(spin[0])
+                else:
+                    for axis, x in zip("xyz", spin):
+                        row[f"{body.name}.spin.{axis}"] = num(x)
+            row[f"{body.name}.deflection_deg"] = num(angle[m][n])
+        row["residual.energy"] = num(energy[m])
+        row["residual.momentum"] = num(momentum[m])
+        row["residual.angular_momentum"] = num(angular[m])
+        row["steps"] = text(int(steps[m]))
+        row["dt"] = num(dt[m])
+        row["sim_time"] = num(sim_time[m])
+        row["wall_time_s"] = share
+        row["error"] = ""
+        rows.append(row)
+    return rows
 
 
 def failure_row(spec: RunSpec, error: str) -> dict[str, str]:
@@ -445,6 +466,7 @@ class BatchResult:
     recordings: list[Path]
     wall_time_s: float
     notes: list[str] = field(default_factory=list)
+    load_s: float = 0.0  # of wall_time_s: loading the compiled kernels (once a process)
 
 
 ProgressCallback = Callable[[int, int], None]
@@ -552,6 +574,7 @@ def run_batch(plan: Plan, *, integrator: str | None = None, dt: float | str | No
     rows = dict(done)
     recordings: list[Path] = []
     started = time.perf_counter()
+    loaded_before = tier.load_seconds()
     failed = 0
     order = {s.run_id: i for i, s in enumerate(plan.specs)}
 
@@ -614,7 +637,7 @@ def run_batch(plan: Plan, *, integrator: str | None = None, dt: float | str | No
     save_in_order()
     ordered = sorted(rows.values(), key=lambda r: order[r["run_id"]])
     return BatchResult(header, ordered, len(todo), len(done), failed, summary, recordings,
-                       time.perf_counter() - started, notes)
+                       time.perf_counter() - started, notes, tier.load_seconds() - loaded_before)
 
 
 _TEMPORARY = re.compile(r"\.(?P<name>.+)\.[0-9a-f]{8}\.tmp")
@@ -729,10 +752,8 @@ def _run_chunk(chunk: list[RunSpec], integrator: str | None, dt: float | str | N
         yield from _run_chunk(chunk[:half], integrator, dt, tol, record)
         yield from _run_chunk(chunk[half:], integrator, dt, tol, record)
         return
-    per_run = run.result.wall_time_s / len(chunk)
-    res = residuals(run.result)
-    for i, spec in enumerate(chunk):
-        yield spec, outcome_row(spec, run, i, per_run, res), run, i
+    for i, (spec, row) in enumerate(zip(chunk, outcome_rows(chunk, run, run.result.wall_time_s / len(chunk)))):
+        yield spec, row, run, i
 
 
 # ---------------------------------------------------------------------------------------------

@@ -250,5 +250,6 @@ def _load_compiled(*args) -> None:
         return
     import numba
 
-    dk.dem_run.compile(tuple(numba.typeof(a) for a in args))
+    with tier.loading():
+        dk.dem_run.compile(tuple(numba.typeof(a) for a in args))
     _LOADED.append(True)

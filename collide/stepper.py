@@ -460,9 +460,24 @@ def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Prog
         for b in range(first, b_count, threads):
             outcomes[b] = run_member(b)
 
-    with ThreadPoolExecutor(threads) as pool:
-        list(pool.map(run_share, range(threads)))
+    list(_pool(threads).map(run_share, range(threads)))
     return outcomes
+
+
+_POOLS: dict[int, tuple[int, ThreadPoolExecutor]] = {}
+_POOLS_LOCK = threading.Lock()
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """A process's pool of `threads` threads, kept for its later batches (starting two threads
+    cost a batch of ten small runs as much as running them). A forked child makes its own: the
+    parent's threads are not in it."""
+    with _POOLS_LOCK:
+        entry = _POOLS.get(threads)
+        if entry is None or entry[0] != os.getpid():
+            entry = (os.getpid(), ThreadPoolExecutor(threads, thread_name_prefix="collide-members"))
+            _POOLS[threads] = entry
+        return entry[1]
 
 
 _LOADED: set[bool] = set()
@@ -477,7 +492,8 @@ def _load_compiled(events: bool, *args) -> None:
     kernel = kn.simulate if events else kn.seed_run
     types = tuple(numba.typeof(a) for a in (args if events else (args[0], args[1], args[2], args[3], args[5],
                                                                   args[6])))
-    kernel.compile(types)
+    with tier.loading():
+        kernel.compile(types)
     _LOADED.add(events)
 
 

@@ -120,7 +120,7 @@ def test_sweep_rows_equal_single_runs(tmp_path: Path) -> None:
         expected = []
         for n in range(2):
             expected += list(single.final.v[0, n]) + [single.final.w[0, n, 0]]
-            expected.append(lib.deflection_deg(single.initial.v[0, n], single.final.v[0, n]))
+            expected.append(float(lib.deflection_deg(single.initial.v[0, n], single.final.v[0, n])))
         np.testing.assert_allclose(_floats(row, outcome), expected, rtol=0, atol=1e-12)
         assert int(row["steps"]) == int(single.steps[0])
         assert float(row["contact.mu"]) == spec.params["contact.mu"]

@@ -21,6 +21,8 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from collide.engine.hint import HINT_VARIABLE, jit_setting
@@ -97,6 +99,25 @@ def _choose() -> tuple[bool, bool]:
 
 
 COMPILED, BACKGROUND = _choose()
+
+# Seconds this process spent loading compiled kernels from numba's cache (once per kernel): a
+# batch reports its runs' cost apart from this one-time cost.
+_loading = [0.0]
+
+
+@contextmanager
+def loading() -> Iterator[None]:
+    """Time a kernel's loading (add it to `load_seconds`)."""
+    started = time.perf_counter()
+    try:
+        yield
+    finally:
+        _loading[0] += time.perf_counter() - started
+
+
+def load_seconds() -> float:
+    """Seconds this process has spent loading compiled kernels."""
+    return _loading[0]
 
 if COMPILED:
     from numba import njit
