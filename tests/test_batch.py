@@ -254,7 +254,8 @@ def test_cli_sweep_prints_paths_and_writes_rows(tmp_path: Path, monkeypatch: pyt
     assert "runs: 3/3" in err  # progress on stderr
     # One sentence a reader can take in: "3 runs in 0.1 s (33 ms each), 0 failed" (issue 12:
     # it read "3 runs: 3 run in").
-    assert re.search(r"^3 runs in [0-9.e+-]+ s \([0-9.e+-]+ ms each\), 0 failed$", out, re.M), out
+    assert re.search(r"^3 runs in [0-9.e+-]+ s \([0-9.e+-]+ ms each(, after [0-9.e+-]+ s loading the compiled "
+                     r"engine)?\), 0 failed$", out, re.M), out
     header, rows = read_summary(tmp_path / "recordings" / "batch-summary.csv")
     assert header[:3] == ["run_id", "scene", "contact.k"] and "ball1.velocity.x" in header
     assert [r["contact.k"] for r in rows] == ["1000.0", "1500.0", "2000.0"]
@@ -453,6 +454,24 @@ def test_sigkill_at_random_moments_then_resume_equals_uninterrupted(tmp_path: Pa
     full = run_batch(plan, dt=1e-4, summary=tmp_path / "full.csv")  # rows do not depend on recording
     assert _without_wall_time(read_summary(tmp_path / "s.csv")[1]) == _without_wall_time(full.rows)
     assert sorted(p.name for p in (tmp_path / "rrd").iterdir()) == sorted(lib.recording_name(s) for s in plan.specs)
+
+
+def test_batch_says_the_engine_loading_apart_from_the_runs(tmp_path: Path) -> None:
+    """Loading the compiled engine (a process's one-time cost, 0.3-1.5 s) is not spread over the
+    runs: 20 runs of demo-bonus cost well under it each."""
+    from collide.engine import tier
+
+    if not COLLIDE.exists() or not tier.compiled_ready():
+        pytest.skip("needs the compiled engine (python -m collide.engine.warm) and the collide command")
+    env = {**os.environ, "COLLIDE_JIT": "1"}
+    out = subprocess.run([str(COLLIDE), "batch", "demo-bonus", "--sweep", "contact.mu=0.1:0.3:20", "--summary",
+                          "s.csv"], capture_output=True, text=True, cwd=tmp_path, timeout=300, env=env)
+    assert out.returncode == 0, out.stderr
+    found = re.search(r"^20 runs in ([0-9.e+-]+) s \(([0-9.e+-]+) ms each, after ([0-9.e+-]+) s loading the "
+                      r"compiled engine\), 0 failed$", out.stdout, re.M)
+    assert found, out.stdout
+    total, each, load = (float(x) for x in found.groups())
+    assert load > 0.05 and each * 1e-3 * 20 == pytest.approx(total - load, rel=0.2, abs=0.01)
 
 
 def test_a_sweep_too_large_for_memory_is_refused_before_it_is_built() -> None:
