@@ -181,6 +181,39 @@ def test_batch_with_different_contact_times_equals_single_runs():
         assert member.final.t[0] == pytest.approx(single.final.t[0], abs=1e-12)
 
 
+def test_batch_members_keep_their_own_contact_log_and_work():
+    """The batch's tables are built for all members at once: each member's contact log and
+    dissipated work are still its own (a sweep of friction and offsets, billiards with 16 balls)."""
+    scenes = [load_scene("billiards-break", [f"contact.mu={mu}", f"body.cue.position.y={y}"])
+              for mu, y in ((0.05, -0.004), (0.2, 0.0), (0.3, 0.003))]
+    for member, single in batch_and_singles(scenes):
+        for name in ("first_start", "last_end", "duration", "max_overlap", "count"):
+            assert getattr(member.contacts, name)[0] == pytest.approx(getattr(single.contacts, name)[0], abs=1e-12)
+        assert member.final.work[0] == pytest.approx(single.final.work[0], rel=1e-12)
+
+
+def test_contact_log_is_the_union_of_the_contact_intervals():
+    """First start, last end and the time any contact is engaged (overlapping intervals counted
+    once, an open one ending at the run's end), against a fine sampling of the union."""
+    rng = np.random.default_rng(7)
+    logs, expected, t_end = [], [], 2.0
+    for _ in range(200):
+        n = int(rng.integers(0, 6))
+        ivals = np.zeros((n, 4))
+        starts = rng.uniform(0.0, 1.5, n)
+        ivals[:, kernels.V_START], ivals[:, kernels.V_END] = starts, starts + rng.exponential(0.1, n)
+        ivals[rng.uniform(size=n) < 0.2, kernels.V_END] = np.nan
+        logs.append(ivals)
+        ends = np.where(np.isnan(ivals[:, kernels.V_END]), t_end, ivals[:, kernels.V_END])
+        grid = (np.arange(200_000) + 0.5) * (t_end / 200_000)
+        covered = ((grid[:, None] >= starts) & (grid[:, None] < ends)).any(axis=1).mean() * t_end
+        expected.append((starts.min() if n else np.nan, ends.max() if n else np.nan, covered))
+    got = stepper.contact_logs(logs, np.full(len(logs), t_end))
+    np.testing.assert_allclose(got[:, :2], np.array(expected)[:, :2], rtol=0, atol=0)
+    # Each of at most ten interval ends is sampled within half a grid step (5e-6 s).
+    np.testing.assert_allclose(got[:, 2], np.array(expected)[:, 2], rtol=0, atol=5e-5)
+
+
 def test_frictionless_scene_computes_no_friction(monkeypatch):
     """Leave out what a scene does not need: the engine is told there is no friction and no spin
     (so it computes neither), and the results carry no angular state and 1D arrays."""
