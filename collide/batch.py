@@ -34,7 +34,7 @@ from typing import Protocol
 
 import numpy as np
 
-from collide.diagnostics import Residuals, residuals
+from collide.diagnostics import residuals
 from collide.engine import tier
 from collide.model import shape_key
 from collide.run import SceneRun, run_scenes
@@ -318,18 +318,17 @@ def deflection_deg(v0: np.ndarray, v1: np.ndarray) -> np.ndarray:
     return np.where(v0.any(-1) & v1.any(-1), angle, np.nan)
 
 
-def outcome_rows(specs: list[RunSpec], run: SceneRun, wall_time_s: float,
-                 res: Residuals | None = None) -> list[dict[str, str]]:
+def outcome_rows(specs: list[RunSpec], run: SceneRun, wall_time_s: float) -> list[dict[str, str]]:
     """The summary rows of a batch run's members, one per spec (`wall_time_s`: each run's
-    share; `res`: the run's residuals, if known). Columns are filled from whole arrays, turned
-    into Python floats once (per value, numpy scalars cost a row as much as its run)."""
+    share). Columns are filled from whole arrays, turned into Python floats once (per value,
+    numpy scalars cost a row as much as its run)."""
     r = run.result
     scene = specs[0].scene
     text, num = _text, _float_text
     v = r.final.v.tolist()
     w = r.final.w.tolist() if r.model.spin_dim else None
     angle = deflection_deg(r.initial.v, r.final.v).tolist()
-    res = residuals(r) if res is None else res
+    res = residuals(r)  # kept on the result: computed once per run
     energy, momentum, angular = res.energy.tolist(), res.momentum.tolist(), res.angular_momentum.tolist()
     steps, dt, sim_time = r.steps.tolist(), r.dt.tolist(), r.final.t.tolist()
     share = text(wall_time_s)

@@ -170,7 +170,7 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
         raise RunError("duration: a DEM run under gravity needs a duration (or rest, to end when it settles)")
     check_dem(model, initial, dt, max_steps, duration)
     t_c, _, _ = contact_time(model, initial)
-    finals, trajectories, parts = [], [] if record else None, []
+    finals, trajectories = [], [] if record else None
     stats = np.zeros((b_count, int(dk.NSTAT)), np.int64)
     figures = np.zeros((b_count, int(dk.NFIG)))
     members = []
@@ -218,11 +218,8 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
         G = body_tables[b]
         G[:, kn.G_S:kn.G_S + 3], G[:, kn.G_V:kn.G_V + 3] = X, V
         G[:, kn.G_W:kn.G_W + 3], G[:, kn.G_Q:kn.G_Q + 4] = W, Q
-        if model.spin_dim == 1:
-            G[:, kn.G_Q] = Q[:, 0]
         finals.append((t, float(WK.sum()), float(fg[dk.G_STORED])))
         stats[b], figures[b] = st, fg
-        parts.append(EP)
         if record:
             traj = Trajectory(KN, REC, IV, select_model(model, b))
             traj.energy_parts = EP
