@@ -73,7 +73,8 @@ X_S, X_V, X_W, X_Q = 0, 3, 6, 9
 X_S0, X_V0, X_W0, X_Q0 = 13, 16, 19, 22
 X_A, X_F, X_L, X_V1, X_W1, X_T, X_UA, X_UL, X_FO, X_VB, X_WB = 26, 29, 32, 35, 38, 41, 44, 47, 50, 53, 56
 X_IM, X_II, X_R, X_M, X_I = 59, 60, 61, 62, 63
-NX = 64
+X_SF, X_SL = 64, 67  # sliding contacts' part of X_F, X_L
+NX = 70
 # C / CI: an island's engaged contacts.
 C_N, C_DELTA, C_DIST, C_LIF, C_LJF, C_LIS, C_LJS, C_FN = 0, 3, 4, 5, 6, 7, 8, 9
 C_K, C_MU, C_EPS, C_REACH, C_HELD, C_FF, C_B = 10, 11, 12, 13, 14, 17, 20
@@ -518,21 +519,26 @@ def slide_direction(X, C, CI, c, vc, wc, spin, span):
 
 
 @jit_inline
-def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh):
+def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
     """Friction forces (C_FF, on body i) of every contact at the velocities in columns (vc, wc),
     by mode, and their accelerations (X_F, X_L); X_A holds everything else's. Stuck contacts'
     slips stop changing: W f = -G, with G their slip rates under every other force. `span`: the
     velocities already hold the forces now in C_FF over that many seconds (see
     `slide_direction`); 0 when they hold none. `fresh`: the stuck contacts' matrix must be built
-    (a new geometry or new modes), else the last one is reused."""
+    (a new geometry or new modes), else the last one is reused. `slides`: the sliding contacts'
+    forces are found again, else those of the last call (X_SF, X_SL) are kept: in the plane they
+    are mu F_n on the held side whatever the velocities, so only a new geometry changes them."""
     spin, seed = fl[FL_SPIN], fl[FL_SEED]
-    for a in range(na):
-        for d in range(3):
-            X[a, X_F + d] = 0.0
-            X[a, X_L + d] = 0.0
+    if slides:
+        for a in range(na):
+            for d in range(3):
+                X[a, X_SF + d] = 0.0
+                X[a, X_SL + d] = 0.0
     m = 0
     for c in range(nc):
         if CI[c, CI_MODE] == SLIDE:
+            if not slides:
+                continue
             sx, sy, sz = slide_direction(X, C, CI, c, vc, wc, spin, span)
             mag = math.sqrt(sx * sx + sy * sy + sz * sz)
             C[c, C_FF] = 0.0
@@ -541,7 +547,7 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh):
             if mag > 0.0:
                 f = -C[c, C_MU] * C[c, C_FN] / mag
                 C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2] = f * sx, f * sy, f * sz
-                add_force(X, C, CI, c, f * sx, f * sy, f * sz, X_F, X_L, spin)
+                add_force(X, C, CI, c, f * sx, f * sy, f * sz, X_SF, X_SL, spin)
         else:
             C[c, C_FF] = 0.0
             C[c, C_FF + 1] = 0.0
@@ -549,6 +555,10 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh):
             if CI[c, CI_MODE] == STICK:
                 stuck[m] = c
                 m += 1
+    for a in range(na):
+        for d in range(3):
+            X[a, X_F + d] = X[a, X_SF + d]
+            X[a, X_L + d] = X[a, X_SL + d]
     if m == 0:
         return True
     for a in range(na):
@@ -619,7 +629,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl):
         for it in range(FIXED_POINT):
             # Each pass but a cold first takes each contact's own friction in V1 back out.
             if not friction(X, C, CI, na, nc, X_V1, X_W1, stuck, A, b, fl, h_end if warm or it > 0 else 0.0,
-                            YES if it == 0 else NO):
+                            YES if it == 0 else NO, YES if it == 0 or not planar else NO):
                 return work, False
             change = 0.0
             size = 0.0
@@ -643,7 +653,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl):
             for d in range(3):
                 X[a, X_V + d] = X[a, X_V1 + d]
                 X[a, X_W + d] = X[a, X_W1 + d]
-    elif not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES):
+    elif not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES, YES):
         return work, False
     if h_start != 0.0:
         for a in range(na):
@@ -795,7 +805,7 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale):
     slip, as the slip change they would make over STICK_SCALE (rates NaN: no closed form).
     Leaves the friction forces in C_FF. Returns False if the hold system is singular."""
     spin, seed, planar = fl[FL_SPIN], fl[FL_SEED], fl[FL_PLANAR] == YES
-    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES):
+    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES, YES):
         return False
     for a in range(na):
         for d in range(3):
@@ -877,7 +887,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
         else:
             CI[c, CI_MODE] = BAND
     for _ in range(2 * nc + 2):
-        if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES):
+        if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES, YES):
             return 0.0, False
         changed = False
         # An edge contact that another's change left sliding with its slip heading into the band,
