@@ -414,30 +414,40 @@ def couple_block(X, C, CI, c, d, a, spin, rows, A, row, col):
 
 
 @jit_inline
-def hold_matrix(X, C, CI, stuck, m, A, piv, spin, rows):
+def hold_matrix(X, C, CI, stuck, m, A, piv, spin, rows, seed):
     """Build and factor W (rows m x rows m) for the stuck contacts: block (c, d) is the rate of
     change of c's slip per unit friction force at d; a contact's own block is K times the
-    identity, and contacts couple only through a body they share. `rows`: tangents per contact,
-    1 in the z = 0 plane (the e2 = z rows are zero there: W is block diagonal, and z holds no
-    force). False if singular."""
+    identity (`response`), and contacts couple only through a body they share. `rows`: tangents
+    per contact, 1 in the z = 0 plane (the e2 = z rows are zero there: W is block diagonal, and
+    z holds no force). W is symmetric where the slip and force levers are one (not the seed's
+    lever): the blocks below the diagonal are copied. False if singular."""
     n = rows * m
     for r in range(n):
         for col in range(n):
             A[r, col] = 0.0
     for p in range(m):
         c = stuck[p]
-        for q in range(m):
+        ci, cj = CI[c, CI_I], CI[c, CI_J]
+        k = response(X, C, CI, c, spin)
+        for alpha in range(rows):
+            A[rows * p + alpha, rows * p + alpha] = k
+        for q in range(0 if seed else p + 1, m):
+            if q == p:
+                continue
             d = stuck[q]
             for side in range(2):
                 a = CI[d, CI_I] if side == 0 else CI[d, CI_J]
-                if a < 0 or _share(CI, c, a) == 0.0:
-                    continue
-                couple_block(X, C, CI, c, d, a, spin, rows, A, rows * p, rows * q)
+                if a >= 0 and (a == ci or a == cj):
+                    couple_block(X, C, CI, c, d, a, spin, rows, A, rows * p, rows * q)
+            if not seed:
+                for alpha in range(rows):
+                    for beta in range(rows):
+                        A[rows * q + beta, rows * p + alpha] = A[rows * p + alpha, rows * q + beta]
     return factor(A, piv, n)
 
 
 @jit_inline
-def hold(X, C, CI, na, nc, stuck, m, A, b, spin, planar, fresh):
+def hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, planar, fresh):
     """Solve W f = b for the stuck contacts `stuck[:m]` (b in tangent coordinates, 2 per contact;
     see `hold_matrix`); with `fresh` W is built and factored here, else the factors in A from the
     last call at this geometry and these modes are used. Adds the forces (as accelerations) to
@@ -449,7 +459,7 @@ def hold(X, C, CI, na, nc, stuck, m, A, b, spin, planar, fresh):
         b[1] /= k
     elif planar:
         # In the plane W is m x m (its z rows hold nothing): an eighth of the factoring.
-        if fresh and not hold_matrix(X, C, CI, stuck, m, A, piv, spin, 1):
+        if fresh and not hold_matrix(X, C, CI, stuck, m, A, piv, spin, 1, seed):
             return False
         for k in range(m):
             b[k] = b[2 * k]
@@ -458,7 +468,7 @@ def hold(X, C, CI, na, nc, stuck, m, A, b, spin, planar, fresh):
             b[2 * k] = b[k]
             b[2 * k + 1] = 0.0
     else:
-        if fresh and not hold_matrix(X, C, CI, stuck, m, A, piv, spin, 2):
+        if fresh and not hold_matrix(X, C, CI, stuck, m, A, piv, spin, 2, seed):
             return False
         solve_factored(A, piv, b, 2 * m)
     for a in range(na):
@@ -566,11 +576,12 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
             X[a, X_T + d] = X[a, X_A + d] + X[a, X_F + d]
     for k in range(m):
         c = stuck[k]
-        set_basis(C, c)
+        if fresh:
+            set_basis(C, c)  # else the one W was built in, at this geometry
         gx, gy, gz = slip_rate(X, C, CI, c, vc, wc, X_T, X_L, spin, seed, YES)
         b[2 * k] = -(gx * C[c, C_B] + gy * C[c, C_B + 1] + gz * C[c, C_B + 2])
         b[2 * k + 1] = -(gx * C[c, C_B + 3] + gy * C[c, C_B + 4] + gz * C[c, C_B + 5])
-    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, fl[FL_PLANAR] == YES, fresh):
+    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, fl[FL_PLANAR] == YES, fresh):
         return False
     for k in range(m):
         c = stuck[k]
@@ -696,7 +707,7 @@ def settle(X, C, CI, na, nc, stuck, A, b, fl):
         dx, dy, dz = hm * hx - sx, hm * hy - sy, hm * hz - sz
         b[2 * k] = dx * C[c, C_B] + dy * C[c, C_B + 1] + dz * C[c, C_B + 2]
         b[2 * k + 1] = dx * C[c, C_B + 3] + dy * C[c, C_B + 4] + dz * C[c, C_B + 5]
-    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, fl[FL_PLANAR] == YES, YES):
+    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, fl[FL_SEED], fl[FL_PLANAR] == YES, YES):
         return 0.0, False
     for a in range(na):
         for d in range(3):
