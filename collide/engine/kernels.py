@@ -447,11 +447,11 @@ def hold_matrix(X, C, CI, stuck, m, A, piv, spin, rows, seed):
 
 
 @jit_inline
-def hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, planar, fresh):
+def hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, planar, fresh, fa, la):
     """Solve W f = b for the stuck contacts `stuck[:m]` (b in tangent coordinates, 2 per contact;
     see `hold_matrix`); with `fresh` W is built and factored here, else the factors in A from the
     last call at this geometry and these modes are used. Adds the forces (as accelerations) to
-    X_UA/X_UL; they are also left in b. Returns False if W is singular."""
+    columns (fa, la); they are also left in b. Returns False if W is singular."""
     piv = stuck[stuck.shape[0] // 3:]  # `stuck` holds the stuck contacts, then W's row swaps
     if m == 1:
         k = response(X, C, CI, stuck[0], spin)
@@ -471,15 +471,11 @@ def hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, planar, fresh):
         if fresh and not hold_matrix(X, C, CI, stuck, m, A, piv, spin, 2, seed):
             return False
         solve_factored(A, piv, b, 2 * m)
-    for a in range(na):
-        for x in range(3):
-            X[a, X_UA + x] = 0.0
-            X[a, X_UL + x] = 0.0
     for k in range(m):
         c = stuck[k]
         f1, f2 = b[2 * k], b[2 * k + 1]
         add_force(X, C, CI, c, f1 * C[c, C_B] + f2 * C[c, C_B + 3], f1 * C[c, C_B + 1] + f2 * C[c, C_B + 4],
-                  f1 * C[c, C_B + 2] + f2 * C[c, C_B + 5], X_UA, X_UL, spin)
+                  f1 * C[c, C_B + 2] + f2 * C[c, C_B + 5], fa, la, spin)
     return True
 
 
@@ -581,17 +577,13 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
         gx, gy, gz = slip_rate(X, C, CI, c, vc, wc, X_T, X_L, spin, seed, YES)
         b[2 * k] = -(gx * C[c, C_B] + gy * C[c, C_B + 1] + gz * C[c, C_B + 2])
         b[2 * k + 1] = -(gx * C[c, C_B + 3] + gy * C[c, C_B + 4] + gz * C[c, C_B + 5])
-    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, fl[FL_PLANAR] == YES, fresh):
+    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, fl[FL_PLANAR] == YES, fresh, X_F, X_L):
         return False
     for k in range(m):
         c = stuck[k]
         f1, f2 = b[2 * k], b[2 * k + 1]
         for d in range(3):
             C[c, C_FF + d] = f1 * C[c, C_B + d] + f2 * C[c, C_B + 3 + d]
-    for a in range(na):
-        for d in range(3):
-            X[a, X_F + d] += X[a, X_UA + d]
-            X[a, X_L + d] += X[a, X_UL + d]
     return True
 
 
@@ -707,7 +699,11 @@ def settle(X, C, CI, na, nc, stuck, A, b, fl):
         dx, dy, dz = hm * hx - sx, hm * hy - sy, hm * hz - sz
         b[2 * k] = dx * C[c, C_B] + dy * C[c, C_B + 1] + dz * C[c, C_B + 2]
         b[2 * k + 1] = dx * C[c, C_B + 3] + dy * C[c, C_B + 4] + dz * C[c, C_B + 5]
-    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, fl[FL_SEED], fl[FL_PLANAR] == YES, YES):
+    for a in range(na):
+        for d in range(3):
+            X[a, X_UA + d] = 0.0
+            X[a, X_UL + d] = 0.0
+    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, fl[FL_SEED], fl[FL_PLANAR] == YES, YES, X_UA, X_UL):
         return 0.0, False
     for a in range(na):
         for d in range(3):
