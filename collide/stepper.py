@@ -388,6 +388,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     fp = np.zeros((b_count, int(kn.NFP)))
     fp[:, kn.FP_DT], fp[:, kn.FP_OMEGA_H], fp[:, kn.FP_TEND], fp[:, kn.FP_TAIL] = dt, omega_h, t_end, tail
     fp[:, kn.FP_SCALE] = speed * event_tol / EDGE_TOL
+    fp[:, kn.FP_EVENT_TOL] = event_tol
     fp[:, kn.FP_SLOW] = 1e-9 * speed  # closing speeds under 1e-9 of the fastest are round-off, not an approach
     # Contiguous already (stacked per scene); a strided view would compile the kernel anew.
     tables = [(np.ascontiguousarray(model.pair_table[b]), np.ascontiguousarray(model.wall_table[b]))

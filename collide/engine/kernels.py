@@ -63,6 +63,7 @@ LATE = 2  # Q_ENG of a contact engaged from a step's start after the step found 
 MAX_RETRIES = 24  # a window redone this often, each 4x shorter, has met a contact it cannot foresee
 NO_CONTACT_TAIL = 1.0  # s: how long a run with no contact at all lasts
 EPS64 = 2.220446049250313e-16
+VERLET = np.ones(1)  # the weights of one kick-drift-kick substep
 
 # G: bodies.
 G_S, G_V, G_W, G_Q, G_TB, G_WK, G_IM, G_II, G_R, G_M, G_I, G_MAT = 0, 3, 6, 9, 13, 14, 15, 16, 17, 18, 19, 20
@@ -89,8 +90,8 @@ E_V0, E_R0, E_V1, E_R1 = 0, 1, 2, 3
 # Settings: flags (int) and figures (float).
 FL_SPIN, FL_FRICTION, FL_SEED, FL_PLANAR, FL_RECORD, FL_AUTO, FL_MAXSTEPS, FL_DIM, FL_TURNS = range(9)
 NFL = 9
-FP_DT, FP_OMEGA_H, FP_TEND, FP_TAIL, FP_SCALE, FP_SLOW, FP_NOW, FP_NOW_STEPS = range(8)
-NFP = 8  # the last two are written by the run: time reached and steps, read by a progress display
+FP_DT, FP_OMEGA_H, FP_TEND, FP_TAIL, FP_SCALE, FP_SLOW, FP_EVENT_TOL, FP_NOW, FP_NOW_STEPS = range(9)
+NFP = 9  # the last two are written by the run: time reached and steps, read by a progress display
 # Contact parameter tables: pairs (M, M, NP), walls (M, NP).
 TP_K, TP_MU, TP_EPS = range(3)
 # Records.
@@ -750,15 +751,17 @@ def turn(q, w0, w1, w2, tau, planar):
 
 
 @jit_inline
-def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl):
-    """One step of h from the start state (X_S0...): a symmetric composition of Verlet
-    (kick-drift-kick) substeps gamma h (`weights`); the kicks between two substeps share one
-    geometry. After the whole step stuck slips go back on the band's edge. The end state is left
-    in (X_S...) with its geometry in C and its accelerations in X_A, X_F. Returns (work, ok)."""
+def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart):
+    """One step of h from the start state (X_S0...), or with `restart` NO from the state now in
+    (X_S...): a symmetric composition of Verlet (kick-drift-kick) substeps gamma h (`weights`);
+    the kicks between two substeps share one geometry. After the whole step stuck slips go back
+    on the band's edge. The end state is left in (X_S...) with its geometry in C and its
+    accelerations in X_A, X_F. Returns (work, ok)."""
     spin, fric, seed, planar = fl[FL_SPIN], fl[FL_FRICTION], fl[FL_SEED], fl[FL_PLANAR]
-    for a in range(na):
-        for d in range(13):
-            X[a, X_S + d] = X[a, X_S0 + d]
+    if restart:
+        for a in range(na):
+            for d in range(13):
+                X[a, X_S + d] = X[a, X_S0 + d]
     geometry(X, C, CI, nc, WP, seed)
     springs(X, C, CI, na, nc, grav)
     n = weights.shape[0]
@@ -1448,7 +1451,7 @@ def mode_dip(E, modes, frac, h_full, passed):
 
 @jit
 def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
-                max_turn):
+                max_turn, nudge):
     """One step from the start state; where an event would happen inside it, shortened to land
     there, each refinement re-stepping from the start. Contacts starting or ending: a cubic
     Hermite through the overlaps at both ends of a trial; friction modes: a bracketed root find
@@ -1461,7 +1464,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     the search landed: False if it ran out of trials, and the step may have passed an event)."""
     h = h_full
     limited = False
-    work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl)
+    work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, YES)
     if not ok:
         return h, work, False, limited, -1, True
     tol = TOUCH_TOL
@@ -1619,8 +1622,16 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             located = True
             break
         # Never shorter than a few ticks of the clock: an event closer than that is taken as passed.
-        h = max(h_full * max(theta, 1e-12), shortest)
-        work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl)
+        h_next = max(h_full * max(theta, 1e-12), shortest)
+        if abs(h_next - h) <= nudge:
+            # Close to the last trial's end (a root search's last refinements): one Verlet
+            # substep from there, forwards or back, a tenth of the cost of a step from the start;
+            # `nudge` keeps its error, (omega dh)^3 / 12, a thousandth of the event tolerance.
+            more, ok = step(X, C, CI, na, nc, h_next - h, VERLET, WP, grav, stuck, A, b, fl, NO)
+            work += more
+        else:
+            work, ok = step(X, C, CI, na, nc, h_next, weights, WP, grav, stuck, A, b, fl, YES)
+        h = h_next
         if not ok:
             return h, work, False, limited, -1, True
     return h, work, True, limited, -1, located
@@ -1714,6 +1725,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         dt = fp[FP_OMEGA_H] / omega if fl[FL_AUTO] else fp[FP_DT]
         # A slip may turn by the angle the stiffest contact's oscillation advances in a step.
         max_turn = max(dt * omega, 1e-3)
+        nudge = (12e-3 * fp[FP_EVENT_TOL]) ** (1.0 / 3.0) / omega if omega > 0 else 0.0
         grown = math.inf
         FG[F_DT_MIN] = min(FG[F_DT_MIN], dt)
         geometry(X, C, CI, nc, WP, fl[FL_SEED])
@@ -1761,7 +1773,8 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             if fric and fl[FL_TURNS] and stiff_slide(X, C, CI, nc, dt, spin):
                 h_full = min(h_full, dt * min(1.0, (dt * omega) ** STIFF_SLIDE_POWER))
             h, work, ok, limited, late, located = step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full,
-                                                              weights, WP, grav, stuck, A, b, fl, scale, max_turn)
+                                                              weights, WP, grav, stuck, A, b, fl, scale, max_turn,
+                                                              nudge)
             if not located:
                 if ST[S_UNLOCATED] == 0:
                     FG[F_UNLOCATED_T] = t
