@@ -1464,7 +1464,21 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     the search landed: False if it ran out of trials, and the step may have passed an event)."""
     h = h_full
     limited = False
-    work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, YES)
+    # A mode value that heads for zero so fast that, at its start rate, it gets there within a
+    # Verlet substep's reach (a contact's mode changing just after another's, which changed its
+    # forces): the first trial is one substep to twice that time, whose end brackets the change
+    # or, if the value slows, is a short step of its own. A whole step there only found it.
+    soon = math.inf
+    if fl[FL_FRICTION]:
+        for k in range(2 * nc):
+            e0, r0 = E[k, E_V0], E[k, E_R0]
+            if e0 > MODE_TOL and r0 < 0.0:
+                soon = min(soon, -e0 / r0)
+    if 2.0 * soon <= min(nudge, h_full):
+        h = 2.0 * soon
+        work, ok = step(X, C, CI, na, nc, h, VERLET, WP, grav, stuck, A, b, fl, YES)
+    else:
+        work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, YES)
     if not ok:
         return h, work, False, limited, -1, True
     tol = TOUCH_TOL
