@@ -294,7 +294,7 @@ def _text(value: float | int | str | None) -> str:
     if value is None:
         return ""
     if isinstance(value, (float, np.floating)):
-        return repr(float(value)) if math.isfinite(value) else ""
+        return _float_text(float(value))
     return str(value)
 
 

@@ -448,7 +448,7 @@ def hold_matrix(X, C, CI, stuck, m, A, piv, spin, rows, seed):
 
 
 @jit_inline
-def hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, planar, fresh, fa, la):
+def hold(X, C, CI, stuck, m, A, b, spin, seed, planar, fresh, fa, la):
     """Solve W f = b for the stuck contacts `stuck[:m]` (b in tangent coordinates, 2 per contact;
     see `hold_matrix`); with `fresh` W is built and factored here, else the factors in A from the
     last call at this geometry and these modes are used. Adds the forces (as accelerations) to
@@ -578,7 +578,7 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
         gx, gy, gz = slip_rate(X, C, CI, c, vc, wc, X_T, X_L, spin, seed, YES)
         b[2 * k] = -(gx * C[c, C_B] + gy * C[c, C_B + 1] + gz * C[c, C_B + 2])
         b[2 * k + 1] = -(gx * C[c, C_B + 3] + gy * C[c, C_B + 4] + gz * C[c, C_B + 5])
-    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, seed, fl[FL_PLANAR] == YES, fresh, X_F, X_L):
+    if not hold(X, C, CI, stuck, m, A, b, spin, seed, fl[FL_PLANAR] == YES, fresh, X_F, X_L):
         return False
     for k in range(m):
         c = stuck[k]
@@ -707,7 +707,7 @@ def settle(X, C, CI, na, nc, stuck, A, b, fl):
         for d in range(3):
             X[a, X_UA + d] = 0.0
             X[a, X_UL + d] = 0.0
-    if not hold(X, C, CI, na, nc, stuck, m, A, b, spin, fl[FL_SEED], fl[FL_PLANAR] == YES, YES, X_UA, X_UL):
+    if not hold(X, C, CI, stuck, m, A, b, spin, fl[FL_SEED], fl[FL_PLANAR] == YES, YES, X_UA, X_UL):
         return 0.0, False
     for a in range(na):
         for d in range(3):
@@ -1456,7 +1456,8 @@ def mode_dip(E, modes, frac, h_full, passed):
 def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
                 max_turn, nudge, exact):
     """One step from the start state; where an event would happen inside it, shortened to land
-    there, each refinement re-stepping from the start. Contacts starting or ending: a cubic
+    there, each refinement re-stepping from the start (in the plane, one within `nudge` of the
+    last trial's end is a Verlet substep from there). Contacts starting or ending: a cubic
     Hermite through the overlaps at both ends of a trial; friction modes: a bracketed root find
     (Hermite with both ends' rates where they have closed forms, then inverse quadratic
     interpolation, secant or Newton in the bracket). In 3D a sliding slip may turn by at most
@@ -1472,7 +1473,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     # forces): the first trial is one substep to twice that time, whose end brackets the change
     # or, if the value slows, is a short step of its own. A whole step there only found it.
     soon = math.inf
-    if fl[FL_FRICTION]:
+    if fl[FL_FRICTION] and nudge > 0.0:
         for k in range(2 * nc):
             e0, r0 = E[k, E_V0], E[k, E_R0]
             if e0 > MODE_TOL and r0 < 0.0:
