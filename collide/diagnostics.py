@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from collide.engine import kernels as kn
-from collide.model import TABLE_ESTAR, Model, State
+from collide.model import TABLE_ESTAR, Model, State, turned_quaternions
 from collide.stepper import RunResult, Trajectory
 
 
@@ -367,20 +367,6 @@ def _quintic(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return basis, deriv
 
 
-def _turn(q: np.ndarray, w: np.ndarray, tau: np.ndarray) -> np.ndarray:
-    """Quaternions q (T, 4) after turning at w (T, 3) for tau (T,) seconds."""
-    rate = np.sqrt(_dot(w, w))
-    half = 0.5 * rate * tau
-    with np.errstate(invalid="ignore", divide="ignore"):
-        axis = np.where(rate[:, None] > 0, w / np.where(rate > 0, rate, 1.0)[:, None], 0.0)
-    dq = np.concatenate((np.cos(half)[:, None], np.sin(half)[:, None] * axis), axis=1)
-    a, b = dq, q
-    return np.stack((a[:, 0] * b[:, 0] - a[:, 1] * b[:, 1] - a[:, 2] * b[:, 2] - a[:, 3] * b[:, 3],
-                     a[:, 0] * b[:, 1] + a[:, 1] * b[:, 0] + a[:, 2] * b[:, 3] - a[:, 3] * b[:, 2],
-                     a[:, 0] * b[:, 2] - a[:, 1] * b[:, 3] + a[:, 2] * b[:, 0] + a[:, 3] * b[:, 1],
-                     a[:, 0] * b[:, 3] + a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1] + a[:, 3] * b[:, 0]), axis=1)
-
-
 def body_knots(traj: Trajectory) -> list[np.ndarray]:
     """Each body's knots, in time order."""
     knots = traj.knots
@@ -418,7 +404,7 @@ def sample(model: Model, traj: Trajectory, times: np.ndarray, member: int = 0) -
         vel = v0 + g * tau[:, None]
         spin = k0[:, kn.K_W:kn.K_W + 3].copy()
         if qd == 4:
-            orient = _turn(k0[:, kn.K_Q:kn.K_Q + 4], spin, tau)
+            orient = turned_quaternions(k0[:, kn.K_Q:kn.K_Q + 4], spin, tau)
         else:
             orient = k0[:, kn.K_Q:kn.K_Q + 4].copy()
             orient[:, 0] += spin[:, 2] * tau

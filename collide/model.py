@@ -198,12 +198,12 @@ def contact_tables(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
 PLANE_TOL = 1e-12  # relative: what round-off leaves of a scene turned into another plane
 
 
-def moves_in_a_plane(model: Model, state: State, b: int) -> bool:
-    """Whether run b stays in one plane, of any orientation: centres, velocities, gravity and
-    wall normals all lie in a plane whose normal every spin is along. Only outside such a plane
-    can a sliding contact's slip turn."""
+def plane_of_motion(model: Model, state: State, b: int) -> np.ndarray | None:
+    """The unit normal of the plane run b stays in, of any orientation (centres, velocities,
+    gravity and wall normals all lie in it, and every spin is along its normal), or None. Only
+    outside such a plane can a sliding contact's slip turn."""
     if model.dim < 3:
-        return True
+        return np.array([0.0, 0.0, 1.0])
     rows = [state.s[b] - state.s[b, :1], state.v[b], model.wall_normal]
     if model.gravity is not None:
         rows.append(model.gravity[b][None])
@@ -212,11 +212,35 @@ def moves_in_a_plane(model: Model, state: State, b: int) -> bool:
     spins = state.w[b] if model.spin_dim == 3 else np.zeros((0, 3))
     spin_size = np.linalg.norm(spins, axis=1)
     if not spin_size.any():
-        return bool(np.linalg.matrix_rank(in_plane, tol=PLANE_TOL * size) < 3)
+        _, sizes, axes = np.linalg.svd(in_plane)
+        spread = np.zeros(3)
+        spread[:len(sizes)] = sizes
+        return axes[-1] if spread[-1] <= PLANE_TOL * size else None
     # Spinning: the plane's normal can only be the spins' common axis.
     normal = spins[int(spin_size.argmax())] / spin_size.max()
-    return bool(np.abs(in_plane @ normal).max() <= PLANE_TOL * size
-                and np.linalg.norm(np.cross(spins, normal), axis=1).max() <= PLANE_TOL * spin_size.max())
+    if (np.abs(in_plane @ normal).max() <= PLANE_TOL * size
+            and np.linalg.norm(np.cross(spins, normal), axis=1).max() <= PLANE_TOL * spin_size.max()):
+        return normal
+    return None
+
+
+def turned_quaternions(q: np.ndarray, w: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """Orientations q (T, 4), scalar first, after turning at w (T, 3) rad/s for tau (T,) seconds."""
+    rate = np.sqrt((w * w).sum(-1))
+    half = 0.5 * rate * tau
+    with np.errstate(invalid="ignore", divide="ignore"):
+        axis = np.where(rate[:, None] > 0, w / np.where(rate > 0, rate, 1.0)[:, None], 0.0)
+    dq = np.concatenate((np.cos(half)[:, None], np.sin(half)[:, None] * axis), axis=1)
+    a, b = dq, q
+    return np.stack((a[:, 0] * b[:, 0] - a[:, 1] * b[:, 1] - a[:, 2] * b[:, 2] - a[:, 3] * b[:, 3],
+                     a[:, 0] * b[:, 1] + a[:, 1] * b[:, 0] + a[:, 2] * b[:, 3] - a[:, 3] * b[:, 2],
+                     a[:, 0] * b[:, 2] - a[:, 1] * b[:, 3] + a[:, 2] * b[:, 0] + a[:, 3] * b[:, 1],
+                     a[:, 0] * b[:, 3] + a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1] + a[:, 3] * b[:, 0]), axis=1)
+
+
+def moves_in_a_plane(model: Model, state: State, b: int) -> bool:
+    """Whether run b stays in one plane, of any orientation (see `plane_of_motion`)."""
+    return plane_of_motion(model, state, b) is not None
 
 
 def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:

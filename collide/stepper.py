@@ -24,7 +24,17 @@ from collide.engine import kernels as kn
 from collide.engine import tier
 from collide.errors import RunError
 from collide.integrators import INTEGRATORS, Integrator
-from collide.model import Model, State, max_frequency, moves_in_a_plane, reference_frequency, select_model, select_state
+from collide.model import (
+    TABLE_K,
+    Model,
+    State,
+    max_frequency,
+    plane_of_motion,
+    reference_frequency,
+    select_model,
+    select_state,
+    turned_quaternions,
+)
 
 MAX_STEPS_DEFAULT = 20_000_000
 EDGE_TOL = float(kn.EDGE_TOL)
@@ -164,6 +174,9 @@ class ContactLog:
     max_overlap: np.ndarray
     count: np.ndarray
     max_normal_force: np.ndarray | None = None  # N; NaN where not known (the seed's grid with walls)
+    # The longest single contact in collision times (pi / omega of its pair): a collision lasts
+    # about one, a contact that rests or rolls many. None where not known (DEM runs, recordings).
+    longest: np.ndarray | None = None
 
 
 @dataclass
@@ -200,7 +213,8 @@ class RunResult:
             return None if x is None else x[index:index + 1]
 
         log = ContactLog(*(pick(getattr(self.contacts, f)) for f in
-                           ("first_start", "last_end", "duration", "max_overlap", "count", "max_normal_force")))
+                           ("first_start", "last_end", "duration", "max_overlap", "count", "max_normal_force",
+                            "longest")))
         trajectories = None
         if self.trajectories is not None:
             traj = self.trajectories[index]
@@ -325,6 +339,50 @@ def kernel_inputs(model: Model, state: State) -> tuple:
     return G, WP, grav
 
 
+def into_plane(Gb: np.ndarray, WP: np.ndarray, gravity: np.ndarray, normal: np.ndarray) -> tuple:
+    """Turn one member's bodies (Gb, in place), gravity (in place) and walls so that its plane of
+    motion (unit `normal`) is z = const, what is out of it exactly zero (it is round-off: see
+    `plane_of_motion`). Returns (turn R: x' = R x, the turned walls, the initial orientations);
+    orientations become the planar path's angle about z, from 0."""
+    turn = np.eye(3)
+    if abs(normal[2]) < 1.0 - 1e-15:  # z = const already: left as it is, to the bit
+        first = np.cross(normal, np.eye(3)[int(np.abs(normal).argmin())])
+        first /= np.linalg.norm(first)
+        turn = np.array([first, np.cross(normal, first), normal])
+    for col in (kn.G_S, kn.G_V, kn.G_W):
+        Gb[:, col:col + 3] = Gb[:, col:col + 3] @ turn.T
+    Gb[:, kn.G_S + 2] = Gb[0, kn.G_S + 2]
+    Gb[:, kn.G_V + 2] = 0.0
+    Gb[:, kn.G_W:kn.G_W + 2] = 0.0
+    orientation = Gb[:, kn.G_Q:kn.G_Q + 4].copy()
+    Gb[:, kn.G_Q:kn.G_Q + 4] = 0.0
+    gravity[:] = turn @ gravity
+    gravity[2] = 0.0
+    walls = WP.copy()
+    walls[:, :3] = WP[:, :3] @ turn.T
+    walls[:, 3:] = WP[:, 3:] @ turn.T
+    walls[:, 5] = 0.0
+    walls[:, 3:] /= np.maximum(np.linalg.norm(walls[:, 3:], axis=1), 1e-300)[:, None]
+    return turn, walls, orientation
+
+
+def out_of_plane(Gb: np.ndarray, knots: np.ndarray, records: np.ndarray, turn: np.ndarray,
+                 orientation: np.ndarray, spin_dim: int) -> None:
+    """Undo `into_plane` on one member's final bodies, knots and contact records (in place)."""
+    for col in (kn.G_S, kn.G_V, kn.G_W):
+        Gb[:, col:col + 3] = Gb[:, col:col + 3] @ turn
+    for col in (kn.K_S, kn.K_V, kn.K_W, kn.K_A, kn.K_AN):
+        knots[:, col:col + 3] = knots[:, col:col + 3] @ turn
+    records[:, kn.R_FX:kn.R_FZ + 1] = records[:, kn.R_FX:kn.R_FZ + 1] @ turn
+    if spin_dim == 3:  # the angle turned about the plane's normal, onto each body's start
+        axis = turn[2]
+        Gb[:, kn.G_Q:kn.G_Q + 4] = turned_quaternions(orientation, np.broadcast_to(axis, (len(Gb), 3)),
+                                                      Gb[:, kn.G_Q])
+        body = knots[:, kn.K_BODY].astype(np.int64)
+        knots[:, kn.K_Q:kn.K_Q + 4] = turned_quaternions(orientation[body], np.broadcast_to(axis, (len(knots), 3)),
+                                                         knots[:, kn.K_Q])
+
+
 def unpack_state(model: Model, G: np.ndarray) -> tuple:
     """s, v, w, q of the members from their final body tables G (B, N, NG)."""
     d = model.dim
@@ -377,8 +435,8 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     G, WP, grav = kernel_inputs(model, initial)
     spin = model.spin_dim > 0
     friction = model.friction & (model.mu > 0) & (model.dim > 1)
-    turns = friction & ~np.array([moves_in_a_plane(model, initial, b) if friction[b] and model.dim == 3 else True
-                                  for b in range(b_count)])
+    planes = [plane_of_motion(model, initial, b) if friction[b] and model.dim == 3 else None for b in range(b_count)]
+    turns = friction & np.array([model.dim == 3 and plane is None for plane in planes])
     fl = np.zeros((b_count, int(kn.NFL)), np.int64)
     fl[:, kn.FL_SPIN], fl[:, kn.FL_FRICTION], fl[:, kn.FL_SEED] = spin, friction, model.seed_lever
     fl[:, kn.FL_PLANAR], fl[:, kn.FL_RECORD], fl[:, kn.FL_AUTO] = model.dim < 3, record, auto & integ.events
@@ -393,11 +451,19 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     # Contiguous already (stacked per scene); a strided view would compile the kernel anew.
     tables = [(np.ascontiguousarray(model.pair_table[b]), np.ascontiguousarray(model.wall_table[b]))
               for b in range(b_count)]
+    walls = [WP] * b_count
+    # A frictional 3D run in one plane runs turned into z = const, on the planar path (half the
+    # cost of the general one for a rack: a smaller hold system, smooth band values, substeps).
+    flat = {b: into_plane(G[b], WP, grav[b], plane) for b, plane in enumerate(planes)
+            if plane is not None and integ.events}
+    for b, (_, turned_walls, _) in flat.items():
+        walls[b] = turned_walls
+        fl[b, kn.FL_PLANAR] = kn.YES
     _load_compiled(integ.events, G[0], tables[0], WP, grav[0], weights, fl[0], fp[0])  # loading is not simulating
 
     def run_member(b: int) -> tuple:
         if integ.events:
-            return kn.simulate(G[b], tables[b], WP, grav[b], weights, fl[b], fp[b])
+            return kn.simulate(G[b], tables[b], walls[b], grav[b], weights, fl[b], fp[b])
         return kn.seed_run(G[b], tables[b], WP, grav[b], fl[b], fp[b])
 
     started = time.perf_counter()
@@ -405,6 +471,8 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     wall_time = time.perf_counter() - started
     t_final = np.zeros(b_count)
     ivals = []
+    for b, (turn, _, orientation) in flat.items():
+        out_of_plane(G[b], outcomes[b][1], outcomes[b][2], turn, orientation, model.spin_dim)
     for b, (t, knots, recs, ival, st, fg) in enumerate(outcomes):
         _check_status(model, b, st, fg, dt, integ)
         t_final[b] = t
@@ -427,7 +495,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     else:
         max_force = np.full(b_count, np.nan)
     log = ContactLog(logs[:, 0], logs[:, 1], logs[:, 2], figures[:, kn.F_MAX_OVERLAP].copy(),
-                     stats[:, kn.S_CONTACTS].copy(), max_force)
+                     stats[:, kn.S_CONTACTS].copy(), max_force, longest_contacts(model, ivals, t_final))
     dt_min = np.where(np.isfinite(figures[:, kn.F_DT_MIN]), figures[:, kn.F_DT_MIN], dt)
     return RunResult(model=model, initial=initial, final=final, integrator=integrator, dt=dt,
                      steps=stats[:, kn.S_STEPS].copy(), jumps=stats[:, kn.S_WINDOWS].copy(),
@@ -516,6 +584,28 @@ def contact_logs(ivals: list[np.ndarray], t_end: np.ndarray) -> np.ndarray:
             reached = np.maximum.accumulate(e)[:-1]
             added = np.maximum(e[1:] - np.maximum(s[1:], reached), 0.0)
             out[b] = start.min(), end.max(), (e[0] - s[0]) + added.sum()
+    return out
+
+
+def longest_contacts(model: Model, ivals: list[np.ndarray], t_end: np.ndarray) -> np.ndarray:
+    """Each member's (B,) longest single contact in collision times, pi / omega with omega =
+    sqrt(k / reduced mass) of its pair (an open contact ends at t_end). The whole batch at once:
+    per member, numpy calls would cost a sweep's small member more than its run."""
+    counts = np.array([len(iv) for iv in ivals], np.int64)
+    out = np.zeros(len(ivals))
+    if not counts.any():
+        return out
+    iv = np.concatenate(ivals)
+    member = np.repeat(np.arange(len(ivals)), counts)
+    i, j = iv[:, kn.V_I].astype(np.int64), iv[:, kn.V_J].astype(np.int64)
+    wall = j < 0
+    other = np.where(wall, i, j)
+    mat_i, mat_j = model.material[member, i], model.material[member, other]
+    m_i, m_j = model.mass[member, i], model.mass[member, other]
+    k = np.where(wall, model.wall_table[member, mat_i, TABLE_K], model.pair_table[member, mat_i, mat_j, TABLE_K])
+    reduced = np.where(wall, m_i, m_i * m_j / (m_i + m_j))
+    end = np.where(np.isnan(iv[:, kn.V_END]), t_end[member], iv[:, kn.V_END])
+    np.maximum.at(out, member, (end - iv[:, kn.V_START]) * np.sqrt(k / reduced) / math.pi)
     return out
 
 

@@ -109,9 +109,9 @@ def tilted_bonus(**changes) -> dict:
     return raw
 
 
-def _bonus_turned() -> tuple[dict, dict, np.ndarray]:
-    """The bonus demo (2D) and the same turned as a whole into a tilted plane (3D), with the turn."""
-    raw2 = load_scene("demo-bonus").source
+def turned_scene(name: str = "demo-bonus", overrides: tuple[str, ...] = ()) -> tuple[dict, dict, np.ndarray]:
+    """A built-in 2D scene and the same turned as a whole into a tilted plane (3D), with the turn."""
+    raw2 = load_scene(name, list(overrides)).source
     axis = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
     k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     turn = np.eye(3) + np.sin(0.7) * k + (1 - np.cos(0.7)) * k @ k
@@ -119,22 +119,69 @@ def _bonus_turned() -> tuple[dict, dict, np.ndarray]:
     def turned(v2):
         return (turn @ np.array([v2[0], v2[1], 0.0])).tolist()
 
-    raw3 = dict(raw2, dim=3, body=[dict(b, position=turned(b["position"]), velocity=turned(b["velocity"]),
-                                        spin=(turn @ np.array([0.0, 0.0, b["spin"]])).tolist())
-                                   for b in raw2["body"]])
-    return raw2, raw3, turn
+    def body(b: dict) -> dict:
+        out = dict(b, position=turned(b["position"]), velocity=turned(b["velocity"]))
+        if "spin" in b:
+            out["spin"] = (turn @ np.array([0.0, 0.0, b["spin"]])).tolist()
+        return out
+
+    return raw2, dict(raw2, dim=3, body=[body(b) for b in raw2["body"]]), turn
 
 
 def test_bonus_demo_in_any_plane_is_the_2d_run():
     """No preferred axes: the bonus demo turned as a whole into a tilted plane takes the same
     steps as in z = 0 and gives the turned 2D answer."""
-    raw2, raw3, turn = _bonus_turned()
+    raw2, raw3, turn = turned_scene()
     flat = run_scene(parse_scene(raw2), record=False).result
     tilted = run_scene(parse_scene(raw3), record=False).result
     back = tilted.final.v[0] @ turn
     assert back[:, :2] == pytest.approx(flat.final.v[0], abs=1e-9)
     assert np.abs(back[:, 2]).max() < 1e-12
     assert int(tilted.steps[0]) == int(flat.steps[0])
+
+
+def test_a_run_in_a_tilted_plane_records_the_turned_2d_motion():
+    """A 3D run in a tilted plane goes through the planar path turned into z = const, and comes
+    back turned: its recorded motion (sampled between knots too), spins and orientations are the
+    2D run's turned, to round-off and the event tolerance."""
+    from collide.diagnostics import sample
+    from collide.model import turned_quaternions
+
+    raw2, raw3, turn = turned_scene()
+    flat = run_scene(parse_scene(raw2)).result
+    tilted = run_scene(parse_scene(raw3)).result
+    times = np.linspace(0.0, float(flat.final.t[0]), 57)
+    s2 = sample(flat.model, flat.trajectories[0], times)
+    s3 = sample(tilted.model, tilted.trajectories[0], times)
+    size = float(np.abs(s2.s).max())
+    assert np.abs(s3.s[:, 0] @ turn - np.pad(s2.s[:, 0], ((0, 0), (0, 0), (0, 1)))).max() < 1e-9 * size
+    assert np.abs(s3.v[:, 0] @ turn - np.pad(s2.v[:, 0], ((0, 0), (0, 0), (0, 1)))).max() < 1e-9
+    assert np.abs(s3.w[:, 0] - s2.w[:, 0] * turn[:, 2]).max() < 1e-9
+    # Orientation at the knots (between them 2D turns an angle, 3D a quaternion, by the spin
+    # interpolated in the step: they differ by 5e-9): the 2D angle turned about the plane's
+    # normal (turn's z column), from the start.
+    knots = np.unique(flat.trajectories[0].knots[:, kn.K_T])
+    angle = sample(flat.model, flat.trajectories[0], knots).q[:, 0, :, 0].ravel()
+    q3 = sample(tilted.model, tilted.trajectories[0], knots).q[:, 0].reshape(-1, 4)
+    expected = turned_quaternions(np.broadcast_to(q3[0], q3.shape), np.broadcast_to(turn[:, 2], q3[:, 1:].shape),
+                                  angle)
+    assert len(knots) > 10 and np.abs(q3 - expected).max() < 1e-12
+    friction2 = flat.trajectories[0].records[:, kn.R_FX:kn.R_FY + 1]
+    friction3 = tilted.trajectories[0].records[:, kn.R_FX:kn.R_FZ + 1] @ turn
+    assert np.abs(friction3[:, :2] - friction2).max() < 1e-9 * np.abs(friction2).max()
+    assert np.abs(friction3[:, 2]).max() < 1e-12 * np.abs(friction2).max()
+
+
+def test_billiards_in_a_tilted_plane_costs_what_it_does_in_2d():
+    """The billiards break turned into a tilted plane takes about the 2D run's steps and gives
+    its turned outcome within the tolerance (the break amplifies the turn's round-off)."""
+    raw2, raw3, turn = turned_scene("billiards-break")
+    flat = run_scene(parse_scene(raw2), record=False, measure=False).result
+    tilted = run_scene(parse_scene(raw3), record=False, measure=False).result
+    back = tilted.final.v[0] @ turn
+    assert np.abs(back[:, :2] - flat.final.v[0]).max() < 1e-6 * 6.0
+    assert np.abs(back[:, 2]).max() < 1e-12
+    assert abs(int(tilted.steps[0]) - int(flat.steps[0])) <= 2
 
 
 def test_friction_out_of_the_plane_keeps_the_order():
@@ -245,7 +292,7 @@ def test_a_run_knows_whether_it_stays_in_a_plane_of_any_orientation():
     assert planar(bounce | {"body": [ball([0.0, 3.0, 0.0])]})
     assert not planar(bounce | {"body": [ball([0.0, 3.0, 1.0])]})
     # The bonus demo turned as a whole into a tilted plane.
-    assert planar(_bonus_turned()[1])
+    assert planar(turned_scene()[1])
 
 
 def test_friction_events_in_the_plane_cost_few_step_attempts():
@@ -254,8 +301,8 @@ def test_friction_events_in_the_plane_cost_few_step_attempts():
     edge's value of |slip| rose and fell back: 11 trials for one event), and refinements close
     to a trial's end are one Verlet substep from there. With these, 154 steps from a step's start
     against 78 without friction (261 before). Out of the plane no Verlet substep is taken (a
-    small slip's direction turns faster than they resolve). Counted with the interpreted kernels,
-    where `step` can be wrapped."""
+    small slip's direction turns faster than they resolve); in a tilted plane they are. Counted
+    with the interpreted kernels, where `step` can be wrapped."""
     code = """
 import sys
 import collide.engine.kernels as kn
@@ -269,8 +316,10 @@ def counted(*args):
     count["full" if len(args[6]) > 1 else "substep"] += 1
     return step(*args)
 kn.step = counted
+from test_friction import turned_scene
 scenes = [load_scene("billiards-break", ["tol=1e-6", "contact.mu=" + mu]) for mu in ("0.1", "0")]
-for scene in scenes + [parse_scene(tilted_bonus(tol=1e-7))]:
+turned = parse_scene(turned_scene("billiards-break", ("tol=1e-6",))[1])
+for scene in scenes + [parse_scene(tilted_bonus(tol=1e-7)), turned]:
     count.update(full=0, substep=0)
     run_scene(scene, record=False, measure=False)
     print(count["full"], count["substep"])
@@ -278,9 +327,11 @@ for scene in scenes + [parse_scene(tilted_bonus(tol=1e-7))]:
     env = {**os.environ, "COLLIDE_JIT": "0"}
     out = subprocess.run([sys.executable, "-c", code.format(tests=str(Path(__file__).parent))], env=env,
                          capture_output=True, text=True, check=True)
-    (full, substeps), (full_without, _), (full_3d, substeps_3d) = [map(int, line.split())
-                                                                   for line in out.stdout.splitlines()]
+    (full, substeps), (full_without, _), (full_3d, substeps_3d), (full_tilted, substeps_tilted) = [
+        map(int, line.split()) for line in out.stdout.splitlines()]
     assert full_without > 0 and full_3d > 0
     assert full <= 2.2 * full_without
     assert substeps > 0
     assert substeps_3d == 0
+    # In a tilted plane the break runs on the planar path too (turned into z = const).
+    assert substeps_tilted > 0 and full_tilted <= 1.1 * full

@@ -18,7 +18,7 @@ import numpy as np
 
 from collide import diagnostics as dg
 from collide.engine import kernels as kn
-from collide.model import Model, State
+from collide.model import Model, State, turned_quaternions
 from collide.stepper import Trajectory
 
 CHUNK = 1 << 14  # (time, body) pairs evaluated at once: about 6 MB of gathered knot rows
@@ -122,7 +122,7 @@ class Knots:
         vel = v0 + g * tau[:, None]
         spin = k0[:, kn.K_W:kn.K_W + 3].copy()
         if qd == 4:
-            orient = dg._turn(k0[:, kn.K_Q:kn.K_Q + 4], spin, tau)
+            orient = turned_quaternions(k0[:, kn.K_Q:kn.K_Q + 4], spin, tau)
         else:
             orient = k0[:, kn.K_Q:kn.K_Q + 4].copy()
             orient[:, 0] += spin[:, 2] * tau
