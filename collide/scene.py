@@ -685,6 +685,31 @@ def _check_start_overlap(scene: Scene) -> None:
                                  f"(distance {height:.3g} m < radius {a.radius:.3g} m)")
 
 
+def turned_source(raw: dict, turn: Any) -> dict:
+    """A scene's source (1D, 2D or 3D) turned as a whole about the origin by the rotation `turn`
+    (3 x 3), as a 3D scene: bodies' positions, velocities and spins (a 2D spin is about z),
+    walls' points and normals, gravity. The same physics in another orientation: a check that
+    no axis is preferred."""
+    import numpy as np
+
+    turn = np.asarray(turn, dtype=float)
+
+    def turned(vector: Any) -> list[float]:
+        return (turn @ np.pad(np.asarray(vector, dtype=float), (0, 3 - len(vector)))).tolist()
+
+    def spin(value: Any) -> list[float]:
+        return turned([0.0, 0.0, float(value)] if np.ndim(value) == 0 else value)
+
+    out = dict(raw, dim=3)
+    out["body"] = [dict(b, position=turned(b["position"]), velocity=turned(b["velocity"]),
+                        **({"spin": spin(b["spin"])} if "spin" in b else {})) for b in raw.get("body", [])]
+    if "wall" in raw:
+        out["wall"] = [dict(w, point=turned(w["point"]), normal=turned(w["normal"])) for w in raw["wall"]]
+    if "gravity" in raw:
+        out["gravity"] = turned(raw["gravity"])
+    return out
+
+
 def with_settings(scene: Scene, **changes: Any) -> Scene:
     """A copy of the scene with top-level settings changed (keeps `source` in step)."""
     source = dict(scene.source)

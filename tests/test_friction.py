@@ -15,7 +15,7 @@ from collide.accuracy import outcome, speed_scale
 from collide.engine import kernels as kn
 from collide.model import compile_scenes, reference_frequency
 from collide.run import run_scene
-from collide.scene import load_scene, parse_scene
+from collide.scene import load_scene, parse_scene, turned_source
 
 
 def pressed_island(dim: int, seed: bool, wall: bool):
@@ -115,17 +115,7 @@ def turned_scene(name: str = "demo-bonus", overrides: tuple[str, ...] = ()) -> t
     axis = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
     k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     turn = np.eye(3) + np.sin(0.7) * k + (1 - np.cos(0.7)) * k @ k
-
-    def turned(v2):
-        return (turn @ np.array([v2[0], v2[1], 0.0])).tolist()
-
-    def body(b: dict) -> dict:
-        out = dict(b, position=turned(b["position"]), velocity=turned(b["velocity"]))
-        if "spin" in b:
-            out["spin"] = (turn @ np.array([0.0, 0.0, b["spin"]])).tolist()
-        return out
-
-    return raw2, dict(raw2, dim=3, body=[body(b) for b in raw2["body"]]), turn
+    return raw2, turned_source(raw2, turn), turn
 
 
 def test_bonus_demo_in_any_plane_is_the_2d_run():
@@ -170,6 +160,20 @@ def test_a_run_in_a_tilted_plane_records_the_turned_2d_motion():
     friction3 = tilted.trajectories[0].records[:, kn.R_FX:kn.R_FZ + 1] @ turn
     assert np.abs(friction3[:, :2] - friction2).max() < 1e-9 * np.abs(friction2).max()
     assert np.abs(friction3[:, 2]).max() < 1e-12 * np.abs(friction2).max()
+
+
+def test_a_ball_on_a_tilted_floor_is_the_turned_2d_ball():
+    """No preferred axes with walls and gravity: a ball set down sliding on a floor, the scene
+    turned as a whole (floor, gravity and all), takes the 2D run's steps to its turned outcome."""
+    raw2 = {"name": "slide", "dim": 2, "duration": 0.1, "gravity": [0.0, -9.81], "contact": {"k": 1e6, "mu": 0.3},
+            "body": [{"name": "ball", "mass": 0.1, "radius": 0.05, "position": [0.0, 0.05], "velocity": [1.0, 0.0]}],
+            "wall": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}]}
+    turn = turned_scene()[2]
+    flat = run_scene(parse_scene(raw2), record=False, measure=False).result
+    tilted = run_scene(parse_scene(turned_source(raw2, turn)), record=False, measure=False).result
+    assert np.abs(tilted.final.v[0, 0] @ turn - [*flat.final.v[0, 0], 0.0]).max() < 1e-12
+    assert np.abs(tilted.final.w[0, 0] - flat.final.w[0, 0, 0] * turn[:, 2]).max() * 0.05 < 1e-12
+    assert int(tilted.steps[0]) == int(flat.steps[0])
 
 
 def test_billiards_in_a_tilted_plane_costs_what_it_does_in_2d():
