@@ -2,6 +2,10 @@
 with and without a floor under gravity), each run at --tol and at a 1000 times tighter one.
 
     python scripts/check_estimates.py [--scenes 200] [--seed 0] [--tol 1e-6] [--model-only]
+                                      [--k 1e4] [--mu 0.3]
+
+--k sets every scene's spring (default 1e4 N/m), --mu every scene's friction (0: none; default
+drawn, 0.1-0.6); the scenes drawn are the same.
 
 Printed: how many scenes had their error (against the tighter run) within the reported
 error_estimate, within 10 times it, or beyond; how many measured their error; the energy balance
@@ -36,13 +40,15 @@ def main() -> int:
     parser.add_argument("--tol", type=float, default=1e-6)
     parser.add_argument("--model-only", action="store_true",
                         help="quote the error model alone (no run measures its error): how far the model holds")
+    parser.add_argument("--k", type=float, default=1e4, help="every scene's spring constant, N/m")
+    parser.add_argument("--mu", type=float, default=None, help="every scene's friction coefficient (0: none)")
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
     counts: collections.Counter[str] = collections.Counter()
     worst: list[tuple] = []
     started = time.perf_counter()
     for index in range(args.scenes):
-        scene = random_scene(rng, index)
+        scene = random_scene(rng, index, k=args.k, mu=args.mu)
         try:
             run = run_scene(scene, tol=args.tol, record=False, measure=not args.model_only)
             reference = run_scene(scene, tol=args.tol / 1000, record=False, measure=not args.model_only)
@@ -60,7 +66,8 @@ def main() -> int:
         counts["warned"] += bool(run.result.warnings)
         worst.append((error / estimate, scene.name, scene.dim, len(scene.bodies), bool(scene.walls), error,
                       estimate, energy))
-    print(f"{args.scenes} random frictional scenes (seed {args.seed}), tol {args.tol:g} against "
+    kind = "frictional" if args.mu is None else f"mu = {args.mu:g}"
+    print(f"{args.scenes} random {kind} scenes (seed {args.seed}, k = {args.k:g} N/m), tol {args.tol:g} against "
           f"{args.tol / 1000:g}, {time.perf_counter() - started:.0f} s")
     for what in sorted(counts):
         print(f"  {what}: {counts[what]}")

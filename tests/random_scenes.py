@@ -10,7 +10,9 @@ from collide.scene import Scene, parse_scene
 RADIUS, MASS = 0.03, 0.0254
 
 
-def random_scene(rng: np.random.Generator, index: int) -> Scene:
+def random_scene(rng: np.random.Generator, index: int, k: float = 1e4, mu: float | None = None) -> Scene:
+    """Scene `index` of the sequence `rng` draws; `mu` (else drawn, 0.1-0.6) and `k` replace the
+    contact's constants without changing what is drawn."""
     dim = int(rng.choice([2, 3]))
     count = int(rng.integers(2, 7))
     floor = bool(rng.random() < 0.5)
@@ -27,7 +29,9 @@ def random_scene(rng: np.random.Generator, index: int) -> Scene:
                            "velocity": (rng.normal(size=dim) * 0.5).tolist(),
                            "spin": spin if dim == 2 else spin.tolist()})
     raw: dict = {"name": f"random-{index}", "dim": dim, "duration": 0.5,
-                 "contact": {"k": 1e4, "mu": float(rng.uniform(0.1, 0.6))}, "body": bodies}
+                 "contact": {"k": k, "mu": float(rng.uniform(0.1, 0.6))}, "body": bodies}
+    if mu is not None:
+        raw["contact"]["mu"] = mu
     if floor:
         up = [0.0] * dim
         up[-1] = 1.0
