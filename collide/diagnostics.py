@@ -230,8 +230,11 @@ class Residuals:
 
 
 def _angular_scale(model: Model, s: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """What the angular momentum's round-off is relative to: each body's |s x m v| and I |w|, and
+    its momentum times its radius, so that a ball moving through the origin (a cue ball along
+    the x axis: s x v is round-off) does not make round-off look like a residual of 0.5."""
     terms = np.sqrt(_dot(_cross_z(s, model.mass[..., None] * v), _cross_z(s, model.mass[..., None] * v)))
-    scale = terms.sum(axis=-1)
+    scale = terms.sum(axis=-1) + np.sum(model.mass * model.radius * np.sqrt(_dot(v, v)), axis=-1)
     if w.shape[-1]:
         scale = scale + np.sum(model.inertia * np.sqrt(_dot(w, w)), axis=-1)
     return scale

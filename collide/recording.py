@@ -321,6 +321,9 @@ class _Writer:
         # Every contact that ever engaged (from the run's contact intervals: a frame could miss one).
         self.touched = np.arange(len(self.exact.contacts.names))
         self.many_contacts = len(self.touched) >= MANY_CONTACTS
+        # A contact counts as pressed past the engine's touching tolerance: a tight rack turned
+        # into a tilted plane touches with round-off overlaps (1e-17 m) that press nothing.
+        self.pressed = float(kn.TOUCH_TOL) * 2.0 * float(self.model.radius.max())
         normal = self.exact.contacts.normal_force[:, 0]
         peak = float(np.max(np.linalg.norm(normal, axis=-1))) if normal.size else 0.0
         # Force arrows: the largest normal force is drawn as long as a sphere's diameter.
@@ -516,7 +519,7 @@ class _Writer:
         for c in self.touched:
             name = exact.names[c]
             bodies = self._contact_bodies(c)
-            on = view.overlap[:, 0, c] > 0
+            on = view.overlap[:, 0, c] > self.pressed
             lengths = on.astype(np.int32)
             point = _pad3(view.point[:, 0, c])[on]
             entity = f"/world/contacts/{name}"
@@ -544,7 +547,7 @@ class _Writer:
         """Every contact at once: points and normal (and friction) force arrows of all contacts
         pressed at each frame, and how many there are as a plot."""
         view = self.view.contacts
-        on = view.overlap[:, 0] > 0  # (T, C)
+        on = view.overlap[:, 0] > self.pressed  # (T, C)
         lengths = on.sum(axis=1).astype(np.int32)
         point = _pad3(view.point[:, 0][on])
         radius = float(self.model.radius.mean())
@@ -555,7 +558,7 @@ class _Writer:
         if self.friction and view.friction_force is not None:
             self._arrows("/world/contacts/friction_force", _pad3(view.friction_force[:, 0][on]), point, lengths, 1,
                          (255, 64, 160))
-        exact_on = (self.exact.contacts.overlap[:, 0] > 0).sum(axis=1).astype(float)
+        exact_on = (self.exact.contacts.overlap[:, 0] > self.pressed).sum(axis=1).astype(float)
         self._send("/contacts/count", rr.Scalars.columns(scalars=exact_on), self.exact.index)
 
     def _arrows(self, entity: str, force: np.ndarray, point: np.ndarray, lengths: np.ndarray,

@@ -685,14 +685,23 @@ def _check_start_overlap(scene: Scene) -> None:
                                  f"(distance {height:.3g} m < radius {a.radius:.3g} m)")
 
 
-def turned_source(raw: dict, turn: Any) -> dict:
-    """A scene's source (1D, 2D or 3D) turned as a whole about the origin by the rotation `turn`
-    (3 x 3), as a 3D scene: bodies' positions, velocities and spins (a 2D spin is about z),
-    walls' points and normals, gravity. The same physics in another orientation: a check that
-    no axis is preferred."""
+def generic_turn() -> Any:
+    """A rotation (3 x 3) with no axis special: 0.7 rad about (1, 2, 0.5)."""
     import numpy as np
 
-    turn = np.asarray(turn, dtype=float)
+    axis = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
+    cross = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + np.sin(0.7) * cross + (1 - np.cos(0.7)) * cross @ cross
+
+
+def turned_source(raw: dict, turn: Any = None) -> dict:
+    """A scene's source (1D, 2D or 3D) turned as a whole about the origin by the rotation `turn`
+    (3 x 3; default `generic_turn()`), as a 3D scene: bodies' positions, velocities and spins (a
+    2D spin is about z), walls' points and normals, gravity. The same physics in another
+    orientation: a check that no axis is preferred."""
+    import numpy as np
+
+    turn = generic_turn() if turn is None else np.asarray(turn, dtype=float)
 
     def turned(vector: Any) -> list[float]:
         return (turn @ np.pad(np.asarray(vector, dtype=float), (0, 3 - len(vector)))).tolist()
