@@ -229,7 +229,7 @@ class Residuals:
     angular_momentum: np.ndarray
 
 
-def _angular_scale(model: Model, s: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+def angular_scale(model: Model, s: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
     """What the angular momentum's round-off is relative to: each body's |s x m v| and I |w|, and
     its momentum times its radius, so that a ball moving through the origin (a cue ball along
     the x axis: s x v is round-off) does not make round-off look like a residual of 0.5."""
@@ -278,7 +278,7 @@ def _residuals(result: RunResult) -> Residuals:
         if dl is None:
             angular = np.full(model.batch, np.nan)
         else:
-            l_scale = np.maximum(_angular_scale(model, a.s, a.v, a.w), _angular_scale(model, b.s, b.v, b.w))
+            l_scale = np.maximum(angular_scale(model, a.s, a.v, a.w), angular_scale(model, b.s, b.v, b.w))
             angular = np.where(l_scale > 0, np.sqrt(_dot(dl, dl)) / l_scale, 0.0)
     if model.n_walls:
         momentum = np.full(model.batch, np.nan)

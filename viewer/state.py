@@ -326,11 +326,8 @@ class ViewRun:
                 for c in range(values.shape[-1]):
                     values[inside, c] = np.interp(self.times[inside], ends, rows[:, c])
             comps = ("z",) if values.shape[-1] == 1 else ("x", "y", "z")
-            # Its natural size: sum |s x m v| + I |w| (the residual's scale), largest over the run.
-            arm = np.linalg.norm(np.atleast_3d(_cross(s, mass * v)), axis=-1).sum(axis=-1)
-            spin = states.w[:, 0]
-            if spin.shape[-1]:
-                arm = arm + np.sum(self.model.inertia[0] * np.linalg.norm(spin, axis=-1), axis=-1)
+            # Its natural size (the residual's scale), largest over the run.
+            arm = dg.angular_scale(self.model, s, v, states.w[:, 0])
             angular = _conserved_series("angular momentum", "kg m²/s",
                                         {f"L{a}": values[:, c] for c, a in enumerate(comps)},
                                         float(np.max(arm, initial=0.0)))
@@ -457,15 +454,6 @@ def body_values_arrays(mass: np.ndarray, inertia: np.ndarray, v: np.ndarray, w: 
            "spin": w}
     out["rotational"] = 0.5 * inertia * np.sum(w * w, axis=-1) if w.shape[-1] else np.zeros(len(mass))
     return out
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b for 1D (zero), 2D (z component, shape (..., 1)) and 3D vectors."""
-    if a.shape[-1] == 1:
-        return np.zeros((*a.shape[:-1], 1))
-    if a.shape[-1] == 2:
-        return (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0])[..., None]
-    return np.cross(a, b)
 
 
 def _conserved_series(title: str, unit: str, lines: dict[str, np.ndarray], scale: float) -> Series:
