@@ -203,7 +203,7 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     with np.errstate(divide="ignore") if contactless else contextlib.nullcontext():
         result = simulate(model, state, integrator=integ, dt=dt_arr, duration=duration, tail=tail,
                           record=record, max_steps=max_steps, event_tol=event_tol, auto=np.array(auto_used),
-                          omega_h=omega_h, progress=progress)
+                          omega_h=omega_h, progress=progress, resolved=np.where(auto_used, tols, estimate))
     check_finite(result, scenes)
     run = SceneRun(list(scenes), result, dt, [float(x) for x in tols], estimate, auto_used, ["model"] * len(scenes))
     if not measure:

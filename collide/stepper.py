@@ -401,11 +401,13 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
              record: bool = True, max_steps: int = MAX_STEPS_DEFAULT,
              event_tol: np.ndarray | float = EDGE_TOL, auto: np.ndarray | None = None,
              omega_h: np.ndarray | None = None, rest: np.ndarray | None = None,
-             progress: Progress | None = None) -> RunResult:
+             progress: Progress | None = None, resolved: np.ndarray | float = 0.0) -> RunResult:
     """Run B scenes to their end. `duration` and `tail` are (B,) with NaN meaning 'not set'.
     `dt` (B,) is the step; where `auto` is set each island steps by omega_h over its own stiffest
     frequency instead (dt is then the step of the stiffest single contact). `event_tol`
-    (relative to the fastest initial speed): how close a friction mode change must land."""
+    (relative to the fastest initial speed): how close a friction mode change must land.
+    `resolved` (B,), relative to the same speed: the velocity error the run's steps leave (its
+    tolerance); a run that ends by itself ends when nothing approaches faster than that."""
     b_count = model.batch
     if integrator == "dem":
         from collide.dem import simulate_dem
@@ -448,6 +450,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     fp[:, kn.FP_SCALE] = speed * event_tol / EDGE_TOL
     fp[:, kn.FP_EVENT_TOL] = event_tol
     fp[:, kn.FP_SLOW] = 1e-9 * speed  # closing speeds under 1e-9 of the fastest are round-off, not an approach
+    fp[:, kn.FP_END_SLOW] = np.maximum(1e-9, resolved) * speed
     # Contiguous already (stacked per scene); a strided view would compile the kernel anew.
     tables = [(np.ascontiguousarray(model.pair_table[b]), np.ascontiguousarray(model.wall_table[b]))
               for b in range(b_count)]

@@ -43,6 +43,8 @@ def main() -> int:
     parser.add_argument("--k", type=float, default=1e4, help="every scene's spring constant, N/m")
     parser.add_argument("--mu", type=float, default=None, help="every scene's friction coefficient (0: none)")
     args = parser.parse_args()
+    if not (args.k > 0 and args.tol > 0 and args.scenes > 0 and (args.mu is None or args.mu >= 0)):
+        parser.error("--k, --tol and --scenes must be positive and --mu at least 0")
     rng = np.random.default_rng(args.seed)
     counts: collections.Counter[str] = collections.Counter()
     worst: list[tuple] = []
