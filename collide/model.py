@@ -127,7 +127,10 @@ class State:
 
 
 def shape_key(scene: Scene) -> tuple:
-    return (scene.dim, tuple(b.name for b in scene.bodies), len(scene.walls),
+    """What scenes run together in one batch must share. Walls are the model's, not a member's:
+    two scenes with walls elsewhere ran the first one's (a ball on a floor turned another way
+    came out 7.7 m/s off)."""
+    return (scene.dim, tuple(b.name for b in scene.bodies), tuple((w.point, w.normal) for w in scene.walls),
             scene.gravity is not None, scene.has_spin, scene.contact.lever, len(scene.materials),
             scene.contact.model, scene.contact.tangential)
 
@@ -252,7 +255,7 @@ def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
     for scene in scenes[1:]:
         if shape_key(scene) != key:
             raise SceneError(f"scene '{scene.name}' differs in shape from '{first.name}' "
-                             "(dim, bodies, walls, gravity or spin); batch only same-shaped scenes")
+                             "(dim, bodies, walls or where they are, gravity or spin); batch only same-shaped scenes")
     dim = first.dim
     n = len(first.bodies)
     b = len(scenes)

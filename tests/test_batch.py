@@ -126,6 +126,28 @@ def test_sweep_rows_equal_single_runs(tmp_path: Path) -> None:
         assert float(row["contact.mu"]) == spec.params["contact.mu"]
 
 
+def test_a_sweep_of_a_wall_runs_each_member_with_its_own_wall(tmp_path: Path) -> None:
+    """Walls are the batch model's, not a member's: a sweep of a wall's normal ran the members of
+    each vectorised call against the first one's wall (8 of 11 rows repeated others, silently).
+    Members with walls elsewhere are run apart, each equal to its single run."""
+    scene = tmp_path / "wall-ball.toml"
+    scene.write_text('name = "wall-ball"\ndim = 2\n[contact]\nk = 1e5\nmu = 0.3\n'
+                     '[[body]]\nname = "ball"\nmass = 0.1\nradius = 0.05\nposition = [0.0, 0.0]\n'
+                     'velocity = [1.0, 0.0]\n[[wall]]\npoint = [0.5, 0.0]\nnormal = [-1.0, 0.0]\n')
+    plan = plan_batch([str(scene)], sweeps=[parse_sweep("wall.0.normal.y=-0.5:0.5:7")])
+    result = run_batch(plan, summary=tmp_path / "s.csv")
+    assert result.failed == 0
+    rows = read_summary(tmp_path / "s.csv")[1]
+    for spec, row in zip(plan.specs, rows):
+        single = run_scene(load_scene(str(scene), [f"wall.0.normal.y={spec.params['wall.0.normal.y']!r}"]),
+                           record=False).result
+        np.testing.assert_allclose(_floats(row, ["ball.velocity.x", "ball.velocity.y"]), single.final.v[0, 0],
+                                   rtol=0, atol=1e-12)
+    # Mirror images: the walls tilted either way turn the ball either way.
+    vy = [float(row["ball.velocity.y"]) for row in rows]
+    np.testing.assert_allclose(vy, [-y for y in vy[::-1]], atol=1e-9)
+
+
 def test_mixed_shapes_are_grouped(tmp_path: Path) -> None:
     # mu = 0 with no spin is another shape than mu > 0: they run in separate vectorised calls.
     plan = plan_batch(["demo-2d-moving"], sweeps=[parse_sweep("contact.mu=0:0.4:3")])
