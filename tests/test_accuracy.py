@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
-from collide.accuracy import plot_work_precision, work_precision
+from collide.accuracy import Point, WorkPrecision, plot_work_precision, work_precision
 from collide.scene import load_scene
 
 
@@ -31,3 +32,13 @@ def test_plot_is_written(study, tmp_path) -> None:
     path = tmp_path / "wp.png"
     plot_work_precision(study, path)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_observed_order_leaves_out_round_off() -> None:
+    """A sixth-order ladder that levels off at 1e-11 and rises again at many steps (a Newton's
+    cradle's kahan6): the slope is the converging part's, not 0.87 from the flat tail."""
+    wp = WorkPrecision("ladder", 1.0, np.zeros(1), 0.0)
+    for omega_dt in (1.0, 0.3, 0.1, 0.03, 0.01, 0.003, 0.001, 0.0003, 0.0001):
+        error = max(1e-5 * omega_dt ** 6, 2e-12 * (0.03 / omega_dt) ** 0.5)
+        wp.points.append(Point("kahan6", omega_dt, omega_dt, int(1 / omega_dt), 0.0, error))
+    assert wp.orders()["kahan6"] == pytest.approx(6.0, abs=0.1)
