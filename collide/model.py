@@ -241,11 +241,6 @@ def turned_quaternions(q: np.ndarray, w: np.ndarray, tau: np.ndarray) -> np.ndar
                      a[:, 0] * b[:, 3] + a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1] + a[:, 3] * b[:, 0]), axis=1)
 
 
-def moves_in_a_plane(model: Model, state: State, b: int) -> bool:
-    """Whether run b stays in one plane, of any orientation (see `plane_of_motion`)."""
-    return plane_of_motion(model, state, b) is not None
-
-
 def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
     """Pack B scenes of the same shape (dim, bodies, walls) into one model and state."""
     if not scenes:

@@ -274,11 +274,11 @@ def test_oblique_wall_impacts_in_3d_match_the_rigid_answer_like_2d() -> None:
 
 def test_a_run_knows_whether_it_stays_in_a_plane_of_any_orientation():
     """Only out of every plane can a slip turn (and its stiff layer need shorter steps)."""
-    from collide.model import compile_scenes, moves_in_a_plane
+    from collide.model import compile_scenes, plane_of_motion
 
     def planar(raw: dict) -> bool:
         model, state = compile_scenes([parse_scene(raw)])
-        return moves_in_a_plane(model, state, 0)
+        return plane_of_motion(model, state, 0) is not None
 
     floor = [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]
 

@@ -2109,8 +2109,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 # What still approaches closes slower than the run resolves velocities (its
                 # tolerance): the step's error, not a contact to come (a Newton's cradle at k =
                 # 1e6, tol 1e-7, left its balls at 1e-8 m/s and met them again 11 hours later).
-                t_end = _last_end(IV, CNT) + tail_after(fp[FP_TAIL], IV, CNT)
-                t = t_end
+                t = t_end = run_end(t, fp, IV, CNT)
                 break
             # Nothing touches: jump to the next contact start (nothing to record in free flight).
             if search == math.inf:
@@ -2138,10 +2137,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
             if tau < math.inf:
                 t += tau
                 continue
-            # No contact ahead: the run ends a tail after the last separation (free flight since).
-            tail = tail_after(fp[FP_TAIL], IV, CNT)
-            t_end = t + tail if CNT[CN_IVALS] == 0 else _last_end(IV, CNT) + tail
-            t = t_end
+            t = t_end = run_end(t, fp, IV, CNT)  # no contact ahead
             break
         # A window: islands of the bodies that may meet within it.
         omega = 0.0
@@ -2235,12 +2231,17 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
 
 
 @jit
-def _last_end(IV, CNT):
+def run_end(t, fp, IV, CNT):
+    """When a run that ends by itself ends: a tail after the last separation (free flight since),
+    or after t if nothing ever touched."""
+    tail = tail_after(fp[FP_TAIL], IV, CNT)
+    if CNT[CN_IVALS] == 0:
+        return t + tail
     last = 0.0
     for k in range(CNT[CN_IVALS]):
         if IV[k, V_END] == IV[k, V_END]:
             last = max(last, IV[k, V_END])
-    return last
+    return last + tail
 
 
 @jit
