@@ -1679,6 +1679,302 @@ def record_step(KN, RC, CNT, G, GI, X, XI, C, CI, na, nc, t, fl):
     return KN, RC
 
 
+
+
+# ---------------------------------------------------------------------------------------------
+# A sphere on a flat wall in closed form
+#
+# With one linear spring and a flat wall, the overlap is a harmonic oscillation whatever the
+# friction does (friction is tangential and the wall does not turn), and within each friction
+# mode the slip and spin follow from it in closed form: band, v and w constant (under the
+# wall's share of gravity); slide, integrals of delta and delta^2; stick, w sqrt(I/m + l^2)
+# constant (l = r - delta, the lever; with gravity along the wall, plus an integral). A ball
+# resting, rolling or sliding on a floor then costs its mode changes, not the thousands of steps
+# its bob (period 2 pi / omega) takes stepped.
+
+REST_SAMPLES = 8  # intervals per period of the bob: the event values are checked at their ends
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
+GL_X = 0.5 * (_GL_X + 1.0)  # nodes and weights on [0, 1]: to round-off over an eighth of a period
+GL_W = 0.5 * _GL_W
+RP_OM, RP_DEQ, RP_C, RP_S, RP_R, RP_M, RP_II, RP_K, RP_MU, RP_EPS, RP_GE, RP_VA, RP_WA = range(13)
+NRP = 13
+REST_STUCK_LIMIT = 8  # events in a row closer than the clock resolves: the stepped path takes over
+
+
+@jit_inline
+def rest_normal(P, tau):
+    """Overlap and its rate at tau into the interval."""
+    om = P[RP_OM]
+    c, s = math.cos(om * tau), math.sin(om * tau)
+    return P[RP_DEQ] + P[RP_C] * c + P[RP_S] * s, om * (P[RP_S] * c - P[RP_C] * s)
+
+
+@jit
+def rest_at(P, mode, sgn, tau):
+    """(delta, delta', tangential velocity, spin, friction force) at tau into the interval, in
+    friction mode `mode` (held or sliding on side sgn)."""
+    d, dd = rest_normal(P, tau)
+    r, m, ii, ge = P[RP_R], P[RP_M], P[RP_II], P[RP_GE]
+    va, wa = P[RP_VA], P[RP_WA]
+    if mode == SLIDE:
+        om, deq, cc, ss = P[RP_OM], P[RP_DEQ], P[RP_C], P[RP_S]
+        x = om * tau
+        sx = math.sin(x)
+        half = math.sin(0.5 * x)
+        osc = (cc * sx + 2.0 * ss * half * half) / om  # integral of delta's oscillating part
+        d1 = deq * tau + osc
+        s2 = math.sin(2.0 * x) / (4.0 * om)
+        d2 = (deq * deq * tau + 2.0 * deq * osc + cc * cc * (0.5 * tau + s2) + ss * ss * (0.5 * tau - s2)
+              + cc * ss * sx * sx / om)
+        push = sgn * P[RP_MU] * P[RP_K]
+        return d, dd, va + ge * tau - push * d1 / m, wa - push * ii * (r * d1 - d2), -push * d
+    if mode == STICK:
+        lever = r - d
+        w = wa
+        if ii > 0.0:
+            inertia = 1.0 / (m * ii)
+            start = r - (P[RP_DEQ] + P[RP_C])
+            lam = 0.0
+            if ge != 0.0:
+                for q in range(GL_X.shape[0]):
+                    dq, _ = rest_normal(P, tau * GL_X[q])
+                    lam += GL_W[q] * (r - dq) / math.sqrt(inertia + (r - dq) ** 2)
+                lam *= tau
+            w = (wa * math.sqrt(inertia + start * start) - ge * lam) / math.sqrt(inertia + lever * lever)
+        resp = 1.0 / m + lever * lever * ii
+        return d, dd, sgn * P[RP_EPS] - lever * w, w, (dd * w - ge) / resp
+    return d, dd, va + ge * tau, wa, 0.0
+
+
+@jit
+def rest_events(P, mode, sgn, tau, touch, out):
+    """Event values and their rates at tau into the interval, into out (3, 2): the contact's end
+    (overlap past -touch), then the mode's: band, eps - |u|; slide, |u| - eps; stick, the margin
+    to mu F_n and the hold force against the held side."""
+    d, dd, v, w, f = rest_at(P, mode, sgn, tau)
+    r, m, ii, ge, eps = P[RP_R], P[RP_M], P[RP_II], P[RP_GE], P[RP_EPS]
+    lever = r - d
+    out[0, 0], out[0, 1] = d + touch, dd
+    out[1, 0], out[1, 1] = math.inf, 0.0
+    out[2, 0], out[2, 1] = math.inf, 0.0
+    if mode < 0:
+        return
+    u = v + lever * w
+    resp = 1.0 / m + lever * lever * ii
+    if mode == BAND:
+        out[1, 0], out[1, 1] = eps - abs(u), -math.copysign(1.0, u) * (ge - dd * w)
+    elif mode == SLIDE:
+        out[1, 0], out[1, 1] = sgn * u - eps, sgn * (f * resp + ge - dd * w)
+    else:
+        ddd = -P[RP_OM] ** 2 * (d - P[RP_DEQ])
+        fd = (ddd * w + dd * lever * f * ii) / resp + f * 2.0 * lever * dd * ii / resp
+        cap = P[RP_MU] * P[RP_K]
+        out[1, 0], out[1, 1] = cap * d - abs(f), cap * dd - math.copysign(1.0, f) * fd
+        out[2, 0], out[2, 1] = -sgn * f, -sgn * fd
+
+
+@jit
+def rest_root(P, mode, sgn, k, lo, g_lo, hi, g_hi, touch, out, clock):
+    """A root of event value k in [lo, hi] (g_lo >= 0 > g_hi), by the Illinois method."""
+    side = 0
+    for _ in range(200):
+        if hi - lo <= clock:
+            break
+        mid = hi - g_hi * (hi - lo) / (g_hi - g_lo)
+        if not (lo < mid < hi):
+            mid = 0.5 * (lo + hi)
+        rest_events(P, mode, sgn, mid, touch, out)
+        g = out[k, 0]
+        if g < 0.0:
+            hi, g_hi = mid, g
+            if side == -1:
+                g_lo *= 0.5
+            side = -1
+        else:
+            lo, g_lo = mid, g
+            if side == 1:
+                g_hi *= 0.5
+            side = 1
+    return hi
+
+
+@jit
+def rest_first(P, mode, sgn, h, touch, start, ends, out, clock):
+    """The first event within the interval [0, h]: (its time, which: -1 none, 0 the contact's
+    end, 1 or 2 the mode's). `start` (3, 2): the values and rates at 0; `ends`, `out`: room."""
+    rest_events(P, mode, sgn, h, touch, ends)
+    first, which = math.inf, -1
+    for k in range(3):
+        g0, g1 = start[k, 0], ends[k, 0]
+        if not math.isfinite(g0) or not math.isfinite(g1):
+            continue
+        hi = math.nan
+        if g1 < 0.0:
+            hi = h
+        else:
+            # A value positive at both ends that dips below zero between: on the cubic through
+            # both ends' values and rates, checked where it is lowest (then at the true value).
+            r0, r1 = start[k, 1] * h, ends[k, 1] * h
+            if not (r0 >= 0.0 and r1 <= 0.0):
+                for i in range(1, DIP_SAMPLES):
+                    x = i / DIP_SAMPLES
+                    x2, x3 = x * x, x * x * x
+                    p = (2 * x3 - 3 * x2 + 1) * g0 + (x3 - 2 * x2 + x) * r0 + (3 * x2 - 2 * x3) * g1 + (x3 - x2) * r1
+                    if p < 0.0:
+                        rest_events(P, mode, sgn, x * h, touch, out)
+                        if out[k, 0] < 0.0:
+                            hi = x * h
+                            g1 = out[k, 0]
+                        break
+        if hi == hi and first < hi:
+            # An earlier value's root bounds this one's: below zero there, it crossed before.
+            rest_events(P, mode, sgn, first, touch, out)
+            hi = first if out[k, 0] < 0.0 else math.nan
+        if hi == hi:
+            rest_events(P, mode, sgn, hi, touch, out)
+            first = rest_root(P, mode, sgn, k, 0.0, max(g0, 0.0), hi, out[k, 0], touch, out, clock)
+            which = k
+    return first, which
+
+
+@jit_inline
+def rest_mode(u, tendency, cap, resp, eps, tol):
+    """The friction mode (and side) of a slip u whose rate without friction is `tendency`: slide
+    outside the band, band inside, and on its edge stick while mu F_n can hold it there."""
+    if abs(u) > eps + tol:
+        return SLIDE, math.copysign(1.0, u)
+    if abs(u) < eps - tol:
+        return BAND, 0.0
+    side = math.copysign(1.0, u)
+    if side * tendency <= 0.0:
+        return BAND, 0.0
+    if abs(tendency) / resp <= cap:
+        return STICK, side
+    return SLIDE, side
+
+
+@jit
+def rest_ready(X, C, CI, na, nc, nq, fl):
+    """Whether this contact phase runs in closed form: one sphere on one wall, the contact's own
+    step (dt auto), the true lever, and friction (if any) in the plane z = const."""
+    if not fl[FL_AUTO] or nq != 1 or na != 1 or nc != 1 or CI[0, CI_J] >= 0 or fl[FL_SEED]:
+        return False
+    return not fl[FL_FRICTION] or C[0, C_MU] == 0.0 or fl[FL_PLANAR] == YES
+
+
+@jit
+def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST):
+    """Advance a sphere on a wall (see rest_ready) in closed form from t to W or to the contact's
+    end, recording a knot at the end of every interval. Returns (t, KN, RC, ended, handed back:
+    the stepped path is to go on from t)."""
+    spin, record = fl[FL_SPIN], fl[FL_RECORD]
+    fric = fl[FL_FRICTION] and C[0, C_MU] > 0.0
+    w_k = -1 - CI[0, CI_J]
+    nx, ny, nz = WP[w_k, 3], WP[w_k, 4], WP[w_k, 5]  # out of the wall, towards the sphere
+    ex, ey = ny, -nx  # the tangent n x z of the plane (planar friction only)
+    m, r, k = X[0, X_M], X[0, X_R], C[0, C_K]
+    ii = X[0, X_II] if spin else 0.0
+    om = math.sqrt(k / m)
+    g_n = grav[0] * nx + grav[1] * ny + grav[2] * nz
+    g_e = grav[0] * ex + grav[1] * ey if fric else 0.0
+    P = np.zeros(NRP)
+    P[RP_OM], P[RP_DEQ], P[RP_R], P[RP_M], P[RP_II], P[RP_K] = om, -g_n / (om * om), r, m, ii, k
+    P[RP_MU], P[RP_EPS], P[RP_GE] = C[0, C_MU], C[0, C_EPS], g_e
+    touch = 2.0 * TOUCH_TOL * r
+    span = 2.0 * math.pi / om / REST_SAMPLES
+    start = np.zeros((3, 2))
+    ends = np.zeros((3, 2))
+    out = np.zeros((3, 2))
+    mode, sgn = -1, 0.0
+    geometry(X, C, CI, 1, WP, NO)
+    springs(X, C, CI, 1, 1, grav)
+    e_prev = energy(X, C, 1, 1, grav, spin)
+    decided = False
+    announce = False
+    quick = 0
+    while t < W:
+        d_a = C[0, C_DELTA]
+        dd_a = -(X[0, X_V] * nx + X[0, X_V + 1] * ny + X[0, X_V + 2] * nz)
+        P[RP_C], P[RP_S] = d_a - P[RP_DEQ], dd_a / om
+        P[RP_VA] = X[0, X_V] * ex + X[0, X_V + 1] * ey
+        P[RP_WA] = X[0, X_W + 2]
+        lever = r - d_a
+        if fric and not decided:
+            u = P[RP_VA] + lever * P[RP_WA]
+            resp = 1.0 / m + lever * lever * ii
+            # On the edge within what the state's round-off leaves (the normal velocity's share
+            # of a velocity turned into the contact's frame; the root's ticks of the clock).
+            tol = 1e-12 * (abs(P[RP_VA]) + abs(lever * P[RP_WA]) + abs(dd_a))
+            mode, sgn = rest_mode(u, g_e - dd_a * P[RP_WA], P[RP_MU] * k * d_a, resp, P[RP_EPS], tol)
+            decided = announce = True
+        if announce and record:
+            # The acceleration the mode starts with, after the last knot's (a jump there).
+            _, _, _, _, f = rest_at(P, mode, sgn, 0.0)
+            last = GI[XI[0], GI_KNOT]
+            KN[last, K_AN] = X[0, X_A] + f * ex / m
+            KN[last, K_AN + 1] = X[0, X_A + 1] + f * ey / m
+        announce = False
+        h = min(span, W - t)
+        clock = 4.0 * EPS64 * (abs(t) + h)
+        rest_events(P, mode, sgn, 0.0, touch, start)
+        tau, which = rest_first(P, mode, sgn, h, touch, start, ends, out, clock)
+        landed = W if tau >= h and h == W - t else t + min(tau, h)
+        h = landed - t
+        quick = quick + 1 if which > 0 and h <= clock else 0
+        if quick > REST_STUCK_LIMIT:
+            return t, KN, RC, False, True
+        # The state at the interval's end: the normal motion, then the tangent's.
+        d, dd, v, w, f = rest_at(P, mode, sgn, h)
+        sx, sy, sz = X[0, X_S] + nx * (d_a - d), X[0, X_S + 1] + ny * (d_a - d), X[0, X_S + 2] + nz * (d_a - d)
+        if fric:
+            along, turned = 0.0, 0.0
+            for q in range(GL_X.shape[0]):
+                _, _, vq, wq, _ = rest_at(P, mode, sgn, h * GL_X[q])
+                along += GL_W[q] * vq
+                turned += GL_W[q] * wq
+            X[0, X_S], X[0, X_S + 1], X[0, X_S + 2] = sx + ex * along * h, sy + ey * along * h, sz
+            X[0, X_V], X[0, X_V + 1] = ex * v - nx * dd, ey * v - ny * dd
+            X[0, X_W + 2] = w
+            X[0, X_Q] += turned * h
+        else:
+            X[0, X_S], X[0, X_S + 1], X[0, X_S + 2] = sx, sy, sz
+            for i in range(3):
+                n_i = WP[w_k, 3 + i]
+                vt = X[0, X_V + i] + dd_a * n_i  # the tangential part
+                gt = grav[i] - g_n * n_i
+                X[0, X_S + i] += vt * h + 0.5 * gt * h * h
+                X[0, X_V + i] = vt + gt * h - n_i * dd
+            if spin:
+                turn(X[0, X_Q:X_Q + 4], X[0, X_W], X[0, X_W + 1], X[0, X_W + 2], h, fl[FL_PLANAR])
+        t = landed
+        geometry(X, C, CI, 1, WP, NO)
+        springs(X, C, CI, 1, 1, grav)
+        C[0, C_FF], C[0, C_FF + 1], C[0, C_FF + 2] = f * ex, f * ey, 0.0
+        X[0, X_F], X[0, X_F + 1], X[0, X_F + 2] = f * ex / m, f * ey / m, 0.0
+        X[0, X_L], X[0, X_L + 1], X[0, X_L + 2] = 0.0, 0.0, (r - d) * f * ii
+        CI[0, CI_MODE] = mode if fric else BAND
+        e_now = energy(X, C, 1, 1, grav, spin)
+        share(G, XI, 1, e_prev - e_now)
+        e_prev = e_now
+        ST[S_STEPS] += 1
+        if record:
+            KN, RC = record_step(KN, RC, CNT, G, GI, X, XI, C, CI, 1, 1, t, fl)
+        if ST[S_STEPS] > fl[FL_MAXSTEPS]:
+            ST[S_STATUS] = MAXSTEPS
+            break
+        if which == 0:
+            return t, KN, RC, True, False
+        if which > 0:
+            # A stuck slip that can no longer be held slides on from its side of the band; one
+            # whose hold force would turn round goes back into the band; a slip reaching the
+            # band's edge is judged there, on the next interval's start.
+            decided = False
+            if mode == STICK:
+                mode, sgn = (SLIDE, sgn) if which == 1 else (BAND, 0.0)
+                decided = announce = True
+    return t, KN, RC, False, False
+
+
 @jit
 def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     """Advance the island of candidate contacts Q (N_Q, 3) from T to W: free flight in closed
@@ -1770,6 +2066,10 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 for d in range(3):
                     KN[last, K_AN + d] = X[a, X_A + d]
         changed = False
+        if rest_ready(X, C, CI, na, nc, nq, fl):
+            # Handed back (mode changes piling up where the clock cannot part them), the steps
+            # go on from where it stopped.
+            t, KN, RC, changed, _ = rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST)
         while t < W and not changed and ST[S_STATUS] == OK:
             if fric:
                 geometry(X, C, CI, nc, WP, fl[FL_SEED])
