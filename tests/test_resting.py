@@ -65,6 +65,9 @@ def test_a_ball_set_down_sliding_ends_rolling_at_five_sevenths():
     w = result.final.w[0, 0]
     assert abs(v[0] - 5 / 7) < 1e-5
     assert abs(v[0] - w[1] * RADIUS) < 1e-5
+    # Set down touching, it bobs between no overlap and twice its resting one, m g / k.
+    assert result.contacts.max_overlap[0] == pytest.approx(2 * MASS * 9.81 / 1e7, rel=1e-9)
+    assert result.contacts.max_normal_force[0] == pytest.approx(2 * MASS * 9.81, rel=1e-9)
     # Eight intervals a period of the bob and its mode changes: not the stepped path's 11 007.
     periods = 0.5 / (2 * math.pi / math.sqrt(1e7 / MASS))
     assert int(result.steps[0]) < 12 * periods

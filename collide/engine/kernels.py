@@ -1863,7 +1863,7 @@ def rest_ready(X, C, CI, na, nc, nq, fl):
 
 
 @jit
-def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST):
+def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG):
     """Advance a sphere on a wall (see rest_ready) in closed form from t to W or to the contact's
     end, recording a knot at the end of every interval. Returns (t, KN, RC, ended, handed back:
     the stepped path is to go on from t)."""
@@ -1947,6 +1947,10 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST):
             if spin:
                 turn(X[0, X_Q:X_Q + 4], X[0, X_W], X[0, X_W + 1], X[0, X_W + 2], h, fl[FL_PLANAR])
         t = landed
+        # The deepest overlap (and force) of the interval: at its end, or inside where the bob turns.
+        deepest = max(d_a, d) if not (dd_a > 0.0 and dd < 0.0) else P[RP_DEQ] + math.hypot(P[RP_C], P[RP_S])
+        FG[F_MAX_OVERLAP] = max(FG[F_MAX_OVERLAP], deepest)
+        FG[F_MAX_FORCE] = max(FG[F_MAX_FORCE], k * deepest)
         geometry(X, C, CI, 1, WP, NO)
         springs(X, C, CI, 1, 1, grav)
         C[0, C_FF], C[0, C_FF + 1], C[0, C_FF + 2] = f * ex, f * ey, 0.0
@@ -2069,7 +2073,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         if rest_ready(X, C, CI, na, nc, nq, fl):
             # Handed back (mode changes piling up where the clock cannot part them), the steps
             # go on from where it stopped.
-            t, KN, RC, changed, _ = rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST)
+            t, KN, RC, changed, _ = rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         while t < W and not changed and ST[S_STATUS] == OK:
             if fric:
                 geometry(X, C, CI, nc, WP, fl[FL_SEED])
