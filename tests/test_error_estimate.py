@@ -49,20 +49,28 @@ def test_single_contacts_quote_the_model_and_chains_measure() -> None:
 
 
 def test_a_contact_that_lasts_has_its_error_measured() -> None:
-    """A ball set down sliding on a floor bobs on its spring through 500 collision times; the
-    model counts one collision's error and said 1e-6 where the outcome was 4e-5 off (2e-5 with
-    friction). Such a run measures its error, and what it says holds."""
+    """A ball set down sliding on a floor bobs on its spring through 500 collision times; stepped,
+    the model counts one collision's error and said 1e-6 where the outcome was 4e-5 off (2e-5 with
+    friction). Such a run measures its error, and what it says holds. With the contact's lever
+    (not the report's) a ball alone on a floor runs in closed form: nothing is stepped, so nothing
+    is run again, and it ends within 1e-10 of the run at tol 1e-9."""
     for mu in (0.0, 0.3):
-        scene = parse_scene({"name": "resting", "dim": 2, "duration": 0.5, "gravity": [0.0, -9.81],
-                             "contact": {"k": 1e6, "mu": mu},
-                             "body": [{"name": "ball", "mass": 0.1, "radius": 0.05, "position": [0.0, 0.05],
-                                       "velocity": [1.0, 0.0]}],
-                             "wall": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}]})
-        run = run_scene(scene, tol=1e-6, record=False)
-        reference = run_scene(scene, tol=1e-9, record=False)
-        assert float(run.result.contacts.longest[0]) > 100
-        assert run.error_method == ["measured"]
-        assert _error(run, reference, scene) <= min(10 * float(run.error_estimate[0]), 1e-6)
+        for lever in ("seed", "contact"):
+            scene = parse_scene({"name": "resting", "dim": 2, "duration": 0.5, "gravity": [0.0, -9.81],
+                                 "contact": {"k": 1e6, "mu": mu, "lever": lever},
+                                 "body": [{"name": "ball", "mass": 0.1, "radius": 0.05, "position": [0.0, 0.05],
+                                           "velocity": [1.0, 0.0]}],
+                                 "wall": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}]})
+            run = run_scene(scene, tol=1e-6, record=False)
+            reference = run_scene(scene, tol=1e-9, record=False)
+            assert float(run.result.contacts.longest[0]) > 100
+            closed = int(run.result.closed_steps[0])
+            if lever == "seed":
+                assert run.error_method == ["measured"] and closed == 0
+                assert _error(run, reference, scene) <= min(10 * float(run.error_estimate[0]), 1e-6)
+            else:
+                assert run.error_method == ["model"] and closed == int(run.result.steps[0])
+                assert _error(run, reference, scene) < 1e-10
 
 
 def test_a_large_run_says_its_estimate_is_not_measured() -> None:

@@ -103,8 +103,8 @@ R_T, R_I, R_J, R_DELTA, R_FN, R_FX, R_FY, R_FZ, R_MODE = range(9)
 NR = 9
 V_I, V_J, V_START, V_END = range(4)
 CN_KNOTS, CN_RECS, CN_IVALS, CN_OPEN = range(4)
-S_STEPS, S_WINDOWS, S_STATUS, S_CONTACTS, S_RETRIES, S_UNLOCATED = range(6)
-NS = 6
+S_STEPS, S_WINDOWS, S_STATUS, S_CONTACTS, S_RETRIES, S_UNLOCATED, S_REST = range(7)
+NS = 7  # S_REST: of the steps, intervals of a sphere on a wall in closed form
 F_MAX_OVERLAP, F_DT_MIN, F_STATUS_T, F_STATUS_A, F_STATUS_B, F_MAX_FORCE, F_UNLOCATED_T = range(7)
 NF = 7
 OK, NONFINITE, ENERGY, STALL, MAXSTEPS, SINGULAR = range(6)
@@ -1696,6 +1696,12 @@ REST_SAMPLES = 8  # intervals per period of the bob: the event values are checke
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
 GL_X = 0.5 * (_GL_X + 1.0)  # nodes and weights on [0, 1]: to round-off over an eighth of a period
 GL_W = 0.5 * _GL_W
+# Sliding, friction's work (force times slip: both swing with the bob, the product at twice its
+# frequency) takes eight: with four, 2e-8 of an interval's work was left (the energy balance of a
+# bounce 2e-9 off); eight leave 1e-20.
+_GL8_X, _GL8_W = np.polynomial.legendre.leggauss(8)
+GL8_X = 0.5 * (_GL8_X + 1.0)
+GL8_W = 0.5 * _GL8_W
 RP_OM, RP_DEQ, RP_C, RP_S, RP_R, RP_M, RP_II, RP_K, RP_MU, RP_EPS, RP_GE, RP_VA, RP_WA = range(13)
 NRP = 13
 REST_STUCK_LIMIT = 8  # events in a row closer than the clock resolves: the stepped path takes over
@@ -1808,8 +1814,17 @@ def rest_first(P, mode, sgn, h, touch, start, ends, out, clock):
         g0, g1 = start[k, 0], ends[k, 0]
         if not math.isfinite(g0) or not math.isfinite(g1):
             continue
+        lo, g_lo = 0.0, max(g0, 0.0)
+        if g0 < 0.0 and start[k, 1] > 0.0:
+            # A mode just entered whose value starts a hair below zero (the round-off of the
+            # state it was judged on) and rises: its root is where it crosses back down, after.
+            lo = min(h, -4.0 * g0 / start[k, 1] + clock)
+            rest_events(P, mode, sgn, lo, touch, out)
+            g_lo = out[k, 0]
+            if g_lo < 0.0:
+                lo, g_lo = 0.0, 0.0
         hi = math.nan
-        if g1 < 0.0:
+        if g1 < 0.0 and lo < h:
             hi = h
         else:
             # A value positive at both ends that dips below zero between: on the cubic through
@@ -1828,11 +1843,13 @@ def rest_first(P, mode, sgn, h, touch, start, ends, out, clock):
                         break
         if hi == hi and first < hi:
             # An earlier value's root bounds this one's: below zero there, it crossed before.
-            rest_events(P, mode, sgn, first, touch, out)
-            hi = first if out[k, 0] < 0.0 else math.nan
+            hi = math.nan
+            if lo < first:
+                rest_events(P, mode, sgn, first, touch, out)
+                hi = first if out[k, 0] < 0.0 else math.nan
         if hi == hi:
             rest_events(P, mode, sgn, hi, touch, out)
-            first = rest_root(P, mode, sgn, k, 0.0, max(g0, 0.0), hi, out[k, 0], touch, out, clock)
+            first = rest_root(P, mode, sgn, k, lo, g_lo, hi, out[k, 0], touch, out, clock)
             which = k
     return first, which
 
@@ -1888,7 +1905,6 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
     mode, sgn = -1, 0.0
     geometry(X, C, CI, 1, WP, NO)
     springs(X, C, CI, 1, 1, grav)
-    e_prev = energy(X, C, 1, 1, grav, spin)
     decided = False
     announce = False
     quick = 0
@@ -1926,12 +1942,16 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         # The state at the interval's end: the normal motion, then the tangent's.
         d, dd, v, w, f = rest_at(P, mode, sgn, h)
         sx, sy, sz = X[0, X_S] + nx * (d_a - d), X[0, X_S + 1] + ny * (d_a - d), X[0, X_S + 2] + nz * (d_a - d)
+        spent = 0.0  # the work friction took out, from its force and the slip (not the energies: a check)
         if fric:
             along, turned = 0.0, 0.0
-            for q in range(GL_X.shape[0]):
-                _, _, vq, wq, _ = rest_at(P, mode, sgn, h * GL_X[q])
-                along += GL_W[q] * vq
-                turned += GL_W[q] * wq
+            nodes, weights = (GL8_X, GL8_W) if mode == SLIDE else (GL_X, GL_W)
+            for q in range(nodes.shape[0]):
+                dq, _, vq, wq, fq = rest_at(P, mode, sgn, h * nodes[q])
+                along += weights[q] * vq
+                turned += weights[q] * wq
+                spent -= weights[q] * fq * (vq + (r - dq) * wq)
+            spent *= h
             X[0, X_S], X[0, X_S + 1], X[0, X_S + 2] = sx + ex * along * h, sy + ey * along * h, sz
             X[0, X_V], X[0, X_V + 1] = ex * v - nx * dd, ey * v - ny * dd
             X[0, X_W + 2] = w
@@ -1957,10 +1977,9 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         X[0, X_F], X[0, X_F + 1], X[0, X_F + 2] = f * ex / m, f * ey / m, 0.0
         X[0, X_L], X[0, X_L + 1], X[0, X_L + 2] = 0.0, 0.0, (r - d) * f * ii
         CI[0, CI_MODE] = mode if fric else BAND
-        e_now = energy(X, C, 1, 1, grav, spin)
-        share(G, XI, 1, e_prev - e_now)
-        e_prev = e_now
+        share(G, XI, 1, spent)
         ST[S_STEPS] += 1
+        ST[S_REST] += 1
         if record:
             KN, RC = record_step(KN, RC, CNT, G, GI, X, XI, C, CI, 1, 1, t, fl)
         if ST[S_STEPS] > fl[FL_MAXSTEPS]:
