@@ -1439,17 +1439,24 @@ def mode_dip(E, modes, frac, h_full, passed):
         r0, r1 = E[k, E_R0] * h_full * frac, E[k, E_R1] * h_full * frac
         if k == passed or not (e0 > MODE_TOL and e1 > MODE_TOL and math.isfinite(r0) and math.isfinite(r1)):
             continue
-        if r0 >= 0.0 and r1 <= 0.0:
-            continue  # a hump, not a dip
-        for i in range(1, DIP_SAMPLES):
-            u = i / DIP_SAMPLES
-            u2, u3 = u * u, u * u * u
-            p = ((2 * u3 - 3 * u2 + 1) * e0 + (u3 - 2 * u2 + u) * r0 + (3 * u2 - 2 * u3) * e1
-                 + (u3 - u2) * r1)
-            if p < -MODE_TOL:
-                first = min(first, u * frac)
-                break
+        first = min(first, hermite_dip(e0, e1, r0, r1, -MODE_TOL) * frac)
     return first
+
+
+@jit_inline
+def hermite_dip(e0, e1, r0, r1, floor):
+    """The first of DIP_SAMPLES points in (0, 1) where the cubic Hermite through (0, e0, r0) and
+    (1, e1, r1) (r per step) is below `floor`: a value above it at both ends that dips between.
+    inf if none (or if the rates make it a hump)."""
+    if r0 >= 0.0 and r1 <= 0.0:
+        return math.inf
+    for i in range(1, DIP_SAMPLES):
+        u = i / DIP_SAMPLES
+        u2, u3 = u * u, u * u * u
+        p = (2 * u3 - 3 * u2 + 1) * e0 + (u3 - 2 * u2 + u) * r0 + (3 * u2 - 2 * u3) * e1 + (u3 - u2) * r1
+        if p < floor:
+            return u
+    return math.inf
 
 
 @jit
@@ -1679,8 +1686,6 @@ def record_step(KN, RC, CNT, G, GI, X, XI, C, CI, na, nc, t, fl):
     return KN, RC
 
 
-
-
 # ---------------------------------------------------------------------------------------------
 # A sphere on a flat wall in closed form
 #
@@ -1827,20 +1832,13 @@ def rest_first(P, mode, sgn, h, touch, start, ends, out, clock):
         if g1 < 0.0 and lo < h:
             hi = h
         else:
-            # A value positive at both ends that dips below zero between: on the cubic through
-            # both ends' values and rates, checked where it is lowest (then at the true value).
-            r0, r1 = start[k, 1] * h, ends[k, 1] * h
-            if not (r0 >= 0.0 and r1 <= 0.0):
-                for i in range(1, DIP_SAMPLES):
-                    x = i / DIP_SAMPLES
-                    x2, x3 = x * x, x * x * x
-                    p = (2 * x3 - 3 * x2 + 1) * g0 + (x3 - 2 * x2 + x) * r0 + (3 * x2 - 2 * x3) * g1 + (x3 - x2) * r1
-                    if p < 0.0:
-                        rest_events(P, mode, sgn, x * h, touch, out)
-                        if out[k, 0] < 0.0:
-                            hi = x * h
-                            g1 = out[k, 0]
-                        break
+            # A value positive at both ends that dips below zero between, on the cubic through
+            # both ends' values and rates (then checked at the true value).
+            x = hermite_dip(g0, g1, start[k, 1] * h, ends[k, 1] * h, 0.0)
+            if x < math.inf:
+                rest_events(P, mode, sgn, x * h, touch, out)
+                if out[k, 0] < 0.0:
+                    hi = x * h
         if hi == hi and first < hi:
             # An earlier value's root bounds this one's: below zero there, it crossed before.
             hi = math.nan
@@ -1882,8 +1880,8 @@ def rest_ready(X, C, CI, na, nc, nq, fl):
 @jit
 def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG):
     """Advance a sphere on a wall (see rest_ready) in closed form from t to W or to the contact's
-    end, recording a knot at the end of every interval. Returns (t, KN, RC, ended, handed back:
-    the stepped path is to go on from t)."""
+    end, recording a knot at the end of every interval. Returns (t, KN, RC, ended); stopped short
+    of both (mode changes piling up closer than the clock resolves), the stepped path goes on."""
     spin, record = fl[FL_SPIN], fl[FL_RECORD]
     fric = fl[FL_FRICTION] and C[0, C_MU] > 0.0
     w_k = -1 - CI[0, CI_J]
@@ -1938,7 +1936,7 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         h = landed - t
         quick = quick + 1 if which > 0 and h <= clock else 0
         if quick > REST_STUCK_LIMIT:
-            return t, KN, RC, False, True
+            return t, KN, RC, False
         # The state at the interval's end: the normal motion, then the tangent's.
         d, dd, v, w, f = rest_at(P, mode, sgn, h)
         sx, sy, sz = X[0, X_S] + nx * (d_a - d), X[0, X_S + 1] + ny * (d_a - d), X[0, X_S + 2] + nz * (d_a - d)
@@ -1986,7 +1984,7 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
             ST[S_STATUS] = MAXSTEPS
             break
         if which == 0:
-            return t, KN, RC, True, False
+            return t, KN, RC, True
         if which > 0:
             # A stuck slip that can no longer be held slides on from its side of the band; one
             # whose hold force would turn round goes back into the band; a slip reaching the
@@ -1995,7 +1993,7 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
             if mode == STICK:
                 mode, sgn = (SLIDE, sgn) if which == 1 else (BAND, 0.0)
                 decided = announce = True
-    return t, KN, RC, False, False
+    return t, KN, RC, False
 
 
 @jit
@@ -2090,9 +2088,8 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                     KN[last, K_AN + d] = X[a, X_A + d]
         changed = False
         if rest_ready(X, C, CI, na, nc, nq, fl):
-            # Handed back (mode changes piling up where the clock cannot part them), the steps
-            # go on from where it stopped.
-            t, KN, RC, changed, _ = rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
+            # Stopped short of W without an end, the steps go on from where it stopped.
+            t, KN, RC, changed = rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         while t < W and not changed and ST[S_STATUS] == OK:
             if fric:
                 geometry(X, C, CI, nc, WP, fl[FL_SEED])
