@@ -1828,9 +1828,9 @@ def rest_first(P, mode, sgn, h, touch, start, ends, out, clock):
             g_lo = out[k, 0]
             if g_lo < 0.0:
                 lo, g_lo = 0.0, 0.0
-        hi = math.nan
+        hi, g_hi = math.nan, math.nan
         if g1 < 0.0 and lo < h:
-            hi = h
+            hi, g_hi = h, g1
         else:
             # A value positive at both ends that dips below zero between, on the cubic through
             # both ends' values and rates (then checked at the true value).
@@ -1838,16 +1838,16 @@ def rest_first(P, mode, sgn, h, touch, start, ends, out, clock):
             if x < math.inf:
                 rest_events(P, mode, sgn, x * h, touch, out)
                 if out[k, 0] < 0.0:
-                    hi = x * h
+                    hi, g_hi = x * h, out[k, 0]
         if hi == hi and first < hi:
             # An earlier value's root bounds this one's: below zero there, it crossed before.
             hi = math.nan
             if lo < first:
                 rest_events(P, mode, sgn, first, touch, out)
-                hi = first if out[k, 0] < 0.0 else math.nan
+                if out[k, 0] < 0.0:
+                    hi, g_hi = first, out[k, 0]
         if hi == hi:
-            rest_events(P, mode, sgn, hi, touch, out)
-            first = rest_root(P, mode, sgn, k, lo, g_lo, hi, out[k, 0], touch, out, clock)
+            first = rest_root(P, mode, sgn, k, lo, g_lo, hi, g_hi, touch, out, clock)
             which = k
     return first, which
 
@@ -1878,7 +1878,7 @@ def rest_ready(X, C, CI, na, nc, nq, fl):
 
 
 @jit
-def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG):
+def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG):
     """Advance a sphere on a wall (see rest_ready) in closed form from t to W or to the contact's
     end, recording a knot at the end of every interval. Returns (t, KN, RC, ended); stopped short
     of both (mode changes piling up closer than the clock resolves), the stepped path goes on."""
@@ -2089,7 +2089,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         changed = False
         if rest_ready(X, C, CI, na, nc, nq, fl):
             # Stopped short of W without an end, the steps go on from where it stopped.
-            t, KN, RC, changed = rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
+            t, KN, RC, changed = rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG)
         while t < W and not changed and ST[S_STATUS] == OK:
             if fric:
                 geometry(X, C, CI, nc, WP, fl[FL_SEED])
