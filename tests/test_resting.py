@@ -38,13 +38,21 @@ CASES = {
     "frictionless, spin about a skew axis": {"mu": 0.0, "v": (1.0, 0.5, -0.3), "w": (3.0, 2.0, 1.0), "height": 0.051},
     "2D, wall x = 0 under sideways gravity": {"dim": 2, "normal": (1.0, 0.0, 0.0), "gravity": (-9.81, 2.0, 0.0),
                                               "v": (0.0, 1.0, 0.0)},
+    # Out of any plane (a spin about the wall's normal, or a tilted wall): the slip keeps its
+    # direction, and the spin about the normal turns the orientation with the rest.
+    "3D, sliding to rolling with sidespin": {"v": (1.0, 0.5, 0.0), "w": (0.0, 0.0, 20.0)},
+    "3D, tilted wall, sidespin": {"normal": (1.0, 1.0, 1.0), "gravity": (-5.0, -5.0, -5.0), "v": (1.0, -1.0, 0.0),
+                                  "w": (10.0, 10.0, 10.0)},
+    "3D, a bounce that sticks, sidespin": {"height": 0.06, "v": (0.05, 0.02, -1.0), "w": (0.4, -1.0, 5.0)},
+    "3D, sliding down a slope with sidespin": {"gravity": (3.0, 0.0, -9.0), "v": (2.0, 0.0, 0.0),
+                                               "w": (0.0, 0.0, 30.0)},
 }
 
 
 def _final(scene):
     result = run_scene(scene, record=False, measure=False).result
     s = result.final
-    return np.concatenate([s.s[0, 0], s.v[0, 0], s.w[0, 0] * RADIUS]), result
+    return np.concatenate([s.s[0, 0], s.v[0, 0], s.w[0, 0] * RADIUS, s.q[0, 0]]), result
 
 
 @pytest.mark.parametrize("case", list(CASES))

@@ -1691,11 +1691,13 @@ def record_step(KN, RC, CNT, G, GI, X, XI, C, CI, na, nc, t, fl):
 #
 # With one linear spring and a flat wall, the overlap is a harmonic oscillation whatever the
 # friction does (friction is tangential and the wall does not turn), and within each friction
-# mode the slip and spin follow from it in closed form: band, v and w constant (under the
-# wall's share of gravity); slide, integrals of delta and delta^2; stick, w sqrt(I/m + l^2)
-# constant (l = r - delta, the lever; with gravity along the wall, plus an integral). A ball
-# resting, rolling or sliding on a floor then costs its mode changes, not the thousands of steps
-# its bob (period 2 pi / omega) takes stepped.
+# mode the slip and spin follow from it in closed form, in any direction: band, v and w constant
+# (under the wall's share of gravity); slide along a fixed direction, integrals of delta and
+# delta^2; stick, the spin in the plane times sqrt(I/m + l^2) constant (l = r - delta, the lever;
+# with gravity along the wall, less an integral). A slide whose slip turns (the spin in the
+# plane or gravity along the wall off the slip) has none and is stepped. A ball resting, rolling
+# or sliding on a floor then costs its mode changes, not the thousands of steps its bob (period
+# 2 pi / omega) takes stepped.
 
 REST_SAMPLES = 8  # intervals per period of the bob: the event values are checked at their ends
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
@@ -1707,9 +1709,22 @@ GL_W = 0.5 * _GL_W
 _GL8_X, _GL8_W = np.polynomial.legendre.leggauss(8)
 GL8_X = 0.5 * (_GL8_X + 1.0)
 GL8_W = 0.5 * _GL8_W
-RP_OM, RP_DEQ, RP_C, RP_S, RP_R, RP_M, RP_II, RP_K, RP_MU, RP_EPS, RP_GE, RP_VA, RP_WA = range(13)
-NRP = 13
+# Tangential quantities are pairs in the wall's tangent basis (e1, e2 = n x e1): the velocity v,
+# the spin turned into the plane (n x w: the slip is u = v + l n x w) and the friction force;
+# the spin about n is constant. h: the direction a mode holds (the slide's, the stuck slip's).
+RP_OM, RP_DEQ, RP_C, RP_S, RP_R, RP_M, RP_II, RP_K, RP_MU, RP_EPS = range(10)
+RP_G, RP_V, RP_TW, RP_H = 10, 12, 14, 16
+NRP = 18
 REST_STUCK_LIMIT = 8  # events in a row closer than the clock resolves: the stepped path takes over
+_GL2 = math.sqrt(3.0) / 6.0
+GL2_X = np.array([0.5 - _GL2, 0.5 + _GL2])  # two Gauss points on [0, 1], for the Magnus commutator
+GL2_COMMUTATOR = math.sqrt(3.0) / 12.0
+REST_PARALLEL = 1e-12  # |a x h| / |a| below which a slide's slip counts as keeping its direction h
+
+
+@jit_inline
+def dot3(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 @jit_inline
@@ -1721,12 +1736,13 @@ def rest_normal(P, tau):
 
 
 @jit
-def rest_at(P, mode, sgn, tau):
-    """(delta, delta', tangential velocity, spin, friction force) at tau into the interval, in
-    friction mode `mode` (held or sliding on side sgn)."""
+def rest_at(P, mode, tau):
+    """(delta, delta', v1, v2, tw1, tw2, f1, f2) at tau into the interval in friction mode `mode`:
+    band (or no friction), slide along -h, stick with the slip held at eps h."""
     d, dd = rest_normal(P, tau)
-    r, m, ii, ge = P[RP_R], P[RP_M], P[RP_II], P[RP_GE]
-    va, wa = P[RP_VA], P[RP_WA]
+    r, m, ii = P[RP_R], P[RP_M], P[RP_II]
+    g1, g2, h1, h2 = P[RP_G], P[RP_G + 1], P[RP_H], P[RP_H + 1]
+    v1, v2, w1, w2 = P[RP_V], P[RP_V + 1], P[RP_TW], P[RP_TW + 1]
     if mode == SLIDE:
         om, deq, cc, ss = P[RP_OM], P[RP_DEQ], P[RP_C], P[RP_S]
         x = om * tau
@@ -1737,55 +1753,68 @@ def rest_at(P, mode, sgn, tau):
         s2 = math.sin(2.0 * x) / (4.0 * om)
         d2 = (deq * deq * tau + 2.0 * deq * osc + cc * cc * (0.5 * tau + s2) + ss * ss * (0.5 * tau - s2)
               + cc * ss * sx * sx / om)
-        push = sgn * P[RP_MU] * P[RP_K]
-        return d, dd, va + ge * tau - push * d1 / m, wa - push * ii * (r * d1 - d2), -push * d
+        push = P[RP_MU] * P[RP_K]
+        dv, dw = push * d1 / m, push * ii * (r * d1 - d2)
+        return (d, dd, v1 + g1 * tau - dv * h1, v2 + g2 * tau - dv * h2, w1 - dw * h1, w2 - dw * h2,
+                -push * d * h1, -push * d * h2)
     if mode == STICK:
         lever = r - d
-        w = wa
         if ii > 0.0:
+            # (r - delta) changes the response to the hold force, and the stuck spin with it:
+            # tw sqrt(I/m + l^2) is constant, less the integral the tangential gravity adds.
             inertia = 1.0 / (m * ii)
             start = r - (P[RP_DEQ] + P[RP_C])
             lam = 0.0
-            if ge != 0.0:
+            if g1 != 0.0 or g2 != 0.0:
                 for q in range(GL_X.shape[0]):
                     dq, _ = rest_normal(P, tau * GL_X[q])
                     lam += GL_W[q] * (r - dq) / math.sqrt(inertia + (r - dq) ** 2)
                 lam *= tau
-            w = (wa * math.sqrt(inertia + start * start) - ge * lam) / math.sqrt(inertia + lever * lever)
+            a, b = math.sqrt(inertia + start * start), math.sqrt(inertia + lever * lever)
+            w1, w2 = (w1 * a - g1 * lam) / b, (w2 * a - g2 * lam) / b
         resp = 1.0 / m + lever * lever * ii
-        return d, dd, sgn * P[RP_EPS] - lever * w, w, (dd * w - ge) / resp
-    return d, dd, va + ge * tau, wa, 0.0
+        eps = P[RP_EPS]
+        return (d, dd, eps * h1 - lever * w1, eps * h2 - lever * w2, w1, w2, (dd * w1 - g1) / resp,
+                (dd * w2 - g2) / resp)
+    return d, dd, v1 + g1 * tau, v2 + g2 * tau, w1, w2, 0.0, 0.0
 
 
 @jit
-def rest_events(P, mode, sgn, tau, touch, out):
+def rest_events(P, mode, tau, touch, out):
     """Event values and their rates at tau into the interval, into out (3, 2): the contact's end
-    (overlap past -touch), then the mode's: band, eps - |u|; slide, |u| - eps; stick, the margin
-    to mu F_n and the hold force against the held side."""
-    d, dd, v, w, f = rest_at(P, mode, sgn, tau)
-    r, m, ii, ge, eps = P[RP_R], P[RP_M], P[RP_II], P[RP_GE], P[RP_EPS]
+    (overlap past -touch), then the mode's: band, eps - |u|; slide, u.h - eps; stick, the margin
+    to mu F_n and the hold force against the held slip."""
+    d, dd, v1, v2, w1, w2, f1, f2 = rest_at(P, mode, tau)
+    r, m, ii, eps = P[RP_R], P[RP_M], P[RP_II], P[RP_EPS]
+    g1, g2, h1, h2 = P[RP_G], P[RP_G + 1], P[RP_H], P[RP_H + 1]
     lever = r - d
     out[0, 0], out[0, 1] = d + touch, dd
     out[1, 0], out[1, 1] = math.inf, 0.0
     out[2, 0], out[2, 1] = math.inf, 0.0
     if mode < 0:
         return
-    u = v + lever * w
+    u1, u2 = v1 + lever * w1, v2 + lever * w2
     resp = 1.0 / m + lever * lever * ii
     if mode == BAND:
-        out[1, 0], out[1, 1] = eps - abs(u), -math.copysign(1.0, u) * (ge - dd * w)
+        mag = math.hypot(u1, u2)
+        rate = (u1 * (g1 - dd * w1) + u2 * (g2 - dd * w2)) / mag if mag > 0.0 else 0.0
+        out[1, 0], out[1, 1] = eps - mag, -rate
     elif mode == SLIDE:
-        out[1, 0], out[1, 1] = sgn * u - eps, sgn * (f * resp + ge - dd * w)
+        out[1, 0] = u1 * h1 + u2 * h2 - eps
+        out[1, 1] = h1 * (f1 * resp + g1 - dd * w1) + h2 * (f2 * resp + g2 - dd * w2)
     else:
         ddd = -P[RP_OM] ** 2 * (d - P[RP_DEQ])
-        fd = (ddd * w + dd * lever * f * ii) / resp + f * 2.0 * lever * dd * ii / resp
+        fd1 = (ddd * w1 + 3.0 * lever * dd * ii * f1) / resp
+        fd2 = (ddd * w2 + 3.0 * lever * dd * ii * f2) / resp
+        mag = math.hypot(f1, f2)
         cap = P[RP_MU] * P[RP_K]
-        out[1, 0], out[1, 1] = cap * d - abs(f), cap * dd - math.copysign(1.0, f) * fd
-        out[2, 0], out[2, 1] = -sgn * f, -sgn * fd
+        out[1, 0] = cap * d - mag
+        out[1, 1] = cap * dd - ((f1 * fd1 + f2 * fd2) / mag if mag > 0.0 else 0.0)
+        out[2, 0], out[2, 1] = -(f1 * h1 + f2 * h2), -(fd1 * h1 + fd2 * h2)
 
 
 @jit
-def rest_root(P, mode, sgn, k, lo, g_lo, hi, g_hi, touch, out, clock):
+def rest_root(P, mode, k, lo, g_lo, hi, g_hi, touch, out, clock):
     """A root of event value k in [lo, hi] (g_lo >= 0 > g_hi), by the Illinois method."""
     side = 0
     for _ in range(200):
@@ -1794,7 +1823,7 @@ def rest_root(P, mode, sgn, k, lo, g_lo, hi, g_hi, touch, out, clock):
         mid = hi - g_hi * (hi - lo) / (g_hi - g_lo)
         if not (lo < mid < hi):
             mid = 0.5 * (lo + hi)
-        rest_events(P, mode, sgn, mid, touch, out)
+        rest_events(P, mode, mid, touch, out)
         g = out[k, 0]
         if g < 0.0:
             hi, g_hi = mid, g
@@ -1810,10 +1839,10 @@ def rest_root(P, mode, sgn, k, lo, g_lo, hi, g_hi, touch, out, clock):
 
 
 @jit
-def rest_first(P, mode, sgn, h, touch, start, ends, out, clock):
+def rest_first(P, mode, h, touch, start, ends, out, clock):
     """The first event within the interval [0, h]: (its time, which: -1 none, 0 the contact's
     end, 1 or 2 the mode's). `start` (3, 2): the values and rates at 0; `ends`, `out`: room."""
-    rest_events(P, mode, sgn, h, touch, ends)
+    rest_events(P, mode, h, touch, ends)
     first, which = math.inf, -1
     for k in range(3):
         g0, g1 = start[k, 0], ends[k, 0]
@@ -1824,7 +1853,7 @@ def rest_first(P, mode, sgn, h, touch, start, ends, out, clock):
             # A mode just entered whose value starts a hair below zero (the round-off of the
             # state it was judged on) and rises: its root is where it crosses back down, after.
             lo = min(h, -4.0 * g0 / start[k, 1] + clock)
-            rest_events(P, mode, sgn, lo, touch, out)
+            rest_events(P, mode, lo, touch, out)
             g_lo = out[k, 0]
             if g_lo < 0.0:
                 lo, g_lo = 0.0, 0.0
@@ -1836,71 +1865,84 @@ def rest_first(P, mode, sgn, h, touch, start, ends, out, clock):
             # both ends' values and rates (then checked at the true value).
             x = hermite_dip(g0, g1, start[k, 1] * h, ends[k, 1] * h, 0.0)
             if x < math.inf:
-                rest_events(P, mode, sgn, x * h, touch, out)
+                rest_events(P, mode, x * h, touch, out)
                 if out[k, 0] < 0.0:
                     hi, g_hi = x * h, out[k, 0]
         if hi == hi and first < hi:
             # An earlier value's root bounds this one's: below zero there, it crossed before.
             hi = math.nan
             if lo < first:
-                rest_events(P, mode, sgn, first, touch, out)
+                rest_events(P, mode, first, touch, out)
                 if out[k, 0] < 0.0:
                     hi, g_hi = first, out[k, 0]
         if hi == hi:
-            first = rest_root(P, mode, sgn, k, lo, g_lo, hi, g_hi, touch, out, clock)
+            first = rest_root(P, mode, k, lo, g_lo, hi, g_hi, touch, out, clock)
             which = k
     return first, which
 
 
 @jit_inline
-def rest_mode(u, tendency, cap, resp, eps, tol):
-    """The friction mode (and side) of a slip u whose rate without friction is `tendency`: slide
-    outside the band, band inside, and on its edge stick while mu F_n can hold it there."""
-    if abs(u) > eps + tol:
-        return SLIDE, math.copysign(1.0, u)
-    if abs(u) < eps - tol:
-        return BAND, 0.0
-    side = math.copysign(1.0, u)
-    if side * tendency <= 0.0:
-        return BAND, 0.0
-    if abs(tendency) / resp <= cap:
-        return STICK, side
-    return SLIDE, side
+def rest_mode(u1, u2, t1, t2, cap, resp, eps, tol):
+    """The friction mode of a slip u whose rate without friction is t, the direction it holds and
+    whether the slip is on the band's edge: slide outside the band, band inside, and on its edge
+    stick while mu F_n can hold it there. On the edge the slip is held (or slides on) along t:
+    the hold force's reverse (as the stepped path's `decide`)."""
+    mag = math.hypot(u1, u2)
+    if mag > eps + tol:
+        return SLIDE, u1 / mag, u2 / mag, False
+    if mag < eps - tol or u1 * t1 + u2 * t2 <= 0.0:
+        return BAND, 0.0, 0.0, False
+    rate = math.hypot(t1, t2)
+    return (STICK if rate / resp <= cap else SLIDE), t1 / rate, t2 / rate, True
+
+
+@jit_inline
+def rest_turns(a1, a2, h1, h2):
+    """Whether a (gravity along the wall, or the spin turned into it) turns a slide's slip off h."""
+    return abs(a1 * h2 - a2 * h1) > REST_PARALLEL * math.hypot(a1, a2)
 
 
 @jit
 def rest_ready(X, C, CI, na, nc, nq, fl):
     """Whether this contact phase runs in closed form: one sphere on one wall, the contact's own
-    step (dt auto), the true lever, and friction (if any) in the plane z = const."""
-    if not fl[FL_AUTO] or nq != 1 or na != 1 or nc != 1 or CI[0, CI_J] >= 0 or fl[FL_SEED]:
-        return False
-    return not fl[FL_FRICTION] or C[0, C_MU] == 0.0 or fl[FL_PLANAR] == YES
+    step (dt auto) and the true lever."""
+    return fl[FL_AUTO] and nq == 1 and na == 1 and nc == 1 and CI[0, CI_J] < 0 and not fl[FL_SEED]
 
 
 @jit
 def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG):
     """Advance a sphere on a wall (see rest_ready) in closed form from t to W or to the contact's
     end, recording a knot at the end of every interval. Returns (t, KN, RC, ended); stopped short
-    of both (mode changes piling up closer than the clock resolves), the stepped path goes on."""
-    spin, record = fl[FL_SPIN], fl[FL_RECORD]
+    of both, the stepped path goes on: a slide whose slip turns (gravity along the wall or the
+    spin in it off the slip: no closed form), or mode changes piling up closer than the clock
+    resolves."""
+    spin, record, planar = fl[FL_SPIN], fl[FL_RECORD], fl[FL_PLANAR] == YES
     fric = fl[FL_FRICTION] and C[0, C_MU] > 0.0
     w_k = -1 - CI[0, CI_J]
-    nx, ny, nz = WP[w_k, 3], WP[w_k, 4], WP[w_k, 5]  # out of the wall, towards the sphere
-    ex, ey = ny, -nx  # the tangent n x z of the plane (planar friction only)
+    n = WP[w_k, 3:6]  # out of the wall, towards the sphere
+    e1 = np.zeros(3)
+    if planar:
+        e1[0], e1[1] = n[1], -n[0]  # n x z: the in-plane tangent (e2 = -z)
+    else:
+        # n x the axis least along n.
+        a = 0 if abs(n[0]) <= min(abs(n[1]), abs(n[2])) else (1 if abs(n[1]) <= abs(n[2]) else 2)
+        e1[(a + 1) % 3], e1[(a + 2) % 3] = n[(a + 2) % 3], -n[(a + 1) % 3]
+        e1 /= math.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
+    e2 = np.array([n[1] * e1[2] - n[2] * e1[1], n[2] * e1[0] - n[0] * e1[2], n[0] * e1[1] - n[1] * e1[0]])
     m, r, k = X[0, X_M], X[0, X_R], C[0, C_K]
     ii = X[0, X_II] if spin else 0.0
     om = math.sqrt(k / m)
-    g_n = grav[0] * nx + grav[1] * ny + grav[2] * nz
-    g_e = grav[0] * ex + grav[1] * ey if fric else 0.0
     P = np.zeros(NRP)
-    P[RP_OM], P[RP_DEQ], P[RP_R], P[RP_M], P[RP_II], P[RP_K] = om, -g_n / (om * om), r, m, ii, k
-    P[RP_MU], P[RP_EPS], P[RP_GE] = C[0, C_MU], C[0, C_EPS], g_e
+    P[RP_OM], P[RP_DEQ], P[RP_R], P[RP_M], P[RP_II], P[RP_K] = om, -dot3(grav, n) / (om * om), r, m, ii, k
+    P[RP_MU], P[RP_EPS] = C[0, C_MU], C[0, C_EPS]
+    P[RP_G], P[RP_G + 1] = dot3(grav, e1), dot3(grav, e2)
     touch = 2.0 * TOUCH_TOL * r
     span = 2.0 * math.pi / om / REST_SAMPLES
     start = np.zeros((3, 2))
     ends = np.zeros((3, 2))
     out = np.zeros((3, 2))
-    mode, sgn = -1, 0.0
+    spun = np.zeros(3)
+    mode = -1
     geometry(X, C, CI, 1, WP, NO)
     springs(X, C, CI, 1, 1, grav)
     decided = False
@@ -1908,62 +1950,100 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG):
     quick = 0
     while t < W:
         d_a = C[0, C_DELTA]
-        dd_a = -(X[0, X_V] * nx + X[0, X_V + 1] * ny + X[0, X_V + 2] * nz)
+        dd_a = -dot3(X[0, X_V:X_V + 3], n)
+        w_n = dot3(X[0, X_W:X_W + 3], n)
         P[RP_C], P[RP_S] = d_a - P[RP_DEQ], dd_a / om
-        P[RP_VA] = X[0, X_V] * ex + X[0, X_V + 1] * ey
-        P[RP_WA] = X[0, X_W + 2]
+        # n x w in the basis is (-w.e2, w.e1).
+        v1, v2 = dot3(X[0, X_V:X_V + 3], e1), dot3(X[0, X_V:X_V + 3], e2)
+        w1, w2 = -dot3(X[0, X_W:X_W + 3], e2), dot3(X[0, X_W:X_W + 3], e1)
+        P[RP_V], P[RP_V + 1], P[RP_TW], P[RP_TW + 1] = v1, v2, w1, w2
         lever = r - d_a
-        if fric and not decided:
-            u = P[RP_VA] + lever * P[RP_WA]
+        if fric and (not decided or (mode == STICK and not planar)):
+            u1, u2 = v1 + lever * w1, v2 + lever * w2
+            t1, t2 = P[RP_G] - dd_a * w1, P[RP_G + 1] - dd_a * w2
             resp = 1.0 / m + lever * lever * ii
-            # On the edge within what the state's round-off leaves (the normal velocity's share
-            # of a velocity turned into the contact's frame; the root's ticks of the clock).
-            tol = 1e-12 * (abs(P[RP_VA]) + abs(lever * P[RP_WA]) + abs(dd_a))
-            mode, sgn = rest_mode(u, g_e - dd_a * P[RP_WA], P[RP_MU] * k * d_a, resp, P[RP_EPS], tol)
-            decided = announce = True
+            edge = mode == STICK
+            if decided:
+                # Out of the plane the hold force turns as the bob swings: the stuck slip follows
+                # its reverse, put there at each interval's start (as the stepped path's steps).
+                rate = math.hypot(t1, t2)
+                if rate > 0.0:
+                    P[RP_H], P[RP_H + 1] = t1 / rate, t2 / rate
+            else:
+                # On the edge within what the state's round-off leaves (the normal velocity's
+                # share of a velocity turned into the contact's frame; the root's ticks).
+                tol = 1e-12 * (math.hypot(v1, v2) + lever * math.hypot(w1, w2) + abs(dd_a))
+                mode, P[RP_H], P[RP_H + 1], edge = rest_mode(u1, u2, t1, t2, P[RP_MU] * k * d_a, resp,
+                                                             P[RP_EPS], tol)
+                decided = announce = True
+            if edge:
+                # The slip put on the edge along h by the friction impulse that does that (its
+                # work is friction's); in the plane h is the slip's own direction already.
+                j1 = (P[RP_EPS] * P[RP_H] - u1) / resp
+                j2 = (P[RP_EPS] * P[RP_H + 1] - u2) / resp
+                P[RP_V], P[RP_V + 1] = v1 + j1 / m, v2 + j2 / m
+                P[RP_TW], P[RP_TW + 1] = w1 + lever * ii * j1, w2 + lever * ii * j2
+                gain = 0.5 * m * (P[RP_V] ** 2 + P[RP_V + 1] ** 2 - v1 * v1 - v2 * v2)
+                if ii > 0.0:
+                    gain += 0.5 / ii * (P[RP_TW] ** 2 + P[RP_TW + 1] ** 2 - w1 * w1 - w2 * w2)
+                share(G, XI, 1, -gain)
+            if mode == SLIDE and (rest_turns(P[RP_G], P[RP_G + 1], P[RP_H], P[RP_H + 1])
+                                  or rest_turns(P[RP_TW], P[RP_TW + 1], P[RP_H], P[RP_H + 1])):
+                rest_put(X, P, dd_a, n, e1, e2, w_n)
+                return t, KN, RC, False
         if announce and record:
             # The acceleration the mode starts with, after the last knot's (a jump there).
-            _, _, _, _, f = rest_at(P, mode, sgn, 0.0)
+            _, _, _, _, _, _, f1, f2 = rest_at(P, mode, 0.0)
             last = GI[XI[0], GI_KNOT]
-            KN[last, K_AN] = X[0, X_A] + f * ex / m
-            KN[last, K_AN + 1] = X[0, X_A + 1] + f * ey / m
+            for i in range(3):
+                KN[last, K_AN + i] = X[0, X_A + i] + (f1 * e1[i] + f2 * e2[i]) / m
         announce = False
         h = min(span, W - t)
         clock = 4.0 * EPS64 * (abs(t) + h)
-        rest_events(P, mode, sgn, 0.0, touch, start)
-        tau, which = rest_first(P, mode, sgn, h, touch, start, ends, out, clock)
+        rest_events(P, mode, 0.0, touch, start)
+        tau, which = rest_first(P, mode, h, touch, start, ends, out, clock)
         landed = W if tau >= h and h == W - t else t + min(tau, h)
         h = landed - t
         quick = quick + 1 if which > 0 and h <= clock else 0
         if quick > REST_STUCK_LIMIT:
+            rest_put(X, P, dd_a, n, e1, e2, w_n)
             return t, KN, RC, False
-        # The state at the interval's end: the normal motion, then the tangent's.
-        d, dd, v, w, f = rest_at(P, mode, sgn, h)
-        sx, sy, sz = X[0, X_S] + nx * (d_a - d), X[0, X_S + 1] + ny * (d_a - d), X[0, X_S + 2] + nz * (d_a - d)
-        spent = 0.0  # the work friction took out, from its force and the slip (not the energies: a check)
-        if fric:
-            along, turned = 0.0, 0.0
-            nodes, weights = (GL8_X, GL8_W) if mode == SLIDE else (GL_X, GL_W)
-            for q in range(nodes.shape[0]):
-                dq, _, vq, wq, fq = rest_at(P, mode, sgn, h * nodes[q])
-                along += weights[q] * vq
-                turned += weights[q] * wq
-                spent -= weights[q] * fq * (vq + (r - dq) * wq)
-            spent *= h
-            X[0, X_S], X[0, X_S + 1], X[0, X_S + 2] = sx + ex * along * h, sy + ey * along * h, sz
-            X[0, X_V], X[0, X_V + 1] = ex * v - nx * dd, ey * v - ny * dd
-            X[0, X_W + 2] = w
-            X[0, X_Q] += turned * h
-        else:
-            X[0, X_S], X[0, X_S + 1], X[0, X_S + 2] = sx, sy, sz
+        # The positions, angle and friction's work over the interval by Gauss-Legendre (the work
+        # from its force and the slip, not from the energies: a check).
+        d, dd, v1, v2, w1, w2, f1, f2 = rest_at(P, mode, h)
+        along1, along2, spent = 0.0, 0.0, 0.0
+        spun[:] = 0.0  # the mean spin in the plane
+        nodes, weights = (GL8_X, GL8_W) if mode == SLIDE else (GL_X, GL_W)
+        for q in range(nodes.shape[0]):
+            dq, _, vq1, vq2, wq1, wq2, fq1, fq2 = rest_at(P, mode, h * nodes[q])
+            along1 += weights[q] * vq1
+            along2 += weights[q] * vq2
             for i in range(3):
-                n_i = WP[w_k, 3 + i]
-                vt = X[0, X_V + i] + dd_a * n_i  # the tangential part
-                gt = grav[i] - g_n * n_i
-                X[0, X_S + i] += vt * h + 0.5 * gt * h * h
-                X[0, X_V + i] = vt + gt * h - n_i * dd
-            if spin:
-                turn(X[0, X_Q:X_Q + 4], X[0, X_W], X[0, X_W + 1], X[0, X_W + 2], h, fl[FL_PLANAR])
+                spun[i] += weights[q] * (wq2 * e1[i] - wq1 * e2[i])
+            spent -= weights[q] * (fq1 * (vq1 + (r - dq) * wq1) + fq2 * (vq2 + (r - dq) * wq2))
+        for i in range(3):
+            X[0, X_S + i] += n[i] * (d_a - d) + (e1[i] * along1 + e2[i] * along2) * h
+            spun[i] = (spun[i] + w_n * n[i]) * h
+        if spin:
+            if planar:
+                X[0, X_Q] += spun[2]
+            else:
+                if mode == STICK or mode == SLIDE:
+                    # The spin's direction changes: fourth-order Magnus, the commutator of the
+                    # spins at two Gauss points added to the mean's turn.
+                    _, _, _, _, a1, a2, _, _ = rest_at(P, mode, h * GL2_X[0])
+                    _, _, _, _, b1, b2, _, _ = rest_at(P, mode, h * GL2_X[1])
+                    ax, ay, az = w_n * n[0] + a2 * e1[0] - a1 * e2[0], w_n * n[1] + a2 * e1[1] - a1 * e2[1], \
+                        w_n * n[2] + a2 * e1[2] - a1 * e2[2]
+                    bx, by, bz = w_n * n[0] + b2 * e1[0] - b1 * e2[0], w_n * n[1] + b2 * e1[1] - b1 * e2[1], \
+                        w_n * n[2] + b2 * e1[2] - b1 * e2[2]
+                    c = GL2_COMMUTATOR * h * h
+                    spun[0] -= c * (ay * bz - az * by)
+                    spun[1] -= c * (az * bx - ax * bz)
+                    spun[2] -= c * (ax * by - ay * bx)
+                turn(X[0, X_Q:X_Q + 4], spun[0], spun[1], spun[2], 1.0, NO)
+        P[RP_V], P[RP_V + 1], P[RP_TW], P[RP_TW + 1] = v1, v2, w1, w2
+        rest_put(X, P, dd, n, e1, e2, w_n)
         t = landed
         # The deepest overlap (and force) of the interval: at its end, or inside where the bob turns.
         deepest = max(d_a, d) if not (dd_a > 0.0 and dd < 0.0) else P[RP_DEQ] + math.hypot(P[RP_C], P[RP_S])
@@ -1971,11 +2051,13 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG):
         FG[F_MAX_FORCE] = max(FG[F_MAX_FORCE], k * deepest)
         geometry(X, C, CI, 1, WP, NO)
         springs(X, C, CI, 1, 1, grav)
-        C[0, C_FF], C[0, C_FF + 1], C[0, C_FF + 2] = f * ex, f * ey, 0.0
-        X[0, X_F], X[0, X_F + 1], X[0, X_F + 2] = f * ex / m, f * ey / m, 0.0
-        X[0, X_L], X[0, X_L + 1], X[0, X_L + 2] = 0.0, 0.0, (r - d) * f * ii
+        for i in range(3):
+            force = f1 * e1[i] + f2 * e2[i]
+            C[0, C_FF + i] = force
+            X[0, X_F + i] = force / m
+            X[0, X_L + i] = (r - d) * ii * (f2 * e1[i] - f1 * e2[i])  # (-l n) x F / I
         CI[0, CI_MODE] = mode if fric else BAND
-        share(G, XI, 1, spent)
+        share(G, XI, 1, spent * h)
         ST[S_STEPS] += 1
         ST[S_REST] += 1
         if record:
@@ -1991,9 +2073,21 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG):
             # band's edge is judged there, on the next interval's start.
             decided = False
             if mode == STICK:
-                mode, sgn = (SLIDE, sgn) if which == 1 else (BAND, 0.0)
+                mode = SLIDE if which == 1 else BAND
                 decided = announce = True
+                if mode == SLIDE and (rest_turns(P[RP_G], P[RP_G + 1], P[RP_H], P[RP_H + 1])
+                                      or rest_turns(P[RP_TW], P[RP_TW + 1], P[RP_H], P[RP_H + 1])):
+                    return t, KN, RC, False
     return t, KN, RC, False
+
+
+@jit_inline
+def rest_put(X, P, dd, n, e1, e2, w_n):
+    """The body's velocity and spin from the tangential pairs in P and the normal rate dd."""
+    v1, v2, w1, w2 = P[RP_V], P[RP_V + 1], P[RP_TW], P[RP_TW + 1]
+    for i in range(3):
+        X[0, X_V + i] = v1 * e1[i] + v2 * e2[i] - n[i] * dd
+        X[0, X_W + i] = w_n * n[i] + w2 * e1[i] - w1 * e2[i]
 
 
 @jit
