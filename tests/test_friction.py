@@ -256,9 +256,10 @@ def test_stiff_oblique_wall_impacts_land_on_the_rigid_answer(raw: dict) -> None:
 def test_oblique_wall_impacts_in_3d_match_the_rigid_answer_like_2d() -> None:
     """Issue 10: a sphere hitting a wall of any orientation with spin about any axis, tol 1e-8,
     lands within 1e-5 of the rigid closed form (k = 1e12: the soft model's own distance from it,
-    about overlap / radius, is ~1e-6), in a few tens of steps. The same impact in a 2D scene (and
-    a 3D one in a plane) runs in closed form, 7 intervals; a spin out of the plane turns the slip,
-    which has no closed form, and is stepped (20 steps for these)."""
+    about overlap / radius, is ~1e-6), in as many steps as the same impact in a 2D scene: both
+    run in closed form, the 3D one's slip turning (a spin out of the plane) held along its mean
+    direction over each interval (measured: 5-8 intervals in 3D, 6-8 in 2D; 14-21 steps when the
+    3D slide was stepped)."""
     rng = np.random.default_rng(10)
     for _ in range(6):
         n = rng.normal(size=3)
@@ -271,7 +272,7 @@ def test_oblique_wall_impacts_in_3d_match_the_rigid_answer_like_2d() -> None:
         flat = -speed_n * n2 + speed_t * np.array([-n2[1], n2[0]])
         error2, steps2 = _rigid_error(_wall_impact(n2, flat, float(np.linalg.norm(spin)), 1e12, "contact", 2))
         assert error < 1e-5 and error2 < 1e-5
-        assert steps < 40 and steps2 < 40
+        assert steps2 < 12 and steps < 2 * steps2
 
 
 def test_a_run_knows_whether_it_stays_in_a_plane_of_any_orientation():

@@ -112,3 +112,60 @@ def test_a_recorded_ball_on_a_floor_has_knots_on_its_motion():
     assert np.all(np.diff(knots[:, 0]) >= 0)
     np.testing.assert_allclose(recorded.final.s, plain.final.s, rtol=0, atol=1e-15)
     np.testing.assert_allclose(recorded.final.v, plain.final.v, rtol=0, atol=1e-15)
+
+
+def _sliding_through(raw: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The velocity and spin after a sphere-wall impact that slides throughout: scipy's DOP853
+    (rtol 1e-13) on the world-frame equations from touching to parting, friction mu F_n against
+    the slip u = v + w x (-l n) whatever its direction (no band: the slip stays far from it)."""
+    from scipy.integrate import solve_ivp
+
+    body, wall = raw["body"][0], raw["wall"][0]
+    n = np.asarray(wall["normal"], float) / np.linalg.norm(wall["normal"])
+    point = np.asarray(wall["point"], float)
+    m, r, k, mu = body["mass"], body["radius"], raw["contact"]["k"], raw["contact"]["mu"]
+    inertia = 0.4 * m * r * r
+    s0, v0 = np.asarray(body["position"], float), np.asarray(body["velocity"], float)
+    s0 = s0 + v0 * ((s0 - point) @ n - r) / -(v0 @ n)
+
+    def rates(_, y):
+        s, v, w = y[:3], y[3:6], y[6:]
+        delta = r - (s - point) @ n
+        arm = -(r - delta) * n
+        slip = v + np.cross(w, arm)
+        slip -= (slip @ n) * n
+        friction = -mu * k * delta * slip / np.linalg.norm(slip)
+        return np.concatenate([v, (k * delta * n + friction) / m, np.cross(arm, friction) / inertia])
+
+    def parted(_, y):
+        return (y[:3] - point) @ n - r * (1 + 1e-12)
+
+    parted.terminal, parted.direction = True, 1
+    y = solve_ivp(rates, (0.0, 1.0), np.concatenate([s0, v0, body["spin"]]), method="DOP853", rtol=1e-13,
+                  atol=1e-16, events=parted).y[:, -1]
+    return y[3:6], y[6:]
+
+
+@pytest.mark.parametrize("k", [1e5, 1e8, 1e12])
+def test_a_slide_whose_slip_turns_is_the_equations_motion(k):
+    """A spin about a skew axis turns the slip as it slides (no closed form): friction is held
+    along the slip's mean direction over each interval, whose error is of second order in the
+    turn and kept to a thousandth of the tolerance (a turn too fast for that, as at k = 1e5 here,
+    is stepped). Within the run's tolerance of an independent integration of the equations:
+    measured 3e-12 to 1.5e-11 at k = 1e8 and 1e12, 7e-11 to 8e-10 at k = 1e5."""
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        along = np.cross(n, rng.normal(size=3))
+        along /= np.linalg.norm(along)
+        velocity = -rng.uniform(0.5, 1.0) * n + rng.uniform(2.0, 4.0) * along
+        raw = {"name": "turning", "dim": 3, "tol": 1e-8, "duration": 0.1, "contact": {"k": k, "mu": 0.1},
+               "wall": [{"point": [0.0, 0.0, 0.0], "normal": list(n)}],
+               "body": [{"name": "b", "mass": MASS, "radius": RADIUS, "position": list(n * 0.06),
+                         "velocity": list(velocity), "spin": list(rng.normal(size=3) * 20)}]}
+        result = run_scene(parse_scene(raw), record=False, measure=False).result
+        v, w = _sliding_through(raw)
+        error = max(np.abs(result.final.v[0, 0] - v).max(), np.abs(result.final.w[0, 0] - w).max() * RADIUS)
+        assert error / np.linalg.norm(velocity) < 1e-8
+        assert int(result.closed_steps[0]) < int(result.steps[0])  # turning intervals are not exact

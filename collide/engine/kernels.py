@@ -104,7 +104,7 @@ NR = 9
 V_I, V_J, V_START, V_END = range(4)
 CN_KNOTS, CN_RECS, CN_IVALS, CN_OPEN = range(4)
 S_STEPS, S_WINDOWS, S_STATUS, S_CONTACTS, S_RETRIES, S_UNLOCATED, S_REST = range(7)
-NS = 7  # S_REST: of the steps, intervals of a sphere on a wall in closed form
+NS = 7  # S_REST: of the steps, intervals of a sphere on a wall in closed form (exactly)
 F_MAX_OVERLAP, F_DT_MIN, F_STATUS_T, F_STATUS_A, F_STATUS_B, F_MAX_FORCE, F_UNLOCATED_T = range(7)
 NF = 7
 OK, NONFINITE, ENERGY, STALL, MAXSTEPS, SINGULAR = range(6)
@@ -1709,17 +1709,24 @@ GL_W = 0.5 * _GL_W
 _GL8_X, _GL8_W = np.polynomial.legendre.leggauss(8)
 GL8_X = 0.5 * (_GL8_X + 1.0)
 GL8_W = 0.5 * _GL8_W
+# The integral from 0 to each Gauss point of the polynomial through values at all of them.
+GL8_S = np.array([[np.polynomial.Polynomial.fit(GL8_X, np.eye(8)[j], 7, domain=[0, 1], window=[0, 1]).integ()(x)
+                   for j in range(8)] for x in GL8_X])
 # Tangential quantities are pairs in the wall's tangent basis (e1, e2 = n x e1): the velocity v,
 # the spin turned into the plane (n x w: the slip is u = v + l n x w) and the friction force;
 # the spin about n is constant. h: the direction a mode holds (the slide's, the stuck slip's).
 RP_OM, RP_DEQ, RP_C, RP_S, RP_R, RP_M, RP_II, RP_K, RP_MU, RP_EPS = range(10)
-RP_G, RP_V, RP_TW, RP_H = 10, 12, 14, 16
-NRP = 18
+RP_G, RP_V, RP_TW, RP_H, RP_LINE = 10, 12, 14, 16, 18
+NRP = 19  # RP_LINE: a slide's start slip along h over its size (1 unless it turns)
 REST_STUCK_LIMIT = 8  # events in a row closer than the clock resolves: the stepped path takes over
 _GL2 = math.sqrt(3.0) / 6.0
 GL2_X = np.array([0.5 - _GL2, 0.5 + _GL2])  # two Gauss points on [0, 1], for the Magnus commutator
 GL2_COMMUTATOR = math.sqrt(3.0) / 12.0
 REST_PARALLEL = 1e-12  # |a x h| / |a| below which a slide's slip counts as keeping its direction h
+REST_AIM_PASSES = 6  # iterations of a turning slide's mean direction (2 or 3 where measured)
+REST_AIMED = 1e-14  # its change (rad) taken as converged
+REST_TURN_HALVINGS = 4  # a turning slide's interval halved more than this (a turn too fast for it): stepped
+REST_TURN_BUDGET = 1e-3
 
 
 @jit_inline
@@ -1782,7 +1789,9 @@ def rest_at(P, mode, tau):
 @jit
 def rest_events(P, mode, tau, touch, out):
     """Event values and their rates at tau into the interval, into out (3, 2): the contact's end
-    (overlap past -touch), then the mode's: band, eps - |u|; slide, u.h - eps; stick, the margin
+    (overlap past -touch), then the mode's: band, eps - |u|; slide, u.h - eps (u.h - eps cos a
+    for a turning slip, held along its mean direction h at an angle a from its start: see
+    rest_aim; a slide started on the band's edge starts at zero); stick, the margin
     to mu F_n and the hold force against the held slip."""
     d, dd, v1, v2, w1, w2, f1, f2 = rest_at(P, mode, tau)
     r, m, ii, eps = P[RP_R], P[RP_M], P[RP_II], P[RP_EPS]
@@ -1800,7 +1809,7 @@ def rest_events(P, mode, tau, touch, out):
         rate = (u1 * (g1 - dd * w1) + u2 * (g2 - dd * w2)) / mag if mag > 0.0 else 0.0
         out[1, 0], out[1, 1] = eps - mag, -rate
     elif mode == SLIDE:
-        out[1, 0] = u1 * h1 + u2 * h2 - eps
+        out[1, 0] = u1 * h1 + u2 * h2 - eps * P[RP_LINE]
         out[1, 1] = h1 * (f1 * resp + g1 - dd * w1) + h2 * (f2 * resp + g2 - dd * w2)
     else:
         ddd = -P[RP_OM] ** 2 * (d - P[RP_DEQ])
@@ -1903,6 +1912,56 @@ def rest_turns(a1, a2, h1, h2):
 
 
 @jit
+def rest_aim(P, h, touch, start, ends, out, clock, budget):
+    """A slide whose slip turns, over [0, h]: friction held along one direction for the interval,
+    the mean of the slip's direction weighted by the friction force up to the interval's first
+    event, found by iteration. The slip's direction phi follows phi' = (u x b) / |u|^2 (b its
+    rate without friction: friction along the slip does not turn it), integrated at the Gauss
+    points on the polynomial through them. The velocities' error is then of second order in the
+    turn: 1/2 int A (phi - mean)^2 (A the slip's deceleration by friction), which must be within
+    `budget`, else the interval is halved. Returns (the first event's time, which, the
+    interval's length; 0 if it became too short)."""
+    r, push, m, ii, g1, g2 = P[RP_R], P[RP_MU] * P[RP_K], P[RP_M], P[RP_II], P[RP_G], P[RP_G + 1]
+    rate = np.empty(GL8_X.shape[0])
+    weight = np.empty(GL8_X.shape[0])
+    # The slip's direction at the start: the state's own.
+    lever = r - (P[RP_DEQ] + P[RP_C])
+    base = math.atan2(P[RP_V + 1] + lever * P[RP_TW + 1], P[RP_V] + lever * P[RP_TW])
+    for _ in range(REST_TURN_HALVINGS):
+        error = math.inf
+        for passes in range(REST_AIM_PASSES + 1):
+            rest_events(P, SLIDE, 0.0, touch, start)
+            tau, which = rest_first(P, SLIDE, h, touch, start, ends, out, clock)
+            if passes == REST_AIM_PASSES:
+                break
+            reach = min(tau, h)
+            total = 0.0
+            for q in range(GL8_X.shape[0]):
+                d, dd, v1, v2, w1, w2, _, _ = rest_at(P, SLIDE, reach * GL8_X[q])
+                lever = r - d
+                u1, u2 = v1 + lever * w1, v2 + lever * w2
+                rate[q] = (u1 * (g2 - dd * w2) - u2 * (g1 - dd * w1)) / (u1 * u1 + u2 * u2)
+                weight[q] = GL8_W[q] * push * d * (1.0 / m + lever * lever * ii)
+                total += weight[q]
+            mean, error = 0.0, 0.0
+            for q in range(GL8_X.shape[0]):
+                turned = reach * (GL8_S[q] @ rate)
+                mean += weight[q] * turned
+                error += weight[q] * turned * turned
+            mean /= total
+            error = 0.5 * reach * (error - total * mean * mean)
+            c, s = math.cos(base + mean), math.sin(base + mean)
+            moved = math.hypot(c - P[RP_H], s - P[RP_H + 1])
+            P[RP_H], P[RP_H + 1], P[RP_LINE] = c, s, math.cos(mean)
+            if moved <= REST_AIMED:
+                break
+        if error <= budget:
+            return tau, which, h
+        h *= 0.5
+    return math.inf, -1, 0.0
+
+
+@jit
 def rest_ready(X, C, CI, na, nc, nq, fl):
     """Whether this contact phase runs in closed form: one sphere on one wall, the contact's own
     step (dt auto) and the true lever."""
@@ -1910,7 +1969,7 @@ def rest_ready(X, C, CI, na, nc, nq, fl):
 
 
 @jit
-def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG):
+def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG):
     """Advance a sphere on a wall (see rest_ready) in closed form from t to W or to the contact's
     end, recording a knot at the end of every interval. Returns (t, KN, RC, ended); stopped short
     of both, the stepped path goes on: a slide whose slip turns (gravity along the wall or the
@@ -1947,7 +2006,12 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG):
     springs(X, C, CI, 1, 1, grav)
     decided = False
     announce = False
+    turning = False
+    reached = False
     quick = 0
+    # A turning slide's force error per interval (in speed over the speeds): as the kicks' fixed
+    # points, a ten-thousandth of the event tolerance.
+    exact = max(4.0 * EPS64, REST_TURN_BUDGET * fp[FP_EVENT_TOL])
     while t < W:
         d_a = C[0, C_DELTA]
         dd_a = -dot3(X[0, X_V:X_V + 3], n)
@@ -1956,7 +2020,7 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG):
         # n x w in the basis is (-w.e2, w.e1).
         v1, v2 = dot3(X[0, X_V:X_V + 3], e1), dot3(X[0, X_V:X_V + 3], e2)
         w1, w2 = -dot3(X[0, X_W:X_W + 3], e2), dot3(X[0, X_W:X_W + 3], e1)
-        P[RP_V], P[RP_V + 1], P[RP_TW], P[RP_TW + 1] = v1, v2, w1, w2
+        P[RP_V], P[RP_V + 1], P[RP_TW], P[RP_TW + 1], P[RP_LINE] = v1, v2, w1, w2, 1.0
         lever = r - d_a
         if fric and (not decided or (mode == STICK and not planar)):
             u1, u2 = v1 + lever * w1, v2 + lever * w2
@@ -1971,8 +2035,12 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG):
                     P[RP_H], P[RP_H + 1] = t1 / rate, t2 / rate
             else:
                 # On the edge within what the state's round-off leaves (the normal velocity's
-                # share of a velocity turned into the contact's frame; the root's ticks).
+                # share of a velocity turned into the contact's frame; the root's ticks), and
+                # by construction where a slide or the band just reached it (a turning slide's
+                # end is off by its second-order error: 2e-12 of its size was taken to slide on).
                 tol = 1e-12 * (math.hypot(v1, v2) + lever * math.hypot(w1, w2) + abs(dd_a))
+                if reached:
+                    tol = math.inf
                 mode, P[RP_H], P[RP_H + 1], edge = rest_mode(u1, u2, t1, t2, P[RP_MU] * k * d_a, resp,
                                                              P[RP_EPS], tol)
                 decided = announce = True
@@ -1987,10 +2055,8 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG):
                 if ii > 0.0:
                     gain += 0.5 / ii * (P[RP_TW] ** 2 + P[RP_TW + 1] ** 2 - w1 * w1 - w2 * w2)
                 share(G, XI, 1, -gain)
-            if mode == SLIDE and (rest_turns(P[RP_G], P[RP_G + 1], P[RP_H], P[RP_H + 1])
-                                  or rest_turns(P[RP_TW], P[RP_TW + 1], P[RP_H], P[RP_H + 1])):
-                rest_put(X, P, dd_a, n, e1, e2, w_n)
-                return t, KN, RC, False
+            turning = mode == SLIDE and (rest_turns(P[RP_G], P[RP_G + 1], P[RP_H], P[RP_H + 1])
+                                         or rest_turns(P[RP_TW], P[RP_TW + 1], P[RP_H], P[RP_H + 1]))
         if announce and record:
             # The acceleration the mode starts with, after the last knot's (a jump there).
             _, _, _, _, _, _, f1, f2 = rest_at(P, mode, 0.0)
@@ -2000,8 +2066,15 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG):
         announce = False
         h = min(span, W - t)
         clock = 4.0 * EPS64 * (abs(t) + h)
-        rest_events(P, mode, 0.0, touch, start)
-        tau, which = rest_first(P, mode, h, touch, start, ends, out, clock)
+        if fric and mode == SLIDE and turning:
+            scale = math.hypot(v1, v2) + lever * math.hypot(w1, w2) + abs(dd_a)
+            tau, which, h = rest_aim(P, h, touch, start, ends, out, clock, exact * scale)
+            if h == 0.0:
+                rest_put(X, P, dd_a, n, e1, e2, w_n)
+                return t, KN, RC, False
+        else:
+            rest_events(P, mode, 0.0, touch, start)
+            tau, which = rest_first(P, mode, h, touch, start, ends, out, clock)
         landed = W if tau >= h and h == W - t else t + min(tau, h)
         h = landed - t
         quick = quick + 1 if which > 0 and h <= clock else 0
@@ -2059,7 +2132,8 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG):
         CI[0, CI_MODE] = mode if fric else BAND
         share(G, XI, 1, spent * h)
         ST[S_STEPS] += 1
-        ST[S_REST] += 1
+        if not (fric and mode == SLIDE and turning):
+            ST[S_REST] += 1  # exact: a turning slide's intervals are not (their error is estimated)
         if record:
             KN, RC = record_step(KN, RC, CNT, G, GI, X, XI, C, CI, 1, 1, t, fl)
         if ST[S_STEPS] > fl[FL_MAXSTEPS]:
@@ -2072,12 +2146,12 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG):
             # whose hold force would turn round goes back into the band; a slip reaching the
             # band's edge is judged there, on the next interval's start.
             decided = False
+            reached = which == 1 and mode != STICK
             if mode == STICK:
                 mode = SLIDE if which == 1 else BAND
                 decided = announce = True
-                if mode == SLIDE and (rest_turns(P[RP_G], P[RP_G + 1], P[RP_H], P[RP_H + 1])
-                                      or rest_turns(P[RP_TW], P[RP_TW + 1], P[RP_H], P[RP_H + 1])):
-                    return t, KN, RC, False
+                turning = mode == SLIDE and (rest_turns(P[RP_G], P[RP_G + 1], P[RP_H], P[RP_H + 1])
+                                             or rest_turns(P[RP_TW], P[RP_TW + 1], P[RP_H], P[RP_H + 1]))
     return t, KN, RC, False
 
 
@@ -2183,7 +2257,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         changed = False
         if rest_ready(X, C, CI, na, nc, nq, fl):
             # Stopped short of W without an end, the steps go on from where it stopped.
-            t, KN, RC, changed = rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, KN, RC, CNT, ST, FG)
+            t, KN, RC, changed = rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         while t < W and not changed and ST[S_STATUS] == OK:
             if fric:
                 geometry(X, C, CI, nc, WP, fl[FL_SEED])
