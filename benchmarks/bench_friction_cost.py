@@ -1,6 +1,7 @@
 """What friction costs the event engine (issue 9: the billiards break with mu = 0.1 against the
-frictionless one; issue 10: a ball set down sliding on a floor against demo-bonus, and the break
-turned into a tilted plane against the 2D one). Each run is
+frictionless one; issue 10: a ball set down sliding on a floor against demo-bonus, the break
+turned into a tilted plane against the 2D one, and a stiff oblique wall impact with spin about a
+skew axis, whose slip turns as it slides, against the same impact in a 2D scene). Each run is
 timed twice: the kernel alone (`wall_time_s` of a run whose error is not measured) and as
 `collide run` does it (error measured where the model does not cover it). Runs of the scenes
 alternate within one process, the compiled kernels loaded first; prints medians and ratios,
@@ -30,6 +31,23 @@ def rolling_ball(tol: float):
     })
 
 
+def wall_impact(dim: int):
+    """A ball (m 0.1 kg, r 0.05 m) hitting a wall at k = 1e12 N/m, mu 0.3, tol 1e-8: 1.2 m/s into
+    it and 0.9 m/s along it, spinning at 20 rad/s; in 3D the wall is tilted and the spin's axis
+    skew (the slip turns as it slides), in 2D the spin is about z."""
+    if dim == 3:
+        normal = [0.36, -0.48, 0.8]
+        along, spin = [0.0, 0.8575, 0.5145], [14.0, 9.0, -11.0]
+    else:
+        normal, along, spin = [0.6, 0.8], [-0.8, 0.6], 20.0
+    return parse_scene({
+        "name": f"wall-impact-{dim}d", "dim": dim, "tol": 1e-8, "contact": {"k": 1e12, "mu": 0.3},
+        "wall": [{"point": [0.0] * dim, "normal": normal}],
+        "body": [{"name": "ball", "mass": 0.1, "radius": 0.05, "position": [0.06 * x for x in normal],
+                  "velocity": [-1.2 * a + 0.9 * b for a, b in zip(normal, along)], "spin": spin}],
+    })
+
+
 def tilted(scene):
     """The scene turned as a whole by 0.7 rad about (1, 2, 0.5): its plane is no longer z = 0."""
     return parse_scene(turned_source(scene.source))
@@ -54,6 +72,8 @@ def main() -> None:
         "billiards-break mu = 0.1, tilted plane (3D)": tilted(load_scene("billiards-break", [f"tol={args.tol}"])),
         "rolling ball, 0.5 s": rolling_ball(args.tol),
         "demo-bonus": load_scene("demo-bonus"),
+        "wall impact, skew spin (3D)": wall_impact(3),
+        "wall impact (2D)": wall_impact(2),
     }
     for scene in cases.values():
         timed(scene, True)  # load the compiled kernels, outside the clock
@@ -70,7 +90,8 @@ def main() -> None:
         print(f"| {name} | {runs[False][0][2]} | {med[name][False] * 1e3:.2f} | {med[name][True] * 1e3:.2f} |")
     for a, b, bar in (("billiards-break mu = 0.1", "billiards-break mu = 0", "bar 5x"),
                       ("rolling ball, 0.5 s", "demo-bonus", "bar 50x"),
-                      ("billiards-break mu = 0.1, tilted plane (3D)", "billiards-break mu = 0.1", "about 1x")):
+                      ("billiards-break mu = 0.1, tilted plane (3D)", "billiards-break mu = 0.1", "about 1x"),
+                      ("wall impact, skew spin (3D)", "wall impact (2D)", "comparable")):
         print(f"{a} / {b}: {med[a][False] / med[b][False]:.1f}x unmeasured, "
               f"{med[a][True] / med[b][True]:.1f}x as run ({bar})")
 
