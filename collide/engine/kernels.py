@@ -1723,10 +1723,10 @@ _GL2 = math.sqrt(3.0) / 6.0
 GL2_X = np.array([0.5 - _GL2, 0.5 + _GL2])  # two Gauss points on [0, 1], for the Magnus commutator
 GL2_COMMUTATOR = math.sqrt(3.0) / 12.0
 REST_PARALLEL = 1e-12  # |a x h| / |a| below which a slide's slip counts as keeping its direction h
-REST_AIM_PASSES = 6  # iterations of a turning slide's mean direction (2 or 3 where measured)
+REST_AIM_PASSES = 6  # iterations of a turning slide's mean direction, at most
 REST_AIMED = 1e-14  # its change (rad) taken as converged
 REST_TURN_HALVINGS = 4  # a turning slide's interval halved more than this (a turn too fast for it): stepped
-REST_TURN_BUDGET = 1e-3
+REST_TURN_BUDGET = 1e-3  # ... its error per interval, over the tolerance
 
 
 @jit_inline
@@ -1972,9 +1972,8 @@ def rest_ready(X, C, CI, na, nc, nq, fl):
 def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG):
     """Advance a sphere on a wall (see rest_ready) in closed form from t to W or to the contact's
     end, recording a knot at the end of every interval. Returns (t, KN, RC, ended); stopped short
-    of both, the stepped path goes on: a slide whose slip turns (gravity along the wall or the
-    spin in it off the slip: no closed form), or mode changes piling up closer than the clock
-    resolves."""
+    of both, the stepped path goes on: a slide whose slip turns too fast for `rest_aim`, or mode
+    changes piling up closer than the clock resolves."""
     spin, record, planar = fl[FL_SPIN], fl[FL_RECORD], fl[FL_PLANAR] == YES
     fric = fl[FL_FRICTION] and C[0, C_MU] > 0.0
     w_k = -1 - CI[0, CI_J]
@@ -2009,8 +2008,8 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
     turning = False
     reached = False
     quick = 0
-    # A turning slide's force error per interval (in speed over the speeds): as the kicks' fixed
-    # points, a ten-thousandth of the event tolerance.
+    # A turning slide's error per interval, over the speeds: a thousandth of the tolerance (an
+    # impact takes a few such intervals; a run with many is measured, as a stepped one).
     exact = max(4.0 * EPS64, REST_TURN_BUDGET * fp[FP_EVENT_TOL])
     while t < W:
         d_a = C[0, C_DELTA]
