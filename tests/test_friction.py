@@ -216,13 +216,21 @@ def test_stiff_friction_at_a_tight_tolerance_does_not_stall():
     assert np.abs(outcome(run.result) - outcome(reference.result)).max() / speed_scale(scene) < 1e-8
 
 
-def _wall_impact(normal, velocity, spin, k: float, lever: str, dim: int) -> dict:
+def _wall_impact(normal, velocity, spin, k: float, lever: str, dim: int, mu: float = 0.3) -> dict:
     n = np.asarray(normal, float) / np.linalg.norm(normal)
     point = np.full(dim, 1.0)
     body = {"name": "b", "mass": 0.1, "radius": 0.05, "position": (point + n * 0.06).tolist(),
             "velocity": list(velocity), "spin": spin if dim == 2 else list(spin)}
-    return {"name": "wall-impact", "dim": dim, "tol": 1e-8, "contact": {"k": k, "mu": 0.3, "lever": lever},
+    return {"name": "wall-impact", "dim": dim, "tol": 1e-8, "contact": {"k": k, "mu": mu, "lever": lever},
             "body": [body], "wall": [{"point": point.tolist(), "normal": n.tolist()}]}
+
+
+def random_wall_frame(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A wall's unit normal of random orientation and a random unit direction along it."""
+    n = rng.normal(size=3)
+    n /= np.linalg.norm(n)
+    along = np.cross(n, rng.normal(size=3))
+    return n, along / np.linalg.norm(along)
 
 
 def _rigid_error(raw: dict) -> tuple[float, int]:
@@ -262,10 +270,7 @@ def test_oblique_wall_impacts_in_3d_match_the_rigid_answer_like_2d() -> None:
     3D slide was stepped)."""
     rng = np.random.default_rng(10)
     for _ in range(6):
-        n = rng.normal(size=3)
-        n /= np.linalg.norm(n)
-        along = np.cross(n, rng.normal(size=3))
-        along /= np.linalg.norm(along)
+        n, along = random_wall_frame(rng)
         speed_n, speed_t, spin = rng.uniform(0.5, 2.0), rng.uniform(0.2, 2.0), rng.normal(size=3) * 20
         error, steps = _rigid_error(_wall_impact(n, -speed_n * n + speed_t * along, spin, 1e12, "contact", 3))
         n2 = np.array([n[0], n[1]]) / np.hypot(n[0], n[1])

@@ -13,6 +13,7 @@ import pytest
 from collide import diagnostics as dg
 from collide.run import run_scene
 from collide.scene import parse_scene
+from tests.test_friction import _wall_impact, random_wall_frame
 
 RADIUS, MASS = 0.05, 0.1
 
@@ -155,15 +156,9 @@ def test_a_slide_whose_slip_turns_is_the_equations_motion(k):
     measured 3e-12 to 1.5e-11 at k = 1e8 and 1e12, 7e-11 to 8e-10 at k = 1e5."""
     rng = np.random.default_rng(7)
     for _ in range(3):
-        n = rng.normal(size=3)
-        n /= np.linalg.norm(n)
-        along = np.cross(n, rng.normal(size=3))
-        along /= np.linalg.norm(along)
+        n, along = random_wall_frame(rng)
         velocity = -rng.uniform(0.5, 1.0) * n + rng.uniform(2.0, 4.0) * along
-        raw = {"name": "turning", "dim": 3, "tol": 1e-8, "duration": 0.1, "contact": {"k": k, "mu": 0.1},
-               "wall": [{"point": [0.0, 0.0, 0.0], "normal": list(n)}],
-               "body": [{"name": "b", "mass": MASS, "radius": RADIUS, "position": list(n * 0.06),
-                         "velocity": list(velocity), "spin": list(rng.normal(size=3) * 20)}]}
+        raw = _wall_impact(n, velocity, rng.normal(size=3) * 20, k, "contact", 3, mu=0.1) | {"duration": 0.1}
         result = run_scene(parse_scene(raw), record=False, measure=False).result
         v, w = _sliding_through(raw)
         error = max(np.abs(result.final.v[0, 0] - v).max(), np.abs(result.final.w[0, 0] - w).max() * RADIUS)
