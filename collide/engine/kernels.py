@@ -1695,9 +1695,9 @@ def record_step(KN, RC, CNT, G, GI, X, XI, C, CI, na, nc, t, fl):
 # (under the wall's share of gravity); slide along a fixed direction, integrals of delta and
 # delta^2; stick, the spin in the plane times sqrt(I/m + l^2) constant (l = r - delta, the lever;
 # with gravity along the wall, less an integral). A slide whose slip turns (the spin in the
-# plane or gravity along the wall off the slip) has none and is stepped. A ball resting, rolling
-# or sliding on a floor then costs its mode changes, not the thousands of steps its bob (period
-# 2 pi / omega) takes stepped.
+# plane or gravity along the wall off the slip) has none: `rest_aim` holds it along its mean
+# direction over each interval. A ball resting, rolling or sliding on a floor then costs its mode
+# changes, not the thousands of steps its bob (period 2 pi / omega) takes stepped.
 
 REST_SAMPLES = 8  # intervals per period of the bob: the event values are checked at their ends
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
@@ -1906,9 +1906,20 @@ def rest_mode(u1, u2, t1, t2, cap, resp, eps, tol):
 
 
 @jit_inline
-def rest_turns(a1, a2, h1, h2):
-    """Whether a (gravity along the wall, or the spin turned into it) turns a slide's slip off h."""
-    return abs(a1 * h2 - a2 * h1) > REST_PARALLEL * math.hypot(a1, a2)
+def rest_turns(P):
+    """Whether gravity along the wall or the spin turned into it turns a slide's slip off h."""
+    h1, h2 = P[RP_H], P[RP_H + 1]
+    for a in (RP_G, RP_TW):
+        a1, a2 = P[a], P[a + 1]
+        if abs(a1 * h2 - a2 * h1) > REST_PARALLEL * math.hypot(a1, a2):
+            return True
+    return False
+
+
+@jit_inline
+def rest_spin(n, e1, e2, w_n, w1, w2, i):
+    """Component i of the spin from its part about n and the pair n x w in the basis."""
+    return w_n * n[i] + w2 * e1[i] - w1 * e2[i]
 
 
 @jit
@@ -2010,7 +2021,7 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
     quick = 0
     # A turning slide's error per interval, over the speeds: a thousandth of the tolerance (an
     # impact takes a few such intervals; a run with many is measured, as a stepped one).
-    exact = max(4.0 * EPS64, REST_TURN_BUDGET * fp[FP_EVENT_TOL])
+    budget = max(4.0 * EPS64, REST_TURN_BUDGET * fp[FP_EVENT_TOL])
     while t < W:
         d_a = C[0, C_DELTA]
         dd_a = -dot3(X[0, X_V:X_V + 3], n)
@@ -2054,8 +2065,7 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
                 if ii > 0.0:
                     gain += 0.5 / ii * (P[RP_TW] ** 2 + P[RP_TW + 1] ** 2 - w1 * w1 - w2 * w2)
                 share(G, XI, 1, -gain)
-            turning = mode == SLIDE and (rest_turns(P[RP_G], P[RP_G + 1], P[RP_H], P[RP_H + 1])
-                                         or rest_turns(P[RP_TW], P[RP_TW + 1], P[RP_H], P[RP_H + 1]))
+            turning = mode == SLIDE and rest_turns(P)
         if announce and record:
             # The acceleration the mode starts with, after the last knot's (a jump there).
             _, _, _, _, _, _, f1, f2 = rest_at(P, mode, 0.0)
@@ -2065,9 +2075,9 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         announce = False
         h = min(span, W - t)
         clock = 4.0 * EPS64 * (abs(t) + h)
-        if fric and mode == SLIDE and turning:
+        if turning:
             scale = math.hypot(v1, v2) + lever * math.hypot(w1, w2) + abs(dd_a)
-            tau, which, h = rest_aim(P, h, touch, start, ends, out, clock, exact * scale)
+            tau, which, h = rest_aim(P, h, touch, start, ends, out, clock, budget * scale)
             if h == 0.0:
                 rest_put(X, P, dd_a, n, e1, e2, w_n)
                 return t, KN, RC, False
@@ -2091,7 +2101,7 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
             along1 += weights[q] * vq1
             along2 += weights[q] * vq2
             for i in range(3):
-                spun[i] += weights[q] * (wq2 * e1[i] - wq1 * e2[i])
+                spun[i] += weights[q] * rest_spin(n, e1, e2, 0.0, wq1, wq2, i)
             spent -= weights[q] * (fq1 * (vq1 + (r - dq) * wq1) + fq2 * (vq2 + (r - dq) * wq2))
         for i in range(3):
             X[0, X_S + i] += n[i] * (d_a - d) + (e1[i] * along1 + e2[i] * along2) * h
@@ -2105,10 +2115,10 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
                     # spins at two Gauss points added to the mean's turn.
                     _, _, _, _, a1, a2, _, _ = rest_at(P, mode, h * GL2_X[0])
                     _, _, _, _, b1, b2, _, _ = rest_at(P, mode, h * GL2_X[1])
-                    ax, ay, az = w_n * n[0] + a2 * e1[0] - a1 * e2[0], w_n * n[1] + a2 * e1[1] - a1 * e2[1], \
-                        w_n * n[2] + a2 * e1[2] - a1 * e2[2]
-                    bx, by, bz = w_n * n[0] + b2 * e1[0] - b1 * e2[0], w_n * n[1] + b2 * e1[1] - b1 * e2[1], \
-                        w_n * n[2] + b2 * e1[2] - b1 * e2[2]
+                    ax, ay, az = (rest_spin(n, e1, e2, w_n, a1, a2, 0), rest_spin(n, e1, e2, w_n, a1, a2, 1),
+                                  rest_spin(n, e1, e2, w_n, a1, a2, 2))
+                    bx, by, bz = (rest_spin(n, e1, e2, w_n, b1, b2, 0), rest_spin(n, e1, e2, w_n, b1, b2, 1),
+                                  rest_spin(n, e1, e2, w_n, b1, b2, 2))
                     c = GL2_COMMUTATOR * h * h
                     spun[0] -= c * (ay * bz - az * by)
                     spun[1] -= c * (az * bx - ax * bz)
@@ -2131,7 +2141,7 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         CI[0, CI_MODE] = mode if fric else BAND
         share(G, XI, 1, spent * h)
         ST[S_STEPS] += 1
-        if not (fric and mode == SLIDE and turning):
+        if not turning:
             ST[S_REST] += 1  # exact: a turning slide's intervals are not (their error is estimated)
         if record:
             KN, RC = record_step(KN, RC, CNT, G, GI, X, XI, C, CI, 1, 1, t, fl)
@@ -2149,8 +2159,7 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
             if mode == STICK:
                 mode = SLIDE if which == 1 else BAND
                 decided = announce = True
-                turning = mode == SLIDE and (rest_turns(P[RP_G], P[RP_G + 1], P[RP_H], P[RP_H + 1])
-                                             or rest_turns(P[RP_TW], P[RP_TW + 1], P[RP_H], P[RP_H + 1]))
+                turning = mode == SLIDE and rest_turns(P)
     return t, KN, RC, False
 
 
@@ -2160,7 +2169,7 @@ def rest_put(X, P, dd, n, e1, e2, w_n):
     v1, v2, w1, w2 = P[RP_V], P[RP_V + 1], P[RP_TW], P[RP_TW + 1]
     for i in range(3):
         X[0, X_V + i] = v1 * e1[i] + v2 * e2[i] - n[i] * dd
-        X[0, X_W + i] = w_n * n[i] + w2 * e1[i] - w1 * e2[i]
+        X[0, X_W + i] = rest_spin(n, e1, e2, w_n, w1, w2, i)
 
 
 @jit
