@@ -81,6 +81,31 @@ def test_hold_rate_is_the_slip_rate_without_friction(dim, seed, wall):
     assert np.abs(rate).max() > 1.0  # not vacuous
 
 
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_the_hold_system_is_solved_as_numpy_solves_it(symmetric):
+    """W f = b by `factor` and `solve_factored`: Cholesky where W is symmetric (positive definite,
+    as a stuck set's W is: J M^-1 J^T), LU with row swaps where it is not (the seed's levers),
+    against numpy's solve to round-off; an exactly singular W is reported, not solved."""
+    rng = np.random.default_rng(3)
+    for m in (1, 4, 10, 16):
+        # Contacts coupled through shared bodies: a sparse J, each contact on bodies of its own.
+        J = rng.normal(size=(m, 3 * m)) * (rng.random((m, 3 * m)) < 0.2) + np.eye(m, 3 * m)
+        W = J @ J.T if symmetric else J @ J.T + 0.1 * rng.normal(size=(m, m))
+        A = np.zeros((48, 48))
+        A[:m, :m] = W
+        piv = np.zeros(48, np.int64)
+        b = rng.normal(size=48)
+        expected = np.linalg.solve(W, b[:m])
+        assert kn.factor(A, piv, m, symmetric)
+        kn.solve_factored(A, piv, b, m, symmetric)
+        # Condition numbers here are below 1e3: 1e-12 is a thousand times round-off.
+        assert np.linalg.cond(W) < 1e3
+        assert b[:m] == pytest.approx(expected, rel=1e-12, abs=1e-12 * np.abs(expected).max())
+    A = np.zeros((4, 4))
+    A[:2, :2] = [[1.0, 1.0], [1.0, 1.0]]  # two contacts that are one
+    assert not kn.factor(A, np.zeros(4, np.int64), 2, symmetric)
+
+
 def _order(scene, fractions=(0.4, 0.2)):
     omega = float(reference_frequency(compile_scenes([scene])[0])[0])
     reference = outcome(run_scene(scene, dt=0.01 / omega, record=False).result)

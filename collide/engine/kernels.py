@@ -336,8 +336,27 @@ def set_basis(C, c):
 
 
 @jit_inline
-def factor(A, piv, m):
-    """LU-factor A[:m, :m] in place with partial pivoting (row swaps in piv). False if singular."""
+def factor(A, piv, m, symmetric):
+    """Factor A[:m, :m] in place: `symmetric` (and positive definite, as W is where it is
+    symmetric) by Cholesky into its lower triangle, half the work of LU and no pivoting (alone,
+    0.21 against 0.38 us at m = 10, 0.68 against 1.57 at 16); else LU with partial pivoting (row
+    swaps in piv). False if singular."""
+    if symmetric:
+        for k in range(m):
+            s = A[k, k]
+            for p in range(k):
+                s -= A[k, p] * A[k, p]
+            if not s > 0.0:
+                return False
+            d = math.sqrt(s)
+            A[k, k] = d
+            inv = 1.0 / d
+            for r in range(k + 1, m):
+                s = A[r, k]
+                for p in range(k):
+                    s -= A[r, p] * A[k, p]
+                A[r, k] = s * inv
+        return True
     for k in range(m):
         p = k
         for r in range(k + 1, m):
@@ -359,8 +378,20 @@ def factor(A, piv, m):
 
 
 @jit_inline
-def solve_factored(A, piv, b, m):
+def solve_factored(A, piv, b, m, symmetric):
     """Solve with the factors from `factor`; b holds the solution."""
+    if symmetric:
+        for k in range(m):
+            s = b[k]
+            for col in range(k):
+                s -= A[k, col] * b[col]
+            b[k] = s / A[k, k]
+        for k in range(m - 1, -1, -1):
+            s = b[k]
+            for r in range(k + 1, m):
+                s -= A[r, k] * b[r]
+            b[k] = s / A[k, k]
+        return
     for k in range(m):
         p = piv[k]
         if p != k:
@@ -421,10 +452,11 @@ def hold_matrix(X, C, CI, stuck, m, A, piv, spin, rows, seed):
     identity (`response`), and contacts couple only through a body they share. `rows`: tangents
     per contact, 1 in the z = 0 plane (the e2 = z rows are zero there: W is block diagonal, and
     z holds no force). W is symmetric where the slip and force levers are one (not the seed's
-    lever): the blocks below the diagonal are copied. False if singular."""
+    lever): then only its lower triangle is built, and factored by Cholesky. False if
+    singular."""
     n = rows * m
     for r in range(n):
-        for col in range(n):
+        for col in range(n if seed else r + 1):
             A[r, col] = 0.0
     for p in range(m):
         c = stuck[p]
@@ -432,7 +464,7 @@ def hold_matrix(X, C, CI, stuck, m, A, piv, spin, rows, seed):
         k = response(X, C, CI, c, spin)
         for alpha in range(rows):
             A[rows * p + alpha, rows * p + alpha] = k
-        for q in range(0 if seed else p + 1, m):
+        for q in range(m if seed else p):
             if q == p:
                 continue
             d = stuck[q]
@@ -440,11 +472,7 @@ def hold_matrix(X, C, CI, stuck, m, A, piv, spin, rows, seed):
                 a = CI[d, CI_I] if side == 0 else CI[d, CI_J]
                 if a >= 0 and (a == ci or a == cj):
                     couple_block(X, C, CI, c, d, a, spin, rows, A, rows * p, rows * q)
-            if not seed:
-                for alpha in range(rows):
-                    for beta in range(rows):
-                        A[rows * q + beta, rows * p + alpha] = A[rows * p + alpha, rows * q + beta]
-    return factor(A, piv, n)
+    return factor(A, piv, n, not seed)
 
 
 @jit_inline
@@ -464,14 +492,14 @@ def hold(X, C, CI, stuck, m, A, b, spin, seed, planar, fresh, fa, la):
             return False
         for k in range(m):
             b[k] = b[2 * k]
-        solve_factored(A, piv, b, m)
+        solve_factored(A, piv, b, m, not seed)
         for k in range(m - 1, -1, -1):
             b[2 * k] = b[k]
             b[2 * k + 1] = 0.0
     else:
         if fresh and not hold_matrix(X, C, CI, stuck, m, A, piv, spin, 2, seed):
             return False
-        solve_factored(A, piv, b, 2 * m)
+        solve_factored(A, piv, b, 2 * m, not seed)
     for k in range(m):
         c = stuck[k]
         f1, f2 = b[2 * k], b[2 * k + 1]
@@ -535,7 +563,7 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
     (a new geometry or new modes), else the last one is reused. `slides`: the sliding contacts'
     forces are found again, else those of the last call (X_SF, X_SL) are kept: in the plane they
     are mu F_n on the held side whatever the velocities, so only a new geometry changes them."""
-    spin, seed = fl[FL_SPIN], fl[FL_SEED]
+    spin, seed, planar = fl[FL_SPIN], fl[FL_SEED], fl[FL_PLANAR] == YES
     if slides:
         for a in range(na):
             for d in range(3):
@@ -546,7 +574,13 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
         if CI[c, CI_MODE] == SLIDE:
             if not slides:
                 continue
-            sx, sy, sz = slide_direction(X, C, CI, c, vc, wc, spin, span)
+            if planar:
+                # The held side of the tangent z x n (see `slide_direction`), without the slip.
+                sx, sy, sz = -C[c, C_N + 1], C[c, C_N], 0.0
+                if sx * C[c, C_HELD] + sy * C[c, C_HELD + 1] < 0.0:
+                    sx, sy = -sx, -sy
+            else:
+                sx, sy, sz = slide_direction(X, C, CI, c, vc, wc, spin, span)
             mag = math.sqrt(sx * sx + sy * sy + sz * sz)
             C[c, C_FF] = 0.0
             C[c, C_FF + 1] = 0.0
@@ -566,11 +600,9 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
         for d in range(3):
             X[a, X_F + d] = X[a, X_SF + d]
             X[a, X_L + d] = X[a, X_SL + d]
+            X[a, X_T + d] = X[a, X_A + d] + X[a, X_SF + d]
     if m == 0:
         return True
-    for a in range(na):
-        for d in range(3):
-            X[a, X_T + d] = X[a, X_A + d] + X[a, X_F + d]
     for k in range(m):
         c = stuck[k]
         if fresh:
@@ -578,7 +610,7 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
         gx, gy, gz = slip_rate(X, C, CI, c, vc, wc, X_T, X_L, spin, seed, YES)
         b[2 * k] = -(gx * C[c, C_B] + gy * C[c, C_B + 1] + gz * C[c, C_B + 2])
         b[2 * k + 1] = -(gx * C[c, C_B + 3] + gy * C[c, C_B + 4] + gz * C[c, C_B + 5])
-    if not hold(X, C, CI, stuck, m, A, b, spin, seed, fl[FL_PLANAR] == YES, fresh, X_F, X_L):
+    if not hold(X, C, CI, stuck, m, A, b, spin, seed, planar, fresh, X_F, X_L):
         return False
     for k in range(m):
         c = stuck[k]
@@ -589,14 +621,18 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
 
 
 @jit_inline
-def kinetic_drop(X, na, vc, wc, vd, wd, spin):
-    """Kinetic energy lost going from the velocities in (vc, wc) to those in (vd, wd)."""
+def take_velocities(X, na, vc, wc, spin):
+    """Make the velocities in (vc, wc) the bodies' (X_V, X_W); returns the kinetic energy lost."""
     e = 0.0
     for a in range(na):
         for d in range(3):
-            e += 0.5 * X[a, X_M] * (X[a, vc + d] * X[a, vc + d] - X[a, vd + d] * X[a, vd + d])
+            v, u = X[a, X_V + d], X[a, vc + d]
+            e += 0.5 * X[a, X_M] * (v * v - u * u)
+            X[a, X_V + d] = u
+            w, u = X[a, X_W + d], X[a, wc + d]
             if spin:
-                e += 0.5 * X[a, X_I] * (X[a, wc + d] * X[a, wc + d] - X[a, wd + d] * X[a, wd + d])
+                e += 0.5 * X[a, X_I] * (w * w - u * u)
+            X[a, X_W + d] = u
     return e
 
 
@@ -655,11 +691,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
                                                             and change * change <= exact * size * last):
                 break
             last = change
-        work += kinetic_drop(X, na, X_V, X_W, X_V1, X_W1, spin)
-        for a in range(na):
-            for d in range(3):
-                X[a, X_V + d] = X[a, X_V1 + d]
-                X[a, X_W + d] = X[a, X_W1 + d]
+        work += take_velocities(X, na, X_V1, X_W1, spin)
     elif not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES, YES):
         return work, False
     if h_start != 0.0:
@@ -667,11 +699,10 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
             for d in range(3):
                 X[a, X_VB + d] = X[a, X_V + d] + h_start * X[a, X_F + d]
                 X[a, X_WB + d] = X[a, X_W + d] + h_start * X[a, X_L + d]
-        work += kinetic_drop(X, na, X_V, X_W, X_VB, X_WB, spin)
+        work += take_velocities(X, na, X_VB, X_WB, spin)
         for a in range(na):
             for d in range(3):
-                X[a, X_V + d] = X[a, X_VB + d] + h_start * X[a, X_A + d]
-                X[a, X_W + d] = X[a, X_WB + d]
+                X[a, X_V + d] += h_start * X[a, X_A + d]
     return work, True
 
 
@@ -713,12 +744,7 @@ def settle(X, C, CI, na, nc, stuck, A, b, fl):
         for d in range(3):
             X[a, X_VB + d] = X[a, X_V + d] + X[a, X_UA + d]
             X[a, X_WB + d] = X[a, X_W + d] + X[a, X_UL + d]
-    work = kinetic_drop(X, na, X_V, X_W, X_VB, X_WB, spin)
-    for a in range(na):
-        for d in range(3):
-            X[a, X_V + d] = X[a, X_VB + d]
-            X[a, X_W + d] = X[a, X_WB + d]
-    return work, True
+    return take_velocities(X, na, X_VB, X_WB, spin), True
 
 
 @jit_inline
