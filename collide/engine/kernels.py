@@ -837,14 +837,16 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
 
 
 @jit_inline
-def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale):
+def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh):
     """Friction mode event values (2C) into E[:, vcol] and their rates into E[:, rcol], in speed
     units over `scale`, at the state in X (geometry in C, X_A set). Slide: |slip| - eps; band:
     eps - |slip|; stick: the margin to mu F_n and the hold force's component against the held
     slip, as the slip change they would make over STICK_SCALE (rates NaN: no closed form).
-    Leaves the friction forces in C_FF. Returns False if the hold system is singular."""
+    `fresh`: the stuck contacts' hold system is built here, else the one in A is theirs at this
+    geometry (`settle` built it: a step and a decision end with it). Leaves the friction forces
+    in C_FF. Returns False if the hold system is singular."""
     spin, seed, planar = fl[FL_SPIN], fl[FL_SEED], fl[FL_PLANAR] == YES
-    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES, YES):
+    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, fresh, YES):
         return False
     for a in range(na):
         for d in range(3):
@@ -1572,7 +1574,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             if first < math.inf:
                 theta = frac + first * gap
         if modes:
-            if not mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale):
+            if not mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale, NO):
                 return h, work, False, limited, -1, True
             best = -1
             guess = math.inf
@@ -2298,7 +2300,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 springs(X, C, CI, na, nc, grav)
                 done, ok = decide(X, C, CI, na, nc, stuck, A, b, fl, scale)
                 share(G, XI, na, done)
-                if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale):
+                if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale, NO):
                     ST[S_STATUS] = SINGULAR
                     FG[F_STATUS_T] = t
                     break
