@@ -509,7 +509,7 @@ def hold(X, C, CI, stuck, m, A, b, spin, seed, planar, fresh, fa, la):
 
 
 @jit_inline
-def slide_direction(X, C, CI, c, vc, wc, spin, span):
+def slide_direction(X, C, CI, c, vc, wc, spin, span, planar):
     """The slip that sliding friction opposes at contact c, for the velocities in (vc, wc).
 
     `span` > 0: those velocities already hold this contact's own friction impulse over `span`
@@ -526,7 +526,12 @@ def slide_direction(X, C, CI, c, vc, wc, spin, span):
     slide takes there; holding the direction at the step's start instead lost the order and made
     the error erratic in the step. Between, a C^1 blend: held times phi(a) = eps / 4 + a^2 / eps
     plus the rest of the slip times a / phi(a). In the plane all of these are the held side of
-    the tangent, whatever the slip."""
+    the tangent z x n, whatever the slip: that, without the slip."""
+    if planar:
+        tx, ty = -C[c, C_N + 1], C[c, C_N]
+        if tx * C[c, C_HELD] + ty * C[c, C_HELD + 1] < 0.0:
+            return -tx, -ty, 0.0
+        return tx, ty, 0.0
     sx, sy, sz = slip(X, C, CI, c, vc, wc, spin)
     nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
     if span != 0.0:
@@ -574,13 +579,7 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
         if CI[c, CI_MODE] == SLIDE:
             if not slides:
                 continue
-            if planar:
-                # The held side of the tangent z x n (see `slide_direction`), without the slip.
-                sx, sy, sz = -C[c, C_N + 1], C[c, C_N], 0.0
-                if sx * C[c, C_HELD] + sy * C[c, C_HELD + 1] < 0.0:
-                    sx, sy = -sx, -sy
-            else:
-                sx, sy, sz = slide_direction(X, C, CI, c, vc, wc, spin, span)
+            sx, sy, sz = slide_direction(X, C, CI, c, vc, wc, spin, span, planar)
             mag = math.sqrt(sx * sx + sy * sy + sz * sz)
             C[c, C_FF] = 0.0
             C[c, C_FF + 1] = 0.0
@@ -837,16 +836,16 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
 
 
 @jit_inline
-def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh):
+def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale):
     """Friction mode event values (2C) into E[:, vcol] and their rates into E[:, rcol], in speed
     units over `scale`, at the state in X (geometry in C, X_A set). Slide: |slip| - eps; band:
     eps - |slip|; stick: the margin to mu F_n and the hold force's component against the held
     slip, as the slip change they would make over STICK_SCALE (rates NaN: no closed form).
-    `fresh`: the stuck contacts' hold system is built here, else the one in A is theirs at this
-    geometry (`settle` built it: a step and a decision end with it). Leaves the friction forces
-    in C_FF. Returns False if the hold system is singular."""
+    The stuck contacts' hold system is the one in A: every state this sees ends a step or a
+    decision, whose `settle` built it at this geometry and these modes. Leaves the friction
+    forces in C_FF. Returns False if the hold system is singular."""
     spin, seed, planar = fl[FL_SPIN], fl[FL_SEED], fl[FL_PLANAR] == YES
-    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, fresh, YES):
+    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, NO, YES):
         return False
     for a in range(na):
         for d in range(3):
@@ -1574,7 +1573,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             if first < math.inf:
                 theta = frac + first * gap
         if modes:
-            if not mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale, NO):
+            if not mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale):
                 return h, work, False, limited, -1, True
             best = -1
             guess = math.inf
@@ -2300,7 +2299,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 springs(X, C, CI, na, nc, grav)
                 done, ok = decide(X, C, CI, na, nc, stuck, A, b, fl, scale)
                 share(G, XI, na, done)
-                if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale, NO):
+                if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale):
                     ST[S_STATUS] = SINGULAR
                     FG[F_STATUS_T] = t
                     break
