@@ -53,12 +53,12 @@ def tilted(scene):
     return parse_scene(turned_source(scene.source))
 
 
-def timed(scene, measure: bool) -> tuple[float, float, int]:
-    """(kernel seconds, whole call seconds, steps) of one run."""
+def timed(scene, measure: bool) -> tuple[float, float, int, int]:
+    """(kernel seconds, whole call seconds, steps, whole steps tried) of one run."""
     start = time.perf_counter()
     run = run_scene(scene, record=False, measure=measure)
     whole = time.perf_counter() - start
-    return run.result.wall_time_s, whole, int(run.result.steps[0])
+    return run.result.wall_time_s, whole, int(run.result.steps[0]), int(run.result.attempts[0])
 
 
 def main() -> None:
@@ -84,10 +84,11 @@ def main() -> None:
                 figures[name][measure].append(timed(scene, measure))
     med = {name: {m: statistics.median(x[0] for x in runs[m]) for m in runs} for name, runs in figures.items()}
     print(f"tol {args.tol:g} (demo-bonus at its own), medians of {args.repeat}, ms of wall_time_s")
-    print("| run | steps | kernel, error not measured | as `collide run` (error measured) |")
-    print("|---|---|---|---|")
+    print("| run | steps | whole steps tried | kernel, error not measured | as `collide run` (error measured) |")
+    print("|---|---|---|---|---|")
     for name, runs in figures.items():
-        print(f"| {name} | {runs[False][0][2]} | {med[name][False] * 1e3:.2f} | {med[name][True] * 1e3:.2f} |")
+        print(f"| {name} | {runs[False][0][2]} | {runs[False][0][3]} | {med[name][False] * 1e3:.2f} "
+              f"| {med[name][True] * 1e3:.2f} |")
     for a, b, bar in (("billiards-break mu = 0.1", "billiards-break mu = 0", "bar 5x"),
                       ("rolling ball, 0.5 s", "demo-bonus", "bar 50x"),
                       ("billiards-break mu = 0.1, tilted plane (3D)", "billiards-break mu = 0.1", "about 1x"),

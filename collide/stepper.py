@@ -198,6 +198,7 @@ class RunResult:
     windows: np.ndarray | None = None  # (B,) windows of islands the run took
     dissipation: np.ndarray | None = None  # (B, 3) DEM: J taken out by damping, friction, rolling
     closed_steps: np.ndarray | None = None  # (B,) of the steps, intervals run in closed form (a sphere on a wall)
+    attempts: np.ndarray | None = None  # (B,) whole steps tried from a step's start (events cost more than one)
 
     @property
     def batch_size(self) -> int:
@@ -224,7 +225,8 @@ class RunResult:
         return RunResult(select_model(self.model, index), select_state(self.initial, index),
                          select_state(self.final, index), self.integrator, pick(self.dt), pick(self.steps),
                          pick(self.jumps), self.wall_time_s, log, trajectories, list(self.warnings),
-                         pick(self.dt_min), pick(self.windows), pick(self.dissipation), pick(self.closed_steps))
+                         pick(self.dt_min), pick(self.windows), pick(self.dissipation), pick(self.closed_steps),
+                         pick(self.attempts))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -504,7 +506,8 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     return RunResult(model=model, initial=initial, final=final, integrator=integrator, dt=dt,
                      steps=stats[:, kn.S_STEPS].copy(), jumps=stats[:, kn.S_WINDOWS].copy(),
                      wall_time_s=wall_time, contacts=log, trajectories=trajectories, warnings=warnings,
-                     dt_min=dt_min, windows=stats[:, kn.S_WINDOWS].copy(), closed_steps=stats[:, kn.S_REST].copy())
+                     dt_min=dt_min, windows=stats[:, kn.S_WINDOWS].copy(), closed_steps=stats[:, kn.S_REST].copy(),
+                     attempts=stats[:, kn.S_ATTEMPTS].copy())
 
 
 def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Progress | None,

@@ -40,6 +40,7 @@ import math
 import numpy as np
 
 from collide.engine.tier import jit, jit_inline
+from collide.integrators import YOSHIDA4
 
 BAND, SLIDE, STICK = 0, 1, 2
 EDGE_TOL = 1e-9  # relative to the speed scale: how close to the band's edge counts as on it
@@ -64,6 +65,13 @@ MAX_RETRIES = 24  # a window redone this often, each 4x shorter, has met a conta
 NO_CONTACT_TAIL = 1.0  # s: how long a run with no contact at all lasts
 EPS64 = 2.220446049250313e-16
 VERLET = np.ones(1)  # the weights of one kick-drift-kick substep
+YOSHIDA = np.array(YOSHIDA4)  # three substeps: the event search's longer nudges
+# Local errors of one step of omega h on an oscillator (measured): Verlet (omega h)^3 / 12,
+# Yoshida 0.0281 (omega h)^5. A nudge of the event search may leave a thousandth of the tolerance.
+VERLET_ERROR, YOSHIDA_ERROR = 1.0 / 12.0, 0.0281
+NUDGE_SHARE = 1e-3
+FORESEE_SPAN = 1e-4  # of the step: the differences that foresee events
+AIM = 1.02  # a first trial aimed at an event its start rates foresee ends this far past it
 
 # G: bodies.
 G_S, G_V, G_W, G_Q, G_TB, G_WK, G_IM, G_II, G_R, G_M, G_I, G_MAT = 0, 3, 6, 9, 13, 14, 15, 16, 17, 18, 19, 20
@@ -103,8 +111,9 @@ R_T, R_I, R_J, R_DELTA, R_FN, R_FX, R_FY, R_FZ, R_MODE = range(9)
 NR = 9
 V_I, V_J, V_START, V_END = range(4)
 CN_KNOTS, CN_RECS, CN_IVALS, CN_OPEN = range(4)
-S_STEPS, S_WINDOWS, S_STATUS, S_CONTACTS, S_RETRIES, S_UNLOCATED, S_REST = range(7)
-NS = 7  # S_REST: of the steps, intervals of a sphere on a wall in closed form (exactly)
+S_STEPS, S_WINDOWS, S_STATUS, S_CONTACTS, S_RETRIES, S_UNLOCATED, S_REST, S_ATTEMPTS = range(8)
+NS = 8  # S_REST: of the steps, intervals of a sphere on a wall in closed form (exactly); S_ATTEMPTS:
+# whole steps tried from a step's start (the event search's nudges not counted)
 F_MAX_OVERLAP, F_DT_MIN, F_STATUS_T, F_STATUS_A, F_STATUS_B, F_MAX_FORCE, F_UNLOCATED_T = range(7)
 NF = 7
 OK, NONFINITE, ENERGY, STALL, MAXSTEPS, SINGULAR = range(6)
@@ -836,16 +845,16 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
 
 
 @jit_inline
-def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale):
+def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh):
     """Friction mode event values (2C) into E[:, vcol] and their rates into E[:, rcol], in speed
     units over `scale`, at the state in X (geometry in C, X_A set). Slide: |slip| - eps; band:
     eps - |slip|; stick: the margin to mu F_n and the hold force's component against the held
     slip, as the slip change they would make over STICK_SCALE (rates NaN: no closed form).
-    The stuck contacts' hold system is the one in A: every state this sees ends a step or a
-    decision, whose `settle` built it at this geometry and these modes. Leaves the friction
-    forces in C_FF. Returns False if the hold system is singular."""
+    The stuck contacts' hold system is built with `fresh`, else it is the one in A: a state that
+    ends a step or a decision, whose `settle` built it at this geometry and these modes. Leaves
+    the friction forces in C_FF. Returns False if the hold system is singular."""
     spin, seed, planar = fl[FL_SPIN], fl[FL_SEED], fl[FL_PLANAR] == YES
-    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, NO, YES):
+    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, fresh, YES):
         return False
     for a in range(na):
         for d in range(3):
@@ -1486,13 +1495,68 @@ def hermite_dip(e0, e1, r0, r1, floor):
     return math.inf
 
 
+@jit_inline
+def first_root(e0, r0, curve):
+    """The first positive root of e0 + r0 t + curve t^2 / 2 (e0 > 0), in the form without
+    cancellation; inf if none."""
+    disc = r0 * r0 - 2.0 * curve * e0
+    if disc >= 0.0:
+        denominator = -r0 + math.sqrt(disc)
+        if denominator > 0.0:
+            return 2.0 * e0 / denominator
+    return math.inf
+
+
+@jit_inline
+def foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A, b, fl, scale):
+    """The first time (from the step's start) at which a contact is foreseen to start or end or a
+    friction mode to change: where the parabola through a value's start, rate and rate of change
+    reaches zero. The rates of change, and a stuck contact's rate (its values have no closed
+    form; theirs is a line), are differences to a state FORESEE_SPAN of the step on by the
+    start's velocities and accelerations (the bodies are left there: the step restarts; its mode
+    values in E[:, E_V1:]). inf if nothing is foreseen."""
+    span = FORESEE_SPAN * h_full
+    for a in range(na):
+        for d in range(3):
+            acc = X[a, X_A + d] + (X[a, X_F + d] if fl[FL_FRICTION] else 0.0)
+            X[a, X_S + d] += span * (X[a, X_V + d] + 0.5 * span * acc)
+            X[a, X_V + d] += span * acc
+            if fl[FL_FRICTION]:
+                X[a, X_W + d] += span * X[a, X_L + d]
+    soon = math.inf
+    tol = TOUCH_TOL
+    for k in range(nq):
+        d0, r0 = QF[k, QF_D0], QF[k, QF_R0]
+        if abs(d0) > tol:
+            r1 = overlap(G, GI, X, Q, QF, k, t + span, WP, grav)[1]
+            sign = 1.0 if d0 > 0.0 else -1.0
+            soon = min(soon, first_root(sign * d0, sign * r0, sign * (r1 - r0) / span))
+    if not fl[FL_FRICTION]:
+        return soon
+    geometry(X, C, CI, nc, WP, fl[FL_SEED])
+    springs(X, C, CI, na, nc, grav)
+    known = mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale, YES)
+    for k in range(2 * nc):
+        e0, r0 = E[k, E_V0], E[k, E_R0]
+        if not (e0 > MODE_TOL and known):
+            continue
+        if math.isfinite(r0):
+            if math.isfinite(E[k, E_R1]):
+                soon = min(soon, first_root(e0, r0, (E[k, E_R1] - r0) / span))
+        else:
+            soon = min(soon, first_root(e0, (E[k, E_V1] - e0) / span, 0.0))
+    return soon
+
+
 @jit
 def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
-                max_turn, nudge, exact):
+                max_turn, nudge, reach, exact, ST):
     """One step from the start state; where an event would happen inside it, shortened to land
     there, each refinement re-stepping from the start (in the plane, one within `nudge` of the
-    last trial's end is a Verlet substep from there). Contacts starting or ending: a cubic
-    Hermite through the overlaps at both ends of a trial; friction modes: a bracketed root find
+    last trial's end is a Verlet substep from there, one within `reach` a Yoshida step; and the
+    first trial ends just past the first event `foresee` sees coming). Contacts starting or
+    ending: a cubic Hermite through the overlaps at both ends of a trial; friction modes: a
+    bracketed root find
     (Hermite with both ends' rates where they have closed forms, then inverse quadratic
     interpolation, secant or Newton in the bracket). In 3D a sliding slip may turn by at most
     `max_turn` (rad) a step: just after it leaves the band's edge it turns on a time scale of
@@ -1502,24 +1566,28 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     the search landed: False if it ran out of trials, and the step may have passed an event)."""
     h = h_full
     limited = False
-    # A mode value that heads for zero so fast that, at its start rate, it gets there within a
-    # Verlet substep's reach (a contact's mode changing just after another's, which changed its
-    # forces): the first trial is one substep to twice that time, whose end brackets the change
-    # or, if the value slows, is a short step of its own. A whole step there only found it.
+    tol = TOUCH_TOL
+    # Where an event is foreseen inside the step, the first trial ends just past it: its end then
+    # brackets the event closely, and the search lands there with nudges from it. Unforeseen, a
+    # whole step only found it and a second one aimed at it (the billiards break tried 155 whole
+    # steps for its 80; now 77 for 83). Very soon (a contact's mode changing just after another's
+    # changed its forces), the trial is a nudge to twice that time, whose end brackets the
+    # change or, if the value slows, is a short step of its own.
     soon = math.inf
-    if fl[FL_FRICTION] and nudge > 0.0:
-        for k in range(2 * nc):
-            e0, r0 = E[k, E_V0], E[k, E_R0]
-            if e0 > MODE_TOL and r0 < 0.0:
-                soon = min(soon, -e0 / r0)
+    if nudge > 0.0:
+        soon = foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A, b, fl, scale)
     if 2.0 * soon <= min(nudge, h_full):
         h = 2.0 * soon
         work, ok = step(X, C, CI, na, nc, h, VERLET, WP, grav, stuck, A, b, fl, YES, exact)
+    elif 2.0 * soon <= min(reach, h_full):
+        h = 2.0 * soon
+        work, ok = step(X, C, CI, na, nc, h, YOSHIDA, WP, grav, stuck, A, b, fl, YES, exact)
     else:
+        h = min(AIM * soon, h_full)
         work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, YES, exact)
+        ST[S_ATTEMPTS] += 1
     if not ok:
         return h, work, False, limited, -1, True
-    tol = TOUCH_TOL
     # A contact touching at the start with no approach speed that presses by the end began with
     # the step: it is engaged from the start and the step taken again (a Newton's cradle).
     for k in range(nq):
@@ -1573,7 +1641,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             if first < math.inf:
                 theta = frac + first * gap
         if modes:
-            if not mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale):
+            if not mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale, NO):
                 return h, work, False, limited, -1, True
             best = -1
             guess = math.inf
@@ -1675,13 +1743,16 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             break
         # Never shorter than a few ticks of the clock: an event closer than that is taken as passed.
         h_next = max(h_full * max(theta, 1e-12), shortest)
-        if nudge > 0.0 and abs(h_next - h) <= nudge:
+        if nudge > 0.0 and abs(h_next - h) <= reach:
             # Close to the last trial's end (a root search's last refinements): one Verlet
-            # substep from there, forwards or back, a tenth of the cost of a step from the start.
-            more, ok = step(X, C, CI, na, nc, h_next - h, VERLET, WP, grav, stuck, A, b, fl, NO, exact)
+            # substep from there, forwards or back, a ninth of the cost of a step from the start,
+            # or a little further a Yoshida step, a third of it.
+            near = VERLET if abs(h_next - h) <= nudge else YOSHIDA
+            more, ok = step(X, C, CI, na, nc, h_next - h, near, WP, grav, stuck, A, b, fl, NO, exact)
             work += more
         else:
             work, ok = step(X, C, CI, na, nc, h_next, weights, WP, grav, stuck, A, b, fl, YES, exact)
+            ST[S_ATTEMPTS] += 1
         h = h_next
         if not ok:
             return h, work, False, limited, -1, True
@@ -2262,13 +2333,16 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         dt = fp[FP_OMEGA_H] / omega if fl[FL_AUTO] else fp[FP_DT]
         # A slip may turn by the angle the stiffest contact's oscillation advances in a step.
         max_turn = max(dt * omega, 1e-3)
-        # How far a Verlet substep may reach in the event search: its error, (omega dh)^3 / 12, a
-        # thousandth of the event tolerance. Not out of the plane, where a small slip's direction
+        # How far a Verlet substep (and a Yoshida step) may reach in the event search: its error
+        # a thousandth of the event tolerance. Not out of the plane, where a small slip's direction
         # turns on a time scale far below 1 / omega: there the substeps' values strayed from
         # the steps' and searches ran out of trials (6 of 300 random 3D scenes).
         nudge = 0.0
+        reach = 0.0
         if omega > 0 and fl[FL_PLANAR] == YES:
-            nudge = (12e-3 * fp[FP_EVENT_TOL]) ** (1.0 / 3.0) / omega
+            nudge = (NUDGE_SHARE * fp[FP_EVENT_TOL] / VERLET_ERROR) ** (1.0 / 3.0) / omega
+            # A Yoshida step costs a third of kahan6's: no gain over the integrator's own step.
+            reach = (NUDGE_SHARE * fp[FP_EVENT_TOL] / YOSHIDA_ERROR) ** 0.2 / omega if weights.shape[0] > 3 else nudge
         # A kick's fixed point is left with a ten-thousandth of the event tolerance: thousands of
         # kicks stay far below the tolerance (at 1e-6, 1e-12 each; a pass fewer in most kicks).
         exact = max(4.0 * EPS64, 1e-4 * fp[FP_EVENT_TOL])
@@ -2299,7 +2373,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 springs(X, C, CI, na, nc, grav)
                 done, ok = decide(X, C, CI, na, nc, stuck, A, b, fl, scale)
                 share(G, XI, na, done)
-                if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale):
+                if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale, NO):
                     ST[S_STATUS] = SINGULAR
                     FG[F_STATUS_T] = t
                     break
@@ -2323,7 +2397,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 h_full = min(h_full, dt * min(1.0, (dt * omega) ** STIFF_SLIDE_POWER))
             h, work, ok, limited, late, located = step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full,
                                                               weights, WP, grav, stuck, A, b, fl, scale, max_turn,
-                                                              nudge, exact)
+                                                              nudge, reach, exact, ST)
             if not located:
                 if ST[S_UNLOCATED] == 0:
                     FG[F_UNLOCATED_T] = t
