@@ -1576,12 +1576,9 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     soon = math.inf
     if nudge > 0.0:
         soon = foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A, b, fl, scale)
-    if 2.0 * soon <= min(nudge, h_full):
+    if 2.0 * soon <= min(reach, h_full):
         h = 2.0 * soon
-        work, ok = step(X, C, CI, na, nc, h, VERLET, WP, grav, stuck, A, b, fl, YES, exact)
-    elif 2.0 * soon <= min(reach, h_full):
-        h = 2.0 * soon
-        work, ok = step(X, C, CI, na, nc, h, YOSHIDA, WP, grav, stuck, A, b, fl, YES, exact)
+        work, ok = step(X, C, CI, na, nc, h, VERLET if h <= nudge else YOSHIDA, WP, grav, stuck, A, b, fl, YES, exact)
     else:
         h = min(AIM * soon, h_full)
         work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, YES, exact)
