@@ -1496,6 +1496,13 @@ def hermite_dip(e0, e1, r0, r1, floor):
 
 
 @jit_inline
+def nudge_weights(dh, nudge):
+    """The substeps of a nudge of dh in the event search: one Verlet substep within `nudge`,
+    a Yoshida step beyond it (within the search's `reach`)."""
+    return VERLET if abs(dh) <= nudge else YOSHIDA
+
+
+@jit_inline
 def first_root(e0, r0, curve):
     """The first positive root of e0 + r0 t + curve t^2 / 2 (e0 > 0), in the form without
     cancellation; inf if none."""
@@ -1556,9 +1563,8 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     last trial's end is a Verlet substep from there, one within `reach` a Yoshida step; and the
     first trial ends just past the first event `foresee` sees coming). Contacts starting or
     ending: a cubic Hermite through the overlaps at both ends of a trial; friction modes: a
-    bracketed root find
-    (Hermite with both ends' rates where they have closed forms, then inverse quadratic
-    interpolation, secant or Newton in the bracket). In 3D a sliding slip may turn by at most
+    bracketed root find (Hermite with both ends' rates where they have closed forms, then inverse
+    quadratic interpolation, secant or Newton in the bracket). In 3D a sliding slip may turn by at most
     `max_turn` (rad) a step: just after it leaves the band's edge it turns on a time scale of
     eps over its rate, far below a step, and the step is shortened to follow it.
     Returns (h taken, work, ok, whether the turning limited the step, a candidate that began
@@ -1578,7 +1584,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
         soon = foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A, b, fl, scale)
     if 2.0 * soon <= min(reach, h_full):
         h = 2.0 * soon
-        work, ok = step(X, C, CI, na, nc, h, VERLET if h <= nudge else YOSHIDA, WP, grav, stuck, A, b, fl, YES, exact)
+        work, ok = step(X, C, CI, na, nc, h, nudge_weights(h, nudge), WP, grav, stuck, A, b, fl, YES, exact)
     else:
         h = min(AIM * soon, h_full)
         work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, YES, exact)
@@ -1744,8 +1750,8 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             # Close to the last trial's end (a root search's last refinements): one Verlet
             # substep from there, forwards or back, a ninth of the cost of a step from the start,
             # or a little further a Yoshida step, a third of it.
-            near = VERLET if abs(h_next - h) <= nudge else YOSHIDA
-            more, ok = step(X, C, CI, na, nc, h_next - h, near, WP, grav, stuck, A, b, fl, NO, exact)
+            more, ok = step(X, C, CI, na, nc, h_next - h, nudge_weights(h_next - h, nudge), WP, grav, stuck, A, b,
+                            fl, NO, exact)
             work += more
         else:
             work, ok = step(X, C, CI, na, nc, h_next, weights, WP, grav, stuck, A, b, fl, YES, exact)
@@ -2338,7 +2344,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         reach = 0.0
         if omega > 0 and fl[FL_PLANAR] == YES:
             nudge = (NUDGE_SHARE * fp[FP_EVENT_TOL] / VERLET_ERROR) ** (1.0 / 3.0) / omega
-            # A Yoshida step costs a third of kahan6's: no gain over the integrator's own step.
+            # A Yoshida step costs a third of kahan6's; with three substeps or fewer it saves nothing.
             reach = (NUDGE_SHARE * fp[FP_EVENT_TOL] / YOSHIDA_ERROR) ** 0.2 / omega if weights.shape[0] > 3 else nudge
         # A kick's fixed point is left with a ten-thousandth of the event tolerance: thousands of
         # kicks stay far below the tolerance (at 1e-6, 1e-12 each; a pass fewer in most kicks).
