@@ -1496,13 +1496,6 @@ def hermite_dip(e0, e1, r0, r1, floor):
 
 
 @jit_inline
-def nudge_weights(dh, nudge):
-    """The substeps of a nudge of dh in the event search: one Verlet substep within `nudge`,
-    a Yoshida step beyond it (within the search's `reach`)."""
-    return VERLET if abs(dh) <= nudge else YOSHIDA
-
-
-@jit_inline
 def first_root(e0, r0, curve):
     """The first positive root of e0 + r0 t + curve t^2 / 2 (e0 > 0), in the form without
     cancellation; inf if none."""
@@ -1564,9 +1557,9 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     first trial ends just past the first event `foresee` sees coming). Contacts starting or
     ending: a cubic Hermite through the overlaps at both ends of a trial; friction modes: a
     bracketed root find (Hermite with both ends' rates where they have closed forms, then inverse
-    quadratic interpolation, secant or Newton in the bracket). In 3D a sliding slip may turn by at most
-    `max_turn` (rad) a step: just after it leaves the band's edge it turns on a time scale of
-    eps over its rate, far below a step, and the step is shortened to follow it.
+    quadratic interpolation, secant or Newton in the bracket). In 3D a sliding slip may turn by
+    at most `max_turn` (rad) a step: just after it leaves the band's edge it turns on a time
+    scale of eps over its rate, far below a step, and the step is shortened to follow it.
     Returns (h taken, work, ok, whether the turning limited the step, a candidate that began
     pressing from touching within the step: -1 if none, else the step was not taken, whether
     the search landed: False if it ran out of trials, and the step may have passed an event)."""
@@ -1584,7 +1577,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
         soon = foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A, b, fl, scale)
     if 2.0 * soon <= min(reach, h_full):
         h = 2.0 * soon
-        work, ok = step(X, C, CI, na, nc, h, nudge_weights(h, nudge), WP, grav, stuck, A, b, fl, YES, exact)
+        work, ok = step(X, C, CI, na, nc, h, VERLET if h <= nudge else YOSHIDA, WP, grav, stuck, A, b, fl, YES, exact)
     else:
         h = min(AIM * soon, h_full)
         work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, YES, exact)
@@ -1750,8 +1743,8 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             # Close to the last trial's end (a root search's last refinements): one Verlet
             # substep from there, forwards or back, a ninth of the cost of a step from the start,
             # or a little further a Yoshida step, a third of it.
-            more, ok = step(X, C, CI, na, nc, h_next - h, nudge_weights(h_next - h, nudge), WP, grav, stuck, A, b,
-                            fl, NO, exact)
+            near = VERLET if abs(h_next - h) <= nudge else YOSHIDA
+            more, ok = step(X, C, CI, na, nc, h_next - h, near, WP, grav, stuck, A, b, fl, NO, exact)
             work += more
         else:
             work, ok = step(X, C, CI, na, nc, h_next, weights, WP, grav, stuck, A, b, fl, YES, exact)
