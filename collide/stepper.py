@@ -504,7 +504,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
                      stats[:, kn.S_CONTACTS].copy(), max_force, longest_contacts(model, ivals, t_final))
     dt_min = np.where(np.isfinite(figures[:, kn.F_DT_MIN]), figures[:, kn.F_DT_MIN], dt)
     return RunResult(model=model, initial=initial, final=final, integrator=integrator, dt=dt,
-                     steps=stats[:, kn.S_STEPS].copy(), jumps=stats[:, kn.S_WINDOWS].copy(),
+                     steps=stats[:, kn.S_STEPS].copy(), jumps=stats[:, kn.S_JUMPS].copy(),
                      wall_time_s=wall_time, contacts=log, trajectories=trajectories, warnings=warnings,
                      dt_min=dt_min, windows=stats[:, kn.S_WINDOWS].copy(), closed_steps=stats[:, kn.S_REST].copy(),
                      attempts=stats[:, kn.S_ATTEMPTS].copy())

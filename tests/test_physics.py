@@ -294,6 +294,22 @@ def test_a_cradle_ends_when_what_still_approaches_is_the_steps_error(k: float) -
     assert abs(float(r.final.v[0, -1, 0]) - 1.0) < 100 * scene.tol
 
 
+def test_free_flight_jumps_count_the_stretches_where_nothing_touches() -> None:
+    """`jumps` counts the contact-free stretches crossed in closed form, not the engine's windows:
+    two spheres meeting once cross two (the approach and the tail after they part); a ball between
+    two walls 1 m apart at 2 m/s, from the middle, meets them at 0.225 s and 0.675 s (plus a
+    contact's duration each) within 1 s, and crosses one stretch more than its contacts."""
+    r = run_scene(load_scene("demo-1d"), record=False, measure=False).result
+    assert int(r.contacts.count[0]) == 1
+    assert int(r.jumps[0]) == 2
+    raw = {"name": "box", "dim": 2, "duration": 1.0, "contact": {"k": 1e5},
+           "body": [{"name": "ball", "mass": 0.1, "radius": 0.05, "position": [0.5, 0.0], "velocity": [2.0, 0.0]}],
+           "wall": [{"point": [0.0, 0.0], "normal": [1.0, 0.0]}, {"point": [1.0, 0.0], "normal": [-1.0, 0.0]}]}
+    r = run_scene(parse_scene(raw), record=False, measure=False).result
+    assert int(r.contacts.count[0]) == 2
+    assert int(r.jumps[0]) == 3
+
+
 def test_gas_box_builtin_keeps_its_energy_and_stays_in_the_box():
     scene = load_scene("gas-box", ["duration=0.05"])
     r = run_scene(scene, record=False).result

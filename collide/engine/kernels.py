@@ -122,9 +122,10 @@ R_T, R_I, R_J, R_DELTA, R_FN, R_FX, R_FY, R_FZ, R_MODE = range(9)
 NR = 9
 V_I, V_J, V_START, V_END = range(4)
 CN_KNOTS, CN_RECS, CN_IVALS, CN_OPEN = range(4)
-S_STEPS, S_WINDOWS, S_STATUS, S_CONTACTS, S_RETRIES, S_UNLOCATED, S_REST, S_ATTEMPTS = range(8)
-NS = 8  # S_REST: of the steps, intervals of a sphere on a wall in closed form (exactly); S_ATTEMPTS:
-# whole steps tried from a step's start (the event search's nudges not counted)
+S_STEPS, S_WINDOWS, S_STATUS, S_CONTACTS, S_RETRIES, S_UNLOCATED, S_REST, S_ATTEMPTS, S_JUMPS = range(9)
+NS = 9  # S_REST: of the steps, intervals of a sphere on a wall in closed form (exactly); S_ATTEMPTS:
+# whole steps tried from a step's start (the event search's nudges not counted); S_JUMPS:
+# stretches where nothing touched, crossed in closed form (to a contact, or to the run's end)
 F_MAX_OVERLAP, F_DT_MIN, F_STATUS_T, F_STATUS_A, F_STATUS_B, F_MAX_FORCE, F_UNLOCATED_T = range(7)
 NF = 7
 OK, NONFINITE, ENERGY, STALL, MAXSTEPS, SINGULAR = range(6)
@@ -2770,6 +2771,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 # tolerance): the step's error, not a contact to come (a Newton's cradle at k =
                 # 1e6, tol 1e-7, left its balls at 1e-8 m/s and met them again 11 hours later).
                 t = t_end = run_end(t, fp, IV, CNT)
+                ST[S_JUMPS] += 1
                 break
             # Nothing touches: jump to the next contact start (nothing to record in free flight).
             if search == math.inf:
@@ -2787,8 +2789,10 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                     FG[F_STATUS_T] = t
                     break
                 t = min(t + tau, t_end)
+                ST[S_JUMPS] += 1
                 search = 2.0 * tau if tau > 0 else search
                 continue
+            ST[S_JUMPS] += 1
             if t_end < math.inf:
                 t = min(t + horizon, t_end)
                 search *= 2.0
