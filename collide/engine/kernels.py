@@ -696,7 +696,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
         # How fast the hold forces follow the velocities: a pass shrinks the change by about
         # h |dG/dv| (see CONTRACTION_SAFETY); with it, one pass can be enough.
         pull = 0.0
-        for c in range(nc):
+        for c in range(nc if warm and not one_pass else 0):
             if CI[c, CI_MODE] == STICK:
                 i, j = CI[c, CI_I], CI[c, CI_J]
                 rel, wi, wj = 0.0, 0.0, 0.0
@@ -2568,6 +2568,14 @@ def engaged_now(G, P, V, n, WP, grav, dim):
     return out[:m]
 
 
+@jit_inline
+def approaches(P, V, i, j, slow):
+    """Whether bodies i and j close faster than `slow` (m/s) along their line of centres."""
+    dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
+    closing = -((V[j, 0] - V[i, 0]) * dx + (V[j, 1] - V[i, 1]) * dy + (V[j, 2] - V[i, 2]) * dz)
+    return closing > slow * math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
 @jit
 def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow):
     """The earliest contact start after t, looking `horizon` ahead (every pair if asked). Two
@@ -2577,9 +2585,7 @@ def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow):
     if every_pair:
         for i in range(n):
             for j in range(i + 1, n):
-                dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
-                closing = -((V[j, 0] - V[i, 0]) * dx + (V[j, 1] - V[i, 1]) * dy + (V[j, 2] - V[i, 2]) * dz)
-                if closing > slow * math.sqrt(dx * dx + dy * dy + dz * dz):
+                if approaches(P, V, i, j, slow):
                     best = min(best, touch_time(G, i, j, t, WP, grav))
     else:
         g = math.sqrt(grav[0] ** 2 + grav[1] ** 2 + grav[2] ** 2)
@@ -2589,9 +2595,7 @@ def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow):
         pairs = near_pairs(P, G[:, G_R], margin, n, dim)
         for p in range(pairs.shape[0]):
             i, j = pairs[p, 0], pairs[p, 1]
-            dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
-            closing = -((V[j, 0] - V[i, 0]) * dx + (V[j, 1] - V[i, 1]) * dy + (V[j, 2] - V[i, 2]) * dz)
-            if closing > slow * math.sqrt(dx * dx + dy * dy + dz * dz):
+            if approaches(P, V, i, j, slow):
                 best = min(best, touch_time(G, i, j, t, WP, grav))
     for w in range(WP.shape[0]):
         for i in range(n):
@@ -2614,9 +2618,7 @@ def meets_again(G, P, V, n, t, WP, grav, IV, CNT, slow, resolved):
                 count[b] += 1.0
     for i in range(n):
         for j in range(i + 1, n):
-            dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
-            closing = -((V[j, 0] - V[i, 0]) * dx + (V[j, 1] - V[i, 1]) * dy + (V[j, 2] - V[i, 2]) * dz)
-            if (closing > max(slow, (count[i] + count[j]) * resolved) * math.sqrt(dx * dx + dy * dy + dz * dz)
+            if (approaches(P, V, i, j, max(slow, (count[i] + count[j]) * resolved))
                     and touch_time(G, i, j, t, WP, grav) < math.inf):
                 return True
     for w in range(WP.shape[0]):
