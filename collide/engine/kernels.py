@@ -657,6 +657,48 @@ def take_velocities(X, na, vc, wc, spin):
 
 
 @jit_inline
+def friction_kick(X, na, h, then, spin):
+    """Add h times the friction accelerations (X_F, X_L) to the velocities and then, unless 0,
+    `then` times the others' (X_A); returns the kinetic energy the friction took: one pass over
+    the bodies where `take_velocities` of stored velocities made two."""
+    e = 0.0
+    for a in range(na):
+        for d in range(3):
+            v = X[a, X_V + d]
+            u = v + h * X[a, X_F + d]
+            e += 0.5 * X[a, X_M] * (v * v - u * u)
+            X[a, X_V + d] = u + then * X[a, X_A + d] if then != 0.0 else u
+            w = X[a, X_W + d]
+            u = w + h * X[a, X_L + d]
+            if spin:
+                e += 0.5 * X[a, X_I] * (w * w - u * u)
+            X[a, X_W + d] = u
+    return e
+
+
+@jit_inline
+def close_and_open(X, na, h, spin):
+    """`take_velocities` of (X_V1, X_W1), then `friction_kick` over h with the springs' after it,
+    in one pass over the bodies; returns the kinetic energy each took."""
+    closed, opened = 0.0, 0.0
+    for a in range(na):
+        m, i = 0.5 * X[a, X_M], 0.5 * X[a, X_I]
+        for d in range(3):
+            v, u = X[a, X_V + d], X[a, X_V1 + d]
+            n = u + h * X[a, X_F + d]
+            closed += m * (v * v - u * u)
+            opened += m * (u * u - n * n)
+            X[a, X_V + d] = n + h * X[a, X_A + d]
+            w, u = X[a, X_W + d], X[a, X_W1 + d]
+            n = u + h * X[a, X_L + d]
+            if spin:
+                closed += i * (w * w - u * u)
+                opened += i * (u * u - n * n)
+            X[a, X_W + d] = n
+    return closed, opened
+
+
+@jit_inline
 def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
     """The kicks at one geometry between two Verlet substeps, on (X_V, X_W): the close of one
     (springs over h_end, then friction at the end velocities: implicit) and the opening of the
@@ -681,6 +723,18 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
                 one_pass = False
             elif CI[c, CI_MODE] == SLIDE and not planar:
                 warm = False
+        if one_pass:
+            # Nothing depends on the velocities: the closing kick is explicit, in one pass.
+            for a in range(na):
+                for d in range(3):
+                    X[a, X_V + d] += h_end * X[a, X_A + d]
+            X[0, X_HP] = h_end
+            if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, h_end, YES, YES):
+                return work, False
+            work += friction_kick(X, na, h_end, 0.0, spin)
+            if h_start != 0.0:
+                work += friction_kick(X, na, h_start, h_start, spin)
+            return work, True
         start = h_end if warm else 0.0
         # The friction extrapolated along the step from the last two kicks' (same modes, a smooth
         # function of time): the first pass starts closer to the fixed point.
@@ -696,7 +750,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
         # How fast the hold forces follow the velocities: a pass shrinks the change by about
         # h |dG/dv| (see CONTRACTION_SAFETY); with it, one pass can be enough.
         pull = 0.0
-        for c in range(nc if warm and not one_pass else 0):
+        for c in range(nc if warm else 0):
             if CI[c, CI_MODE] == STICK:
                 i, j = CI[c, CI_I], CI[c, CI_J]
                 rel, wi, wj = 0.0, 0.0, 0.0
@@ -732,23 +786,19 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
             # fewer), or after a warm first pass, as its bound `pull` predicts it.
             predicted = (it == 0 and warm and pull * change <= exact * size) or (
                 (it >= 1 if warm else it >= 2) and change < 0.5 * last and change * change <= exact * size * last)
-            if one_pass or change <= 4.0 * EPS64 * size or predicted:
+            if change <= 4.0 * EPS64 * size or predicted:
                 break
             last = change
+        if h_start != 0.0:
+            closed, opened = close_and_open(X, na, h_start, spin)
+            return work + closed + opened, True
         work += take_velocities(X, na, X_V1, X_W1, spin)
     else:
         if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES, YES):
             return work, False
         X[0, X_HP] = 0.0  # a step's first kick: no kick before it at these modes
     if h_start != 0.0:
-        for a in range(na):
-            for d in range(3):
-                X[a, X_VB + d] = X[a, X_V + d] + h_start * X[a, X_F + d]
-                X[a, X_WB + d] = X[a, X_W + d] + h_start * X[a, X_L + d]
-        work += take_velocities(X, na, X_VB, X_WB, spin)
-        for a in range(na):
-            for d in range(3):
-                X[a, X_V + d] += h_start * X[a, X_A + d]
+        work += friction_kick(X, na, h_start, h_start, spin)
     return work, True
 
 
@@ -976,6 +1026,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
             CI[c, CI_MODE] = SLIDE
         else:
             CI[c, CI_MODE] = BAND
+    solved = False  # the last friction solve was at the final modes: its hold system is settle's
     for _ in range(2 * nc + 2):
         if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES, YES):
             return 0.0, False
@@ -1021,6 +1072,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
             if not planar and fmag > 0 and CI[c, CI_MODE] != BAND:
                 C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2] = -fx / fmag, -fy / fmag, -fz / fmag
         if not changed:
+            solved = True
             break
     # Stuck slips onto the edge along their held direction; in 3D an edge contact that slides on
     # starts along its hold force's reverse: its slip is turned there with the stuck ones.
@@ -1028,7 +1080,8 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
         if not planar and CI[c, CI_EDGE] == 1 and CI[c, CI_MODE] == SLIDE:
             CI[c, CI_MODE] = STICK
             CI[c, CI_EDGE] = 2
-    work, ok = settle(X, C, CI, na, nc, stuck, A, b, fl, YES)
+            solved = False
+    work, ok = settle(X, C, CI, na, nc, stuck, A, b, fl, NO if solved else YES)
     for c in range(nc):
         if CI[c, CI_EDGE] == 2:
             CI[c, CI_MODE] = SLIDE
