@@ -94,7 +94,8 @@ X_A, X_F, X_L, X_V1, X_W1, X_T, X_UA, X_UL, X_FO, X_VB, X_WB = 26, 29, 32, 35, 3
 X_IM, X_II, X_R, X_M, X_I = 59, 60, 61, 62, 63
 X_SF, X_SL = 64, 67  # sliding contacts' part of X_F, X_L
 X_FP, X_LP, X_HP = 70, 73, 76  # the kick before's X_F, X_L and closing span (row 0; 0: none)
-NX = 77
+X_F0, X_L0 = 77, 80  # the friction accelerations at the step's start (with X_S0...)
+NX = 83
 # C / CI: an island's engaged contacts.
 C_N, C_DELTA, C_DIST, C_LIF, C_LJF, C_LIS, C_LJS, C_FN = 0, 3, 4, 5, 6, 7, 8, 9
 C_K, C_MU, C_EPS, C_REACH, C_HELD, C_FF, C_B = 10, 11, 12, 13, 14, 17, 20
@@ -702,7 +703,8 @@ def close_and_open(X, na, h, spin):
 def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
     """The kicks at one geometry between two Verlet substeps, on (X_V, X_W): the close of one
     (springs over h_end, then friction at the end velocities: implicit) and the opening of the
-    next (friction at those velocities, then springs over h_start); either span may be 0.
+    next (friction at those velocities, then springs over h_start); either span may be 0 (a
+    step's first kick, h_end 0, opens with the friction already in X_F, X_L: see `step`).
     `exact`: the change, relative to the fastest velocity, that the closing kick's fixed point may
     leave undone. Returns (work dissipated, ok); friction forces at the closing velocities stay
     in C_FF."""
@@ -794,8 +796,6 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
             return work + closed + opened, True
         work += take_velocities(X, na, X_V1, X_W1, spin)
     else:
-        if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES, YES):
-            return work, False
         X[0, X_HP] = 0.0  # a step's first kick: no kick before it at these modes
     if h_start != 0.0:
         work += friction_kick(X, na, h_start, h_start, spin)
@@ -879,16 +879,19 @@ def turn(q, w0, w1, w2, tau, planar):
 
 @jit_inline
 def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact):
-    """One step of h from the start state (X_S0...), or with `restart` NO from the state now in
-    (X_S...): a symmetric composition of Verlet (kick-drift-kick) substeps gamma h (`weights`);
-    the kicks between two substeps share one geometry. After the whole step stuck slips go back
-    on the band's edge. The end state is left in (X_S...) with its geometry in C and its
+    """One step of h from the start state (X_S0..., its friction accelerations in X_F0, X_L0), or
+    with `restart` NO from the state now in (X_S...), its friction in (X_F, X_L) (a trial's end,
+    whose mode values solved it there): a symmetric composition of Verlet (kick-drift-kick)
+    substeps gamma h (`weights`); the kicks between two substeps share one geometry. After the
+    whole step stuck slips go back on the band's edge. The end state is left in (X_S...) with its geometry in C and its
     accelerations in X_A, X_F. Returns (work, ok)."""
     spin, fric, seed, planar = fl[FL_SPIN], fl[FL_FRICTION], fl[FL_SEED], fl[FL_PLANAR]
     if restart:
         for a in range(na):
             for d in range(13):
                 X[a, X_S + d] = X[a, X_S0 + d]
+            for d in range(3 if fric else 0):
+                X[a, X_F + d], X[a, X_L + d] = X[a, X_F0 + d], X[a, X_L0 + d]
     geometry(X, C, CI, nc, WP, seed)
     springs(X, C, CI, na, nc, grav)
     n = weights.shape[0]
@@ -2457,13 +2460,26 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         if rest_ready(X, C, CI, na, nc, nq, fl):
             # Stopped short of W without an end, the steps go on from where it stopped.
             t, KN, RC, changed = rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
+        carried = False
         while t < W and not changed and ST[S_STATUS] == OK:
-            if fric:
+            if carried:
+                # The last step met no mode's edge: decide would keep every mode (in the plane a
+                # held direction counts by its side only) and settle nothing (the step's end
+                # did), and its mode values at the end are this step's at the start.
+                for k in range(2 * nc):
+                    E[k, E_V0], E[k, E_R0] = E[k, E_V1], E[k, E_R1]
+            elif fric:
                 geometry(X, C, CI, nc, WP, fl[FL_SEED])
                 springs(X, C, CI, na, nc, grav)
                 done, ok = decide(X, C, CI, na, nc, stuck, A, b, fl, scale)
                 share(G, XI, na, done)
-                if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale, NO):
+                # Settled with the edge contacts that slide on (3D) held, the hold system is not
+                # these modes'.
+                turned = False
+                for c in range(nc):
+                    turned = turned or CI[c, CI_EDGE] == 2
+                if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale,
+                                             YES if turned else NO):
                     ST[S_STATUS] = SINGULAR
                     FG[F_STATUS_T] = t
                     break
@@ -2476,6 +2492,10 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             for a in range(na):
                 for d in range(13):
                     X[a, X_S0 + d] = X[a, X_S + d]
+                # The friction at the start (the mode values just solved it): every trial from
+                # the start opens with it.
+                for d in range(3 if fric else 0):
+                    X[a, X_F0 + d], X[a, X_L0 + d] = X[a, X_F + d], X[a, X_L + d]
                 if record and fric:
                     # The acceleration the coming step starts with (its modes).
                     for d in range(3):
@@ -2544,6 +2564,13 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 d, r = overlap(G, GI, X, Q, QF, k, t, WP, grav)
                 if engaged(Q, k, d, r, WP, grav) != Q[k, Q_ENG]:
                     changed = True
+            # Every mode value clear of its edge at the step's end, by twice what decide counts as
+            # on it (its own closing trial evaluated them there, at these modes).
+            carried = fric and located and fl[FL_PLANAR] == YES
+            for k in range(2 * nc if carried else 0):
+                if not E[k, E_V1] > 2.0 * EDGE_TOL:
+                    carried = False
+                    break
         # The phase ends here: the stepped bodies go back to base states at t.
         e_end = energy(X, C, na, nc, grav, spin)
         if e_end - e_start > 0.5 * abs(e_start) + 1e-300 and ST[S_STATUS] == OK:
