@@ -362,6 +362,21 @@ def test_billiards_break_converges_and_keeps_the_racks_mirror_symmetry():
     assert np.abs(-w[partner] - w).max() * scene.bodies[0].radius / speed < 1e-8
 
 
+def test_an_asymmetric_break_meets_its_tolerance_with_short_trials_as_yoshida_steps():
+    """The cue ball 1 cm off the rack's line: every friction mode changes at its own time (143
+    steps at tol 1e-6, 83 for the symmetric rack), many soon after a step's start, where a trial
+    from the start is one Yoshida step if its error there is at most a tenth of a whole kahan6
+    step's. The outcome at tol 1e-6 is within the tolerance of the run at 1e-9 (2.1e-7 of the
+    cue ball's speed; with every trial a Yoshida step, 2e-4)."""
+    scene = load_scene("billiards-break", ["body.cue.position.y=0.01"])
+    speed = 6.0
+    runs = {tol: run_scene(scene, tol=tol, record=False, measure=False).result for tol in (1e-6, 1e-9)}
+    outcome = {tol: np.concatenate([r.final.v[0].ravel(), r.final.w[0].ravel() * scene.bodies[0].radius])
+               for tol, r in runs.items()}
+    assert np.abs(outcome[1e-6] - outcome[1e-9]).max() / speed < 1e-6
+    assert dg.residuals(runs[1e-6]).energy[0] < 10 * 1e-6
+
+
 @pytest.mark.parametrize("mu", ["0.1", "0"])
 def test_an_event_the_steps_start_foresees_costs_about_one_whole_step(mu):
     """A contact's start or end, or a friction mode change, foreseen from the step's start (where

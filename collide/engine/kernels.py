@@ -79,6 +79,11 @@ YOSHIDA = np.array(YOSHIDA4)  # three substeps: the event search's longer nudges
 # Local errors of one step of omega h on an oscillator (measured): Verlet (omega h)^3 / 12,
 # Yoshida 0.0281 (omega h)^5. A nudge of the event search may leave a thousandth of the tolerance.
 VERLET_ERROR, YOSHIDA_ERROR = 1.0 / 12.0, 0.0281
+KAHAN6_ERROR = 1.73e-4  # one step's error on an oscillator over (omega h)^7 (1.73e-4 at 0.05, 1.82e-4 at 0.2)
+# A trial from a step's start short enough that a Yoshida step's error there is at most this share
+# of a whole kahan6 step's is a Yoshida step (the break's error against tol 1e-10: unchanged at
+# 0.1, up to 8 % higher at 1).
+SHORT_SHARE = 0.1
 NUDGE_SHARE = 1e-3
 FORESEE_SPAN = 1e-4  # of the step: the differences that foresee events
 AIM = 1.02  # a first trial aimed at an event its start rates foresee ends this far past it
@@ -1632,7 +1637,9 @@ def foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A
         return soon
     geometry(X, C, CI, nc, WP, fl[FL_SEED])
     springs(X, C, CI, na, nc, grav)
-    known = mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale, YES)
+    # With the start's hold system (1e-4 of a step on, the geometry has barely turned: the
+    # differences aim the first trial, and the break's trials and outcome came out the same).
+    known = mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale, NO)
     for k in range(2 * nc):
         e0, r0 = E[k, E_V0], E[k, E_R0]
         if not (e0 > MODE_TOL and known):
@@ -1647,11 +1654,12 @@ def foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A
 
 @jit
 def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
-                max_turn, nudge, reach, exact, ST):
+                max_turn, nudge, reach, short, exact, ST):
     """One step from the start state; where an event would happen inside it, shortened to land
     there, each refinement re-stepping from the start (in the plane, one within `nudge` of the
-    last trial's end is a Verlet substep from there, one within `reach` a Yoshida step; and the
-    first trial ends just past the first event `foresee` sees coming). Contacts starting or
+    last trial's end is a Verlet substep from there, one within `reach` a Yoshida step, and one
+    from the start up to `short` long a Yoshida step; and the first trial ends just past the
+    first event `foresee` sees coming). Contacts starting or
     ending: a cubic Hermite through the overlaps at both ends of a trial; friction modes: a
     bracketed root find (Hermite with both ends' rates where they have closed forms, then inverse
     quadratic interpolation, secant or Newton in the bracket). In 3D a sliding slip may turn by
@@ -1677,7 +1685,8 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
         work, ok = step(X, C, CI, na, nc, h, VERLET if h <= nudge else YOSHIDA, WP, grav, stuck, A, b, fl, YES, exact)
     else:
         h = min(AIM * soon, h_full)
-        work, ok = step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, YES, exact)
+        work, ok = step(X, C, CI, na, nc, h, YOSHIDA if h <= short else weights, WP, grav, stuck, A, b, fl, YES,
+                        exact)
         ST[S_ATTEMPTS] += 1
     if not ok:
         return h, work, False, limited, -1, True
@@ -1844,7 +1853,8 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             more, ok = step(X, C, CI, na, nc, h_next - h, near, WP, grav, stuck, A, b, fl, NO, exact)
             work += more
         else:
-            work, ok = step(X, C, CI, na, nc, h_next, weights, WP, grav, stuck, A, b, fl, YES, exact)
+            work, ok = step(X, C, CI, na, nc, h_next, YOSHIDA if h_next <= short else weights, WP, grav, stuck, A,
+                            b, fl, YES, exact)
             ST[S_ATTEMPTS] += 1
         h = h_next
         if not ok:
@@ -2436,6 +2446,11 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             nudge = (NUDGE_SHARE * fp[FP_EVENT_TOL] / VERLET_ERROR) ** (1.0 / 3.0) / omega
             # A Yoshida step costs a third of kahan6's; with three substeps or fewer it saves nothing.
             reach = (NUDGE_SHARE * fp[FP_EVENT_TOL] / YOSHIDA_ERROR) ** 0.2 / omega if weights.shape[0] > 3 else nudge
+        # A trial from the step's start up to this long (an event soon after it) is one Yoshida
+        # step, a third of kahan6's substeps, its error at most SHORT_SHARE of a whole step's.
+        short = 0.0
+        if omega > 0 and fl[FL_PLANAR] == YES and weights.shape[0] > 3:
+            short = (SHORT_SHARE * KAHAN6_ERROR * (omega * dt) ** 7 / YOSHIDA_ERROR) ** 0.2 / omega
         # A kick's fixed point is left with a ten-thousandth of the event tolerance: thousands of
         # kicks stay far below the tolerance (at 1e-6, 1e-12 each; a pass fewer in most kicks).
         exact = max(4.0 * EPS64, 1e-4 * fp[FP_EVENT_TOL])
@@ -2507,7 +2522,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 h_full = min(h_full, dt * min(1.0, (dt * omega) ** STIFF_SLIDE_POWER))
             h, work, ok, limited, late, located = step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full,
                                                               weights, WP, grav, stuck, A, b, fl, scale, max_turn,
-                                                              nudge, reach, exact, ST)
+                                                              nudge, reach, short, exact, ST)
             if not located:
                 if ST[S_UNLOCATED] == 0:
                     FG[F_UNLOCATED_T] = t
