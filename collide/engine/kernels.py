@@ -1654,11 +1654,11 @@ def foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A
 
 @jit
 def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
-                max_turn, nudge, reach, short, exact, ST):
+                max_turn, nudge, reach, brief, exact, ST):
     """One step from the start state; where an event would happen inside it, shortened to land
     there, each refinement re-stepping from the start (in the plane, one within `nudge` of the
     last trial's end is a Verlet substep from there, one within `reach` a Yoshida step, and one
-    from the start up to `short` long a Yoshida step; and the first trial ends just past the
+    from the start up to `brief` long a Yoshida step; and the first trial ends just past the
     first event `foresee` sees coming). Contacts starting or
     ending: a cubic Hermite through the overlaps at both ends of a trial; friction modes: a
     bracketed root find (Hermite with both ends' rates where they have closed forms, then inverse
@@ -1685,7 +1685,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
         work, ok = step(X, C, CI, na, nc, h, VERLET if h <= nudge else YOSHIDA, WP, grav, stuck, A, b, fl, YES, exact)
     else:
         h = min(AIM * soon, h_full)
-        work, ok = step(X, C, CI, na, nc, h, YOSHIDA if h <= short else weights, WP, grav, stuck, A, b, fl, YES,
+        work, ok = step(X, C, CI, na, nc, h, YOSHIDA if h <= brief else weights, WP, grav, stuck, A, b, fl, YES,
                         exact)
         ST[S_ATTEMPTS] += 1
     if not ok:
@@ -1853,7 +1853,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             more, ok = step(X, C, CI, na, nc, h_next - h, near, WP, grav, stuck, A, b, fl, NO, exact)
             work += more
         else:
-            work, ok = step(X, C, CI, na, nc, h_next, YOSHIDA if h_next <= short else weights, WP, grav, stuck, A,
+            work, ok = step(X, C, CI, na, nc, h_next, YOSHIDA if h_next <= brief else weights, WP, grav, stuck, A,
                             b, fl, YES, exact)
             ST[S_ATTEMPTS] += 1
         h = h_next
@@ -2448,9 +2448,9 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             reach = (NUDGE_SHARE * fp[FP_EVENT_TOL] / YOSHIDA_ERROR) ** 0.2 / omega if weights.shape[0] > 3 else nudge
         # A trial from the step's start up to this long (an event soon after it) is one Yoshida
         # step, a third of kahan6's substeps, its error at most SHORT_SHARE of a whole step's.
-        short = 0.0
+        brief = 0.0
         if omega > 0 and fl[FL_PLANAR] == YES and weights.shape[0] > 3:
-            short = (SHORT_SHARE * KAHAN6_ERROR * (omega * dt) ** 7 / YOSHIDA_ERROR) ** 0.2 / omega
+            brief = (SHORT_SHARE * KAHAN6_ERROR * (omega * dt) ** 7 / YOSHIDA_ERROR) ** 0.2 / omega
         # A kick's fixed point is left with a ten-thousandth of the event tolerance: thousands of
         # kicks stay far below the tolerance (at 1e-6, 1e-12 each; a pass fewer in most kicks).
         exact = max(4.0 * EPS64, 1e-4 * fp[FP_EVENT_TOL])
@@ -2522,7 +2522,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 h_full = min(h_full, dt * min(1.0, (dt * omega) ** STIFF_SLIDE_POWER))
             h, work, ok, limited, late, located = step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full,
                                                               weights, WP, grav, stuck, A, b, fl, scale, max_turn,
-                                                              nudge, reach, short, exact, ST)
+                                                              nudge, reach, brief, exact, ST)
             if not located:
                 if ST[S_UNLOCATED] == 0:
                     FG[F_UNLOCATED_T] = t
