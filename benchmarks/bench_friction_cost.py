@@ -7,7 +7,10 @@ timed twice: the kernel alone (`wall_time_s` of a run whose error is not measure
 alternate within one process, the compiled kernels loaded first; prints medians and ratios,
 never asserts.
 
-    python benchmarks/bench_friction_cost.py [--repeat 7] [--tol 1e-6]
+    python benchmarks/bench_friction_cost.py [--repeat 7] [--tol 1e-6] [--variants]
+
+--variants adds breaks with more friction mode changes, each against its frictionless twin:
+the cue ball 1 cm off the rack's line (every mode changes at its own time), mu = 0.2 and 0.4.
 """
 
 from __future__ import annotations
@@ -65,6 +68,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=7)
     parser.add_argument("--tol", type=float, default=1e-6)
+    parser.add_argument("--variants", action="store_true", help="also breaks with more mode changes")
     args = parser.parse_args()
     cases = {
         "billiards-break mu = 0.1": load_scene("billiards-break", [f"tol={args.tol}"]),
@@ -75,6 +79,17 @@ def main() -> None:
         "wall impact, skew spin (3D)": wall_impact(3),
         "wall impact (2D)": wall_impact(2),
     }
+    pairs = [("billiards-break mu = 0.1", "billiards-break mu = 0", "bar 5x"),
+             ("rolling ball, 0.5 s", "demo-bonus", "bar 50x"),
+             ("billiards-break mu = 0.1, tilted plane (3D)", "billiards-break mu = 0.1", "about 1x"),
+             ("wall impact, skew spin (3D)", "wall impact (2D)", "comparable")]
+    variants = {"cue 1 cm off-centre": ["body.cue.position.y=0.01"], "mu = 0.2": ["contact.mu=0.2"],
+                "mu = 0.4": ["contact.mu=0.4"]} if args.variants else {}
+    for label, sets in variants.items():
+        with_friction, twin = f"billiards-break, {label}", f"billiards-break, {label}: its frictionless twin"
+        cases[with_friction] = load_scene("billiards-break", [f"tol={args.tol}", *sets])
+        cases[twin] = load_scene("billiards-break", [f"tol={args.tol}", *sets, "contact.mu=0"])
+        pairs.append((with_friction, twin, "issue 9's bar is for the break itself"))
     for scene in cases.values():
         timed(scene, True)  # load the compiled kernels, outside the clock
     figures: dict[str, dict[bool, list]] = {name: {False: [], True: []} for name in cases}
@@ -89,10 +104,7 @@ def main() -> None:
     for name, runs in figures.items():
         print(f"| {name} | {runs[False][0][2]} | {runs[False][0][3]} | {med[name][False] * 1e3:.2f} "
               f"| {med[name][True] * 1e3:.2f} |")
-    for a, b, bar in (("billiards-break mu = 0.1", "billiards-break mu = 0", "bar 5x"),
-                      ("rolling ball, 0.5 s", "demo-bonus", "bar 50x"),
-                      ("billiards-break mu = 0.1, tilted plane (3D)", "billiards-break mu = 0.1", "about 1x"),
-                      ("wall impact, skew spin (3D)", "wall impact (2D)", "comparable")):
+    for a, b, bar in pairs:
         print(f"{a} / {b}: {med[a][False] / med[b][False]:.1f}x unmeasured, "
               f"{med[a][True] / med[b][True]:.1f}x as run ({bar})")
 
