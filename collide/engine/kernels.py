@@ -1015,7 +1015,8 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     with the other stuck contacts) is within mu F_n and against the slip, else slide (beyond
     mu F_n) or band (not against it). A stuck slip is held along its hold force's reverse; in 3D
     a slip that reaches the edge off that direction is turned onto it (the limit of the fast
-    turning along the edge that the law gives there). Returns (work dissipated, ok)."""
+    turning along the edge that the law gives there). Returns (work dissipated, ok, whether the
+    hold system left in A is not these modes': 3D edge contacts that slide on were settled held)."""
     spin, planar, seed = fl[FL_SPIN], fl[FL_PLANAR], fl[FL_SEED]
     tol = EDGE_TOL * scale
     retried = np.zeros(nc, np.bool_)
@@ -1037,7 +1038,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     solved = False  # the last friction solve was at the final modes: its hold system is settle's
     for _ in range(2 * nc + 2):
         if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES, YES):
-            return 0.0, False
+            return 0.0, False, False
         changed = False
         # An edge contact that another's change left sliding with its slip heading into the band,
         # or in the band with its slip heading out, is in no consistent mode: it is held again
@@ -1084,16 +1085,17 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
             break
     # Stuck slips onto the edge along their held direction; in 3D an edge contact that slides on
     # starts along its hold force's reverse: its slip is turned there with the stuck ones.
+    turned = False
     for c in range(nc):
         if not planar and CI[c, CI_EDGE] == 1 and CI[c, CI_MODE] == SLIDE:
             CI[c, CI_MODE] = STICK
             CI[c, CI_EDGE] = 2
-            solved = False
-    work, ok = settle(X, C, CI, na, nc, stuck, A, b, fl, NO if solved else YES)
+            turned = True
+    work, ok = settle(X, C, CI, na, nc, stuck, A, b, fl, NO if solved and not turned else YES)
     for c in range(nc):
         if CI[c, CI_EDGE] == 2:
             CI[c, CI_MODE] = SLIDE
-    return work, ok
+    return work, ok, turned
 
 
 @jit_inline
@@ -2485,13 +2487,8 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             elif fric:
                 geometry(X, C, CI, nc, WP, fl[FL_SEED])
                 springs(X, C, CI, na, nc, grav)
-                done, ok = decide(X, C, CI, na, nc, stuck, A, b, fl, scale)
+                done, ok, turned = decide(X, C, CI, na, nc, stuck, A, b, fl, scale)
                 share(G, XI, na, done)
-                # Settled with the edge contacts that slide on (3D) held, the hold system is not
-                # these modes'.
-                turned = False
-                for c in range(nc):
-                    turned = turned or CI[c, CI_EDGE] == 2
                 if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale,
                                              YES if turned else NO):
                     ST[S_STATUS] = SINGULAR
