@@ -10,6 +10,10 @@ Single calls are timed on a sample and their median per-scene cost is used for t
 
 from __future__ import annotations
 
+import os
+
+os.environ.setdefault("COLLIDE_JIT", "1")  # time compiled kernels (waited for), not a fresh install's interpreted
+
 import argparse
 import statistics
 import time

@@ -6,6 +6,10 @@ compiled kernels loaded before timing), energy residual. Prints a Markdown table
 
 from __future__ import annotations
 
+import os
+
+os.environ.setdefault("COLLIDE_JIT", "1")  # time compiled kernels (waited for), not a fresh install's interpreted
+
 import argparse
 import statistics
 import time

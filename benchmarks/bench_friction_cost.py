@@ -15,6 +15,10 @@ the cue ball 1 cm off the rack's line (every mode changes at its own time), mu =
 
 from __future__ import annotations
 
+import os
+
+os.environ.setdefault("COLLIDE_JIT", "1")  # time compiled kernels (waited for), not a fresh install's interpreted
+
 import argparse
 import statistics
 import time

@@ -8,6 +8,10 @@ and the ratio to the smallest N; issue 9 asks 512 spheres at most 16 times the c
 
 from __future__ import annotations
 
+import os
+
+os.environ.setdefault("COLLIDE_JIT", "1")  # time compiled kernels (waited for), not a fresh install's interpreted
+
 import argparse
 import math
 import statistics

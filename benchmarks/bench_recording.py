@@ -17,6 +17,10 @@ Run: python benchmarks/bench_recording.py [--repeats 3] [--dt 1.3e-7] [--sweep-r
 
 from __future__ import annotations
 
+import os
+
+os.environ.setdefault("COLLIDE_JIT", "1")  # time compiled kernels (waited for), not a fresh install's interpreted
+
 import argparse
 import statistics
 import tempfile

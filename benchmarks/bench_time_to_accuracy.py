@@ -11,6 +11,10 @@ rad/s. Prints, never asserts. The report's own program (rebuilt, -O2) needs dt =
 
 from __future__ import annotations
 
+import os
+
+os.environ.setdefault("COLLIDE_JIT", "1")  # time compiled kernels (waited for), not a fresh install's interpreted
+
 import argparse
 import statistics
 

@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+os.environ.setdefault("COLLIDE_JIT", "1")  # time compiled kernels (waited for), not a fresh install's interpreted
 
 from collide.scene import builtin_names, load_scene  # noqa: E402
 from viewer.app import ViewerApp  # noqa: E402

@@ -65,7 +65,9 @@ def print_summary(summary: dict[str, Any], recording: Path | None) -> None:
     else:
         typer.echo("  contacts: none")
     typer.echo(f"  {summary['steps']} steps, {summary['jumps']} free-flight jumps, "
-               f"{summary['sim_time']:.6g} s simulated in {wall_text(summary['wall_time_s'])}")
+               f"{summary['sim_time']:.6g} s simulated in {wall_text(summary['wall_time_s'])}"
+               + (" (interpreted kernels: quicker for a run this small; COLLIDE_JIT=1 compiles)"
+                  if summary.get("kernels") == "interpreted" else ""))
     for warning in summary.get("warnings", []):
         typer.echo(f"  warning: {warning}")
     if recording is not None:

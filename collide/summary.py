@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from collide import diagnostics as dg
+from collide.engine import tier
 from collide.model import Model, State
 from collide.run import SceneRun
 from collide.stepper import RunError
@@ -52,6 +53,9 @@ def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
         "jumps": int(r.jumps[member]),
         "sim_time": float(r.final.t[member]),
         "wall_time_s": r.wall_time_s,
+        # Which kernels ran (collide.engine.tier): a small run stays interpreted, quicker as a
+        # whole process, and its wall_time_s is then the interpreted code's.
+        "kernels": "compiled" if tier.COMPILED else "interpreted",
         "bodies": bodies,
         "residuals": {
             "energy": _finite_or_none(res.energy[member]),

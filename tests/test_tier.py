@@ -48,6 +48,8 @@ def test_settings_that_take_many_steps_are_not_quick() -> None:
     assert not quick(scene, integrator="seed")  # the report's fixed step: 1e-5 s, thousands of steps
     assert not quick(scene, dt=1e-6)
     assert not quick(scene, tol=1e-12)
+    assert not quick(scene, tol=1e-9)  # a convergence or timing check: wall_time_s is the compiled engine's
+    assert quick(scene, tol=1e-8)
     assert not quick(load_scene("demo-bonus", ["gravity=[0,-9.81]"]))
 
 
@@ -58,6 +60,7 @@ def test_a_quick_run_does_not_load_numba_and_gives_the_compiled_numbers() -> Non
     assert interpreted.stderr.strip().endswith("numba not loaded")
     assert compiled.stderr.strip().endswith("numba loaded")
     a, b = json.loads(interpreted.stdout), json.loads(compiled.stdout)
+    assert (a.pop("kernels"), b.pop("kernels")) == ("interpreted", "compiled")
     a.pop("wall_time_s"), b.pop("wall_time_s")
     assert a == b  # the same code either way, operation for operation
 
