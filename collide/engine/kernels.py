@@ -208,12 +208,28 @@ def springs(X, C, CI, na, nc, grav):
 
 
 @jit_inline
-def slip(X, C, CI, c, vc, wc, spin):
+def slip(X, C, CI, c, vc, wc, spin, planar):
     """Slip of i's surface relative to j's (or the wall's) at contact c, at the velocities in
-    columns vc, wc: P_t (v_i - v_j) + (l_i w_i + l_j w_j) x n, with the slip lever arms."""
+    columns vc, wc: P_t (v_i - v_j) + (l_i w_i + l_j w_j) x n, with the slip lever arms.
+    `planar`: in the z = 0 plane (z parts and in-plane spins exactly zero), the same sums
+    without their zero terms (the same numbers)."""
     i = CI[c, CI_I]
     j = CI[c, CI_J]
     nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+    if planar:
+        rx, ry = X[i, vc], X[i, vc + 1]
+        if j >= 0:
+            rx -= X[j, vc]
+            ry -= X[j, vc + 1]
+        rn = rx * nx + ry * ny
+        sx, sy = rx - rn * nx, ry - rn * ny
+        if spin:
+            lz = C[c, C_LIS] * X[i, wc + 2]
+            if j >= 0:
+                lz += C[c, C_LJS] * X[j, wc + 2]
+            sx -= lz * ny
+            sy += lz * nx
+        return sx, sy, 0.0
     rx, ry, rz = X[i, vc], X[i, vc + 1], X[i, vc + 2]
     if j >= 0:
         rx -= X[j, vc]
@@ -236,10 +252,11 @@ def slip(X, C, CI, c, vc, wc, spin):
 
 
 @jit_inline
-def slip_rate(X, C, CI, c, vc, wc, ac, lc, spin, seed, velocity_terms):
+def slip_rate(X, C, CI, c, vc, wc, ac, lc, spin, seed, velocity_terms, planar):
     """Rate of change of contact c's tangential slip at velocities (vc, wc) under linear and
     angular accelerations in columns (ac, lc); the hold rate G when those leave out stuck
-    friction. Without `velocity_terms`, only the accelerations' part.
+    friction. Without `velocity_terms`, only the accelerations' part. `planar`: as `slip`
+    (there L lies along z, normal to n: the turning term is zero).
 
     G = P_t (a_i - a_j) - n' (n . (v_i - v_j)) + (l_i' w_i + l_j' w_j) x n + (l_i alpha_i +
     l_j alpha_j) x n + (L . n)(n x n'), with L = l_i w_i + l_j w_j, the line of centres turning
@@ -248,6 +265,37 @@ def slip_rate(X, C, CI, c, vc, wc, ac, lc, spin, seed, velocity_terms):
     i = CI[c, CI_I]
     j = CI[c, CI_J]
     nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+    if planar:
+        ax, ay = X[i, ac], X[i, ac + 1]
+        if j >= 0:
+            ax -= X[j, ac]
+            ay -= X[j, ac + 1]
+        an = ax * nx + ay * ny
+        gx, gy = ax - an * nx, ay - an * ny
+        pz = 0.0  # (l_i alpha_i + l_j alpha_j (+ l' w terms)) . z
+        if spin:
+            pz = C[c, C_LIS] * X[i, lc + 2]
+            if j >= 0:
+                pz += C[c, C_LJS] * X[j, lc + 2]
+        if velocity_terms:
+            rx, ry = X[i, vc], X[i, vc + 1]
+            if j >= 0:
+                rx -= X[j, vc]
+                ry -= X[j, vc + 1]
+            rn = rx * nx + ry * ny
+            if j >= 0:
+                inv = 1.0 / C[c, C_DIST]
+                gx -= -(rx - rn * nx) * inv * rn
+                gy -= -(ry - rn * ny) * inv * rn
+            if spin and not seed:
+                ld = -0.5 * rn if j >= 0 else -rn
+                pz += ld * X[i, wc + 2]
+                if j >= 0:
+                    pz += ld * X[j, wc + 2]
+        if spin:
+            gx -= pz * ny
+            gy += pz * nx
+        return gx, gy, 0.0
     ax, ay, az = X[i, ac], X[i, ac + 1], X[i, ac + 2]
     if j >= 0:
         ax -= X[j, ac]
@@ -321,11 +369,24 @@ def response(X, C, CI, c, spin):
 
 
 @jit_inline
-def add_force(X, C, CI, c, fx, fy, fz, ac, lc, spin):
+def add_force(X, C, CI, c, fx, fy, fz, ac, lc, spin, planar):
     """Add to columns (ac, lc) the accelerations of friction force f on i (and -f on j) at
-    contact c: torques l_i (n x f) on i and l_j (n x f) on j (both arms reach the contact)."""
+    contact c: torques l_i (n x f) on i and l_j (n x f) on j (both arms reach the contact).
+    `planar`: f and n in the z = 0 plane, the torque along z (as `slip`)."""
     i = CI[c, CI_I]
     j = CI[c, CI_J]
+    if planar:
+        X[i, ac] += fx * X[i, X_IM]
+        X[i, ac + 1] += fy * X[i, X_IM]
+        if j >= 0:
+            X[j, ac] -= fx * X[j, X_IM]
+            X[j, ac + 1] -= fy * X[j, X_IM]
+        if spin:
+            cz = C[c, C_N] * fy - C[c, C_N + 1] * fx
+            X[i, lc + 2] += C[c, C_LIF] * X[i, X_II] * cz
+            if j >= 0:
+                X[j, lc + 2] += C[c, C_LJF] * X[j, X_II] * cz
+        return
     X[i, ac] += fx * X[i, X_IM]
     X[i, ac + 1] += fy * X[i, X_IM]
     X[i, ac + 2] += fz * X[i, X_IM]
@@ -531,7 +592,7 @@ def hold(X, C, CI, stuck, m, A, b, spin, seed, planar, fresh, fa, la):
         c = stuck[k]
         f1, f2 = b[2 * k], b[2 * k + 1]
         add_force(X, C, CI, c, f1 * C[c, C_B] + f2 * C[c, C_B + 3], f1 * C[c, C_B + 1] + f2 * C[c, C_B + 4],
-                  f1 * C[c, C_B + 2] + f2 * C[c, C_B + 5], fa, la, spin)
+                  f1 * C[c, C_B + 2] + f2 * C[c, C_B + 5], fa, la, spin, planar)
     return True
 
 
@@ -559,7 +620,7 @@ def slide_direction(X, C, CI, c, vc, wc, spin, span, planar):
         if tx * C[c, C_HELD] + ty * C[c, C_HELD + 1] < 0.0:
             return -tx, -ty, 0.0
         return tx, ty, 0.0
-    sx, sy, sz = slip(X, C, CI, c, vc, wc, spin)
+    sx, sy, sz = slip(X, C, CI, c, vc, wc, spin, False)
     nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
     if span != 0.0:
         k = span * response(X, C, CI, c, spin)
@@ -614,7 +675,7 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
             if mag > 0.0:
                 f = -C[c, C_MU] * C[c, C_FN] / mag
                 C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2] = f * sx, f * sy, f * sz
-                add_force(X, C, CI, c, f * sx, f * sy, f * sz, X_SF, X_SL, spin)
+                add_force(X, C, CI, c, f * sx, f * sy, f * sz, X_SF, X_SL, spin, planar)
         else:
             C[c, C_FF] = 0.0
             C[c, C_FF + 1] = 0.0
@@ -633,7 +694,7 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
         c = stuck[k]
         if fresh:
             set_basis(C, c)  # else the one W was built in, at this geometry
-        gx, gy, gz = slip_rate(X, C, CI, c, vc, wc, X_T, X_L, spin, seed, YES)
+        gx, gy, gz = slip_rate(X, C, CI, c, vc, wc, X_T, X_L, spin, seed, YES, planar)
         b[2 * k] = -(gx * C[c, C_B] + gy * C[c, C_B + 1] + gz * C[c, C_B + 2])
         b[2 * k + 1] = -(gx * C[c, C_B + 3] + gy * C[c, C_B + 4] + gz * C[c, C_B + 5])
     if not hold(X, C, CI, stuck, m, A, b, spin, seed, planar, fresh, X_F, X_L):
@@ -647,14 +708,18 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
 
 
 @jit_inline
-def take_velocities(X, na, vc, wc, spin):
-    """Make the velocities in (vc, wc) the bodies' (X_V, X_W); returns the kinetic energy lost."""
+def take_velocities(X, na, vc, wc, spin, planar):
+    """Make the velocities in (vc, wc) the bodies' (X_V, X_W); returns the kinetic energy lost.
+    `planar`: only the parts in the plane (the velocities' x, y, the spins' z: the others are
+    zero and stay so), the same sums."""
+    moves, turns = (2, 2) if planar else (3, 0)
     e = 0.0
     for a in range(na):
-        for d in range(3):
+        for d in range(moves):
             v, u = X[a, X_V + d], X[a, vc + d]
             e += 0.5 * X[a, X_M] * (v * v - u * u)
             X[a, X_V + d] = u
+        for d in range(turns, 3):
             w, u = X[a, X_W + d], X[a, wc + d]
             if spin:
                 e += 0.5 * X[a, X_I] * (w * w - u * u)
@@ -663,17 +728,19 @@ def take_velocities(X, na, vc, wc, spin):
 
 
 @jit_inline
-def friction_kick(X, na, h, then, spin):
+def friction_kick(X, na, h, then, spin, planar):
     """Add h times the friction accelerations (X_F, X_L) to the velocities and then, unless 0,
     `then` times the others' (X_A); returns the kinetic energy the friction took: one pass over
-    the bodies where `take_velocities` of stored velocities made two."""
+    the bodies where `take_velocities` of stored velocities made two. `planar`: as there."""
+    moves, turns = (2, 2) if planar else (3, 0)
     e = 0.0
     for a in range(na):
-        for d in range(3):
+        for d in range(moves):
             v = X[a, X_V + d]
             u = v + h * X[a, X_F + d]
             e += 0.5 * X[a, X_M] * (v * v - u * u)
             X[a, X_V + d] = u + then * X[a, X_A + d] if then != 0.0 else u
+        for d in range(turns, 3):
             w = X[a, X_W + d]
             u = w + h * X[a, X_L + d]
             if spin:
@@ -683,18 +750,20 @@ def friction_kick(X, na, h, then, spin):
 
 
 @jit_inline
-def close_and_open(X, na, h, spin):
+def close_and_open(X, na, h, spin, planar):
     """`take_velocities` of (X_V1, X_W1), then `friction_kick` over h with the springs' after it,
-    in one pass over the bodies; returns the kinetic energy each took."""
+    in one pass over the bodies; returns the kinetic energy each took. `planar`: as there."""
+    moves, turns = (2, 2) if planar else (3, 0)
     closed, opened = 0.0, 0.0
     for a in range(na):
         m, i = 0.5 * X[a, X_M], 0.5 * X[a, X_I]
-        for d in range(3):
+        for d in range(moves):
             v, u = X[a, X_V + d], X[a, X_V1 + d]
             n = u + h * X[a, X_F + d]
             closed += m * (v * v - u * u)
             opened += m * (u * u - n * n)
             X[a, X_V + d] = n + h * X[a, X_A + d]
+        for d in range(turns, 3):
             w, u = X[a, X_W + d], X[a, X_W1 + d]
             n = u + h * X[a, X_L + d]
             if spin:
@@ -714,6 +783,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
     leave undone. Returns (work dissipated, ok); friction forces at the closing velocities stay
     in C_FF."""
     spin = fl[FL_SPIN]
+    planar = fl[FL_PLANAR] == YES
     work = 0.0
     if h_end != 0.0:
         # Started from the last kick's friction (C_FF and its accelerations, at the step's
@@ -723,7 +793,6 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
         # the other (measured: a random 3D scene stopped converging with the tolerance).
         # In the plane a slide's friction is mu F_n on the held side whatever the velocities:
         # with nothing stuck one pass is the fixed point.
-        planar = fl[FL_PLANAR] == YES
         warm, one_pass = True, planar
         for c in range(nc):
             if CI[c, CI_MODE] == STICK:
@@ -738,9 +807,9 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
             X[0, X_HP] = h_end
             if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, h_end, YES, YES):
                 return work, False
-            work += friction_kick(X, na, h_end, 0.0, spin)
+            work += friction_kick(X, na, h_end, 0.0, spin, planar)
             if h_start != 0.0:
-                work += friction_kick(X, na, h_start, h_start, spin)
+                work += friction_kick(X, na, h_start, h_start, spin, planar)
             return work, True
         start = h_end if warm else 0.0
         # The friction extrapolated along the step from the last two kicks' (same modes, a smooth
@@ -771,6 +840,8 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
                 arm = C[c, C_DIST] if j >= 0 else C[c, C_LIS]
                 pull = max(pull, (math.sqrt(rel) + C[c, C_LIS] * wi + C[c, C_LJS] * wj) / arm + wi + wj)
         pull *= CONTRACTION_SAFETY * abs(h_end)
+        # In the plane the velocities' z parts and the spins' x, y parts are zero and stay so.
+        moves, turns = (2, 2) if planar else (3, 0)
         last = math.inf
         for it in range(FIXED_POINT):
             # Each pass but a cold first takes each contact's own friction in V1 back out.
@@ -780,12 +851,15 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
             change = 0.0
             size = 0.0
             for a in range(na):
-                for d in range(3):
+                for d in range(moves):
                     nv = X[a, X_V + d] + h_end * X[a, X_F + d]
-                    nw = X[a, X_W + d] + h_end * X[a, X_L + d]
-                    change = max(change, abs(nv - X[a, X_V1 + d]), abs(nw - X[a, X_W1 + d]) * X[a, X_R])
-                    size = max(size, abs(nv), abs(nw) * X[a, X_R])
+                    change = max(change, abs(nv - X[a, X_V1 + d]))
+                    size = max(size, abs(nv))
                     X[a, X_V1 + d] = nv
+                for d in range(turns, 3):
+                    nw = X[a, X_W + d] + h_end * X[a, X_L + d]
+                    change = max(change, abs(nw - X[a, X_W1 + d]) * X[a, X_R])
+                    size = max(size, abs(nw) * X[a, X_R])
                     X[a, X_W1 + d] = nw
             # Done when what is left is round-off or below `exact`: the change itself, or the next
             # one as the last two passes of the same map predict it (a stuck contact's hold force
@@ -797,13 +871,13 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
                 break
             last = change
         if h_start != 0.0:
-            closed, opened = close_and_open(X, na, h_start, spin)
+            closed, opened = close_and_open(X, na, h_start, spin, planar)
             return work + closed + opened, True
-        work += take_velocities(X, na, X_V1, X_W1, spin)
+        work += take_velocities(X, na, X_V1, X_W1, spin, planar)
     else:
         X[0, X_HP] = 0.0  # a step's first kick: no kick before it at these modes
     if h_start != 0.0:
-        work += friction_kick(X, na, h_start, h_start, spin)
+        work += friction_kick(X, na, h_start, h_start, spin, planar)
     return work, True
 
 
@@ -832,7 +906,7 @@ def settle(X, C, CI, na, nc, stuck, A, b, fl, fresh):
         hm = math.sqrt(hx * hx + hy * hy + hz * hz)
         if hm > 0.0:
             hm = C[c, C_EPS] / hm
-        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
+        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, fl[FL_PLANAR] == YES)
         # A friction impulse changes the slip as its force changes the slip's rate: W J = s* - s.
         dx, dy, dz = hm * hx - sx, hm * hy - sy, hm * hz - sz
         b[2 * k] = dx * C[c, C_B] + dy * C[c, C_B + 1] + dz * C[c, C_B + 2]
@@ -847,7 +921,7 @@ def settle(X, C, CI, na, nc, stuck, A, b, fl, fresh):
         for d in range(3):
             X[a, X_VB + d] = X[a, X_V + d] + X[a, X_UA + d]
             X[a, X_WB + d] = X[a, X_W + d] + X[a, X_UL + d]
-    return take_velocities(X, na, X_VB, X_WB, spin), True
+    return take_velocities(X, na, X_VB, X_WB, spin, fl[FL_PLANAR] == YES), True
 
 
 @jit_inline
@@ -969,8 +1043,8 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh):
             E[c, rcol] = math.nan
             E[second, rcol] = math.nan
             continue
-        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
-        gx, gy, gz = slip_rate(X, C, CI, c, X_V, X_W, X_T, X_L, spin, seed, YES)
+        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, planar)
+        gx, gy, gz = slip_rate(X, C, CI, c, X_V, X_W, X_T, X_L, spin, seed, YES, planar)
         if CI[c, CI_MODE] == SLIDE:
             # |slip| - eps, with |slip| counted negative once the slip points against the way it
             # slid at the step's start: a slip reversing through the band within a step then
@@ -1022,7 +1096,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     retried = np.zeros(nc, np.bool_)
     edges = 0
     for c in range(nc):
-        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
+        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, planar == YES)
         mag = math.sqrt(sx * sx + sy * sy + sz * sz)
         if mag > 0:
             C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2] = sx / mag, sy / mag, sz / mag
@@ -1053,8 +1127,8 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
             for c in range(nc):
                 if CI[c, CI_EDGE] != 1 or CI[c, CI_MODE] == STICK or retried[c]:
                     continue
-                sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
-                gx, gy, gz = slip_rate(X, C, CI, c, X_V, X_W, X_T, X_L, spin, seed, YES)
+                sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, planar == YES)
+                gx, gy, gz = slip_rate(X, C, CI, c, X_V, X_W, X_T, X_L, spin, seed, YES, planar == YES)
                 mag = math.sqrt(sx * sx + sy * sy + sz * sz)
                 outward = (sx * gx + sy * gy + sz * gz) / mag if mag > 0 else 0.0
                 if (CI[c, CI_MODE] == SLIDE and outward < -limit) or (CI[c, CI_MODE] == BAND and outward > limit):
@@ -1541,7 +1615,7 @@ def slip_turn(X, C, CI, nc, fl):
     for c in range(nc):
         if CI[c, CI_MODE] != SLIDE:
             continue
-        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, fl[FL_SPIN])
+        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, fl[FL_SPIN], False)
         nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
         hx, hy, hz = C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2]
         hn = hx * nx + hy * ny + hz * nz
@@ -1560,7 +1634,7 @@ def stiff_slide(X, C, CI, nc, dt, spin):
     for c in range(nc):
         if CI[c, CI_MODE] != SLIDE:
             continue
-        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin)
+        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, False)
         impulse = C[c, C_MU] * C[c, C_FN] * response(X, C, CI, c, spin) * dt
         if STIFF_SLIDE_IMPULSES * impulse > math.sqrt(sx * sx + sy * sy + sz * sz):
             return True
