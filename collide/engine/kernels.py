@@ -2014,22 +2014,35 @@ def dot3(a, b):
 def rest_normal(P, tau):
     """Overlap and its rate at tau into the interval."""
     om = P[RP_OM]
-    c, s = math.cos(om * tau), math.sin(om * tau)
-    return P[RP_DEQ] + P[RP_C] * c + P[RP_S] * s, om * (P[RP_S] * c - P[RP_C] * s)
+    return rest_normal_at(P, math.cos(om * tau), math.sin(om * tau))
 
 
-@jit
+@jit_inline
+def rest_normal_at(P, c, s):
+    """Overlap and its rate where the bob's phase om tau has cosine c and sine s."""
+    return P[RP_DEQ] + P[RP_C] * c + P[RP_S] * s, P[RP_OM] * (P[RP_S] * c - P[RP_C] * s)
+
+
+@jit_inline
 def rest_at(P, mode, tau):
     """(delta, delta', v1, v2, tw1, tw2, f1, f2) at tau into the interval in friction mode `mode`:
     band (or no friction), slide along -h, stick with the slip held at eps h."""
-    d, dd = rest_normal(P, tau)
+    om = P[RP_OM]
+    return rest_at_phase(P, mode, tau, math.cos(om * tau), math.sin(om * tau))
+
+
+@jit_inline
+def rest_at_phase(P, mode, tau, c, s):
+    """`rest_at` with the bob's phase om tau given by its cosine c and sine s (one table of them
+    serves every interval of the same length)."""
+    d, dd = rest_normal_at(P, c, s)
     r, m, ii = P[RP_R], P[RP_M], P[RP_II]
     g1, g2, h1, h2 = P[RP_G], P[RP_G + 1], P[RP_H], P[RP_H + 1]
     v1, v2, w1, w2 = P[RP_V], P[RP_V + 1], P[RP_TW], P[RP_TW + 1]
     if mode == SLIDE:
         om, deq, cc, ss = P[RP_OM], P[RP_DEQ], P[RP_C], P[RP_S]
         x = om * tau
-        sx = math.sin(x)
+        sx = s
         half = math.sin(0.5 * x)
         osc = (cc * sx + 2.0 * ss * half * half) / om  # integral of delta's oscillating part
         d1 = deq * tau + osc
@@ -2062,7 +2075,7 @@ def rest_at(P, mode, tau):
     return d, dd, v1 + g1 * tau, v2 + g2 * tau, w1, w2, 0.0, 0.0
 
 
-@jit
+@jit_inline
 def rest_events(P, mode, tau, touch, out):
     """Event values and their rates at tau into the interval, into out (3, 2): the contact's end
     (overlap past -touch), then the mode's: band, eps - |u|; slide, u.h - eps (u.h - eps cos a
@@ -2098,7 +2111,7 @@ def rest_events(P, mode, tau, touch, out):
         out[2, 0], out[2, 1] = -(f1 * h1 + f2 * h2), -(fd1 * h1 + fd2 * h2)
 
 
-@jit
+@jit_inline
 def rest_root(P, mode, k, lo, g_lo, hi, g_hi, touch, out, clock):
     """A root of event value k in [lo, hi] (g_lo >= 0 > g_hi), by the Illinois method."""
     side = 0
@@ -2123,7 +2136,7 @@ def rest_root(P, mode, k, lo, g_lo, hi, g_hi, touch, out, clock):
     return hi
 
 
-@jit
+@jit_inline
 def rest_first(P, mode, h, touch, start, ends, out, clock):
     """The first event within the interval [0, h]: (its time, which: -1 none, 0 the contact's
     end, 1 or 2 the mode's). `start` (3, 2): the values and rates at 0; `ends`, `out`: room."""
@@ -2287,6 +2300,8 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
     ends = np.zeros((3, 2))
     out = np.zeros((3, 2))
     spun = np.zeros(3)
+    phases = np.zeros((GL8_X.shape[0], 2))  # cos and sin of om h x_q for the interval length phases_h
+    phases_h, phases_n = -1.0, 0
     mode = -1
     geometry(X, C, CI, 1, WP, NO)
     springs(X, C, CI, 1, 1, grav)
@@ -2372,8 +2387,13 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         along1, along2, spent = 0.0, 0.0, 0.0
         spun[:] = 0.0  # the mean spin in the plane
         nodes, weights = (GL8_X, GL8_W) if mode == SLIDE else (GL_X, GL_W)
+        if h != phases_h or nodes.shape[0] != phases_n:
+            # The bob's phase at the quadrature nodes: the same for every interval of this length.
+            phases_h, phases_n = h, nodes.shape[0]
+            for q in range(phases_n):
+                phases[q, 0], phases[q, 1] = math.cos(om * (h * nodes[q])), math.sin(om * (h * nodes[q]))
         for q in range(nodes.shape[0]):
-            dq, _, vq1, vq2, wq1, wq2, fq1, fq2 = rest_at(P, mode, h * nodes[q])
+            dq, _, vq1, vq2, wq1, wq2, fq1, fq2 = rest_at_phase(P, mode, h * nodes[q], phases[q, 0], phases[q, 1])
             along1 += weights[q] * vq1
             along2 += weights[q] * vq2
             for i in range(3):
