@@ -31,6 +31,17 @@ app = typer.Typer(
 )
 
 
+def interpreted_why() -> str:
+    """Why this process ran the interpreted kernels (its wall time is theirs)."""
+    from collide.engine import tier
+
+    if tier.BACKGROUND:
+        return "interpreted kernels: the compiled ones are being built in the background, once"
+    if tier.jit_setting() == "interpreted":
+        return "interpreted kernels: COLLIDE_JIT=0"
+    return "interpreted kernels: quicker for a run this small; COLLIDE_JIT=1 compiles"
+
+
 def wall_text(seconds: float) -> str:
     """A wall time as people read it: 1.47 ms, 25.7 s (not 2.57e+04 ms)."""
     return f"{seconds * 1e3:.3g} ms" if seconds < 1.0 else f"{seconds:.3g} s"
@@ -66,8 +77,7 @@ def print_summary(summary: dict[str, Any], recording: Path | None) -> None:
         typer.echo("  contacts: none")
     typer.echo(f"  {summary['steps']} steps, {summary['jumps']} free-flight jumps, "
                f"{summary['sim_time']:.6g} s simulated in {wall_text(summary['wall_time_s'])}"
-               + (" (interpreted kernels: quicker for a run this small; COLLIDE_JIT=1 compiles)"
-                  if summary.get("kernels") == "interpreted" else ""))
+               + (f" ({interpreted_why()})" if summary.get("kernels") == "interpreted" else ""))
     for warning in summary.get("warnings", []):
         typer.echo(f"  warning: {warning}")
     if recording is not None:

@@ -65,6 +65,19 @@ def test_a_quick_run_does_not_load_numba_and_gives_the_compiled_numbers() -> Non
     assert a == b  # the same code either way, operation for operation
 
 
+def test_the_summary_says_why_a_run_was_interpreted() -> None:
+    """Its wall time is the interpreted code's: the text summary says so, and why."""
+    from collide.engine import tier
+
+    if not tier.compiled_ready():
+        pytest.skip("the compiled kernels are not built here (python -m collide.engine.warm)")
+    quick_run = _probe("run", "demo-bonus", "--no-record")
+    forced = _probe("run", "demo-bonus", "--no-record", jit="0")
+    assert "(interpreted kernels: quicker for a run this small; COLLIDE_JIT=1 compiles)" in quick_run.stdout
+    assert "(interpreted kernels: COLLIDE_JIT=0)" in forced.stdout
+    assert "interpreted" not in _probe("run", "demo-bonus", "--no-record", jit="1").stdout
+
+
 def test_a_run_that_is_not_quick_loads_the_compiled_kernels_when_ready() -> None:
     from collide.engine import tier
 
