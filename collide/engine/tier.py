@@ -66,12 +66,28 @@ def mark_compiled() -> None:
     _marker().write_text(json.dumps(_stamp()))
 
 
+LOCK_FRESH = 600.0  # s: a compile lock older than this is a dead compile's, not a running one
+
+
+def compile_lock() -> Path:
+    """The file a background compile holds while it runs."""
+    return cache_dir() / "collide-compiling.lock"
+
+
+def compiling_elsewhere() -> bool:
+    """Whether a background compile is running (its lock is fresh)."""
+    try:
+        return time.time() - compile_lock().stat().st_mtime < LOCK_FRESH
+    except OSError:
+        return False
+
+
 def _start_background_compile() -> None:
     """Compile the kernels in a detached process, unless one is already at it."""
-    lock = cache_dir() / "collide-compiling.lock"
+    lock = compile_lock()
     try:
         lock.parent.mkdir(parents=True, exist_ok=True)
-        if lock.exists() and time.time() - lock.stat().st_mtime < 600:
+        if compiling_elsewhere():
             return
         lock.write_text(str(os.getpid()))
         log = open(cache_dir() / "collide-compile.log", "w")
