@@ -208,6 +208,27 @@ def springs(X, C, CI, na, nc, grav):
 
 
 @jit_inline
+def planar_relative(X, i, j, col):
+    """The x, y parts of body i's column col (a velocity, an acceleration) less body j's (a wall
+    has none)."""
+    x, y = X[i, col], X[i, col + 1]
+    if j >= 0:
+        x -= X[j, col]
+        y -= X[j, col + 1]
+    return x, y
+
+
+@jit_inline
+def planar_levers(X, C, c, i, j, col):
+    """l_i times body i's column col's z part (a spin, an angular acceleration), plus l_j times
+    body j's, with contact c's slip levers."""
+    z = C[c, C_LIS] * X[i, col + 2]
+    if j >= 0:
+        z += C[c, C_LJS] * X[j, col + 2]
+    return z
+
+
+@jit_inline
 def slip(X, C, CI, c, vc, wc, spin, planar):
     """Slip of i's surface relative to j's (or the wall's) at contact c, at the velocities in
     columns vc, wc: P_t (v_i - v_j) + (l_i w_i + l_j w_j) x n, with the slip lever arms.
@@ -217,16 +238,11 @@ def slip(X, C, CI, c, vc, wc, spin, planar):
     j = CI[c, CI_J]
     nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
     if planar:
-        rx, ry = X[i, vc], X[i, vc + 1]
-        if j >= 0:
-            rx -= X[j, vc]
-            ry -= X[j, vc + 1]
+        rx, ry = planar_relative(X, i, j, vc)
         rn = rx * nx + ry * ny
         sx, sy = rx - rn * nx, ry - rn * ny
         if spin:
-            lz = C[c, C_LIS] * X[i, wc + 2]
-            if j >= 0:
-                lz += C[c, C_LJS] * X[j, wc + 2]
+            lz = planar_levers(X, C, c, i, j, wc)
             sx -= lz * ny
             sy += lz * nx
         return sx, sy, 0.0
@@ -266,22 +282,14 @@ def slip_rate(X, C, CI, c, vc, wc, ac, lc, spin, seed, velocity_terms, planar):
     j = CI[c, CI_J]
     nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
     if planar:
-        ax, ay = X[i, ac], X[i, ac + 1]
-        if j >= 0:
-            ax -= X[j, ac]
-            ay -= X[j, ac + 1]
+        ax, ay = planar_relative(X, i, j, ac)
         an = ax * nx + ay * ny
         gx, gy = ax - an * nx, ay - an * ny
         pz = 0.0  # (l_i alpha_i + l_j alpha_j (+ l' w terms)) . z
         if spin:
-            pz = C[c, C_LIS] * X[i, lc + 2]
-            if j >= 0:
-                pz += C[c, C_LJS] * X[j, lc + 2]
+            pz = planar_levers(X, C, c, i, j, lc)
         if velocity_terms:
-            rx, ry = X[i, vc], X[i, vc + 1]
-            if j >= 0:
-                rx -= X[j, vc]
-                ry -= X[j, vc + 1]
+            rx, ry = planar_relative(X, i, j, vc)
             rn = rx * nx + ry * ny
             if j >= 0:
                 inv = 1.0 / C[c, C_DIST]
