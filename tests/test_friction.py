@@ -85,6 +85,46 @@ def test_hold_rate_is_the_slip_rate_without_friction(dim, seed, wall):
     assert np.abs(rate).max() > 1.0  # not vacuous
 
 
+def test_a_3d_slides_event_value_is_continuous_as_its_slip_turns():
+    """Out of the plane a slip near the band can turn half round without slowing to it (its way
+    slaved to the other forces). The slide's event value must not jump as it turns, or the root
+    search bisects the jump to the clock and gives up (40 trials: a pile of 27 spheres warned of
+    dozens of such steps). It is |slip| cos^2(turn / 2) - eps: |slip| - eps while the slip keeps
+    its way, and -eps reversed, so a slip that reverses through the band still changes sign."""
+    X, C, CI, WP, nc, grav = pressed_island(3, 0, False)
+    seed = np.int64(0)
+    kn.geometry(X, C, CI, nc, WP, seed)
+    kn.springs(X, C, CI, 2, nc, grav)
+    kn.set_basis(C, 0)
+    e1, e2 = C[0, kn.C_B:kn.C_B + 3], C[0, kn.C_B + 3:kn.C_B + 6]  # the tangent plane
+    X[:, kn.X_W:kn.X_W + 3] = 0.0
+    X[0, kn.X_V:kn.X_V + 3] = 0.0
+    eps, size, mu = 1e-6, 37e-6, 0.3  # a slip of 37 eps, as in the pile
+    CI[0, kn.CI_MODE] = kn.SLIDE
+    C[0, kn.C_MU], C[0, kn.C_EPS] = mu, eps
+    fl = np.zeros(int(kn.NFL), np.int64)
+    fl[kn.FL_SPIN], fl[kn.FL_FRICTION], fl[kn.FL_PLANAR] = 1, 1, kn.NO
+    E = np.zeros((2 * nc, 4))
+    turns = np.linspace(0.0, np.pi, 721)
+    values, held = [], None
+    for turn in turns:
+        X[1, kn.X_V:kn.X_V + 3] = -size * (np.cos(turn) * e1 + np.sin(turn) * e2)
+        kn.geometry(X, C, CI, nc, WP, seed)
+        slip = np.array(kn.slip(X, C, CI, 0, kn.X_V, kn.X_W, 1, False))
+        if held is None:
+            held = slip / np.linalg.norm(slip)
+        C[0, kn.C_HELD:kn.C_HELD + 3] = held
+        assert kn.mode_events(X, C, CI, E, 2, nc, kn.E_V0, kn.E_R0, np.zeros(3, np.int64), np.zeros((6, 6)),
+                              np.zeros(6), fl, 1.0, kn.YES)
+        values.append(E[0, kn.E_V0])
+    values = np.array(values)
+    expected = np.linalg.norm(slip) * np.cos(turns / 2) ** 2 - eps
+    assert values == pytest.approx(expected, rel=1e-9, abs=1e-9 * size)
+    # Continuous: between neighbouring turns it moves by at most |slip| / 2 per radian.
+    assert np.abs(np.diff(values)).max() <= 0.5 * size * (turns[1] - turns[0]) * (1 + 1e-6)
+    assert values[0] > 0 > values[-1]  # and a reversal is below the band's edge
+
+
 @pytest.mark.parametrize("symmetric", [True, False])
 def test_the_hold_system_is_solved_as_numpy_solves_it(symmetric):
     """W f = b by `factor` and `solve_factored`: Cholesky where W is symmetric (positive definite,

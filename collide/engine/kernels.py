@@ -86,6 +86,8 @@ KAHAN6_ERROR = 1.73e-4  # one step's error on an oscillator over (omega h)^7 (1.
 SHORT_SHARE = 0.1
 NUDGE_SHARE = 1e-3
 FORESEE_SPAN = 1e-4  # of the step: the differences that foresee events
+EVENT_RES = 1e-9  # of the step: an event (a contact's start or end, a mode's change) bracketed this closely has landed
+CREEP_LIMIT = 3  # short trials in a row whose aim shrank by less than half: the step ends short
 AIM = 1.02  # a first trial aimed at an event its start rates foresee ends this far past it
 
 # G: bodies.
@@ -109,8 +111,8 @@ CI_I, CI_J, CI_GI, CI_GJ, CI_MODE, CI_Q, CI_EDGE = 0, 1, 2, 3, 4, 5, 6
 NCI = 7
 # Q / QF: an island's candidate contacts.
 Q_I, Q_J, Q_ENG = 0, 1, 2
-QF_REACH, QF_D0, QF_R0, QF_D1, QF_R1, QF_DP, QF_RP = 0, 1, 2, 3, 4, 5, 6
-NQF = 7
+QF_REACH, QF_D0, QF_R0, QF_D1, QF_R1, QF_DP, QF_RP, QF_DB, QF_RB = 0, 1, 2, 3, 4, 5, 6, 7, 8
+NQF = 9
 E_V0, E_R0, E_V1, E_R1 = 0, 1, 2, 3
 # Settings: flags (int) and figures (float).
 FL_SPIN, FL_FRICTION, FL_SEED, FL_PLANAR, FL_RECORD, FL_AUTO, FL_MAXSTEPS, FL_DIM, FL_TURNS = range(9)
@@ -1059,9 +1061,22 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh):
             # still changes sign, and one that turns as it slows lands where |slip| = eps.
             hx, hy, hz = C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2]
             mag = math.sqrt(sx * sx + sy * sy + sz * sz)
-            sign = 1.0 if sx * hx + sy * hy + sz * hz >= 0 else -1.0
-            E[c, vcol] = (sign * mag - C[c, C_EPS]) / scale
-            E[c, rcol] = sign * (sx * gx + sy * gy + sz * gz) / mag / scale if mag > 0 else 0.0
+            along = sx * hx + sy * hy + sz * hz
+            outward = (sx * gx + sy * gy + sz * gz) / mag if mag > 0 else 0.0
+            if planar:
+                sign = 1.0 if along >= 0 else -1.0
+                E[c, vcol] = (sign * mag - C[c, C_EPS]) / scale
+                E[c, rcol] = sign * outward / scale
+            else:
+                # Out of the plane a slip near the band can turn past a right angle off the way
+                # it slid without slowing to the band (its direction slaved to the other forces):
+                # the signed |slip| jumped there, and the root search bisected the jump to the
+                # clock (40 trials, in a pile of 27 spheres). (|slip| + slip . held) / 2, that is
+                # |slip| cos^2 of half the turn, is continuous, |slip| while the slip keeps its
+                # way and 0 reversed: a reversal still changes sign, and a slip that turns as it
+                # slows lands a little before |slip| = eps, where it slides on, redirected.
+                E[c, vcol] = (0.5 * (mag + along) - C[c, C_EPS]) / scale
+                E[c, rcol] = 0.5 * (outward + gx * hx + gy * hy + gz * hz) / scale
             E[second, vcol] = 1.0
             E[second, rcol] = 0.0
         elif planar:
@@ -1613,15 +1628,20 @@ def energy(X, C, na, nc, grav, spin):
 
 
 @jit_inline
-def slip_turn(X, C, CI, nc, fl):
-    """The largest angle (rad) a sliding contact's slip turned by over the step just taken, seen
-    in the contact's frame: from its direction at the step's start (held, carried onto the end's
-    tangent plane) to its direction at the end. Zero in the plane, where a slip cannot turn."""
+def slip_turn(X, C, CI, nc, fl, h, negligible):
+    """The largest angle (rad) a sliding contact's slip turned by over the step just taken (h),
+    seen in the contact's frame: from its direction at the step's start (held, carried onto the
+    end's tangent plane) to its direction at the end, and that contact (-1 if none). Zero in the
+    plane, where a slip cannot turn. A contact whose friction changes the slip by at most
+    `negligible` over the step is left out: however its force turned, the step's error from it
+    is no more than an event landed to the tolerance makes (a slip grazing the band turns
+    half round in a ten-millionth of a second: followed, a dozen steps)."""
     if fl[FL_PLANAR]:
-        return 0.0
+        return 0.0, -1
     top = 0.0
+    which = -1
     for c in range(nc):
-        if CI[c, CI_MODE] != SLIDE:
+        if CI[c, CI_MODE] != SLIDE or C[c, C_MU] * C[c, C_FN] * response(X, C, CI, c, fl[FL_SPIN]) * h <= negligible:
             continue
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, fl[FL_SPIN], False)
         nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
@@ -1629,8 +1649,10 @@ def slip_turn(X, C, CI, nc, fl):
         hn = hx * nx + hy * ny + hz * nz
         hx, hy, hz = hx - hn * nx, hy - hn * ny, hz - hn * nz
         cross = math.sqrt((hy * sz - hz * sy) ** 2 + (hz * sx - hx * sz) ** 2 + (hx * sy - hy * sx) ** 2)
-        top = max(top, math.atan2(cross, hx * sx + hy * sy + hz * sz))
-    return top
+        angle = math.atan2(cross, hx * sx + hy * sy + hz * sz)
+        if angle > top:
+            top, which = angle, c
+    return top, which
 
 
 @jit_inline
@@ -1738,7 +1760,7 @@ def foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A
 
 @jit
 def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
-                max_turn, nudge, reach, brief, exact, ST):
+                max_turn, negligible, nudge, reach, brief, exact, ST):
     """One step from the start state; where an event would happen inside it, shortened to land there,
     each refinement re-stepping from the start (in the plane, one within `nudge` of the last trial's
     end is a Verlet substep from there, one within `reach` a Yoshida step, and one from the start up
@@ -1746,13 +1768,14 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     sees coming). Contacts starting or ending: a cubic Hermite through the overlaps at both ends of
     a trial; friction modes: a bracketed root find (Hermite with both ends' rates where they have
     closed forms, then inverse quadratic interpolation, secant or Newton in the bracket). In 3D a
-    sliding slip may turn by at most `max_turn` (rad) a step: just after it leaves the band's edge
-    it turns on a time scale of eps over its rate, far below a step, and the step is shortened to
-    follow it. Returns (h taken, work, ok, whether the turning limited the step, a candidate that
-    began pressing from touching within the step: -1 if none, else the step was not taken, whether
-    the search landed: False if it ran out of trials, and the step may have passed an event)."""
+    sliding slip may turn by at most `max_turn` (rad) a step, unless its friction changes the slip
+    by at most `negligible` over the step: just after it leaves the band's edge it turns on a time
+    scale of eps over its rate, far below a step, and the step is shortened to follow it. Returns
+    (h taken, work, ok, the contact whose turning limited the step or -1, a candidate that began
+    pressing from touching within the step: -1 if none, else the step was not taken, whether the
+    search landed: False if it ran out of trials, and the step may have passed an event)."""
     h = h_full
-    limited = False
+    limited = -1
     tol = TOUCH_TOL
     # Where an event is foreseen inside the step, the first trial ends just past it: its end then
     # brackets the event closely, and the search lands there with nudges from it. Unforeseen, a
@@ -1789,6 +1812,9 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     passed = -1
     ta, fa, tb, fb = math.nan, math.nan, math.nan, math.nan
     past = math.inf
+    below = 0.0  # the longest trial that fell short of `past` (its overlaps in QF_DB, QF_RB)
+    ahead, creep = math.inf, 0  # the last short trial's aim past its end; short trials creeping
+    aimed = False  # this trial's end was aimed at a contact's crossing (not at a mode's root)
     shortest = 16.0 * EPS64 * (abs(t) + abs(h_full))
     located = False
     dipped = False
@@ -1805,11 +1831,37 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
         crossing = first < math.inf
         if crossing:
             theta = first * frac
+            ahead, creep = math.inf, 0
             if frac < past:
                 past = frac
                 for k in range(nq):
                     QF[k, QF_DP], QF[k, QF_RP] = QF[k, QF_D1], QF[k, QF_R1]
+                if 0.0 < below < frac:
+                    # Between the longest trial that fell short and this one: the cubic from the
+                    # step's start misses by far more (in a pile, each refinement from below that
+                    # went just past was sent 0.6 % of the step back: 40 trials in a cycle).
+                    gap = frac - below
+                    first = math.inf
+                    for k in range(nq):
+                        db, d1 = QF[k, QF_DB], QF[k, QF_D1]
+                        if (db > tol and d1 < -tol) or (db < -tol and d1 > tol):
+                            first = min(first, hermite_root(db, d1, QF[k, QF_RB] * gap * h_full,
+                                                            QF[k, QF_R1] * gap * h_full))
+                    if first < math.inf:
+                        theta = below + first * gap
+                    if gap <= EVENT_RES:
+                        # Bracketed to a billionth of the step: a trial's end is path-dependent at
+                        # round-off (nudged forwards and back), and the search wandered there to
+                        # the last trial. Landing this close starts or ends the contact with an
+                        # overlap error of rate times that: its impulse, of order (omega h)^2 1e-18.
+                        theta = frac
+                elif below >= frac:
+                    below = 0.0  # crossed before it: a contact that came and went within the step
         short = past < math.inf and frac < past and not crossing
+        if short and frac > below:
+            below = frac
+            for k in range(nq):
+                QF[k, QF_DB], QF[k, QF_RB] = QF[k, QF_D1], QF[k, QF_R1]
         if short:
             # Fell short: the crossing lies between this trial's end and the shorter crossing one.
             gap = past - frac
@@ -1825,6 +1877,17 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                     first = 0.0
             if first < math.inf:
                 theta = frac + first * gap
+                # Short trials whose aims shrink slowly (each more than half the last) creep at a
+                # crossing the nudged trials do not reach: nudges forwards add their errors (by
+                # design, a thousandth of the event tolerance each), the crossing trial's end
+                # came by another path, and its overlap was 2e-6 where theirs stayed at -8e-8
+                # (40 trials, in a pile of 27 spheres). The step ends here, short of the crossing,
+                # and the next one lands it from its own start.
+                creep = creep + 1 if aimed and theta - frac > 0.5 * ahead else 0
+                ahead = theta - frac
+                if creep >= CREEP_LIMIT:
+                    theta = frac
+        crossing_aim = theta
         if modes:
             if not mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale, NO):
                 return h, work, False, limited, -1, True
@@ -1863,9 +1926,12 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                     pending = False
                     if short:
                         theta = math.inf
-                elif (hi - lo) * h_full <= shortest:
+                elif hi - lo <= EVENT_RES or (hi - lo) * h_full <= shortest:
                     # A jump in the event value (a stuck contact's hold force can change sign at
-                    # once), bracketed as finely as the clock resolves: the step ends just past it.
+                    # once, as a neighbour's slip passes zero), or a root bracketed to a billionth
+                    # of the step (landed: late by that, its error is that share of a step's
+                    # friction impulse): the step ends just past it. Bisected on to the clock's
+                    # resolution, a jump took more than the 40 trials (a pile of 27 spheres).
                     pending = False
                     passed = col
                     theta = hi
@@ -1912,10 +1978,10 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                 theta = dip
                 dipped = True
         if modes and not pending:
-            turned = slip_turn(X, C, CI, nc, fl)
+            turned, turner = slip_turn(X, C, CI, nc, fl, h, negligible)
             if turned > max_turn:
                 # The turning angle grows about in proportion to the step near the edge.
-                limited = True
+                limited = turner
                 limit = frac * max(0.8 * max_turn / turned, 0.05)
                 if limit < theta:
                     # A contact's start or end beyond the shortened step is the next step's:
@@ -1926,6 +1992,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
         if not (theta < math.inf and abs(theta - frac) > 1e-12 * max(frac, 1e-300)):
             located = True
             break
+        aimed = theta == crossing_aim
         # Never shorter than a few ticks of the clock: an event closer than that is taken as passed.
         h_next = max(h_full * max(theta, 1e-12), shortest)
         if nudge > 0.0 and abs(h_next - h) <= reach:
@@ -2539,6 +2606,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         dt = fp[FP_OMEGA_H] / omega if fl[FL_AUTO] else fp[FP_DT]
         # A slip may turn by the angle the stiffest contact's oscillation advances in a step.
         max_turn = max(dt * omega, 1e-3)
+        negligible = fp[FP_EVENT_TOL] * scale
         # How far a Verlet substep (and a Yoshida step) may reach in the event search: its error
         # a thousandth of the event tolerance. Not out of the plane, where a small slip's direction
         # turns on a time scale far below 1 / omega: there the substeps' values strayed from
@@ -2558,6 +2626,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         # kicks stay far below the tolerance (at 1e-6, 1e-12 each; a pass fewer in most kicks).
         exact = max(4.0 * EPS64, 1e-4 * fp[FP_EVENT_TOL])
         grown = math.inf
+        turner = -1  # the contact whose turning last limited a step
         FG[F_DT_MIN] = min(FG[F_DT_MIN], dt)
         geometry(X, C, CI, nc, WP, fl[FL_SEED])
         springs(X, C, CI, na, nc, grav)
@@ -2615,11 +2684,17 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                         KN[GI[XI[a], GI_KNOT], K_AN + d] = X[a, X_A + d] + X[a, X_F + d]
             for k in range(nq):
                 QF[k, QF_D0], QF[k, QF_R0] = overlap(G, GI, X, Q, QF, k, t, WP, grav)
+            if grown < math.inf and not (turner >= 0 and CI[turner, CI_MODE] == SLIDE):
+                # The step grows back from a turning-limited one while that slip slides on; one
+                # that turned into the band took a dozen doubling steps back from a
+                # ten-millionth of a second (most of the steps of a pile of 27 spheres).
+                grown = math.inf
             h_full = min(dt, W - t, grown)
             if fric and fl[FL_TURNS] and stiff_slide(X, C, CI, nc, dt, spin):
                 h_full = min(h_full, dt * min(1.0, (dt * omega) ** STIFF_SLIDE_POWER))
             h, work, ok, limited, late, located = step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full,
                                                               weights, WP, grav, stuck, A, b, fl, scale, max_turn,
+                                                              negligible,
                                                               nudge, reach, brief, exact, ST)
             if not located:
                 if ST[S_UNLOCATED] == 0:
@@ -2642,7 +2717,10 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 if Q[k, Q_ENG] == LATE:
                     Q[k, Q_ENG] = 1
             # After a step the turning limited, let the next ones grow back by doubling.
-            grown = 2.0 * h if limited else (2.0 * grown if grown < dt else math.inf)
+            if limited >= 0:
+                grown, turner = 2.0 * h, limited
+            else:
+                grown = 2.0 * grown if grown < dt else math.inf
             if not ok:
                 ST[S_STATUS] = SINGULAR
                 FG[F_STATUS_T] = t
