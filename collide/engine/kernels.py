@@ -88,6 +88,9 @@ NUDGE_SHARE = 1e-3
 FORESEE_SPAN = 1e-4  # of the step: the differences that foresee events
 EVENT_RES = 1e-9  # of the step: an event (a contact's start or end, a mode's change) bracketed this closely has landed
 CREEP_LIMIT = 3  # short trials in a row whose aim shrank by less than half: the step ends short
+# Trials of one step's event search: a jump in a mode value, bisected from the whole step to
+# EVENT_RES, takes 30, after those of the step's other events.
+TRIALS = 64
 AIM = 1.02  # a first trial aimed at an event its start rates foresee ends this far past it
 
 # G: bodies.
@@ -1809,7 +1812,9 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     lo, hi, f_lo, f_hi = 0.0, 1.0, 0.0, 0.0
     s_lo, s_hi = math.nan, math.nan
     widths = (math.inf, math.inf)  # |value| at the last two trials of the pending root
+    bisecting = False  # the pending root's value did not halve in two trials: a jump, bisected
     passed = -1
+    passed_at = math.nan  # the trial end just past the passed mode value's jump
     ta, fa, tb, fb = math.nan, math.nan, math.nan, math.nan
     past = math.inf
     below = 0.0  # the longest trial that fell short of `past` (its overlaps in QF_DB, QF_RB)
@@ -1818,7 +1823,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     shortest = 16.0 * EPS64 * (abs(t) + abs(h_full))
     located = False
     dipped = False
-    for trial in range(40):
+    for trial in range(TRIALS):
         frac = h / h_full
         first = math.inf
         for k in range(nq):
@@ -1913,6 +1918,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                 s_lo, s_hi = E[col, E_R0] * h_full, E[col, E_R1] * h_full
                 ta, fa, tb, fb = math.nan, math.nan, 0.0, E[col, E_V0]
                 widths = (math.inf, math.inf)
+                bisecting = False
                 pending = True
             if pending:
                 f = E[col, E_V1]
@@ -1935,6 +1941,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                     pending = False
                     passed = col
                     theta = hi
+                    passed_at = hi
                 else:
                     estimate = bracketed_root(lo, f_lo, hi, f_hi, ta, fa, tb, fb, frac, f)
                     if fresh:
@@ -1963,12 +1970,20 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                             if math.isfinite(steep) and steep != 0 and lo < end - f_end / steep < hi:
                                 estimate = end - f_end / steep
                         # Safeguard: after a few trials, a value that did not halve in two
-                        # (interpolation creeping along a flat side) is followed by a bisection.
-                        if trial >= 8 and abs(f) > 0.5 * widths[0]:
+                        # (interpolation creeping along a flat side, or a jump: a stuck contact's
+                        # hold force as a neighbour's slip passes zero) is bisected from then on.
+                        # Interleaved with interpolation, a jump took two trials a halving and
+                        # ran out of trials (a pile of 27 spheres).
+                        bisecting = bisecting or (trial >= 8 and abs(f) > 0.5 * widths[0])
+                        if bisecting:
                             estimate = 0.5 * (lo + hi)
                     widths = (widths[1], abs(f))
                     theta = min(theta, estimate)
                     ta, fa, tb, fb = tb, fb, frac, f
+            if short and not pending and abs(frac - passed_at) <= 1e-12 * frac:
+                # Landed just past a jump, short of a contact's crossing: the step ends here, as
+                # at a root (aimed on at the crossing, the search ran out of trials in a pile).
+                theta = math.inf
         if modes and not pending and not dipped:
             dip = mode_dip(E, modes, frac, h_full, passed)
             if dip < theta:
