@@ -1199,6 +1199,22 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
 
 
 @jit_inline
+def first_crossing(QF, nq, d_col, r_col, share, length, tol):
+    """The first crossing (a share of the span, inf if none) of the candidates' overlaps between
+    an earlier trial end (overlaps and rates in columns d_col, r_col of QF) and the last one
+    (QF_D1, QF_R1), share * length (s) apart: on the cubic Hermite through both ends, where the
+    overlap changes sign beyond the touch tolerance `tol`. The rates are scaled by share, then
+    length, as the search always did (a rounding apart moved a chaotic pile's outcome)."""
+    first = math.inf
+    for k in range(nq):
+        d0, d1 = QF[k, d_col], QF[k, QF_D1]
+        if (d0 > tol and d1 < -tol) or (d0 < -tol and d1 > tol):
+            first = min(first, hermite_root(d0, d1, QF[k, r_col] * share * length,
+                                            QF[k, QF_R1] * share * length))
+    return first
+
+
+@jit_inline
 def hermite_root(d0, d1, r0, r1):
     """Root in (0, 1) of the cubic Hermite through (0, d0, r0) and (1, d1, r1) (r per step), by
     safeguarded Newton on the cubic, kept inside the bracket."""
@@ -1825,13 +1841,9 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     dipped = False
     for trial in range(TRIALS):
         frac = h / h_full
-        first = math.inf
         for k in range(nq):
-            d1, r1 = overlap(G, GI, X, Q, QF, k, t + h, WP, grav)
-            QF[k, QF_D1], QF[k, QF_R1] = d1, r1
-            d0 = QF[k, QF_D0]
-            if (d0 > tol and d1 < -tol) or (d0 < -tol and d1 > tol):
-                first = min(first, hermite_root(d0, d1, QF[k, QF_R0] * h, r1 * h))
+            QF[k, QF_D1], QF[k, QF_R1] = overlap(G, GI, X, Q, QF, k, t + h, WP, grav)
+        first = first_crossing(QF, nq, QF_D0, QF_R0, h, 1.0, tol)
         theta = math.inf
         crossing = first < math.inf
         if crossing:
@@ -1846,12 +1858,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                     # step's start misses by far more (in a pile, each refinement from below that
                     # went just past was sent 0.6 % of the step back: 40 trials in a cycle).
                     gap = frac - below
-                    first = math.inf
-                    for k in range(nq):
-                        db, d1 = QF[k, QF_DB], QF[k, QF_D1]
-                        if (db > tol and d1 < -tol) or (db < -tol and d1 > tol):
-                            first = min(first, hermite_root(db, d1, QF[k, QF_RB] * gap * h_full,
-                                                            QF[k, QF_R1] * gap * h_full))
+                    first = first_crossing(QF, nq, QF_DB, QF_RB, gap, h_full, tol)
                     if first < math.inf:
                         theta = below + first * gap
                     if gap <= EVENT_RES:
