@@ -9,8 +9,10 @@ never asserts.
 
     python benchmarks/bench_friction_cost.py [--repeat 7] [--tol 1e-6] [--variants]
 
---variants adds breaks with more friction mode changes, each against its frictionless twin:
-the cue ball 1 cm off the rack's line (every mode changes at its own time), mu = 0.2 and 0.4.
+--variants adds other breaks, each against its frictionless twin: at mu = 0.1 the rack turned
+30 degrees in its plane, balls 1.3 times larger (same density) and the cue at 3 m/s; and breaks
+with more friction mode changes: the cue ball 1 cm off the rack's line (every mode changes at its
+own time), mu = 0.2 and 0.4.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import os
 os.environ.setdefault("COLLIDE_JIT", "1")  # time compiled kernels (waited for), not a fresh install's interpreted
 
 import argparse
+import math
 import statistics
 import time
 
@@ -60,6 +63,19 @@ def tilted(scene):
     return parse_scene(turned_source(scene.source))
 
 
+def in_plane(source: dict, angle: float = 0.0, size: float = 1.0, speed: float = 1.0) -> dict:
+    """A 2D scene's source turned by `angle` (rad) about the origin, its lengths times `size` (masses
+    times size^3: the same density) and its velocities times `speed`."""
+    c, s = math.cos(angle), math.sin(angle)
+
+    def turned(vector: list, factor: float) -> list[float]:
+        return [factor * (c * vector[0] - s * vector[1]), factor * (s * vector[0] + c * vector[1])]
+
+    bodies = [dict(b, position=turned(b["position"], size), velocity=turned(b["velocity"], speed),
+                   radius=b["radius"] * size, mass=b["mass"] * size ** 3) for b in source["body"]]
+    return dict(source, body=bodies)
+
+
 def timed(scene, measure: bool) -> tuple[float, float, int, int]:
     """(kernel seconds, whole call seconds, steps, whole steps tried) of one run."""
     start = time.perf_counter()
@@ -87,13 +103,16 @@ def main() -> None:
              ("rolling ball, 0.5 s", "demo-bonus", "bar 50x"),
              ("billiards-break mu = 0.1, tilted plane (3D)", "billiards-break mu = 0.1", "about 1x"),
              ("wall impact, skew spin (3D)", "wall impact (2D)", "comparable")]
-    variants = {"cue 1 cm off-centre": ["body.cue.position.y=0.01"], "mu = 0.2": ["contact.mu=0.2"],
-                "mu = 0.4": ["contact.mu=0.4"]} if args.variants else {}
-    for label, sets in variants.items():
+    variants = {"rack turned 30 deg": ([], {"angle": math.pi / 6}), "balls 1.3x larger": ([], {"size": 1.3}),
+                "cue at 3 m/s": ([], {"speed": 0.5}), "cue 1 cm off-centre": (["body.cue.position.y=0.01"], {}),
+                "mu = 0.2": (["contact.mu=0.2"], {}), "mu = 0.4": (["contact.mu=0.4"], {})} if args.variants else {}
+    for label, (sets, change) in variants.items():
         with_friction, twin = f"billiards-break, {label}", f"billiards-break, {label}: its frictionless twin"
-        cases[with_friction] = load_scene("billiards-break", [f"tol={args.tol}", *sets])
-        cases[twin] = load_scene("billiards-break", [f"tol={args.tol}", *sets, "contact.mu=0"])
-        pairs.append((with_friction, twin, "issue 9's bar is for the break itself"))
+        for name, mu in ((with_friction, []), (twin, ["contact.mu=0"])):
+            scene = load_scene("billiards-break", [f"tol={args.tol}", *sets, *mu])
+            cases[name] = parse_scene(in_plane(scene.source, **change)) if change else scene
+        bar = "mu above the bar's 0.1" if "mu" in label else "bar 5x"
+        pairs.append((with_friction, twin, bar))
     for scene in cases.values():
         timed(scene, True)  # load the compiled kernels, outside the clock
     figures: dict[str, dict[bool, list]] = {name: {False: [], True: []} for name in cases}

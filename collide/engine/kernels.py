@@ -1831,6 +1831,10 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     bisecting = False  # the pending root's value did not halve in two trials: a jump, bisected
     passed = -1
     passed_at = math.nan  # the trial end just past the passed mode value's jump
+    # A pending root's bracket start, kept when another value's root comes first: searched again
+    # after that one is landed or passed, it goes on from there (restarted from the step's start,
+    # a jump in a pile was bisected anew and the step ran out of trials).
+    kept, kept_lo, kept_f, kept_s, kept_bisecting = -1, 0.0, 0.0, 0.0, False
     ta, fa, tb, fb = math.nan, math.nan, math.nan, math.nan
     past = math.inf
     below = 0.0  # the longest trial that fell short of `past` (its overlaps in QF_DB, QF_RB)
@@ -1919,7 +1923,10 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                     guess = at * frac
                     best = k
             fresh = best >= 0 and (not pending or best != col)
+            resumed = False
             if fresh:
+                if pending and lo > 0.0:
+                    kept, kept_lo, kept_f, kept_s, kept_bisecting = col, lo, f_lo, s_lo, bisecting
                 col = best
                 lo, f_lo, hi, f_hi = 0.0, E[col, E_V0], frac, E[col, E_V1]
                 s_lo, s_hi = E[col, E_R0] * h_full, E[col, E_R1] * h_full
@@ -1927,6 +1934,10 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                 widths = (math.inf, math.inf)
                 bisecting = False
                 pending = True
+                if col == kept and kept_lo < frac:
+                    resumed = True
+                    lo, f_lo, s_lo, bisecting = kept_lo, kept_f, kept_s, kept_bisecting
+                    tb, fb = lo, f_lo
             if pending:
                 f = E[col, E_V1]
                 slope = E[col, E_R1] * h_full
@@ -1951,7 +1962,9 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                     passed_at = hi
                 else:
                     estimate = bracketed_root(lo, f_lo, hi, f_hi, ta, fa, tb, fb, frac, f)
-                    if fresh:
+                    if bisecting:
+                        estimate = 0.5 * (lo + hi)
+                    elif fresh and not resumed:
                         s0 = E[col, E_R0] * h
                         if math.isfinite(s0) and math.isfinite(slope):
                             estimate = hermite_root(E[col, E_V0], f, s0, slope * frac) * frac
@@ -1991,7 +2004,10 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                 # Landed just past a jump, short of a contact's crossing: the step ends here, as
                 # at a root (aimed on at the crossing, the search ran out of trials in a pile).
                 theta = math.inf
-        if modes and not pending and not dipped:
+        # Not on a trial that ends just past a jump: the cubics through its ends span the jump (the
+        # other values' rates jump with it), and one dipped far back; bracketed there anew, the
+        # root just past the jump ran out of trials (a pile of 27 spheres).
+        if modes and not pending and not dipped and not frac >= passed_at:
             dip = mode_dip(E, modes, frac, h_full, passed)
             if dip < theta:
                 # A slip that comes back to the band's edge and leaves it again within the step
@@ -2670,6 +2686,9 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             # Stopped short of W without an end, the steps go on from where it stopped.
             t, KN, RC, changed = rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         carried = False
+        # After a step the state's geometry and spring accelerations are the step's end's (its
+        # last trial left them there; they depend on the positions only).
+        stepped = False
         while t < W and not changed and ST[S_STATUS] == OK:
             if carried:
                 # The last step met no mode's edge: decide would keep every mode (in the plane a
@@ -2678,8 +2697,9 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 for k in range(2 * nc):
                     E[k, E_V0], E[k, E_R0] = E[k, E_V1], E[k, E_R1]
             elif fric:
-                geometry(X, C, CI, nc, WP, fl[FL_SEED])
-                springs(X, C, CI, na, nc, grav)
+                if not stepped:
+                    geometry(X, C, CI, nc, WP, fl[FL_SEED])
+                    springs(X, C, CI, na, nc, grav)
                 done, ok, turned = decide(X, C, CI, na, nc, stuck, A, b, fl, scale)
                 share(G, XI, na, done)
                 if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale,
@@ -2758,6 +2778,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             # A step to the window's end lands on it exactly.
             t = W if (h == h_full and h_full == W - t) else t + h
             ST[S_STEPS] += 1
+            stepped = True
             share(G, XI, na, work)
             for a in range(na):
                 for d in range(6):
