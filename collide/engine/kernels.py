@@ -21,7 +21,8 @@ C     (K, NC)      an island's engaged contacts: normal, overlap, arms, normal f
 CI    (K, NCI) int contacts: local i, local j (or -1 - wall), global i, global j, mode, ...
 Q     (K, 3) int   an island's candidate contacts: global i, j (or -1 - wall), engaged
 QF    (K, NQF)     candidates: touching distance, overlaps and rates at trial ends
-E     (2K, 4)      friction mode events: values and rates at a step's start and end
+E     (2K, NE)     friction mode events: values and rates at a step's start, a trial's end
+                   and the longest trial at whose end none had crossed
 WP    (W, 6)       walls: a point and the outward unit normal
 ====  ===========  ========================================================================
 
@@ -116,7 +117,8 @@ NCI = 7
 Q_I, Q_J, Q_ENG = 0, 1, 2
 QF_REACH, QF_D0, QF_R0, QF_D1, QF_R1, QF_DP, QF_RP, QF_DB, QF_RB = 0, 1, 2, 3, 4, 5, 6, 7, 8
 NQF = 9
-E_V0, E_R0, E_V1, E_R1 = 0, 1, 2, 3
+E_V0, E_R0, E_V1, E_R1, E_VC, E_RC = 0, 1, 2, 3, 4, 5
+NE = 6
 # Settings: flags (int) and figures (float).
 FL_SPIN, FL_FRICTION, FL_SEED, FL_PLANAR, FL_RECORD, FL_AUTO, FL_MAXSTEPS, FL_DIM, FL_TURNS = range(9)
 NFL = 9
@@ -1823,6 +1825,14 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             if d1 > tol:
                 return 0.0, work, True, limited, k, True
     modes = 2 * nc if fl[FL_FRICTION] else 0
+    # The longest trial at whose end no mode value had crossed zero (nor dipped below it): every
+    # root lies past it, and a new one is bracketed from there (from the step's start, two values
+    # that jump took turns: each time one was bracketed to a few billionths of the step the
+    # other crossed there first and was bisected again from the start, and the step ran out of
+    # trials in a pile of 27 spheres). Its values and rates are in E_VC, E_RC.
+    clear = 0.0
+    for k in range(modes):
+        E[k, E_VC], E[k, E_RC] = E[k, E_V0], E[k, E_R0]
     pending = False
     col = -1
     lo, hi, f_lo, f_hi = 0.0, 1.0, 0.0, 0.0
@@ -1831,10 +1841,6 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     bisecting = False  # the pending root's value did not halve in two trials: a jump, bisected
     passed = -1
     passed_at = math.nan  # the trial end just past the passed mode value's jump
-    # A pending root's bracket start, kept when another value's root comes first: searched again
-    # after that one is landed or passed, it goes on from there (restarted from the step's start,
-    # a jump in a pile was bisected anew and the step ran out of trials).
-    kept, kept_lo, kept_f, kept_s, kept_bisecting = -1, 0.0, 0.0, 0.0, False
     ta, fa, tb, fb = math.nan, math.nan, math.nan, math.nan
     past = math.inf
     below = 0.0  # the longest trial that fell short of `past` (its overlaps in QF_DB, QF_RB)
@@ -1904,6 +1910,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                 if creep >= CREEP_LIMIT:
                     theta = frac
         crossing_aim = theta
+        best = -1
         if modes:
             if not mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale, NO):
                 return h, work, False, limited, -1, True
@@ -1923,21 +1930,16 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                     guess = at * frac
                     best = k
             fresh = best >= 0 and (not pending or best != col)
-            resumed = False
             if fresh:
-                if pending and lo > 0.0:
-                    kept, kept_lo, kept_f, kept_s, kept_bisecting = col, lo, f_lo, s_lo, bisecting
                 col = best
-                lo, f_lo, hi, f_hi = 0.0, E[col, E_V0], frac, E[col, E_V1]
-                s_lo, s_hi = E[col, E_R0] * h_full, E[col, E_R1] * h_full
-                ta, fa, tb, fb = math.nan, math.nan, 0.0, E[col, E_V0]
+                start = clear if clear < frac else 0.0  # a value back below zero before it: a dip
+                at_v, at_r = (E[col, E_VC], E[col, E_RC]) if start > 0.0 else (E[col, E_V0], E[col, E_R0])
+                lo, f_lo, hi, f_hi = start, at_v, frac, E[col, E_V1]
+                s_lo, s_hi = at_r * h_full, E[col, E_R1] * h_full
+                ta, fa, tb, fb = math.nan, math.nan, start, at_v
                 widths = (math.inf, math.inf)
                 bisecting = False
                 pending = True
-                if col == kept and kept_lo < frac:
-                    resumed = True
-                    lo, f_lo, s_lo, bisecting = kept_lo, kept_f, kept_s, kept_bisecting
-                    tb, fb = lo, f_lo
             if pending:
                 f = E[col, E_V1]
                 slope = E[col, E_R1] * h_full
@@ -1962,9 +1964,11 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                     passed_at = hi
                 else:
                     estimate = bracketed_root(lo, f_lo, hi, f_hi, ta, fa, tb, fb, frac, f)
-                    if bisecting:
-                        estimate = 0.5 * (lo + hi)
-                    elif fresh and not resumed:
+                    if fresh and lo > 0.0:
+                        gap = frac - lo
+                        if math.isfinite(s_lo) and math.isfinite(slope):
+                            estimate = lo + gap * hermite_root(f_lo, f, s_lo * gap, slope * gap)
+                    elif fresh:
                         s0 = E[col, E_R0] * h
                         if math.isfinite(s0) and math.isfinite(slope):
                             estimate = hermite_root(E[col, E_V0], f, s0, slope * frac) * frac
@@ -2007,6 +2011,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
         # Not on a trial that ends just past a jump: the cubics through its ends span the jump (the
         # other values' rates jump with it), and one dipped far back; bracketed there anew, the
         # root just past the jump ran out of trials (a pile of 27 spheres).
+        clean = modes > 0 and best < 0
         if modes and not pending and not dipped and not frac >= passed_at:
             dip = mode_dip(E, modes, frac, h_full, passed)
             if dip < theta:
@@ -2015,6 +2020,11 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                 # shortened into the dip, and the crossing is then bracketed as any other.
                 theta = dip
                 dipped = True
+                clean = False
+        if clean and frac > clear:
+            clear = frac
+            for k in range(modes):
+                E[k, E_VC], E[k, E_RC] = E[k, E_V1], E[k, E_R1]
         if modes and not pending:
             turned, turner = slip_turn(X, C, CI, nc, fl, h, negligible)
             if turned > max_turn:
@@ -2597,7 +2607,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
     XI = np.zeros(size, np.int64)
     C = np.zeros((nq, NC))
     CI = np.zeros((nq, NCI), np.int64)
-    E = np.zeros((2 * nq, 4))
+    E = np.zeros((2 * nq, NE))
     stuck = np.zeros(3 * nq, np.int64)
     m_cap = min(nq, 48)
     A = np.zeros((2 * m_cap, 2 * m_cap))
