@@ -2008,10 +2008,10 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                 # Landed just past a jump, short of a contact's crossing: the step ends here, as
                 # at a root (aimed on at the crossing, the search ran out of trials in a pile).
                 theta = math.inf
+        clean = modes > 0 and best < 0  # no mode value crossed in this trial
         # Not on a trial that ends just past a jump: the cubics through its ends span the jump (the
         # other values' rates jump with it), and one dipped far back; bracketed there anew, the
         # root just past the jump ran out of trials (a pile of 27 spheres).
-        clean = modes > 0 and best < 0
         if modes and not pending and not dipped and not frac >= passed_at:
             dip = mode_dip(E, modes, frac, h_full, passed)
             if dip < theta:
