@@ -1964,14 +1964,13 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                     passed_at = hi
                 else:
                     estimate = bracketed_root(lo, f_lo, hi, f_hi, ta, fa, tb, fb, frac, f)
-                    if fresh and lo > 0.0:
+                    if fresh:
+                        # The cubic from the bracket's start (the step's or the clear trial's),
+                        # its start rate scaled as the search always did from the step's start.
                         gap = frac - lo
-                        if math.isfinite(s_lo) and math.isfinite(slope):
-                            estimate = lo + gap * hermite_root(f_lo, f, s_lo * gap, slope * gap)
-                    elif fresh:
-                        s0 = E[col, E_R0] * h
+                        s0 = s_lo * gap if lo > 0.0 else E[col, E_R0] * h
                         if math.isfinite(s0) and math.isfinite(slope):
-                            estimate = hermite_root(E[col, E_V0], f, s0, slope * frac) * frac
+                            estimate = lo + gap * hermite_root(f_lo, f, s0, slope * gap)
                     else:
                         # The cubic through both ends' values and rates: a slip that leaves the
                         # band with no rate grows as a parabola, which Newton from the steep end
