@@ -275,7 +275,7 @@ def _measured(run: SceneRun, integ: str, record: bool, max_steps: int) -> SceneR
             break
         spent += finer.result.wall_time_s
         if float(finer.result.dt[0]) == float(candidate.result.dt[0]) and same < SAME_RUNS_LIMIT:
-            # The same step (at its largest, kept for stability and the events' search): it
+            # The same step (at its ceiling, MAX_OMEGA_H or half the stability limit): it
             # measures the events' landing at most, not the step's error; the next tighter run
             # does. Taken as the measurement, it quoted the model's 3e-5 for six balls on a floor
             # whose outcome was 0.1 off (random scenes at tol 1e-3: 21 in 100 beyond 10 times the
