@@ -399,8 +399,8 @@ def test_billiards_break_runs_at_loose_tolerances(tol):
 
 @pytest.mark.parametrize("cue_y", [0.0, 0.01])
 def test_billiards_break_meets_a_loose_tolerance_unmeasured(cue_y):
-    """A mode change lands to a hundredth of the tolerance, but a slip never counts as on the
-    band's edge from further than half the band (eps) off it: at tol 1e-4 that was 6 eps for
+    """A mode change lands to a tenth of the tolerance, but a slip never counts as on the band's
+    edge from further than half the band (eps) off it: at tol 1e-4 a hundredth was 6 eps for
     the 6 m/s break, slips passing through the band were held instead, and the outcome (unmeasured,
     as in a batch) missed the run at 1e-8 by 1.5e-3 (off-centre 4.8e-4); within half the band,
     7e-6. Compared with the cue ball's speed, as --tol bounds it."""
