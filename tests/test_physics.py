@@ -404,13 +404,12 @@ def test_billiards_break_meets_a_loose_tolerance_unmeasured(cue_y):
     the 6 m/s break, slips passing through the band were held instead, and the outcome (unmeasured,
     as in a batch) missed the run at 1e-8 by 1.5e-3 (off-centre 4.8e-4); within half the band,
     7e-6. Compared with the cue ball's speed, as --tol bounds it."""
+    from collide.accuracy import outcome, speed_scale
+
     scene = load_scene("billiards-break", [f"body.cue.position.y={cue_y}"])
-    speed = 6.0
-    runs = {tol: run_scene(scene, tol=tol, record=False, measure=False).result for tol in (1e-3, 1e-4, 1e-8)}
-    outcome = {tol: np.concatenate([r.final.v[0].ravel(), r.final.w[0].ravel() * scene.bodies[0].radius])
-               for tol, r in runs.items()}
+    ends = {tol: outcome(run_scene(scene, tol=tol, record=False, measure=False).result) for tol in (1e-3, 1e-4, 1e-8)}
     for tol in (1e-3, 1e-4):
-        assert np.abs(outcome[tol] - outcome[1e-8]).max() / speed <= tol, tol
+        assert np.abs(ends[tol] - ends[1e-8]).max() / speed_scale(scene) <= tol, tol
 
 
 @pytest.mark.parametrize(("index", "mu"), [(10, 0.0), (22, 0.0), (5, None)])

@@ -195,8 +195,6 @@ def test_residuals_are_drawn_at_exact_states_only(tmp_path: Path) -> None:
     and dissipated work straight across the step). Drawn at those frames the energy residual was
     1.3e-5 while the run balances to round-off; now only states where every body is at a knot or
     in free flight are drawn (`diagnostics.settled`)."""
-    from collide import diagnostics as dg
-
     scene = parse_scene({
         "name": "two-sliding", "dim": 3, "dt": "auto", "integrator": "kahan6", "tol": 1e-6, "duration": 0.3,
         "gravity": [0.0, 0.0, -9.81], "contact": {"k": 1e7, "mu": 0.3},
