@@ -47,6 +47,11 @@ BAND, SLIDE, STICK = 0, 1, 2
 EDGE_TOL = 1e-9  # relative to the speed scale: how close to the band's edge counts as on it
 MODE_TOL = 0.5 * EDGE_TOL
 STICK_SCALE = 1e-3  # s: turns a friction force into a slip change, to compare with EDGE_TOL
+# A stuck slip whose hold force comes to zero crosses the band to its other edge in a time
+# `crossing` (README "Friction as events"); taken as an impulse there when the positions it
+# moves, eps * crossing, times omega (FLIP_SAFETY over) stay within FLIP_SHARE of the event
+# tolerance. CI_EDGE FLIP marks it for `decide`.
+FLIP, FLIP_SHARE, FLIP_SAFETY = 3, 0.1, 4.0
 TOUCH_TOL = 1e-12  # relative overlap below which spheres count as just touching
 FIXED_POINT = 12  # most iterations of an implicit kick
 # A pass of a kick's fixed point shrinks its change by a factor of h |dG/dv| (the hold rates'
@@ -1122,17 +1127,25 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     spin, planar, seed = fl[FL_SPIN], fl[FL_PLANAR], fl[FL_SEED]
     tol = EDGE_TOL * scale
     retried = np.zeros(nc, np.bool_)
+    flipped = np.zeros(nc, np.bool_)
     edges = 0
     for c in range(nc):
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, planar == YES)
         mag = math.sqrt(sx * sx + sy * sy + sz * sz)
         if mag > 0:
             C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2] = sx / mag, sy / mag, sz / mag
+        flip = CI[c, CI_EDGE] == FLIP
         CI[c, CI_EDGE] = 0
         if abs(mag - C[c, C_EPS]) <= tol:
             CI[c, CI_MODE] = STICK
             CI[c, CI_EDGE] = 1
             edges += 1
+            if flip:
+                # Its slip goes to the band's other edge (settled there below) and is held
+                # there: the hold force goes on through zero, now against the reversed slip.
+                for d in range(3):
+                    C[c, C_HELD + d] = -C[c, C_HELD + d]
+                flipped[c] = True
         elif mag > C[c, C_EPS]:
             CI[c, CI_MODE] = SLIDE
         else:
@@ -1174,7 +1187,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
             need = -(fx * C[c, C_HELD] + fy * C[c, C_HELD + 1] + fz * C[c, C_HELD + 2])
             if not planar and need > 0:
                 need = fmag
-            if need <= force_tol:
+            if need <= force_tol and not (flipped[c] and need > -force_tol):
                 CI[c, CI_MODE] = BAND
                 changed = True
             elif fmag >= C[c, C_MU] * C[c, C_FN] - force_tol:
@@ -2814,6 +2827,17 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 if not E[k, E_V1] > 2.0 * EDGE_TOL:
                     carried = False
                     break
+            if fric and located and not carried and not changed and fl[FL_PLANAR] == YES and h > 0.0:
+                # A stuck contact whose hold force came to zero here (from above, over this step)
+                # and would cross the band quickly enough: `decide` flips it to the other edge.
+                for c in range(nc):
+                    v0, v1 = E[nc + c, E_V0], E[nc + c, E_V1]
+                    if CI[c, CI_MODE] != STICK or not (v0 > MODE_TOL and v1 <= MODE_TOL and E[c, E_V1] > MODE_TOL):
+                        continue
+                    rate = (v0 - v1) / h * scale / STICK_SCALE  # of the slip's acceleration
+                    crossing = 2.0 * math.sqrt(C[c, C_EPS] / rate)
+                    if FLIP_SAFETY * omega * C[c, C_EPS] * crossing <= FLIP_SHARE * fp[FP_EVENT_TOL] * scale:
+                        CI[c, CI_EDGE] = FLIP
         # The phase ends here: the stepped bodies go back to base states at t.
         e_end = energy(X, C, na, nc, grav, spin)
         if e_end - e_start > 0.5 * abs(e_start) + 1e-300 and ST[S_STATUS] == OK:
