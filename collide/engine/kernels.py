@@ -1038,16 +1038,19 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
 
 
 @jit_inline
-def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh):
+def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh, known):
     """Friction mode event values (2C) into E[:, vcol] and their rates into E[:, rcol], in speed
     units over `scale`, at the state in X (geometry in C, X_A set). Slide: |slip| - eps; band:
     eps - |slip|; stick: the margin to mu F_n and the hold force's component against the held
     slip, as the slip change they would make over STICK_SCALE (rates NaN: no closed form).
     The stuck contacts' hold system is built with `fresh`, else it is the one in A: a state that
     ends a step or a decision, whose `settle` built it at this geometry and these modes. Leaves
-    the friction forces in C_FF. Returns False if the hold system is singular."""
+    the friction forces in C_FF. With `known`, those forces (C_FF, X_F, X_L) are already this
+    state's: a step's end, whose closing kick solved them at its velocities (the settling of
+    stuck slips after it moves them by the kick's fixed-point tolerance: a mode value by 1e-12,
+    far below MODE_TOL), and the solve is skipped. Returns False if the hold system is singular."""
     spin, seed, planar = fl[FL_SPIN], fl[FL_SEED], fl[FL_PLANAR] == YES
-    if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, fresh, YES):
+    if not known and not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, fresh, YES):
         return False
     for a in range(na):
         for d in range(3):
@@ -1779,7 +1782,7 @@ def foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A
     springs(X, C, CI, na, nc, grav)
     # With the start's hold system (1e-4 of a step on, the geometry has barely turned: the
     # differences aim the first trial, and the break's trials and outcome came out the same).
-    known = mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale, NO)
+    known = mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale, NO, NO)
     for k in range(2 * nc):
         e0, r0 = E[k, E_V0], E[k, E_R0]
         if not (e0 > MODE_TOL and known):
@@ -1792,9 +1795,27 @@ def foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A
     return soon
 
 
+@jit_inline
+def flips(C, CI, E, nc, c, h, omega, scale, allowed):
+    """Whether stuck contact c's hold force, come to zero in a trial of h (from above: E_V0 and
+    E_V1 its values at the trial's ends), crosses the band quickly enough to be taken as the
+    impulse that flips its slip to the band's other edge, at the trial's end: the bodies that
+    impulse moves by 2 eps over the crossing's length and over how late the trial's end is
+    (both from the line through the two values) stray, times omega (FLIP_SAFETY over), within
+    FLIP_SHARE of `allowed` (the event tolerance, as a speed)."""
+    k = nc + c
+    v0, v1 = E[k, E_V0], E[k, E_V1]
+    if CI[c, CI_MODE] != STICK or not (v0 > MODE_TOL and v1 <= MODE_TOL and E[c, E_V1] > MODE_TOL):
+        return False
+    rate = (v0 - v1) / h * scale / STICK_SCALE  # of the slip's acceleration
+    crossing = 2.0 * math.sqrt(C[c, C_EPS] / rate)
+    late = h * max(-v1, 0.0) / (v0 - v1)
+    return FLIP_SAFETY * omega * C[c, C_EPS] * (crossing + 2.0 * late) <= FLIP_SHARE * allowed
+
+
 @jit
 def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
-                max_turn, negligible, nudge, reach, brief, exact, ST):
+                max_turn, negligible, nudge, reach, brief, exact, ST, omega):
     """One step from the start state; where an event would happen inside it, shortened to land there,
     each refinement re-stepping from the start (in the plane, one within `nudge` of the last trial's
     end is a Verlet substep from there, one within `reach` a Yoshida step, and one from the start up
@@ -1925,14 +1946,16 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
         crossing_aim = theta
         best = -1
         if modes:
-            if not mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale, NO):
+            if not mode_events(X, C, CI, E, na, nc, E_V1, E_R1, stuck, A, b, fl, scale, NO, YES):
                 return h, work, False, limited, -1, True
             best = -1
             guess = math.inf
+            crossed = 0
             for k in range(modes):
                 e0, e1 = E[k, E_V0], E[k, E_V1]
                 if k == passed or not (e0 > MODE_TOL and e1 < -MODE_TOL):
                     continue
+                crossed += 1
                 # The first root on the cubic through both ends' values and rates where they have
                 # closed forms: a slip entering the band from its edge crosses it, and its near
                 # edge's value rises and falls back with the far edge's, whose secant aims at
@@ -1961,7 +1984,12 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                         hi, f_hi, s_hi = frac, f, slope
                     else:
                         lo, f_lo, s_lo = frac, f, slope
-                if abs(f) <= MODE_TOL and (best < 0 or best == col):
+                # A hold force through zero, alone, that `decide` flips at this end, near enough
+                # past it (see `flips`): landed.
+                flip = (crossed == 1 and best == col and col >= nc and fl[FL_PLANAR] == YES
+                        and not (crossing and theta <= frac)
+                        and flips(C, CI, E, nc, col - nc, h, omega, scale, negligible))
+                if flip or (abs(f) <= MODE_TOL and (best < 0 or best == col)):
                     pending = False
                     if short:
                         theta = math.inf
@@ -2725,7 +2753,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 done, ok, turned = decide(X, C, CI, na, nc, stuck, A, b, fl, scale)
                 share(G, XI, na, done)
                 if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale,
-                                             YES if turned else NO):
+                                             YES if turned else NO, NO):
                     ST[S_STATUS] = SINGULAR
                     FG[F_STATUS_T] = t
                     break
@@ -2759,7 +2787,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             h, work, ok, limited, late, located = step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full,
                                                               weights, WP, grav, stuck, A, b, fl, scale, max_turn,
                                                               negligible,
-                                                              nudge, reach, brief, exact, ST)
+                                                              nudge, reach, brief, exact, ST, omega)
             if not located:
                 if ST[S_UNLOCATED] == 0:
                     FG[F_UNLOCATED_T] = t
@@ -2831,12 +2859,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 # A stuck contact whose hold force came to zero here (from above, over this step)
                 # and would cross the band quickly enough: `decide` flips it to the other edge.
                 for c in range(nc):
-                    v0, v1 = E[nc + c, E_V0], E[nc + c, E_V1]
-                    if CI[c, CI_MODE] != STICK or not (v0 > MODE_TOL and v1 <= MODE_TOL and E[c, E_V1] > MODE_TOL):
-                        continue
-                    rate = (v0 - v1) / h * scale / STICK_SCALE  # of the slip's acceleration
-                    crossing = 2.0 * math.sqrt(C[c, C_EPS] / rate)
-                    if FLIP_SAFETY * omega * C[c, C_EPS] * crossing <= FLIP_SHARE * fp[FP_EVENT_TOL] * scale:
+                    if flips(C, CI, E, nc, c, h, omega, scale, negligible):
                         CI[c, CI_EDGE] = FLIP
         # The phase ends here: the stepped bodies go back to base states at t.
         e_end = energy(X, C, na, nc, grav, spin)
