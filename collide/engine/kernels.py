@@ -1126,7 +1126,8 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     mu F_n) or band (not against it). A stuck slip is held along its hold force's reverse; in 3D
     a slip that reaches the edge off that direction is turned onto it (the limit of the fast
     turning along the edge that the law gives there). Returns (work dissipated, ok, whether the
-    hold system left in A is not these modes': 3D edge contacts that slide on were settled held)."""
+    hold system left in A is not these modes': 3D edge contacts that slide on were settled held,
+    whether the friction forces left are this state's: see `mode_events`' `known`)."""
     spin, planar, seed = fl[FL_SPIN], fl[FL_PLANAR], fl[FL_SEED]
     tol = EDGE_TOL * scale
     retried = np.zeros(nc, np.bool_)
@@ -1156,7 +1157,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     solved = False  # the last friction solve was at the final modes: its hold system is settle's
     for _ in range(2 * nc + 2):
         if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES, YES):
-            return 0.0, False, False
+            return 0.0, False, False, False
         changed = False
         # An edge contact that another's change left sliding with its slip heading into the band,
         # or in the band with its slip heading out, is in no consistent mode: it is held again
@@ -1213,7 +1214,9 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     for c in range(nc):
         if CI[c, CI_EDGE] == 2:
             CI[c, CI_MODE] = SLIDE
-    return work, ok, turned
+    # The friction its last solve left (C_FF, X_F, X_L) is this state's unless settling moved a
+    # slip by more than a step's drift: a flip moves one by 2 eps (a mode value by 3e-8 in the break).
+    return work, ok, turned, solved and not turned and not flipped.any()
 
 
 @jit_inline
@@ -2750,10 +2753,10 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 if not stepped:
                     geometry(X, C, CI, nc, WP, fl[FL_SEED])
                     springs(X, C, CI, na, nc, grav)
-                done, ok, turned = decide(X, C, CI, na, nc, stuck, A, b, fl, scale)
+                done, ok, turned, solved = decide(X, C, CI, na, nc, stuck, A, b, fl, scale)
                 share(G, XI, na, done)
                 if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale,
-                                             YES if turned else NO, NO):
+                                             YES if turned else NO, YES if solved else NO):
                     ST[S_STATUS] = SINGULAR
                     FG[F_STATUS_T] = t
                     break
