@@ -116,7 +116,7 @@ def test_a_3d_slides_event_value_is_continuous_as_its_slip_turns():
             held = slip / np.linalg.norm(slip)
         C[0, kn.C_HELD:kn.C_HELD + 3] = held
         assert kn.mode_events(X, C, CI, E, 2, nc, kn.E_V0, kn.E_R0, np.zeros(3, np.int64), np.zeros((6, 6)),
-                              np.zeros(6), fl, 1.0, kn.YES)
+                              np.zeros(6), fl, 1.0, kn.YES, kn.NO)
         values.append(E[0, kn.E_V0])
     values = np.array(values)
     expected = np.linalg.norm(slip) * np.cos(turns / 2) ** 2 - eps
