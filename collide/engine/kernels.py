@@ -48,9 +48,9 @@ EDGE_TOL = 1e-9  # relative to the speed scale: how close to the band's edge cou
 MODE_TOL = 0.5 * EDGE_TOL
 STICK_SCALE = 1e-3  # s: turns a friction force into a slip change, to compare with EDGE_TOL
 # A stuck slip whose hold force comes to zero crosses the band to its other edge in a time
-# `crossing` (README "Friction as events"); taken as an impulse there when the positions it
-# moves, eps * crossing, times omega (FLIP_SAFETY over) stay within FLIP_SHARE of the event
-# tolerance. CI_EDGE FLIP marks it for `decide`.
+# `crossing` (README "Friction as events"); taken as an impulse there when the bodies' shift
+# that makes, times omega (FLIP_SAFETY over), stays within FLIP_SHARE of the event tolerance
+# (`flips`). CI_EDGE FLIP marks it for `decide`.
 FLIP, FLIP_SHARE, FLIP_SAFETY = 3, 0.1, 4.0
 TOUCH_TOL = 1e-12  # relative overlap below which spheres count as just touching
 FIXED_POINT = 12  # most iterations of an implicit kick
@@ -2714,7 +2714,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         if omega > 0 and fl[FL_PLANAR] == YES and weights.shape[0] > 3:
             brief = (SHORT_SHARE * KAHAN6_ERROR * (omega * dt) ** 7 / YOSHIDA_ERROR) ** 0.2 / omega
         # A kick's fixed point is left with a ten-thousandth of the event tolerance: thousands of
-        # kicks stay far below the tolerance (at 1e-6, 1e-12 each; a pass fewer in most kicks).
+        # kicks stay far below the tolerance (at 1e-6, 1e-11 each; a pass fewer in most kicks).
         exact = max(4.0 * EPS64, 1e-4 * fp[FP_EVENT_TOL])
         grown = math.inf
         turner = -1  # the contact whose turning last limited a step
