@@ -1799,13 +1799,13 @@ def foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A
 
 
 @jit_inline
-def flips(C, CI, E, nc, c, h, omega, scale, allowed):
+def flips(C, CI, E, nc, c, h, omega, scale):
     """Whether stuck contact c's hold force, come to zero in a trial of h (from above: E_V0 and
     E_V1 its values at the trial's ends), crosses the band quickly enough to be taken as the
     impulse that flips its slip to the band's other edge, at the trial's end: the bodies that
     impulse moves by 2 eps over the crossing's length and over how late the trial's end is
     (both from the line through the two values) stray, times omega (FLIP_SAFETY over), within
-    FLIP_SHARE of `allowed` (the event tolerance, as a speed)."""
+    FLIP_SHARE of the event tolerance as a speed (EDGE_TOL scale: the mode values' unit)."""
     k = nc + c
     v0, v1 = E[k, E_V0], E[k, E_V1]
     if CI[c, CI_MODE] != STICK or not (v0 > MODE_TOL and v1 <= MODE_TOL and E[c, E_V1] > MODE_TOL):
@@ -1813,7 +1813,7 @@ def flips(C, CI, E, nc, c, h, omega, scale, allowed):
     rate = (v0 - v1) / h * scale / STICK_SCALE  # of the slip's acceleration
     crossing = 2.0 * math.sqrt(C[c, C_EPS] / rate)
     late = h * max(-v1, 0.0) / (v0 - v1)
-    return FLIP_SAFETY * omega * C[c, C_EPS] * (crossing + 2.0 * late) <= FLIP_SHARE * allowed
+    return FLIP_SAFETY * omega * C[c, C_EPS] * (crossing + 2.0 * late) <= FLIP_SHARE * EDGE_TOL * scale
 
 
 @jit
@@ -1991,7 +1991,7 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                 # past it (see `flips`): landed.
                 flip = (crossed == 1 and best == col and col >= nc and fl[FL_PLANAR] == YES
                         and not (crossing and theta <= frac)
-                        and flips(C, CI, E, nc, col - nc, h, omega, scale, negligible))
+                        and flips(C, CI, E, nc, col - nc, h, omega, scale))
                 if flip or (abs(f) <= MODE_TOL and (best < 0 or best == col)):
                     pending = False
                     if short:
@@ -2862,7 +2862,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 # A stuck contact whose hold force came to zero here (from above, over this step)
                 # and would cross the band quickly enough: `decide` flips it to the other edge.
                 for c in range(nc):
-                    if flips(C, CI, E, nc, c, h, omega, scale, negligible):
+                    if flips(C, CI, E, nc, c, h, omega, scale):
                         CI[c, CI_EDGE] = FLIP
         # The phase ends here: the stepped bodies go back to base states at t.
         e_end = energy(X, C, na, nc, grav, spin)
