@@ -1992,23 +1992,22 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                         hi, f_hi, s_hi = frac, f, slope
                     else:
                         lo, f_lo, s_lo = frac, f, slope
-                # A hold force through zero, alone, that `decide` flips at this end, near enough
-                # past it (see `flips`): landed.
-                flip = (crossed == 1 and best == col and col >= nc and fl[FL_PLANAR] == YES
-                        and not (crossing and theta <= frac)
-                        and flips(C, CI, E, nc, col - nc, h, omega, scale))
+                # The only value crossed in this trial, with no contact's start or end before it.
+                alone = crossed == 1 and best == col and not (crossing and theta <= frac)
+                # A hold force through zero that `decide` flips at this end, near enough past it
+                # (see `flips`): landed.
+                flip = alone and col >= nc and fl[FL_PLANAR] == YES and flips(C, CI, E, nc, col - nc, h, omega, scale)
                 # A stuck contact's value (its margin to mu F_n, its hold force along the held
-                # slip) just past zero, alone: held on past the change for `late` (from the line
-                # through the bracket), the friction is off by at most |f| (as a force: see
-                # `mode_events`) and changes the slip by |f| late / 2 over STICK_SCALE, second
-                # order in `late` where a slide's or the band's value errs by its own size: the
-                # landing takes that within MODE_TOL (LATE_SAFETY over) instead of |f| itself.
-                # The break's stick-to-slide landings took 2.8 trials each, now 1.8.
+                # slip) just past zero: held on past the change for `late` (from the line through
+                # the bracket), the friction is off by at most |f| (as a force: see `mode_events`)
+                # and changes the slip by |f| late / 2 over STICK_SCALE, second order in `late`
+                # where a slide's or the band's value errs by its own size: the landing takes that
+                # within MODE_TOL (LATE_SAFETY over) instead of |f| itself. The break's
+                # stick-to-slide landings took 2.8 trials each, now 1.8.
                 late_ok = False
-                if crossed == 1 and best == col and f < 0.0 < f_lo and CI[col % nc, CI_MODE] == STICK:
+                if alone and f < 0.0 < f_lo and CI[col % nc, CI_MODE] == STICK:
                     late = (frac - lo) * h_full * f / (f - f_lo)
-                    late_ok = (LATE_SAFETY * 0.5 * -f * late <= MODE_TOL * STICK_SCALE
-                               and not (crossing and theta <= frac))
+                    late_ok = LATE_SAFETY * 0.5 * -f * late <= MODE_TOL * STICK_SCALE
                 if flip or late_ok or (abs(f) <= MODE_TOL and (best < 0 or best == col)):
                     pending = False
                     if short:
