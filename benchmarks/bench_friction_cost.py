@@ -11,8 +11,8 @@ never asserts.
 
 --variants adds other breaks, each against its frictionless twin: at mu = 0.1 the rack turned
 30 degrees in its plane, balls 1.3 times larger (same density) and the cue at 3 m/s; and breaks
-with more friction mode changes: the cue ball 1 cm off the rack's line (every mode changes at its
-own time), mu = 0.2 and 0.4.
+with more friction mode changes: the cue ball 0.5, 1 and 2 cm off the rack's line (every mode
+changes at its own time), mu = 0.2 and 0.4.
 """
 
 from __future__ import annotations
@@ -104,7 +104,9 @@ def main() -> None:
              ("billiards-break mu = 0.1, tilted plane (3D)", "billiards-break mu = 0.1", "about 1x"),
              ("wall impact, skew spin (3D)", "wall impact (2D)", "comparable")]
     variants = {"rack turned 30 deg": ([], {"angle": math.pi / 6}), "balls 1.3x larger": ([], {"size": 1.3}),
-                "cue at 3 m/s": ([], {"speed": 0.5}), "cue 1 cm off-centre": (["body.cue.position.y=0.01"], {}),
+                "cue at 3 m/s": ([], {"speed": 0.5}), "cue 0.5 cm off-centre": (["body.cue.position.y=0.005"], {}),
+                "cue 1 cm off-centre": (["body.cue.position.y=0.01"], {}),
+                "cue 2 cm off-centre": (["body.cue.position.y=0.02"], {}),
                 "mu = 0.2": (["contact.mu=0.2"], {}), "mu = 0.4": (["contact.mu=0.4"], {})} if args.variants else {}
     for label, (sets, change) in variants.items():
         with_friction, twin = f"billiards-break, {label}", f"billiards-break, {label}: its frictionless twin"
