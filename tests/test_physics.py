@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -406,20 +407,31 @@ print(int(r.steps[0]), count["flips"], count["trials"], count["released"], *outc
 """
 
 
-def _flip_runs(*settings: str) -> dict[str, tuple[int, int, int, int, np.ndarray]]:
-    """The off-centre break at tol 1e-6 with the interpreted kernels, per setting: (steps, flips,
-    step calls, stuck contacts released, outcome)."""
+@functools.cache
+def _flip_run(setting: str) -> tuple[int, int, int, int, np.ndarray]:
+    """The off-centre break at tol 1e-6 with the interpreted kernels: (steps, flips, step calls,
+    stuck contacts released, outcome). Cached: both tests below compare with the "on" run."""
     import os
     import subprocess
     import sys
 
     env = dict(os.environ, COLLIDE_JIT="0")
-    runs = {}
-    for setting in settings:
-        out = subprocess.run([sys.executable, "-c", _FLIP_RUN, setting], env=env, capture_output=True, text=True,
-                             check=True).stdout.split()
-        runs[setting] = (int(out[0]), int(out[1]), int(out[2]), int(out[3]), np.array(out[4:], dtype=float))
-    return runs
+    out = subprocess.run([sys.executable, "-c", _FLIP_RUN, setting], env=env, capture_output=True, text=True,
+                         check=True).stdout.split()
+    return int(out[0]), int(out[1]), int(out[2]), int(out[3]), np.array(out[4:], dtype=float)
+
+
+def _flip_runs(*settings: str) -> dict[str, tuple[int, int, int, int, np.ndarray]]:
+    return {setting: _flip_run(setting) for setting in settings}
+
+
+def _off_centre_scales() -> tuple[float, float]:
+    """The off-centre break's speed scale and event tolerance at tol 1e-6 (as `simulate` sets it)."""
+    from collide.accuracy import speed_scale
+
+    scene = load_scene("billiards-break", ["body.cue.position.y=0.01"])
+    speed = speed_scale(scene)
+    return speed, min(0.1 * 1e-6, stepper.EDGE_BAND_SHARE * scene.contact.eps / speed)
 
 
 def test_a_hold_force_through_zero_flips_the_slip_to_the_bands_other_edge():
@@ -432,11 +444,7 @@ def test_a_hold_force_through_zero_flips_the_slip_to_the_bands_other_edge():
     the run with both changes landed, in fewer steps (113 against 131). The interpreted kernels,
     so that the gate can be switched off."""
     runs = _flip_runs("on", "no-flips")
-    from collide.accuracy import speed_scale
-
-    scene = load_scene("billiards-break", ["body.cue.position.y=0.01"])
-    speed = speed_scale(scene)
-    event_tol = min(0.1 * 1e-6, stepper.EDGE_BAND_SHARE * scene.contact.eps / speed)
+    speed, event_tol = _off_centre_scales()
     per_flip = kernels.FLIP_SHARE / kernels.FLIP_SAFETY * event_tol
     flips = runs["on"][1]
     assert flips > 0 and runs["no-flips"][1] == 0
@@ -453,11 +461,7 @@ def test_a_stuck_contacts_mode_change_lands_late_within_the_tolerance_in_fewer_t
     trials; its outcome moves by far less than the tolerance (each late landing errs by at most
     MODE_TOL / LATE_SAFETY of the event tolerance; a landed change by MODE_TOL)."""
     runs = _flip_runs("on", "no-late")
-    from collide.accuracy import speed_scale
-
-    scene = load_scene("billiards-break", ["body.cue.position.y=0.01"])
-    speed = speed_scale(scene)
-    event_tol = min(0.1 * 1e-6, stepper.EDGE_BAND_SHARE * scene.contact.eps / speed)
+    speed, event_tol = _off_centre_scales()
     assert runs["on"][2] < runs["no-late"][2]
     # Each release of a stuck contact may have been landed late: at most MODE_TOL / LATE_SAFETY each.
     released = runs["on"][3]
