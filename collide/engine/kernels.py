@@ -451,24 +451,26 @@ def set_basis(C, c):
 @jit_inline
 def factor(A, piv, m, symmetric):
     """Factor A[:m, :m] in place: `symmetric` (and positive definite, as W is where it is
-    symmetric) by Cholesky into its lower triangle, half the work of LU and no pivoting (alone,
-    0.21 against 0.38 us at m = 10, 0.68 against 1.57 at 16); else LU with partial pivoting (row
-    swaps in piv). False if singular."""
+    symmetric) as L D L^T, L unit lower triangular below the diagonal and 1 / D on it, half the
+    work of LU and no pivoting (Cholesky: 0.21 against 0.38 us at m = 10, 0.68 against 1.57 at
+    16), and no square root or division in the solves' chains (a third of a hold solve's time);
+    the upper triangle holds L D while factoring. Else LU with partial pivoting (row swaps in
+    piv). False if singular."""
     if symmetric:
         for k in range(m):
-            s = A[k, k]
             for p in range(k):
-                s -= A[k, p] * A[k, p]
-            if not s > 0.0:
+                s = A[k, p]
+                for q in range(p):
+                    s -= A[q, k] * A[p, q]
+                A[p, k] = s  # L[k, p] D[p]
+            d = A[k, k]
+            for p in range(k):
+                lkp = A[p, k] * A[p, p]
+                A[k, p] = lkp
+                d -= A[p, k] * lkp
+            if not d > 0.0:
                 return False
-            d = math.sqrt(s)
-            A[k, k] = d
-            inv = 1.0 / d
-            for r in range(k + 1, m):
-                s = A[r, k]
-                for p in range(k):
-                    s -= A[r, p] * A[k, p]
-                A[r, k] = s * inv
+            A[k, k] = 1.0 / d
         return True
     for k in range(m):
         p = k
@@ -498,12 +500,12 @@ def solve_factored(A, piv, b, m, symmetric):
             s = b[k]
             for col in range(k):
                 s -= A[k, col] * b[col]
-            b[k] = s / A[k, k]
+            b[k] = s
         for k in range(m - 1, -1, -1):
-            s = b[k]
+            s = b[k] * A[k, k]
             for r in range(k + 1, m):
                 s -= A[r, k] * b[r]
-            b[k] = s / A[k, k]
+            b[k] = s
         return
     for k in range(m):
         p = piv[k]
@@ -543,6 +545,11 @@ def couple_block(X, C, CI, c, d, a, spin, rows, A, row, col):
     im, ii = X[a, X_IM], X[a, X_II]
     ncx, ncy, ncz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
     ndx, ndy, ndz = C[d, C_N], C[d, C_N + 1], C[d, C_N + 2]
+    if rows == 1:
+        # In the plane each tangent is z x n and (n_d x e_d) x n_c is e_c: the block is
+        # s_c s_d (n_c . n_d) / m_a + l_c l_d / I_a (a fifth of the general sums' work).
+        A[row, col] += sc * sd * im * (ncx * ndx + ncy * ndy) + (lc * ii * ld if spin else 0.0)
+        return
     for beta in range(rows):
         ex, ey, ez = C[d, C_B + 3 * beta], C[d, C_B + 3 * beta + 1], C[d, C_B + 3 * beta + 2]
         rx, ry, rz = sc * sd * im * ex, sc * sd * im * ey, sc * sd * im * ez
@@ -693,7 +700,8 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
             if not slides:
                 continue
             sx, sy, sz = slide_direction(X, C, CI, c, vc, wc, spin, span, planar)
-            mag = math.sqrt(sx * sx + sy * sy + sz * sz)
+            # In the plane the direction is the unit tangent z x n.
+            mag = 1.0 if planar else math.sqrt(sx * sx + sy * sy + sz * sz)
             C[c, C_FF] = 0.0
             C[c, C_FF + 1] = 0.0
             C[c, C_FF + 2] = 0.0
@@ -799,14 +807,37 @@ def close_and_open(X, na, h, spin, planar):
 
 
 @jit_inline
-def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
+def hold_pull(X, C, CI, nc):
+    """How fast the stuck contacts' hold forces follow the velocities, |dG/dv| (1/s): the frame
+    turning at the relative speed over the distance and with the spins, the arms with the spins.
+    Taken once a step: within one it changes by a share of the step's impulse, which
+    CONTRACTION_SAFETY covers (computed at each kick, a twentieth of the kicks' time)."""
+    pull = 0.0
+    for c in range(nc):
+        if CI[c, CI_MODE] == STICK:
+            i, j = CI[c, CI_I], CI[c, CI_J]
+            rel, wi, wj = 0.0, 0.0, 0.0
+            for d in range(3):
+                u = X[i, X_V + d] - (X[j, X_V + d] if j >= 0 else 0.0)
+                rel += u * u
+                wi += X[i, X_W + d] ** 2
+                if j >= 0:
+                    wj += X[j, X_W + d] ** 2
+            wi, wj = math.sqrt(wi), math.sqrt(wj)
+            arm = C[c, C_DIST] if j >= 0 else C[c, C_LIS]
+            pull = max(pull, (math.sqrt(rel) + C[c, C_LIS] * wi + C[c, C_LJS] * wj) / arm + wi + wj)
+    return pull
+
+
+@jit_inline
+def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact, pull_rate):
     """The kicks at one geometry between two Verlet substeps, on (X_V, X_W): the close of one
     (springs over h_end, then friction at the end velocities: implicit) and the opening of the
     next (friction at those velocities, then springs over h_start); either span may be 0 (a
     step's first kick, h_end 0, opens with the friction already in X_F, X_L: see `step`).
     `exact`: the change, relative to the fastest velocity, that the closing kick's fixed point may
-    leave undone. Returns (work dissipated, ok); friction forces at the closing velocities stay
-    in C_FF."""
+    leave undone; `pull_rate`: `hold_pull` at the step's start. Returns (work dissipated, ok);
+    friction forces at the closing velocities stay in C_FF."""
     spin = fl[FL_SPIN]
     planar = fl[FL_PLANAR] == YES
     work = 0.0
@@ -850,21 +881,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact):
         X[0, X_HP] = h_end
         # How fast the hold forces follow the velocities: a pass shrinks the change by about
         # h |dG/dv| (see CONTRACTION_SAFETY); with it, one pass can be enough.
-        pull = 0.0
-        for c in range(nc if warm else 0):
-            if CI[c, CI_MODE] == STICK:
-                i, j = CI[c, CI_I], CI[c, CI_J]
-                rel, wi, wj = 0.0, 0.0, 0.0
-                for d in range(3):
-                    u = X[i, X_V + d] - (X[j, X_V + d] if j >= 0 else 0.0)
-                    rel += u * u
-                    wi += X[i, X_W + d] ** 2
-                    if j >= 0:
-                        wj += X[j, X_W + d] ** 2
-                wi, wj = math.sqrt(wi), math.sqrt(wj)
-                arm = C[c, C_DIST] if j >= 0 else C[c, C_LIS]
-                pull = max(pull, (math.sqrt(rel) + C[c, C_LIS] * wi + C[c, C_LJS] * wj) / arm + wi + wj)
-        pull *= CONTRACTION_SAFETY * abs(h_end)
+        pull = CONTRACTION_SAFETY * abs(h_end) * pull_rate if warm else 0.0
         # In the plane the velocities' z parts and the spins' x, y parts are zero and stay so.
         moves, turns = (2, 2) if planar else (3, 0)
         last = math.inf
@@ -1002,8 +1019,9 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
     work = 0.0
     ok = True
     first = 0.5 * weights[0] * h
+    pull_rate = hold_pull(X, C, CI, nc) if fric else 0.0
     if fric:
-        work, ok = kick(X, C, CI, na, nc, 0.0, first, stuck, A, b, fl, exact)
+        work, ok = kick(X, C, CI, na, nc, 0.0, first, stuck, A, b, fl, exact, pull_rate)
     else:
         for a in range(na):
             for d in range(3):
@@ -1020,7 +1038,7 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
         close = 0.5 * hk
         opening = 0.5 * weights[k + 1] * h if k + 1 < n else 0.0
         if fric:
-            done, good = kick(X, C, CI, na, nc, close, opening, stuck, A, b, fl, exact)
+            done, good = kick(X, C, CI, na, nc, close, opening, stuck, A, b, fl, exact, pull_rate)
             work += done
             ok = ok and good
         else:
@@ -1738,6 +1756,12 @@ def hermite_dip(e0, e1, r0, r1, floor):
     (1, e1, r1) (r per step) is below `floor`: a value above it at both ends that dips between.
     inf if none (or if the rates make it a hump)."""
     if r0 >= 0.0 and r1 <= 0.0:
+        return math.inf
+    # The cubic is e0, e1's blend plus r0 u (1 - u)^2 - r1 u^2 (1 - u), each term at most 4/27 of
+    # its rate: no sample can dip below this bound (0.15 over 4/27 and the 1e-12 cover the
+    # samples' rounding), and most values of a trial stay above it (their 15 samples skipped).
+    reach = max(-r0, 0.0) + max(r1, 0.0)
+    if min(e0, e1) - 0.15 * reach - 1e-12 * (abs(e0) + abs(e1) + reach) > floor:
         return math.inf
     for i in range(1, DIP_SAMPLES):
         u = i / DIP_SAMPLES
