@@ -3,6 +3,7 @@ the order the compositions keep with friction, in the plane and out of it."""
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -169,16 +170,18 @@ def test_a_3d_pile_locates_every_event(seed, tol):
 
 @pytest.mark.parametrize("symmetric", [True, False])
 def test_the_hold_system_is_solved_as_numpy_solves_it(symmetric):
-    """W f = b by `factor` and `solve_factored`: Cholesky where W is symmetric (positive definite,
-    as a stuck set's W is: J M^-1 J^T), LU with row swaps where it is not (the seed's levers),
-    against numpy's solve to round-off; an exactly singular W is reported, not solved."""
+    """W f = b by `factor` and `solve_factored`: L D L^T where W is symmetric (positive definite,
+    as a stuck set's W is: J M^-1 J^T; from its lower triangle only, as `hold_matrix` builds it),
+    LU with row swaps where it is not (the seed's levers), against numpy's solve to round-off;
+    an exactly singular W is reported, not solved."""
     rng = np.random.default_rng(3)
     for m in (1, 4, 10, 16):
         # Contacts coupled through shared bodies: a sparse J, each contact on bodies of its own.
         J = rng.normal(size=(m, 3 * m)) * (rng.random((m, 3 * m)) < 0.2) + np.eye(m, 3 * m)
         W = J @ J.T if symmetric else J @ J.T + 0.1 * rng.normal(size=(m, m))
         A = np.zeros((48, 48))
-        A[:m, :m] = W
+        # Symmetric: the upper triangle is never built, so it must never be read.
+        A[:m, :m] = np.where(np.tri(m, dtype=bool), W, np.nan) if symmetric else W
         piv = np.zeros(48, np.int64)
         b = rng.normal(size=48)
         expected = np.linalg.solve(W, b[:m])
@@ -190,6 +193,59 @@ def test_the_hold_system_is_solved_as_numpy_solves_it(symmetric):
     A = np.zeros((4, 4))
     A[:2, :2] = [[1.0, 1.0], [1.0, 1.0]]  # two contacts that are one
     assert not kn.factor(A, np.zeros(4, np.int64), 2, symmetric)
+
+
+def test_a_planar_coupling_block_is_the_general_one_in_the_plane():
+    """`couple_block`'s closed form in the plane (one tangent, z x n) equals the general sums'
+    first row and column for the same contacts: shared bodies of either side, with and without
+    spin, seed levers (slip arm apart from force arm) included."""
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        X = np.zeros((3, int(kn.NX)))
+        X[:, kn.X_IM], X[:, kn.X_II] = rng.uniform(0.5, 5.0, 3), rng.uniform(10.0, 500.0, 3)
+        C = np.zeros((2, int(kn.NC)))
+        CI = np.zeros((2, int(kn.NCI)), np.int64)
+        pairs = [(0, 1), (1, 2)] if trial % 2 else [(0, 1), (2, 0)]
+        for c, (i, j) in enumerate(pairs):
+            angle = rng.uniform(0.0, 2 * np.pi)
+            C[c, kn.C_N:kn.C_N + 3] = np.cos(angle), np.sin(angle), 0.0
+            C[c, [kn.C_LIF, kn.C_LJF, kn.C_LIS, kn.C_LJS]] = rng.uniform(0.02, 0.05, 4)
+            CI[c, kn.CI_I], CI[c, kn.CI_J] = i, j
+            kn.set_basis(C, c)
+        shared = ({*pairs[0]} & {*pairs[1]}).pop()
+        for spin in (0, 1):
+            planar, general = np.zeros((1, 1)), np.zeros((2, 2))
+            kn.couple_block(X, C, CI, 0, 1, shared, spin, 1, planar, 0, 0)
+            kn.couple_block(X, C, CI, 0, 1, shared, spin, 2, general, 0, 0)
+            assert planar[0, 0] == pytest.approx(general[0, 0], rel=1e-13, abs=1e-13 * np.abs(general).max())
+
+
+def test_a_dip_bound_skips_only_cubics_that_do_not_dip():
+    """`hermite_dip` skips its samples where a bound shows the cubic stays above the floor: over
+    random ends and rates (values near the floor, rates up to 40 times them), its answer is the
+    samples' own."""
+    rng = np.random.default_rng(11)
+
+    def sampled(e0, e1, r0, r1, floor):
+        if r0 >= 0.0 and r1 <= 0.0:
+            return math.inf
+        for i in range(1, int(kn.DIP_SAMPLES)):
+            u = i / kn.DIP_SAMPLES
+            p = ((2 * u**3 - 3 * u**2 + 1) * e0 + (u**3 - 2 * u**2 + u) * r0 + (3 * u**2 - 2 * u**3) * e1
+                 + (u**3 - u**2) * r1)
+            if p < floor:
+                return u
+        return math.inf
+
+    answers = []
+    for _ in range(20000):
+        e0, e1 = rng.uniform(1e-10, 1.0, 2) * 10.0 ** rng.integers(-6, 1)
+        r0, r1 = rng.normal(size=2) * 40 * max(e0, e1)
+        got = kn.hermite_dip(e0, e1, r0, r1, -1e-9)
+        assert got == sampled(e0, e1, r0, r1, -1e-9)
+        answers.append(got)
+    dips = np.isfinite(answers).sum()
+    assert 1000 < dips < 19000  # both kinds were tried
 
 
 def _order(scene, fractions=(0.4, 0.2)):
