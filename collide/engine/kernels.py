@@ -453,8 +453,8 @@ def factor(A, piv, m, symmetric):
     """Factor A[:m, :m] in place: `symmetric` (and positive definite, as W is where it is
     symmetric) as L D L^T, L unit lower triangular below the diagonal and 1 / D on it, half the
     work of LU and no pivoting (Cholesky: 0.21 against 0.38 us at m = 10, 0.68 against 1.57 at
-    16), and no square root or division in the solves' chains (a third of a hold solve's time);
-    the upper triangle holds L D while factoring. Else LU with partial pivoting (row swaps in
+    16), and no square root, nor a division in the solves, whose chains wait on each; the upper
+    triangle holds L D while factoring. Else LU with partial pivoting (row swaps in
     piv). False if singular."""
     if symmetric:
         for k in range(m):
@@ -811,7 +811,8 @@ def hold_pull(X, C, CI, nc):
     """How fast the stuck contacts' hold forces follow the velocities, |dG/dv| (1/s): the frame
     turning at the relative speed over the distance and with the spins, the arms with the spins.
     Taken once a step: within one it changes by a share of the step's impulse, which
-    CONTRACTION_SAFETY covers (computed at each kick, a twentieth of the kicks' time)."""
+    CONTRACTION_SAFETY covers (computed at each kick, it took three square roots per stuck
+    contact every time)."""
     pull = 0.0
     for c in range(nc):
         if CI[c, CI_MODE] == STICK:
