@@ -7,12 +7,17 @@ timed twice: the kernel alone (`wall_time_s` of a run whose error is not measure
 alternate within one process, the compiled kernels loaded first; prints medians and ratios,
 never asserts.
 
-    python benchmarks/bench_friction_cost.py [--repeat 7] [--tol 1e-6] [--variants]
+    python benchmarks/bench_friction_cost.py [--repeat 7] [--tol 1e-6] [--variants] [--cli 9]
 
 --variants adds other breaks, each against its frictionless twin: at mu = 0.1 the rack turned
 30 degrees in its plane, balls 1.3 times larger (same density) and the cue at 3 m/s; and breaks
 with more friction mode changes: the cue ball 0.5, 1 and 2 cm off the rack's line (every mode
 changes at its own time), mu = 0.2 and 0.4.
+
+--cli N also times the breaks that `--set` can make as a user runs them: `collide run
+billiards-break --json --no-record` in a fresh process each, N rounds alternating, `wall_time_s`
+(its error measured as always) medians and ratios; a process's one run finds colder caches than
+runs repeated in one process.
 """
 
 from __future__ import annotations
@@ -22,8 +27,11 @@ import os
 os.environ.setdefault("COLLIDE_JIT", "1")  # time compiled kernels (waited for), not a fresh install's interpreted
 
 import argparse
+import json
 import math
 import statistics
+import subprocess
+import sys
 import time
 
 from collide.run import run_scene
@@ -84,11 +92,42 @@ def timed(scene, measure: bool) -> tuple[float, float, int, int]:
     return run.result.wall_time_s, whole, int(run.result.steps[0]), int(run.result.attempts[0])
 
 
+def cli_wall_time(sets: list[str], tol: float) -> float:
+    """`wall_time_s` of one `collide run billiards-break --json --no-record` in a fresh process."""
+    overrides = [arg for item in sets for arg in ("--set", item)]
+    out = subprocess.run([sys.executable, "-m", "cli.main", "run", "billiards-break", "--tol", str(tol), "--json",
+                          "--no-record", *overrides], capture_output=True, text=True, check=True).stdout
+    return float(json.loads(out)["wall_time_s"])
+
+
+def cli_ratios(rounds: int, tol: float) -> None:
+    """The breaks `--set` makes, each against its frictionless twin, one process a run."""
+    variants = {"built-in": [], "cue 0.5 cm off-centre": ["body.cue.position.y=0.005"],
+                "cue 1 cm off-centre": ["body.cue.position.y=0.01"],
+                "cue 2 cm off-centre": ["body.cue.position.y=0.02"],
+                "mu = 0.2": ["contact.mu=0.2"], "mu = 0.4": ["contact.mu=0.4"]}
+    times: dict[tuple[str, bool], list[float]] = {}
+    for _ in range(rounds):
+        for label, sets in variants.items():
+            for friction in (True, False):
+                twin = [] if friction else ["contact.mu=0"]
+                times.setdefault((label, friction), []).append(cli_wall_time(sets + twin, tol))
+    print(f"\n`collide run billiards-break --tol {tol:g} --json --no-record`, a fresh process each, "
+          f"medians of {rounds} alternating rounds, ms of wall_time_s (error measured)")
+    print("| break | with friction | frictionless twin | ratio |")
+    print("|---|---|---|---|")
+    for label in variants:
+        a, b = statistics.median(times[label, True]), statistics.median(times[label, False])
+        print(f"| {label} | {a * 1e3:.2f} | {b * 1e3:.2f} | {a / b:.1f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=7)
     parser.add_argument("--tol", type=float, default=1e-6)
     parser.add_argument("--variants", action="store_true", help="also breaks with more mode changes")
+    parser.add_argument("--cli", type=int, default=0, metavar="N",
+                        help="also N rounds of the breaks as `collide run` in fresh processes")
     args = parser.parse_args()
     cases = {
         "billiards-break mu = 0.1": load_scene("billiards-break", [f"tol={args.tol}"]),
@@ -134,6 +173,8 @@ def main() -> None:
     for a, b, bar in pairs:
         print(f"{a} / {b}: {med[a][False] / med[b][False]:.1f}x unmeasured, "
               f"{med[a][True] / med[b][True]:.1f}x as run ({bar})")
+    if args.cli:
+        cli_ratios(args.cli, args.tol)
 
 
 if __name__ == "__main__":
