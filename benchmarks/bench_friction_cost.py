@@ -37,6 +37,13 @@ import time
 from collide.run import run_scene
 from collide.scene import load_scene, parse_scene, turned_source
 
+# The --variants breaks: `--set` overrides, and in_plane changes (turned, scaled, slower).
+VARIANTS = {"rack turned 30 deg": ([], {"angle": math.pi / 6}), "balls 1.3x larger": ([], {"size": 1.3}),
+            "cue at 3 m/s": ([], {"speed": 0.5}), "cue 0.5 cm off-centre": (["body.cue.position.y=0.005"], {}),
+            "cue 1 cm off-centre": (["body.cue.position.y=0.01"], {}),
+            "cue 2 cm off-centre": (["body.cue.position.y=0.02"], {}),
+            "mu = 0.2": (["contact.mu=0.2"], {}), "mu = 0.4": (["contact.mu=0.4"], {})}
+
 
 def rolling_ball(tol: float):
     """A ball (m 0.1 kg, r 0.05 m, k 1e7 N/m, mu 0.3) set down touching a floor, sliding at 1 m/s."""
@@ -102,10 +109,7 @@ def cli_wall_time(sets: list[str], tol: float) -> float:
 
 def cli_ratios(rounds: int, tol: float) -> None:
     """The breaks `--set` makes, each against its frictionless twin, one process a run."""
-    variants = {"built-in": [], "cue 0.5 cm off-centre": ["body.cue.position.y=0.005"],
-                "cue 1 cm off-centre": ["body.cue.position.y=0.01"],
-                "cue 2 cm off-centre": ["body.cue.position.y=0.02"],
-                "mu = 0.2": ["contact.mu=0.2"], "mu = 0.4": ["contact.mu=0.4"]}
+    variants = {"built-in": [], **{label: sets for label, (sets, change) in VARIANTS.items() if not change}}
     times: dict[tuple[str, bool], list[float]] = {}
     for _ in range(rounds):
         for label, sets in variants.items():
@@ -142,11 +146,7 @@ def main() -> None:
              ("rolling ball, 0.5 s", "demo-bonus", "bar 50x"),
              ("billiards-break mu = 0.1, tilted plane (3D)", "billiards-break mu = 0.1", "about 1x"),
              ("wall impact, skew spin (3D)", "wall impact (2D)", "comparable")]
-    variants = {"rack turned 30 deg": ([], {"angle": math.pi / 6}), "balls 1.3x larger": ([], {"size": 1.3}),
-                "cue at 3 m/s": ([], {"speed": 0.5}), "cue 0.5 cm off-centre": (["body.cue.position.y=0.005"], {}),
-                "cue 1 cm off-centre": (["body.cue.position.y=0.01"], {}),
-                "cue 2 cm off-centre": (["body.cue.position.y=0.02"], {}),
-                "mu = 0.2": (["contact.mu=0.2"], {}), "mu = 0.4": (["contact.mu=0.4"], {})} if args.variants else {}
+    variants = VARIANTS if args.variants else {}
     for label, (sets, change) in variants.items():
         with_friction, twin = f"billiards-break, {label}", f"billiards-break, {label}: its frictionless twin"
         for name, mu in ((with_friction, []), (twin, ["contact.mu=0"])):

@@ -197,8 +197,8 @@ def test_the_hold_system_is_solved_as_numpy_solves_it(symmetric):
 
 def test_a_planar_coupling_block_is_the_general_one_in_the_plane():
     """`couple_block`'s closed form in the plane (one tangent, z x n) equals the general sums'
-    first row and column for the same contacts: shared bodies of either side, with and without
-    spin, seed levers (slip arm apart from force arm) included."""
+    entry for the first tangents of the same contacts: shared bodies of either side, with and
+    without spin, seed levers (slip arm apart from force arm) included."""
     rng = np.random.default_rng(5)
     for trial in range(200):
         X = np.zeros((3, int(kn.NX)))
