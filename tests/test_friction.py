@@ -49,7 +49,7 @@ def pressed_island(dim: int, seed: bool, wall: bool):
 
 
 def slips(X, C, CI, WP, nc, seed, spin=1, planar=False):
-    kn.geometry(X, C, CI, nc, WP, seed)
+    kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
     return np.array([kn.slip(X, C, CI, c, kn.X_V, kn.X_W, spin, planar) for c in range(nc)])
 
 
@@ -61,7 +61,7 @@ def test_hold_rate_is_the_slip_rate_without_friction(dim, seed, wall):
     rate of change along the frictionless motion: checked by a central difference."""
     X, C, CI, WP, nc, grav = pressed_island(dim, seed, wall)
     seed = np.int64(seed)
-    kn.geometry(X, C, CI, nc, WP, seed)
+    kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
     kn.springs(X, C, CI, 2, nc, grav)
     assert (C[:nc, kn.C_DELTA] > 0).all()  # really pressed: the springs act
     planar = dim == 2  # the plane's own arithmetic (its zero parts left out): the same numbers
@@ -79,7 +79,7 @@ def test_hold_rate_is_the_slip_rate_without_friction(dim, seed, wall):
         ends.append(slips(Y, C.copy(), CI, WP, nc, seed, planar=planar))
         assert np.array_equal(ends[-1], slips(Y, C.copy(), CI, WP, nc, seed))
     numeric = (ends[0] - ends[1]) / (2 * h)
-    kn.geometry(X, C, CI, nc, WP, seed)
+    kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
     n = C[:nc, kn.C_N:kn.C_N + 3]
     tangential = numeric - np.sum(numeric * n, axis=1, keepdims=True) * n
     # Truncation h^2 |third derivative| and rounding 1e-16 |slip| / h: both below 1e-7 relative.
@@ -95,7 +95,7 @@ def test_a_3d_slides_event_value_is_continuous_as_its_slip_turns():
     its way, and -eps reversed, so a slip that reverses through the band still changes sign."""
     X, C, CI, WP, nc, grav = pressed_island(3, 0, False)
     seed = np.int64(0)
-    kn.geometry(X, C, CI, nc, WP, seed)
+    kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
     kn.springs(X, C, CI, 2, nc, grav)
     kn.set_basis(C, 0)
     e1, e2 = C[0, kn.C_B:kn.C_B + 3], C[0, kn.C_B + 3:kn.C_B + 6]  # the tangent plane
@@ -111,7 +111,7 @@ def test_a_3d_slides_event_value_is_continuous_as_its_slip_turns():
     values, held = [], None
     for turn in turns:
         X[1, kn.X_V:kn.X_V + 3] = -size * (np.cos(turn) * e1 + np.sin(turn) * e2)
-        kn.geometry(X, C, CI, nc, WP, seed)
+        kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
         slip = np.array(kn.slip(X, C, CI, 0, kn.X_V, kn.X_W, 1, False))
         if held is None:
             held = slip / np.linalg.norm(slip)

@@ -120,9 +120,10 @@ NX = 83
 # C / CI: an island's engaged contacts.
 C_N, C_DELTA, C_DIST, C_LIF, C_LJF, C_LIS, C_LJS, C_FN = 0, 3, 4, 5, 6, 7, 8, 9
 C_K, C_MU, C_EPS, C_REACH, C_HELD, C_FF, C_B = 10, 11, 12, 13, 14, 17, 20
-NC = 26
-CI_I, CI_J, CI_GI, CI_GJ, CI_MODE, CI_Q, CI_EDGE = 0, 1, 2, 3, 4, 5, 6
-NCI = 7
+C_INV = 26  # 1 / C_DIST of a pair (the slip rates' turning terms divide by it)
+NC = 27
+CI_I, CI_J, CI_GI, CI_GJ, CI_MODE, CI_Q, CI_EDGE, CI_RETRIED, CI_FLIPPED = 0, 1, 2, 3, 4, 5, 6, 7, 8
+NCI = 9  # CI_RETRIED, CI_FLIPPED: `decide`'s marks (arrays of its own were allocated at every call)
 # Q / QF: an island's candidate contacts.
 Q_I, Q_J, Q_ENG = 0, 1, 2
 QF_REACH, QF_D0, QF_R0, QF_D1, QF_R1, QF_DP, QF_RP, QF_DB, QF_RB = 0, 1, 2, 3, 4, 5, 6, 7, 8
@@ -165,8 +166,9 @@ for _name, _value in list(globals().items()):
 
 
 @jit_inline
-def geometry(X, C, CI, nc, WP, seed):
-    """Normals, overlaps, lever arms and spring forces of the engaged contacts at X's positions.
+def geometry(X, C, CI, nc, WP, seed, fric):
+    """Normals, overlaps, lever arms and spring forces of the engaged contacts at X's positions;
+    with `fric`, the pairs' 1 / distance too (for the slip rates).
 
     Engaged contacts use the spring law unclamped, so that a substep straying just outside the
     contact sees a smooth force; the contact's start and end are located events."""
@@ -179,6 +181,8 @@ def geometry(X, C, CI, nc, WP, seed):
             dy = X[j, X_S + 1] - X[i, X_S + 1]
             dz = X[j, X_S + 2] - X[i, X_S + 2]
             dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if fric:
+                C[c, C_INV] = 1.0 / dist
             C[c, C_N] = dx / dist
             C[c, C_N + 1] = dy / dist
             C[c, C_N + 2] = dz / dist
@@ -309,7 +313,7 @@ def slip_rate(X, C, CI, c, vc, wc, ac, lc, spin, seed, velocity_terms, planar):
             rx, ry = planar_relative(X, i, j, vc)
             rn = rx * nx + ry * ny
             if j >= 0:
-                inv = 1.0 / C[c, C_DIST]
+                inv = C[c, C_INV]
                 gx -= -(rx - rn * nx) * inv * rn
                 gy -= -(ry - rn * ny) * inv * rn
             if spin and not seed:
@@ -345,7 +349,7 @@ def slip_rate(X, C, CI, c, vc, wc, ac, lc, spin, seed, velocity_terms, planar):
         rn = rx * nx + ry * ny + rz * nz
         tx, ty, tz = 0.0, 0.0, 0.0  # n'
         if j >= 0:
-            inv = 1.0 / C[c, C_DIST]
+            inv = C[c, C_INV]
             tx, ty, tz = -(rx - rn * nx) * inv, -(ry - rn * ny) * inv, -(rz - rn * nz) * inv
             gx -= tx * rn
             gy -= ty * rn
@@ -597,25 +601,28 @@ def hold_matrix(X, C, CI, stuck, m, A, piv, spin, rows, seed):
 
 @jit_inline
 def hold(X, C, CI, stuck, m, A, b, spin, seed, planar, fresh, fa, la):
-    """Solve W f = b for the stuck contacts `stuck[:m]` (b in tangent coordinates, 2 per contact;
-    see `hold_matrix`); with `fresh` W is built and factored here, else the factors in A from the
-    last call at this geometry and these modes are used. Adds the forces (as accelerations) to
-    columns (fa, la); they are also left in b. Returns False if W is singular."""
+    """Solve W f = b for the stuck contacts `stuck[:m]` (b in tangent coordinates, 2 per contact,
+    and in the plane 1: the e1 = z x n one; see `hold_matrix`); with `fresh` W is built and
+    factored here, else the factors in A from the last call at this geometry and these modes are
+    used. Adds the forces (as accelerations) to columns (fa, la); they are also left in b.
+    Returns False if W is singular."""
     piv = stuck[stuck.shape[0] // 3:]  # `stuck` holds the stuck contacts, then W's row swaps
+    if planar:
+        # In the plane W is m x m (its z rows hold nothing): an eighth of the factoring.
+        if m == 1:
+            b[0] /= response(X, C, CI, stuck[0], spin)
+        else:
+            if fresh and not hold_matrix(X, C, CI, stuck, m, A, piv, spin, 1, seed):
+                return False
+            solve_factored(A, piv, b, m, not seed)
+        for k in range(m):
+            c = stuck[k]
+            add_force(X, C, CI, c, b[k] * C[c, C_B], b[k] * C[c, C_B + 1], 0.0, fa, la, spin, planar)
+        return True
     if m == 1:
         k = response(X, C, CI, stuck[0], spin)
         b[0] /= k
         b[1] /= k
-    elif planar:
-        # In the plane W is m x m (its z rows hold nothing): an eighth of the factoring.
-        if fresh and not hold_matrix(X, C, CI, stuck, m, A, piv, spin, 1, seed):
-            return False
-        for k in range(m):
-            b[k] = b[2 * k]
-        solve_factored(A, piv, b, m, not seed)
-        for k in range(m - 1, -1, -1):
-            b[2 * k] = b[k]
-            b[2 * k + 1] = 0.0
     else:
         if fresh and not hold_matrix(X, C, CI, stuck, m, A, piv, spin, 2, seed):
             return False
@@ -728,12 +735,18 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
         if fresh:
             set_basis(C, c)  # else the one W was built in, at this geometry
         gx, gy, gz = slip_rate(X, C, CI, c, vc, wc, X_T, X_L, spin, seed, YES, planar)
-        b[2 * k] = -(gx * C[c, C_B] + gy * C[c, C_B + 1] + gz * C[c, C_B + 2])
-        b[2 * k + 1] = -(gx * C[c, C_B + 3] + gy * C[c, C_B + 4] + gz * C[c, C_B + 5])
+        if planar:
+            b[k] = -(gx * C[c, C_B] + gy * C[c, C_B + 1])
+        else:
+            b[2 * k] = -(gx * C[c, C_B] + gy * C[c, C_B + 1] + gz * C[c, C_B + 2])
+            b[2 * k + 1] = -(gx * C[c, C_B + 3] + gy * C[c, C_B + 4] + gz * C[c, C_B + 5])
     if not hold(X, C, CI, stuck, m, A, b, spin, seed, planar, fresh, X_F, X_L):
         return False
     for k in range(m):
         c = stuck[k]
+        if planar:
+            C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2] = b[k] * C[c, C_B], b[k] * C[c, C_B + 1], 0.0
+            continue
         f1, f2 = b[2 * k], b[2 * k + 1]
         for d in range(3):
             C[c, C_FF + d] = f1 * C[c, C_B + d] + f2 * C[c, C_B + 3 + d]
@@ -831,31 +844,37 @@ def hold_pull(X, C, CI, nc):
 
 
 @jit_inline
-def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact, pull_rate):
+def kick_start(CI, nc, planar):
+    """How a step's closing kicks start, from its modes: (warm, one pass). Warm: from the last
+    kick's friction (C_FF and its accelerations), which differs from this one's by a substep's
+    change, a pass fewer than from none; not with a slide out of the plane, whose kick can have
+    two roots (see slide_direction): a start off the one the kick's own impulse defines can
+    settle on the other (measured: a random 3D scene stopped converging with the tolerance).
+    One pass: in the plane a slide's friction is mu F_n on the held side whatever the
+    velocities, so with nothing stuck one pass is the fixed point."""
+    warm, one_pass = True, planar
+    for c in range(nc):
+        if CI[c, CI_MODE] == STICK:
+            one_pass = False
+        elif CI[c, CI_MODE] == SLIDE and not planar:
+            warm = False
+    return warm, one_pass
+
+
+@jit_inline
+def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact, pull_rate, warm, one_pass):
     """The kicks at one geometry between two Verlet substeps, on (X_V, X_W): the close of one
     (springs over h_end, then friction at the end velocities: implicit) and the opening of the
     next (friction at those velocities, then springs over h_start); either span may be 0 (a
     step's first kick, h_end 0, opens with the friction already in X_F, X_L: see `step`).
     `exact`: the change, relative to the fastest velocity, that the closing kick's fixed point may
-    leave undone; `pull_rate`: `hold_pull` at the step's start. Returns (work dissipated, ok);
+    leave undone; `pull_rate`: `hold_pull` at the step's start; `warm`, `one_pass`:
+    `kick_start` of the step's modes (they hold through a step). Returns (work dissipated, ok);
     friction forces at the closing velocities stay in C_FF."""
     spin = fl[FL_SPIN]
     planar = fl[FL_PLANAR] == YES
     work = 0.0
     if h_end != 0.0:
-        # Started from the last kick's friction (C_FF and its accelerations, at the step's
-        # modes), which differs from this one's by a substep's change: a pass fewer than from
-        # none. Not with a slide out of the plane: its kick can have two roots (see
-        # slide_direction), and a start off the one the kick's own impulse defines can settle on
-        # the other (measured: a random 3D scene stopped converging with the tolerance).
-        # In the plane a slide's friction is mu F_n on the held side whatever the velocities:
-        # with nothing stuck one pass is the fixed point.
-        warm, one_pass = True, planar
-        for c in range(nc):
-            if CI[c, CI_MODE] == STICK:
-                one_pass = False
-            elif CI[c, CI_MODE] == SLIDE and not planar:
-                warm = False
         if one_pass:
             # Nothing depends on the velocities: the closing kick is explicit, in one pass.
             for a in range(na):
@@ -930,7 +949,7 @@ def settle(X, C, CI, na, nc, stuck, A, b, fl, fresh):
     tangent plane), with the impulses that do exactly that, solved together. `fresh`: the hold
     system is built here, else the one in A (and the tangent bases) from the last friction solve
     at this geometry and these modes is used. Returns (work, ok)."""
-    spin = fl[FL_SPIN]
+    spin, planar = fl[FL_SPIN], fl[FL_PLANAR] == YES
     m = 0
     for c in range(nc):
         if CI[c, CI_MODE] == STICK:
@@ -949,22 +968,25 @@ def settle(X, C, CI, na, nc, stuck, A, b, fl, fresh):
         hm = math.sqrt(hx * hx + hy * hy + hz * hz)
         if hm > 0.0:
             hm = C[c, C_EPS] / hm
-        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, fl[FL_PLANAR] == YES)
+        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, planar)
         # A friction impulse changes the slip as its force changes the slip's rate: W J = s* - s.
         dx, dy, dz = hm * hx - sx, hm * hy - sy, hm * hz - sz
-        b[2 * k] = dx * C[c, C_B] + dy * C[c, C_B + 1] + dz * C[c, C_B + 2]
-        b[2 * k + 1] = dx * C[c, C_B + 3] + dy * C[c, C_B + 4] + dz * C[c, C_B + 5]
+        if planar:
+            b[k] = dx * C[c, C_B] + dy * C[c, C_B + 1]
+        else:
+            b[2 * k] = dx * C[c, C_B] + dy * C[c, C_B + 1] + dz * C[c, C_B + 2]
+            b[2 * k + 1] = dx * C[c, C_B + 3] + dy * C[c, C_B + 4] + dz * C[c, C_B + 5]
     for a in range(na):
         for d in range(3):
             X[a, X_UA + d] = 0.0
             X[a, X_UL + d] = 0.0
-    if not hold(X, C, CI, stuck, m, A, b, spin, fl[FL_SEED], fl[FL_PLANAR] == YES, fresh, X_UA, X_UL):
+    if not hold(X, C, CI, stuck, m, A, b, spin, fl[FL_SEED], planar, fresh, X_UA, X_UL):
         return 0.0, False
     for a in range(na):
         for d in range(3):
             X[a, X_VB + d] = X[a, X_V + d] + X[a, X_UA + d]
             X[a, X_WB + d] = X[a, X_W + d] + X[a, X_UL + d]
-    return take_velocities(X, na, X_VB, X_WB, spin, fl[FL_PLANAR] == YES), True
+    return take_velocities(X, na, X_VB, X_WB, spin, planar), True
 
 
 @jit_inline
@@ -1014,15 +1036,17 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
                 X[a, X_S + d] = X[a, X_S0 + d]
             for d in range(3 if fric else 0):
                 X[a, X_F + d], X[a, X_L + d] = X[a, X_F0 + d], X[a, X_L0 + d]
-    geometry(X, C, CI, nc, WP, seed)
+    geometry(X, C, CI, nc, WP, seed, fric)
     springs(X, C, CI, na, nc, grav)
     n = weights.shape[0]
     work = 0.0
     ok = True
     first = 0.5 * weights[0] * h
-    pull_rate = hold_pull(X, C, CI, nc) if fric else 0.0
+    pull_rate, warm, one_pass = 0.0, True, False
     if fric:
-        work, ok = kick(X, C, CI, na, nc, 0.0, first, stuck, A, b, fl, exact, pull_rate)
+        pull_rate = hold_pull(X, C, CI, nc)
+        warm, one_pass = kick_start(CI, nc, planar == YES)
+        work, ok = kick(X, C, CI, na, nc, 0.0, first, stuck, A, b, fl, exact, pull_rate, warm, one_pass)
     else:
         for a in range(na):
             for d in range(3):
@@ -1034,12 +1058,12 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
                 X[a, X_S + d] += X[a, X_V + d] * hk
             if spin:
                 turn(X[a, X_Q:X_Q + 4], X[a, X_W], X[a, X_W + 1], X[a, X_W + 2], hk, planar)
-        geometry(X, C, CI, nc, WP, seed)
+        geometry(X, C, CI, nc, WP, seed, fric)
         springs(X, C, CI, na, nc, grav)
         close = 0.5 * hk
         opening = 0.5 * weights[k + 1] * h if k + 1 < n else 0.0
         if fric:
-            done, good = kick(X, C, CI, na, nc, close, opening, stuck, A, b, fl, exact, pull_rate)
+            done, good = kick(X, C, CI, na, nc, close, opening, stuck, A, b, fl, exact, pull_rate, warm, one_pass)
             work += done
             ok = ok and good
         else:
@@ -1154,10 +1178,11 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     whether the friction forces left are this state's: see `mode_events`' `known`)."""
     spin, planar, seed = fl[FL_SPIN], fl[FL_PLANAR], fl[FL_SEED]
     tol = EDGE_TOL * scale
-    retried = np.zeros(nc, np.bool_)
-    flipped = np.zeros(nc, np.bool_)
     edges = 0
+    flipped_any = False
     for c in range(nc):
+        CI[c, CI_RETRIED] = NO
+        CI[c, CI_FLIPPED] = NO
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, planar == YES)
         mag = math.sqrt(sx * sx + sy * sy + sz * sz)
         if mag > 0:
@@ -1173,7 +1198,8 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
                 # there: the hold force goes on through zero, now against the reversed slip.
                 for d in range(3):
                     C[c, C_HELD + d] = -C[c, C_HELD + d]
-                flipped[c] = True
+                CI[c, CI_FLIPPED] = YES
+                flipped_any = True
         elif mag > C[c, C_EPS]:
             CI[c, CI_MODE] = SLIDE
         else:
@@ -1194,7 +1220,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
                     X[a, X_T + d] = X[a, X_A + d] + X[a, X_F + d]
             limit = tol / STICK_SCALE
             for c in range(nc):
-                if CI[c, CI_EDGE] != 1 or CI[c, CI_MODE] == STICK or retried[c]:
+                if CI[c, CI_EDGE] != 1 or CI[c, CI_MODE] == STICK or CI[c, CI_RETRIED]:
                     continue
                 sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, planar == YES)
                 gx, gy, gz = slip_rate(X, C, CI, c, X_V, X_W, X_T, X_L, spin, seed, YES, planar == YES)
@@ -1202,7 +1228,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
                 outward = (sx * gx + sy * gy + sz * gz) / mag if mag > 0 else 0.0
                 if (CI[c, CI_MODE] == SLIDE and outward < -limit) or (CI[c, CI_MODE] == BAND and outward > limit):
                     CI[c, CI_MODE] = STICK
-                    retried[c] = True
+                    CI[c, CI_RETRIED] = YES
                     changed = True
         if changed:
             continue
@@ -1215,7 +1241,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
             need = -(fx * C[c, C_HELD] + fy * C[c, C_HELD + 1] + fz * C[c, C_HELD + 2])
             if not planar and need > 0:
                 need = fmag
-            if need <= force_tol and not (flipped[c] and need > -force_tol):
+            if need <= force_tol and not (CI[c, CI_FLIPPED] and need > -force_tol):
                 CI[c, CI_MODE] = BAND
                 changed = True
             elif fmag >= C[c, C_MU] * C[c, C_FN] - force_tol:
@@ -1240,7 +1266,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
             CI[c, CI_MODE] = SLIDE
     # The friction its last solve left (C_FF, X_F, X_L) is this state's unless settling moved a
     # slip by more than a step's drift: a flip moves one by 2 eps (a mode value by 3e-8 in the break).
-    return work, ok, turned, solved and not turned and not flipped.any()
+    return work, ok, turned, solved and not turned and not flipped_any
 
 
 @jit_inline
@@ -1811,7 +1837,7 @@ def foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A
             soon = min(soon, first_root(sign * d0, sign * r0, sign * (r1 - r0) / span))
     if not fl[FL_FRICTION]:
         return soon
-    geometry(X, C, CI, nc, WP, fl[FL_SEED])
+    geometry(X, C, CI, nc, WP, fl[FL_SEED], fl[FL_FRICTION])
     springs(X, C, CI, na, nc, grav)
     # With the start's hold system (1e-4 of a step on, the geometry has barely turned: the
     # differences aim the first trial, and the break's trials and outcome came out the same).
@@ -2510,7 +2536,7 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
     phases = np.zeros((GL8_X.shape[0], 2))  # cos and sin of om h x_q for the interval length phases_h
     phases_h, phases_n = -1.0, 0
     mode = -1
-    geometry(X, C, CI, 1, WP, NO)
+    geometry(X, C, CI, 1, WP, NO, NO)
     springs(X, C, CI, 1, 1, grav)
     decided = False
     announce = False
@@ -2634,7 +2660,7 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         deepest = max(d_a, d) if not (dd_a > 0.0 and dd < 0.0) else P[RP_DEQ] + math.hypot(P[RP_C], P[RP_S])
         FG[F_MAX_OVERLAP] = max(FG[F_MAX_OVERLAP], deepest)
         FG[F_MAX_FORCE] = max(FG[F_MAX_FORCE], k * deepest)
-        geometry(X, C, CI, 1, WP, NO)
+        geometry(X, C, CI, 1, WP, NO, NO)
         springs(X, C, CI, 1, 1, grav)
         for i in range(3):
             force = f1 * e1[i] + f2 * e2[i]
@@ -2760,7 +2786,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         grown = math.inf
         turner = -1  # the contact whose turning last limited a step
         FG[F_DT_MIN] = min(FG[F_DT_MIN], dt)
-        geometry(X, C, CI, nc, WP, fl[FL_SEED])
+        geometry(X, C, CI, nc, WP, fl[FL_SEED], fl[FL_FRICTION])
         springs(X, C, CI, na, nc, grav)
         e_start = energy(X, C, na, nc, grav, spin)
         if record:
@@ -2792,7 +2818,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                     E[k, E_V0], E[k, E_R0] = E[k, E_V1], E[k, E_R1]
             elif fric:
                 if not stepped:
-                    geometry(X, C, CI, nc, WP, fl[FL_SEED])
+                    geometry(X, C, CI, nc, WP, fl[FL_SEED], fl[FL_FRICTION])
                     springs(X, C, CI, na, nc, grav)
                 done, ok, turned, solved = decide(X, C, CI, na, nc, stuck, A, b, fl, scale)
                 share(G, XI, na, done)
