@@ -1164,7 +1164,7 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh, 
     return True
 
 
-@jit
+@jit_inline
 def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     """Modes of the engaged contacts at this state (at a phase start and after every step).
 
