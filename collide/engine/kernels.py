@@ -1026,9 +1026,10 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
     """One step of h from the start state (X_S0..., its friction accelerations in X_F0, X_L0), or
     with `restart` NO from the state now in (X_S...), its friction in (X_F, X_L) (a trial's end,
     whose mode values solved it there): a symmetric composition of Verlet (kick-drift-kick)
-    substeps gamma h (`weights`); the kicks between two substeps share one geometry. After the
-    whole step stuck slips go back on the band's edge. The end state is left in (X_S...) with its
-    geometry in C and its accelerations in X_A, X_F. Returns (work, ok)."""
+    substeps gamma h (`weights`); the kicks between two substeps share one geometry. Stuck slips
+    go back on the band's edge only once the step is taken (`settle`, by the event search): a
+    trial's end is off it by the kicks' fixed-point tolerance. The end state is left in (X_S...)
+    with its geometry in C and its accelerations in X_A, X_F. Returns (work, ok)."""
     spin, fric, seed, planar = fl[FL_SPIN], fl[FL_FRICTION], fl[FL_SEED], fl[FL_PLANAR]
     if restart:
         for a in range(na):
@@ -1073,11 +1074,6 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
                     X[a, X_V + d] += close * X[a, X_A + d]
                     if opening != 0.0:
                         X[a, X_V + d] += opening * X[a, X_A + d]
-    if fric:
-        # The last kick solved the hold system at this geometry and these modes.
-        done, good = settle(X, C, CI, na, nc, stuck, A, b, fl, NO)
-        work += done
-        ok = ok and good
     return work, ok
 
 
@@ -2167,6 +2163,14 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
         h = h_next
         if not ok:
             return h, work, False, limited, -1, True
+    if fl[FL_FRICTION]:
+        # The step is taken: its stuck slips go back on the band's edge, with the hold system the
+        # last kick solved at this geometry and these modes (settled at every trial's end, a
+        # third of the settling went on trials the search then threw away).
+        done, good = settle(X, C, CI, na, nc, stuck, A, b, fl, NO)
+        work += done
+        if not good:
+            return h, work, False, limited, -1, located
     return h, work, True, limited, -1, located
 
 
