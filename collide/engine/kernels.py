@@ -1022,14 +1022,15 @@ def turn(q, w0, w1, w2, tau, planar):
 
 
 @jit_inline
-def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact):
+def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact, pull_rate, warm, one_pass):
     """One step of h from the start state (X_S0..., its friction accelerations in X_F0, X_L0), or
-    with `restart` NO from the state now in (X_S...), its friction in (X_F, X_L) (a trial's end,
-    whose mode values solved it there): a symmetric composition of Verlet (kick-drift-kick)
+    with `restart` NO from the state now in (X_S...), its geometry in C, X_A and its friction in
+    (X_F, X_L) (a trial's end, whose mode values solved it there): a symmetric composition of Verlet (kick-drift-kick)
     substeps gamma h (`weights`); the kicks between two substeps share one geometry. Stuck slips
     go back on the band's edge only once the step is taken (`settle`, by the event search): a
     trial's end is off it by the kicks' fixed-point tolerance. The end state is left in (X_S...)
-    with its geometry in C and its accelerations in X_A, X_F. Returns (work, ok)."""
+    with its geometry in C and its accelerations in X_A, X_F. `exact`, `pull_rate`, `warm`,
+    `one_pass`: the kicks' (see `kick`), the same for every trial of a step. Returns (work, ok)."""
     spin, fric, seed, planar = fl[FL_SPIN], fl[FL_FRICTION], fl[FL_SEED], fl[FL_PLANAR]
     if restart:
         for a in range(na):
@@ -1037,16 +1038,13 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
                 X[a, X_S + d] = X[a, X_S0 + d]
             for d in range(3 if fric else 0):
                 X[a, X_F + d], X[a, X_L + d] = X[a, X_F0 + d], X[a, X_L0 + d]
-    geometry(X, C, CI, nc, WP, seed, fric)
-    springs(X, C, CI, na, nc, grav)
+        geometry(X, C, CI, nc, WP, seed, fric)
+        springs(X, C, CI, na, nc, grav)
     n = weights.shape[0]
     work = 0.0
     ok = True
     first = 0.5 * weights[0] * h
-    pull_rate, warm, one_pass = 0.0, True, False
     if fric:
-        pull_rate = hold_pull(X, C, CI, nc)
-        warm, one_pass = kick_start(CI, nc, planar == YES)
         work, ok = kick(X, C, CI, na, nc, 0.0, first, stuck, A, b, fl, exact, pull_rate, warm, one_pass)
     else:
         for a in range(na):
@@ -1887,6 +1885,13 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     h = h_full
     limited = -1
     tol = TOUCH_TOL
+    # The kicks' start and their hold forces' pull, from the step's start (its modes hold through
+    # the step; the pull is a bound with CONTRACTION_SAFETY's margin, which a trial's share of
+    # the step's impulse stays within), before `foresee` moves the bodies on.
+    pull_rate, warm, one_pass = 0.0, True, False
+    if fl[FL_FRICTION]:
+        pull_rate = hold_pull(X, C, CI, nc)
+        warm, one_pass = kick_start(CI, nc, fl[FL_PLANAR] == YES)
     # Where an event is foreseen inside the step, the first trial ends just past it: its end then
     # brackets the event closely, and the search lands there with nudges from it. Unforeseen, a
     # whole step only found it and a second one aimed at it (the billiards break tried 155 whole
@@ -1898,11 +1903,12 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
         soon = foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A, b, fl, scale)
     if 2.0 * soon <= min(reach, h_full):
         h = 2.0 * soon
-        work, ok = step(X, C, CI, na, nc, h, VERLET if h <= nudge else YOSHIDA, WP, grav, stuck, A, b, fl, YES, exact)
+        work, ok = step(X, C, CI, na, nc, h, VERLET if h <= nudge else YOSHIDA, WP, grav, stuck, A, b, fl, YES, exact,
+                        pull_rate, warm, one_pass)
     else:
         h = min(AIM * soon, h_full)
         work, ok = step(X, C, CI, na, nc, h, YOSHIDA if h <= brief else weights, WP, grav, stuck, A, b, fl, YES,
-                        exact)
+                        exact, pull_rate, warm, one_pass)
         ST[S_ATTEMPTS] += 1
     if not ok:
         return h, work, False, limited, -1, True
@@ -2154,11 +2160,12 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
             # substep from there, forwards or back, a ninth of the cost of a step from the start,
             # or a little further a Yoshida step, a third of it.
             near = VERLET if abs(h_next - h) <= nudge else YOSHIDA
-            more, ok = step(X, C, CI, na, nc, h_next - h, near, WP, grav, stuck, A, b, fl, NO, exact)
+            more, ok = step(X, C, CI, na, nc, h_next - h, near, WP, grav, stuck, A, b, fl, NO, exact, pull_rate,
+                            warm, one_pass)
             work += more
         else:
             work, ok = step(X, C, CI, na, nc, h_next, YOSHIDA if h_next <= brief else weights, WP, grav, stuck, A,
-                            b, fl, YES, exact)
+                            b, fl, YES, exact, pull_rate, warm, one_pass)
             ST[S_ATTEMPTS] += 1
         h = h_next
         if not ok:
