@@ -1024,13 +1024,14 @@ def turn(q, w0, w1, w2, tau, planar):
 @jit_inline
 def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact, pull_rate, warm, one_pass):
     """One step of h from the start state (X_S0..., its friction accelerations in X_F0, X_L0), or
-    with `restart` NO from the state now in (X_S...), its geometry in C, X_A and its friction in
-    (X_F, X_L) (a trial's end, whose mode values solved it there): a symmetric composition of Verlet (kick-drift-kick)
-    substeps gamma h (`weights`); the kicks between two substeps share one geometry. Stuck slips
-    go back on the band's edge only once the step is taken (`settle`, by the event search): a
-    trial's end is off it by the kicks' fixed-point tolerance. The end state is left in (X_S...)
-    with its geometry in C and its accelerations in X_A, X_F. `exact`, `pull_rate`, `warm`,
-    `one_pass`: the kicks' (see `kick`), the same for every trial of a step. Returns (work, ok)."""
+    with `restart` NO from the state now in (X_S...), its geometry in C and X_A and its friction
+    in (X_F, X_L) (a trial's end, whose mode values solved it there): a symmetric composition of
+    Verlet (kick-drift-kick) substeps gamma h (`weights`); the kicks between two substeps share
+    one geometry. Stuck slips go back on the band's edge only once the step is taken (`settle`,
+    by the event search): a trial's end is off it by the kicks' fixed-point tolerance. The end
+    state is left in (X_S...) with its geometry in C and its accelerations in X_A, X_F. `exact`,
+    `pull_rate`, `warm`, `one_pass`: the kicks' (see `kick`), the same for every trial of a
+    step. Returns (work, ok)."""
     spin, fric, seed, planar = fl[FL_SPIN], fl[FL_FRICTION], fl[FL_SEED], fl[FL_PLANAR]
     if restart:
         for a in range(na):
