@@ -901,7 +901,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact, pull_rate, wa
         X[0, X_HP] = h_end
         # How fast the hold forces follow the velocities: a pass shrinks the change by about
         # h |dG/dv| (see CONTRACTION_SAFETY); with it, one pass can be enough.
-        pull = CONTRACTION_SAFETY * abs(h_end) * pull_rate if warm else 0.0
+        pull = CONTRACTION_SAFETY * abs(h_end) * pull_rate  # 0 unless warm (see step_events)
         # In the plane the velocities' z parts and the spins' x, y parts are zero and stay so.
         moves, turns = (2, 2) if planar else (3, 0)
         last = math.inf
@@ -1891,8 +1891,9 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     # the step's impulse stays within), before `foresee` moves the bodies on.
     pull_rate, warm, one_pass = 0.0, True, False
     if fl[FL_FRICTION]:
-        pull_rate = hold_pull(X, C, CI, nc)
         warm, one_pass = kick_start(CI, nc, fl[FL_PLANAR] == YES)
+        if warm and not one_pass:  # only a warm kick with stuck contacts reads it
+            pull_rate = hold_pull(X, C, CI, nc)
     # Where an event is foreseen inside the step, the first trial ends just past it: its end then
     # brackets the event closely, and the search lands there with nudges from it. Unforeseen, a
     # whole step only found it and a second one aimed at it (the billiards break tried 155 whole
