@@ -15,6 +15,12 @@ _CBRT2 = 2.0 ** (1.0 / 3.0)
 _Y1 = 1.0 / (2.0 - _CBRT2)
 # Yoshida (1990) fourth order; Kahan & Li (1997) s9odr6a sixth order.
 YOSHIDA4 = (_Y1, -_CBRT2 * _Y1, _Y1)
+# Suzuki (1990) fourth order in five substeps, and Yoshida (1990) sixth order in seven (his
+# solution A): the event search's trials between Yoshida4's reach and a whole kahan6 step.
+_S1 = 1.0 / (4.0 - 4.0 ** (1.0 / 3.0))
+SUZUKI4 = (_S1, _S1, 1.0 - 4.0 * _S1, _S1, _S1)
+_Y6 = (0.784513610477560, 0.235573213359357, -1.17767998417887)
+YOSHIDA6 = _Y6 + (1.0 - 2.0 * sum(_Y6),) + _Y6[::-1]
 _KL6_HALF = (0.39216144400731413928, 0.33259913678935943860, -0.70624617255763935981,
              0.08221359629355080023)
 KAHAN6 = _KL6_HALF + (0.79854399093482996340,) + _KL6_HALF[::-1]

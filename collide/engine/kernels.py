@@ -41,7 +41,7 @@ import math
 import numpy as np
 
 from collide.engine.tier import jit, jit_inline
-from collide.integrators import YOSHIDA4
+from collide.integrators import SUZUKI4, YOSHIDA4, YOSHIDA6
 
 BAND, SLIDE, STICK = 0, 1, 2
 EDGE_TOL = 1e-9  # relative to the speed scale: how close to the band's edge counts as on it
@@ -87,12 +87,16 @@ NO_CONTACT_TAIL = 1.0  # s: how long a run with no contact at all lasts
 EPS64 = 2.220446049250313e-16
 VERLET = np.ones(1)  # the weights of one kick-drift-kick substep
 YOSHIDA = np.array(YOSHIDA4)  # three substeps: the event search's longer nudges
+SUZUKI = np.array(SUZUKI4)  # five substeps, fourth order
+SIXTH7 = np.array(YOSHIDA6)  # seven substeps, sixth order
 # Local errors of one step of omega h on an oscillator (measured): Verlet (omega h)^3 / 12,
-# Yoshida 0.0281 (omega h)^5. A nudge of the event search may leave a thousandth of the tolerance.
-VERLET_ERROR, YOSHIDA_ERROR = 1.0 / 12.0, 0.0281
+# Yoshida 0.0281 (omega h)^5, Suzuki 0.00266 (omega h)^5, Yoshida's sixth order 0.0018 (omega h)^7.
+# A nudge of the event search may leave a thousandth of the tolerance.
+VERLET_ERROR, YOSHIDA_ERROR, SUZUKI_ERROR, SIXTH7_ERROR = 1.0 / 12.0, 0.0281, 0.00266, 0.0018
 KAHAN6_ERROR = 1.73e-4  # one step's error on an oscillator over (omega h)^7 (1.73e-4 at 0.05, 1.82e-4 at 0.2)
 # A trial from a step's start short enough that a Yoshida step's error there is at most this share
-# of a whole kahan6 step's is a Yoshida step (four breaks at tol 1e-6, their errors against tol
+# of a whole kahan6 step's is a Yoshida step (and a little longer, Suzuki's or Yoshida's sixth
+# order, on the same share) (four breaks at tol 1e-6, their errors against tol
 # 1e-10: within 3 % of all-kahan6 trials at 0.1; at 1, one of them 16 % higher).
 SHORT_SHARE = 0.1
 NUDGE_SHARE = 1e-3
@@ -1869,12 +1873,12 @@ def flips(C, CI, E, nc, c, h, omega, scale):
 
 @jit
 def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
-                max_turn, negligible, nudge, reach, brief, exact, ST, omega):
+                max_turn, negligible, nudge, reach, briefs, exact, ST, omega):
     """One step from the start state; where an event would happen inside it, shortened to land there,
     each refinement re-stepping from the start (in the plane, one within `nudge` of the last trial's
     end is a Verlet substep from there, one within `reach` a Yoshida step, and one from the start up
-    to `brief` long a Yoshida step; and the first trial ends just past the first event `foresee`
-    sees coming). Contacts starting or ending: a cubic Hermite through the overlaps at both ends of
+    to `briefs` long a composition of fewer substeps; and the first trial ends just past the first
+    event `foresee` sees coming). Contacts starting or ending: a cubic Hermite through the overlaps at both ends of
     a trial; friction modes: a bracketed root find (Hermite with both ends' rates where they have
     closed forms, then inverse quadratic interpolation, secant or Newton in the bracket). In 3D a
     sliding slip may turn by at most `max_turn` (rad) a step, unless its friction changes the slip
@@ -1909,8 +1913,11 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                         pull_rate, warm, one_pass)
     else:
         h = min(AIM * soon, h_full)
-        work, ok = step(X, C, CI, na, nc, h, YOSHIDA if h <= brief else weights, WP, grav, stuck, A, b, fl, YES,
-                        exact, pull_rate, warm, one_pass)
+        # The fewest substeps whose error is within SHORT_SHARE of a whole step's (see `briefs`).
+        composition = YOSHIDA if h <= briefs[0] else (SUZUKI if h <= briefs[1] else (
+            SIXTH7 if h <= briefs[2] else weights))
+        work, ok = step(X, C, CI, na, nc, h, composition, WP, grav, stuck, A, b, fl, YES, exact, pull_rate, warm,
+                        one_pass)
         ST[S_ATTEMPTS] += 1
     if not ok:
         return h, work, False, limited, -1, True
@@ -2166,7 +2173,9 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                             warm, one_pass)
             work += more
         else:
-            work, ok = step(X, C, CI, na, nc, h_next, YOSHIDA if h_next <= brief else weights, WP, grav, stuck, A,
+            composition = YOSHIDA if h_next <= briefs[0] else (SUZUKI if h_next <= briefs[1] else (
+                SIXTH7 if h_next <= briefs[2] else weights))
+            work, ok = step(X, C, CI, na, nc, h_next, composition, WP, grav, stuck, A,
                             b, fl, YES, exact, pull_rate, warm, one_pass)
             ST[S_ATTEMPTS] += 1
         h = h_next
@@ -2788,11 +2797,14 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             nudge = (NUDGE_SHARE * fp[FP_EVENT_TOL] / VERLET_ERROR) ** (1.0 / 3.0) / omega
             # A Yoshida step costs a third of kahan6's; with three substeps or fewer it saves nothing.
             reach = (NUDGE_SHARE * fp[FP_EVENT_TOL] / YOSHIDA_ERROR) ** 0.2 / omega if weights.shape[0] > 3 else nudge
-        # A trial from the step's start up to this long (an event soon after it) is one Yoshida
-        # step, a third of kahan6's substeps, its error at most SHORT_SHARE of a whole step's.
-        brief = 0.0
+        # A trial from the step's start up to these long (an event soon after it) is one Yoshida
+        # step, a third of kahan6's substeps, one of Suzuki's (5 of 9) or one of Yoshida's sixth
+        # order (7 of 9): each one's error at most SHORT_SHARE of a whole step's.
+        briefs = (0.0, 0.0, 0.0)
         if omega > 0 and fl[FL_PLANAR] == YES and weights.shape[0] > 3:
-            brief = (SHORT_SHARE * KAHAN6_ERROR * (omega * dt) ** 7 / YOSHIDA_ERROR) ** 0.2 / omega
+            budget = SHORT_SHARE * KAHAN6_ERROR * (omega * dt) ** 7
+            briefs = ((budget / YOSHIDA_ERROR) ** 0.2 / omega, (budget / SUZUKI_ERROR) ** 0.2 / omega,
+                      (budget / SIXTH7_ERROR) ** (1.0 / 7.0) / omega)
         # A kick's fixed point is left with a ten-thousandth of the event tolerance: thousands of
         # kicks stay far below the tolerance (at 1e-6, 1e-11 each; a pass fewer in most kicks).
         exact = max(4.0 * EPS64, 1e-4 * fp[FP_EVENT_TOL])
@@ -2870,7 +2882,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             h, work, ok, limited, late, located = step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full,
                                                               weights, WP, grav, stuck, A, b, fl, scale, max_turn,
                                                               negligible,
-                                                              nudge, reach, brief, exact, ST, omega)
+                                                              nudge, reach, briefs, exact, ST, omega)
             if not located:
                 if ST[S_UNLOCATED] == 0:
                     FG[F_UNLOCATED_T] = t
