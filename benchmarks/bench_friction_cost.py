@@ -7,7 +7,7 @@ timed twice: the kernel alone (`wall_time_s` of a run whose error is not measure
 alternate within one process, the compiled kernels loaded first; prints medians and ratios,
 never asserts.
 
-    python benchmarks/bench_friction_cost.py [--repeat 7] [--tol 1e-6] [--variants] [--cli 9]
+    python benchmarks/bench_friction_cost.py [--repeat 7] [--tol 1e-6] [--variants] [--cli 9] [--scan 40]
 
 --variants adds other breaks, each against its frictionless twin: at mu = 0.1 the rack turned
 30 degrees in its plane, balls 1.3 times larger (same density) and the cue at 3 m/s; and breaks
@@ -18,6 +18,10 @@ changes at its own time), mu = 0.2 and 0.4.
 billiards-break --json --no-record` in a fresh process each, N rounds alternating, `wall_time_s`
 (its error measured as always) medians and ratios; a process's one run finds colder caches than
 runs repeated in one process.
+
+--scan N times N random breaks at mu = 0.1 against their twins (the cue up to 3 cm off the
+rack's line, the rack turned by any angle, balls 0.7 to 1.4 times the size, the cue at half to
+twice its speed; `--seed`), 5 alternating rounds each, and prints every ratio and the worst.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ os.environ.setdefault("COLLIDE_JIT", "1")  # time compiled kernels (waited for),
 import argparse
 import json
 import math
+import random
 import statistics
 import subprocess
 import sys
@@ -125,6 +130,36 @@ def cli_ratios(rounds: int, tol: float) -> None:
         print(f"| {label} | {a * 1e3:.2f} | {b * 1e3:.2f} | {a / b:.1f} |")
 
 
+def scan(count: int, seed: int, tol: float) -> None:
+    """`--scan`: random breaks at mu = 0.1, each against its frictionless twin."""
+    rng = random.Random(seed)
+    print(f"\n{count} random breaks (seed {seed}), tol {tol:g}, mu 0.1 against 0: medians of 5 alternating rounds")
+    print("| cue off the line (cm) | rack turned (deg) | size | cue speed | kernel ratio | as run ratio |")
+    print("|---|---|---|---|---|---|")
+    kernel, as_run = [], []
+    for _ in range(count):
+        offset = rng.uniform(-0.03, 0.03)
+        change = {"angle": rng.uniform(0.0, math.pi), "size": rng.choice([0.7, 1.0, 1.4]),
+                  "speed": rng.choice([0.5, 1.0, 2.0])}
+        scenes = [parse_scene(in_plane(load_scene("billiards-break", [f"tol={tol}", f"body.cue.position.y={offset}",
+                                                                       f"contact.mu={mu}"]).source, **change))
+                  for mu in (0.1, 0.0)]
+        for scene in scenes:
+            timed(scene, True)
+        times: dict[tuple[int, bool], list[float]] = {}
+        for _ in range(5):
+            for measure in (False, True):
+                for which, scene in enumerate(scenes):
+                    times.setdefault((which, measure), []).append(timed(scene, measure)[0])
+        med = {key: statistics.median(value) for key, value in times.items()}
+        kernel.append(med[0, False] / med[1, False])
+        as_run.append(med[0, True] / med[1, True])
+        print(f"| {100 * offset:+.2f} | {math.degrees(change['angle']):.0f} | {change['size']} | {change['speed']} "
+              f"| {kernel[-1]:.2f} | {as_run[-1]:.2f} |")
+    print(f"kernel ratio: median {statistics.median(kernel):.2f}, worst {max(kernel):.2f}; "
+          f"as run: median {statistics.median(as_run):.2f}, worst {max(as_run):.2f} (bar 5x)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=7)
@@ -132,6 +167,8 @@ def main() -> None:
     parser.add_argument("--variants", action="store_true", help="also breaks with more mode changes")
     parser.add_argument("--cli", type=int, default=0, metavar="N",
                         help="also N rounds of the breaks as `collide run` in fresh processes")
+    parser.add_argument("--scan", type=int, default=0, metavar="N", help="also N random breaks against their twins")
+    parser.add_argument("--seed", type=int, default=1, help="the --scan breaks' random seed")
     args = parser.parse_args()
     cases = {
         "billiards-break mu = 0.1": load_scene("billiards-break", [f"tol={args.tol}"]),
@@ -175,6 +212,8 @@ def main() -> None:
               f"{med[a][True] / med[b][True]:.1f}x as run ({bar})")
     if args.cli:
         cli_ratios(args.cli, args.tol)
+    if args.scan:
+        scan(args.scan, args.seed, args.tol)
 
 
 if __name__ == "__main__":
