@@ -125,7 +125,8 @@ NX = 83
 C_N, C_DELTA, C_DIST, C_LIF, C_LJF, C_LIS, C_LJS, C_FN = 0, 3, 4, 5, 6, 7, 8, 9
 C_K, C_MU, C_EPS, C_REACH, C_HELD, C_FF, C_B = 10, 11, 12, 13, 14, 17, 20
 C_INV = 26  # 1 / C_DIST of a pair (the slip rates' turning terms divide by it)
-NC = 27
+C_GV = 27  # in the plane, a stuck contact's hold rate's velocity terms along e1, at a kick's last pass
+NC = 28
 CI_I, CI_J, CI_GI, CI_GJ, CI_MODE, CI_Q, CI_EDGE, CI_RETRIED, CI_FLIPPED = 0, 1, 2, 3, 4, 5, 6, 7, 8
 NCI = 9  # CI_RETRIED, CI_FLIPPED: `decide`'s marks (arrays of its own were allocated at every call)
 # Q / QF: an island's candidate contacts.
@@ -293,6 +294,29 @@ def slip(X, C, CI, c, vc, wc, spin, planar):
 
 
 @jit_inline
+def planar_velocity_terms(X, C, CI, c, vc, wc, spin, seed):
+    """In the plane, the terms of contact c's slip rate that the velocities in (vc, wc) make (see
+    `slip_rate`): the line of centres turning, -n' (n . (v_i - v_j)), and the arms shortening,
+    (l_i' w_i + l_j' w_j) x n."""
+    i, j = CI[c, CI_I], CI[c, CI_J]
+    nx, ny = C[c, C_N], C[c, C_N + 1]
+    rx, ry = planar_relative(X, i, j, vc)
+    rn = rx * nx + ry * ny
+    vx, vy = 0.0, 0.0
+    if j >= 0:
+        inv = C[c, C_INV]
+        vx, vy = (rx - rn * nx) * inv * rn, (ry - rn * ny) * inv * rn
+    if spin and not seed:
+        ld = -0.5 * rn if j >= 0 else -rn
+        pz = ld * X[i, wc + 2]
+        if j >= 0:
+            pz += ld * X[j, wc + 2]
+        vx -= pz * ny
+        vy += pz * nx
+    return vx, vy
+
+
+@jit_inline
 def slip_rate(X, C, CI, c, vc, wc, ac, lc, spin, seed, velocity_terms, planar):
     """Rate of change of contact c's tangential slip at velocities (vc, wc) under linear and
     angular accelerations in columns (ac, lc); the hold rate G when those leave out stuck
@@ -310,24 +334,14 @@ def slip_rate(X, C, CI, c, vc, wc, ac, lc, spin, seed, velocity_terms, planar):
         ax, ay = planar_relative(X, i, j, ac)
         an = ax * nx + ay * ny
         gx, gy = ax - an * nx, ay - an * ny
-        pz = 0.0  # (l_i alpha_i + l_j alpha_j (+ l' w terms)) . z
         if spin:
-            pz = planar_levers(X, C, c, i, j, lc)
-        if velocity_terms:
-            rx, ry = planar_relative(X, i, j, vc)
-            rn = rx * nx + ry * ny
-            if j >= 0:
-                inv = C[c, C_INV]
-                gx -= -(rx - rn * nx) * inv * rn
-                gy -= -(ry - rn * ny) * inv * rn
-            if spin and not seed:
-                ld = -0.5 * rn if j >= 0 else -rn
-                pz += ld * X[i, wc + 2]
-                if j >= 0:
-                    pz += ld * X[j, wc + 2]
-        if spin:
+            pz = planar_levers(X, C, c, i, j, lc)  # (l_i alpha_i + l_j alpha_j) . z
             gx -= pz * ny
             gy += pz * nx
+        if velocity_terms:
+            vx, vy = planar_velocity_terms(X, C, CI, c, vc, wc, spin, seed)
+            gx += vx
+            gy += vy
         return gx, gy, 0.0
     ax, ay, az = X[i, ac], X[i, ac + 1], X[i, ac + 2]
     if j >= 0:
@@ -690,26 +704,23 @@ def slide_direction(X, C, CI, c, vc, wc, spin, span, planar):
 
 
 @jit_inline
-def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
+def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh):
     """Friction forces (C_FF, on body i) of every contact at the velocities in columns (vc, wc),
     by mode, and their accelerations (X_F, X_L); X_A holds everything else's. Stuck contacts'
     slips stop changing: W f = -G, with G their slip rates under every other force. `span`: the
     velocities already hold the forces now in C_FF over that many seconds (see
     `slide_direction`); 0 when they hold none. `fresh`: the stuck contacts' matrix must be built
-    (a new geometry or new modes), else the last one is reused. `slides`: the sliding contacts'
-    forces are found again, else those of the last call (X_SF, X_SL) are kept: in the plane they
-    are mu F_n on the held side whatever the velocities, so only a new geometry changes them."""
+    (a new geometry or new modes), else the last one is reused. The slides' own (X_SF, X_SL)
+    are kept apart: in the plane they are mu F_n on the held side whatever the velocities, and
+    a kick's later passes there change only the stuck contacts' (see `repull`)."""
     spin, seed, planar = fl[FL_SPIN], fl[FL_SEED], fl[FL_PLANAR] == YES
-    if slides:
-        for a in range(na):
-            for d in range(3):
-                X[a, X_SF + d] = 0.0
-                X[a, X_SL + d] = 0.0
+    for a in range(na):
+        for d in range(3):
+            X[a, X_SF + d] = 0.0
+            X[a, X_SL + d] = 0.0
     m = 0
     for c in range(nc):
         if CI[c, CI_MODE] == SLIDE:
-            if not slides:
-                continue
             sx, sy, sz = slide_direction(X, C, CI, c, vc, wc, spin, span, planar)
             # In the plane the direction is the unit tangent z x n.
             mag = 1.0 if planar else math.sqrt(sx * sx + sy * sy + sz * sz)
@@ -738,10 +749,15 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
         c = stuck[k]
         if fresh:
             set_basis(C, c)  # else the one W was built in, at this geometry
-        gx, gy, gz = slip_rate(X, C, CI, c, vc, wc, X_T, X_L, spin, seed, YES, planar)
         if planar:
-            b[k] = -(gx * C[c, C_B] + gy * C[c, C_B + 1])
+            # The accelerations' part and the velocity terms apart: a later pass of the kick
+            # changes only the second (see `repull`).
+            gx, gy, gz = slip_rate(X, C, CI, c, vc, wc, X_T, X_L, spin, seed, NO, planar)
+            vx, vy = planar_velocity_terms(X, C, CI, c, vc, wc, spin, seed)
+            C[c, C_GV] = vx * C[c, C_B] + vy * C[c, C_B + 1]
+            b[k] = -(gx * C[c, C_B] + gy * C[c, C_B + 1] + C[c, C_GV])
         else:
+            gx, gy, gz = slip_rate(X, C, CI, c, vc, wc, X_T, X_L, spin, seed, YES, planar)
             b[2 * k] = -(gx * C[c, C_B] + gy * C[c, C_B + 1] + gz * C[c, C_B + 2])
             b[2 * k + 1] = -(gx * C[c, C_B + 3] + gy * C[c, C_B + 4] + gz * C[c, C_B + 5])
     if not hold(X, C, CI, stuck, m, A, b, spin, seed, planar, fresh, X_F, X_L):
@@ -755,6 +771,36 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh, slides):
         for d in range(3):
             C[c, C_FF + d] = f1 * C[c, C_B + d] + f2 * C[c, C_B + 3 + d]
     return True
+
+
+@jit_inline
+def repull(X, C, CI, nc, stuck, A, b, fl, vc, wc):
+    """A later pass of a kick's fixed point in the plane, at the velocities in (vc, wc): there
+    the slides' forces and the stuck contacts' accelerations part stay (a geometry's), and only
+    the hold rates' velocity terms (C_GV) change. Their change is solved with the factors the
+    first pass left in A, and its forces added to C_FF and (X_F, X_L): a `friction` pass's
+    numbers to round-off, without its passes over every contact and body."""
+    spin, seed = fl[FL_SPIN], fl[FL_SEED]
+    m = 0
+    for c in range(nc):
+        if CI[c, CI_MODE] == STICK:
+            m += 1
+    for k in range(m):
+        c = stuck[k]
+        vx, vy = planar_velocity_terms(X, C, CI, c, vc, wc, spin, seed)
+        along = vx * C[c, C_B] + vy * C[c, C_B + 1]
+        b[k] = C[c, C_GV] - along
+        C[c, C_GV] = along
+    if m == 1:
+        b[0] /= response(X, C, CI, stuck[0], spin)
+    elif m > 1:
+        solve_factored(A, stuck[stuck.shape[0] // 3:], b, m, not seed)
+    for k in range(m):
+        c = stuck[k]
+        fx, fy = b[k] * C[c, C_B], b[k] * C[c, C_B + 1]
+        C[c, C_FF] += fx
+        C[c, C_FF + 1] += fy
+        add_force(X, C, CI, c, fx, fy, 0.0, X_F, X_L, spin, True)
 
 
 @jit_inline
@@ -885,7 +931,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact, pull_rate, wa
                 for d in range(3):
                     X[a, X_V + d] += h_end * X[a, X_A + d]
             X[0, X_HP] = h_end
-            if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, h_end, YES, YES):
+            if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, h_end, YES):
                 return work, False
             work += friction_kick(X, na, h_end, 0.0, spin, planar)
             if h_start != 0.0:
@@ -910,9 +956,11 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact, pull_rate, wa
         moves, turns = (2, 2) if planar else (3, 0)
         last = math.inf
         for it in range(FIXED_POINT):
+            if it > 0 and planar:
+                repull(X, C, CI, nc, stuck, A, b, fl, X_V1, X_W1)
             # Each pass but a cold first takes each contact's own friction in V1 back out.
-            if not friction(X, C, CI, na, nc, X_V1, X_W1, stuck, A, b, fl, h_end if warm or it > 0 else 0.0,
-                            YES if it == 0 else NO, YES if it == 0 or not planar else NO):
+            elif not friction(X, C, CI, na, nc, X_V1, X_W1, stuck, A, b, fl, h_end if warm or it > 0 else 0.0,
+                              YES if it == 0 else NO):
                 return work, False
             change = 0.0
             size = 0.0
@@ -1097,7 +1145,7 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh, 
     stuck slips after it moves them by the kick's fixed-point tolerance: a mode value by 1e-12,
     far below MODE_TOL), and the solve is skipped. Returns False if the hold system is singular."""
     spin, seed, planar = fl[FL_SPIN], fl[FL_SEED], fl[FL_PLANAR] == YES
-    if not known and not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, fresh, YES):
+    if not known and not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, fresh):
         return False
     for a in range(na):
         for d in range(3):
@@ -1205,7 +1253,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
             CI[c, CI_MODE] = BAND
     solved = False  # the last friction solve was at the final modes: its hold system is settle's
     for _ in range(2 * nc + 2):
-        if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES, YES):
+        if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, 0.0, YES):
             return 0.0, False, False, False
         changed = False
         # An edge contact that another's change left sliding with its slip heading into the band,
