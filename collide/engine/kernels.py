@@ -95,9 +95,10 @@ SIXTH7 = np.array(YOSHIDA6)  # seven substeps, sixth order
 VERLET_ERROR, YOSHIDA_ERROR, SUZUKI_ERROR, SIXTH7_ERROR = 1.0 / 12.0, 0.0281, 0.00266, 0.0018
 KAHAN6_ERROR = 1.73e-4  # one step's error on an oscillator over (omega h)^7 (1.73e-4 at 0.05, 1.82e-4 at 0.2)
 # A trial from a step's start short enough that a Yoshida step's error there is at most this share
-# of a whole kahan6 step's is a Yoshida step (and a little longer, Suzuki's or Yoshida's sixth
-# order, on the same share) (four breaks at tol 1e-6, their errors against tol
-# 1e-10: within 3 % of all-kahan6 trials at 0.1; at 1, one of them 16 % higher).
+# of a whole kahan6 step's is a Yoshida step (four breaks at tol 1e-6, their errors against tol
+# 1e-10: within 3 % of all-kahan6 trials at 0.1; at 1, one of them 16 % higher); a little longer,
+# on the same share, one of Suzuki's or of Yoshida's sixth order (18 planar scenes at tol 1e-6
+# and 1e-7: their errors within 5 % of what they were with kahan6 there).
 SHORT_SHARE = 0.1
 NUDGE_SHARE = 1e-3
 FORESEE_SPAN = 1e-4  # of the step: the differences that foresee events
@@ -1926,12 +1927,13 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     each refinement re-stepping from the start (in the plane, one within `nudge` of the last trial's
     end is a Verlet substep from there, one within `reach` a Yoshida step, and one from the start up
     to `briefs` long a composition of fewer substeps; and the first trial ends just past the first
-    event `foresee` sees coming). Contacts starting or ending: a cubic Hermite through the overlaps at both ends of
-    a trial; friction modes: a bracketed root find (Hermite with both ends' rates where they have
-    closed forms, then inverse quadratic interpolation, secant or Newton in the bracket). In 3D a
-    sliding slip may turn by at most `max_turn` (rad) a step, unless its friction changes the slip
-    by at most `negligible` over the step: just after it leaves the band's edge it turns on a time
-    scale of eps over its rate, far below a step, and the step is shortened to follow it. Returns
+    event `foresee` sees coming). Contacts starting or ending: a cubic Hermite through the overlaps
+    at both ends of a trial; friction modes: a bracketed root find (Hermite with both ends' rates
+    where they have closed forms, then inverse quadratic interpolation, secant or Newton in the
+    bracket). In 3D a sliding slip may turn by at most `max_turn` (rad) a step, unless its friction
+    changes the slip by at most `negligible` over the step: just after it leaves the band's edge it
+    turns on a time scale of eps over its rate, far below a step, and the step is shortened to
+    follow it. Returns
     (h taken, work, ok, the contact whose turning limited the step or -1, a candidate that began
     pressing from touching within the step: -1 if none, else the step was not taken, whether the
     search landed: False if it ran out of trials, and the step may have passed an event)."""
