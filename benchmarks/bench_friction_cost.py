@@ -7,7 +7,7 @@ timed twice: the kernel alone (`wall_time_s` of a run whose error is not measure
 alternate within one process, the compiled kernels loaded first; prints medians and ratios,
 never asserts.
 
-    python benchmarks/bench_friction_cost.py [--repeat 7] [--tol 1e-6] [--variants] [--cli 9] [--scan 40]
+    python benchmarks/bench_friction_cost.py [--repeat 7] [--tol 1e-6] [--variants] [--cli 9] [--scan 40 [--eps]]
 
 --variants adds other breaks, each against its frictionless twin: at mu = 0.1 the rack turned
 30 degrees in its plane, balls 1.3 times larger (same density) and the cue at 3 m/s; and breaks
@@ -21,7 +21,9 @@ runs repeated in one process.
 
 --scan N times N random breaks at mu = 0.1 against their twins (the cue up to 3 cm off the
 rack's line, the rack turned by any angle, balls 0.7 to 1.4 times the size, the cue at half to
-twice its speed; `--seed`), 5 alternating rounds each, and prints every ratio and the worst.
+twice its speed, and with `--eps` the friction band's half-width drawn from 1e-7 to 1e-4 m/s,
+log-uniform, where the scene's is 1e-6; `--seed`), 5 alternating rounds each, and prints every
+ratio and the worst.
 """
 
 from __future__ import annotations
@@ -130,19 +132,20 @@ def cli_ratios(rounds: int, tol: float) -> None:
         print(f"| {label} | {a * 1e3:.2f} | {b * 1e3:.2f} | {a / b:.1f} |")
 
 
-def scan(count: int, seed: int, tol: float) -> None:
+def scan(count: int, seed: int, tol: float, vary_eps: bool) -> None:
     """`--scan`: random breaks at mu = 0.1, each against its frictionless twin."""
     rng = random.Random(seed)
     print(f"\n{count} random breaks (seed {seed}), tol {tol:g}, mu 0.1 against 0: medians of 5 alternating rounds")
-    print("| cue off the line (cm) | rack turned (deg) | size | cue speed | kernel ratio | as run ratio |")
-    print("|---|---|---|---|---|---|")
+    print("| cue off the line (cm) | rack turned (deg) | size | cue speed | eps (m/s) | kernel ratio | as run ratio |")
+    print("|---|---|---|---|---|---|---|")
     kernel, as_run = [], []
     for _ in range(count):
         offset = rng.uniform(-0.03, 0.03)
         change = {"angle": rng.uniform(0.0, math.pi), "size": rng.choice([0.7, 1.0, 1.4]),
                   "speed": rng.choice([0.5, 1.0, 2.0])}
-        scenes = [parse_scene(in_plane(load_scene("billiards-break", [f"tol={tol}", f"body.cue.position.y={offset}",
-                                                                       f"contact.mu={mu}"]).source, **change))
+        eps = 10.0 ** rng.uniform(-7.0, -4.0) if vary_eps else 1e-6
+        sets = [f"tol={tol}", f"body.cue.position.y={offset}", f"contact.eps={eps}"]
+        scenes = [parse_scene(in_plane(load_scene("billiards-break", [*sets, f"contact.mu={mu}"]).source, **change))
                   for mu in (0.1, 0.0)]
         for scene in scenes:
             timed(scene, True)
@@ -155,7 +158,7 @@ def scan(count: int, seed: int, tol: float) -> None:
         kernel.append(med[0, False] / med[1, False])
         as_run.append(med[0, True] / med[1, True])
         print(f"| {100 * offset:+.2f} | {math.degrees(change['angle']):.0f} | {change['size']} | {change['speed']} "
-              f"| {kernel[-1]:.2f} | {as_run[-1]:.2f} |")
+              f"| {eps:.2g} | {kernel[-1]:.2f} | {as_run[-1]:.2f} |")
     print(f"kernel ratio: median {statistics.median(kernel):.2f}, worst {max(kernel):.2f}; "
           f"as run: median {statistics.median(as_run):.2f}, worst {max(as_run):.2f} (bar 5x)")
 
@@ -169,6 +172,7 @@ def main() -> None:
                         help="also N rounds of the breaks as `collide run` in fresh processes")
     parser.add_argument("--scan", type=int, default=0, metavar="N", help="also N random breaks against their twins")
     parser.add_argument("--seed", type=int, default=1, help="the --scan breaks' random seed")
+    parser.add_argument("--eps", action="store_true", help="--scan also draws the friction band's half-width")
     args = parser.parse_args()
     cases = {
         "billiards-break mu = 0.1": load_scene("billiards-break", [f"tol={args.tol}"]),
@@ -213,7 +217,7 @@ def main() -> None:
     if args.cli:
         cli_ratios(args.cli, args.tol)
     if args.scan:
-        scan(args.scan, args.seed, args.tol)
+        scan(args.scan, args.seed, args.tol, args.eps)
 
 
 if __name__ == "__main__":
