@@ -1921,6 +1921,22 @@ def flips(C, CI, E, nc, c, h, omega, scale):
 
 
 @jit
+def composition(h, briefs, weights, yoshida, suzuki, sixth):
+    """The substeps of a trial of h from a step's start: the fewest whose error there is within
+    SHORT_SHARE of a whole step's (`briefs`: how long a `yoshida`, a `suzuki` and a `sixth` order
+    step may be), else the run's `weights`. Not inlined: numba's kernels without reference
+    counting (`jit_inline`) may not return an array (it corrupted the heap), and it runs once a
+    trial."""
+    if h <= briefs[0]:
+        return yoshida
+    if h <= briefs[1]:
+        return suzuki
+    if h <= briefs[2]:
+        return sixth
+    return weights
+
+
+@jit
 def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
                 max_turn, negligible, nudge, reach, briefs, exact, ST, omega):
     """One step from the start state; where an event would happen inside it, shortened to land there,
@@ -1933,10 +1949,10 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     bracket). In 3D a sliding slip may turn by at most `max_turn` (rad) a step, unless its friction
     changes the slip by at most `negligible` over the step: just after it leaves the band's edge it
     turns on a time scale of eps over its rate, far below a step, and the step is shortened to
-    follow it. Returns
-    (h taken, work, ok, the contact whose turning limited the step or -1, a candidate that began
-    pressing from touching within the step: -1 if none, else the step was not taken, whether the
-    search landed: False if it ran out of trials, and the step may have passed an event)."""
+    follow it. Returns (h taken, work, ok, the contact whose turning limited the step or -1, a
+    candidate that began pressing from touching within the step: -1 if none, else the step was not
+    taken, whether the search landed: False if it ran out of trials, and the step may have passed
+    an event)."""
     h = h_full
     limited = -1
     tol = TOUCH_TOL
@@ -1963,11 +1979,8 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                         pull_rate, warm, one_pass)
     else:
         h = min(AIM * soon, h_full)
-        # The fewest substeps whose error is within SHORT_SHARE of a whole step's (see `briefs`).
-        composition = YOSHIDA if h <= briefs[0] else (SUZUKI if h <= briefs[1] else (
-            SIXTH7 if h <= briefs[2] else weights))
-        work, ok = step(X, C, CI, na, nc, h, composition, WP, grav, stuck, A, b, fl, YES, exact, pull_rate, warm,
-                        one_pass)
+        work, ok = step(X, C, CI, na, nc, h, composition(h, briefs, weights, YOSHIDA, SUZUKI, SIXTH7), WP, grav,
+                        stuck, A, b, fl, YES, exact, pull_rate, warm, one_pass)
         ST[S_ATTEMPTS] += 1
     if not ok:
         return h, work, False, limited, -1, True
@@ -2223,10 +2236,8 @@ def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
                             warm, one_pass)
             work += more
         else:
-            composition = YOSHIDA if h_next <= briefs[0] else (SUZUKI if h_next <= briefs[1] else (
-                SIXTH7 if h_next <= briefs[2] else weights))
-            work, ok = step(X, C, CI, na, nc, h_next, composition, WP, grav, stuck, A,
-                            b, fl, YES, exact, pull_rate, warm, one_pass)
+            work, ok = step(X, C, CI, na, nc, h_next, composition(h_next, briefs, weights, YOSHIDA, SUZUKI, SIXTH7),
+                            WP, grav, stuck, A, b, fl, YES, exact, pull_rate, warm, one_pass)
             ST[S_ATTEMPTS] += 1
         h = h_next
         if not ok:
