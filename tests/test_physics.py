@@ -452,6 +452,24 @@ def test_a_hold_force_through_zero_flips_the_slip_to_the_bands_other_edge():
     assert np.abs(runs["on"][4] - runs["no-flips"][4]).max() / speed <= flips * per_flip
 
 
+@pytest.mark.parametrize("offset", ["0", "0.01"])
+@pytest.mark.parametrize("eps", ["1e-5", "1e-4"])
+def test_flips_across_a_wide_band_keep_the_break_within_its_tolerance(eps, offset):
+    """A wider band takes longer to cross (T grows as sqrt(eps)), and in that time the contact
+    may end, another contact change its mode, or the hold force at the far edge pass mu F_n: a
+    flip then stands for friction that never acts. Taken wherever the crossing's own model
+    (the hold force's rate and curvature) said it was accurate (tried 2026-12-05), the break at
+    eps = 1e-4 missed its run at tol 1e-9 by up to 1.2e-5 of the cue ball's speed at tol 1e-6.
+    `flips`' bound grows as eps^1.5 and refuses them there; whatever gate comes next must keep
+    the break within its tolerance at band widths 10 and 100 times the scene's."""
+    sets = [f"contact.eps={eps}", f"body.cue.position.y={offset}"]
+    scene = load_scene("billiards-break", sets)
+    runs = {tol: run_scene(scene, tol=tol, record=False, measure=False).result for tol in (1e-6, 1e-9)}
+    outcome = {tol: np.concatenate([r.final.v[0].ravel(), r.final.w[0].ravel() * scene.bodies[0].radius])
+               for tol, r in runs.items()}
+    assert np.abs(outcome[1e-6] - outcome[1e-9]).max() / 6.0 < 1e-6
+
+
 def test_a_stuck_contacts_mode_change_lands_late_within_the_tolerance_in_fewer_trials():
     """A stuck contact's mode value (its margin to mu F_n, its hold force) has no closed-form
     rate, and landing it within MODE_TOL took the search about three trials. Held past its
