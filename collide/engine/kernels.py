@@ -457,10 +457,15 @@ def add_force(X, C, CI, c, fx, fy, fz, ac, lc, spin, planar):
 
 
 @jit_inline
-def set_basis(C, c):
+def set_basis(C, c, planar):
     """Two unit tangents (e1, e2 = n x e1) of contact c's normal; in the z = 0 plane, e1 lies in
-    it (a 2D scene's tangent)."""
+    it (a 2D scene's tangent), and is all that is set: z x n, a unit vector as n is (to
+    round-off; its normalising cost a square root and three divisions per stuck contact per
+    solve), and e2 = z holds no force there."""
     nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+    if planar:
+        C[c, C_B], C[c, C_B + 1], C[c, C_B + 2] = -ny, nx, 0.0
+        return
     if abs(nz) < 0.9:
         ex, ey, ez = -ny, nx, 0.0
     else:
@@ -749,7 +754,7 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh):
     for k in range(m):
         c = stuck[k]
         if fresh:
-            set_basis(C, c)  # else the one W was built in, at this geometry
+            set_basis(C, c, planar)  # else the one W was built in, at this geometry
         if planar:
             # The accelerations' part and the velocity terms apart: a later pass of the kick
             # changes only the second (see `repull`).
@@ -1013,7 +1018,7 @@ def settle(X, C, CI, na, nc, stuck, A, b, fl, fresh):
     for k in range(m):
         c = stuck[k]
         if fresh:
-            set_basis(C, c)
+            set_basis(C, c, planar)
         nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
         hx, hy, hz = C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2]
         hn = hx * nx + hy * ny + hz * nz
