@@ -97,7 +97,7 @@ def test_a_3d_slides_event_value_is_continuous_as_its_slip_turns():
     seed = np.int64(0)
     kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
     kn.springs(X, C, CI, 2, nc, grav)
-    kn.set_basis(C, 0)
+    kn.set_basis(C, 0, False)
     e1, e2 = C[0, kn.C_B:kn.C_B + 3], C[0, kn.C_B + 3:kn.C_B + 6]  # the tangent plane
     X[:, kn.X_W:kn.X_W + 3] = 0.0
     X[0, kn.X_V:kn.X_V + 3] = 0.0
@@ -198,7 +198,8 @@ def test_the_hold_system_is_solved_as_numpy_solves_it(symmetric):
 def test_a_planar_coupling_block_is_the_general_one_in_the_plane():
     """`couple_block`'s closed form in the plane (one tangent, z x n) equals the general sums'
     entry for the first tangents of the same contacts: shared bodies of either side, with and
-    without spin, seed levers (slip arm apart from force arm) included."""
+    without spin, seed levers (slip arm apart from force arm) included. `set_basis`' plane
+    tangent is the general first tangent."""
     rng = np.random.default_rng(5)
     for trial in range(200):
         X = np.zeros((3, int(kn.NX)))
@@ -211,7 +212,12 @@ def test_a_planar_coupling_block_is_the_general_one_in_the_plane():
             C[c, kn.C_N:kn.C_N + 3] = np.cos(angle), np.sin(angle), 0.0
             C[c, [kn.C_LIF, kn.C_LJF, kn.C_LIS, kn.C_LJS]] = rng.uniform(0.02, 0.05, 4)
             CI[c, kn.CI_I], CI[c, kn.CI_J] = i, j
-            kn.set_basis(C, c)
+            # The plane's tangent (z x n, unnormalised: n is a unit vector) is the general
+            # basis' first to round-off.
+            kn.set_basis(C, c, True)
+            in_plane = C[c, kn.C_B:kn.C_B + 3].copy()
+            kn.set_basis(C, c, False)
+            assert np.abs(in_plane - C[c, kn.C_B:kn.C_B + 3]).max() <= 4e-16
         shared = ({*pairs[0]} & {*pairs[1]}).pop()
         for spin in (0, 1):
             planar, general = np.zeros((1, 1)), np.zeros((2, 2))
