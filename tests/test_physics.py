@@ -462,12 +462,11 @@ def test_flips_across_a_wide_band_keep_the_break_within_its_tolerance(eps, offse
     eps = 1e-4 missed its run at tol 1e-9 by up to 1.2e-5 of the cue ball's speed at tol 1e-6.
     `flips`' bound grows as eps^1.5 and refuses them there; whatever gate comes next must keep
     the break within its tolerance at band widths 10 and 100 times the scene's."""
-    sets = [f"contact.eps={eps}", f"body.cue.position.y={offset}"]
-    scene = load_scene("billiards-break", sets)
-    runs = {tol: run_scene(scene, tol=tol, record=False, measure=False).result for tol in (1e-6, 1e-9)}
-    outcome = {tol: np.concatenate([r.final.v[0].ravel(), r.final.w[0].ravel() * scene.bodies[0].radius])
-               for tol, r in runs.items()}
-    assert np.abs(outcome[1e-6] - outcome[1e-9]).max() / 6.0 < 1e-6
+    from collide.accuracy import outcome, speed_scale
+
+    scene = load_scene("billiards-break", [f"contact.eps={eps}", f"body.cue.position.y={offset}"])
+    final = {tol: outcome(run_scene(scene, tol=tol, record=False, measure=False).result) for tol in (1e-6, 1e-9)}
+    assert np.abs(final[1e-6] - final[1e-9]).max() / speed_scale(scene) < 1e-6
 
 
 def test_a_stuck_contacts_mode_change_lands_late_within_the_tolerance_in_fewer_trials():

@@ -458,10 +458,9 @@ def add_force(X, C, CI, c, fx, fy, fz, ac, lc, spin, planar):
 
 @jit_inline
 def set_basis(C, c, planar):
-    """Two unit tangents (e1, e2 = n x e1) of contact c's normal; in the z = 0 plane, e1 lies in
-    it (a 2D scene's tangent), and is all that is set: z x n, a unit vector as n is (to
-    round-off; its normalising cost a square root and three divisions per stuck contact per
-    solve), and e2 = z holds no force there."""
+    """Two unit tangents (e1, e2 = n x e1) of contact c's normal. In the z = 0 plane only e1 =
+    z x n, a 2D scene's tangent: a unit vector as n is, to round-off (normalising it cost a
+    square root and three divisions per stuck contact per solve); e2 = z holds no force there."""
     nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
     if planar:
         C[c, C_B], C[c, C_B + 1], C[c, C_B + 2] = -ny, nx, 0.0
