@@ -65,6 +65,10 @@ FIXED_POINT = 12  # most iterations of an implicit kick
 # round-off only).
 CONTRACTION_SAFETY = 4.0
 WINDOW_STEPS = 64  # a window spans this many steps of the stiffest engaged contact
+# ... and, doubling from window to window, up to this many while its bodies are each alone on a
+# wall (`lone_on_walls`) and nothing is recorded: a rolling ball's cycles repeat across it
+# (rest_phase), and a stepped one still reports progress every such window.
+LONE_WINDOW_STEPS = 65536
 ISLAND_SLACK = 4  # ... unless its islands grow past this many times the largest touching cluster
 # A window's candidates: bodies reach at most this many times their speed bound's distance. A
 # window redone doubles it for that window only: kept for the rest of the run, one redone window
@@ -2288,6 +2292,13 @@ def record_step(KN, RC, CNT, G, GI, X, XI, C, CI, na, nc, t, fl):
 # changes, not the thousands of steps its bob (period 2 pi / omega) takes stepped.
 
 REST_SAMPLES = 8  # intervals per period of the bob: the event values are checked at their ends
+# A cycle whose velocities changed by at most this, over the speeds, repeats with that change as a
+# drift (a rolling ball's, by the band's dissipation: 7e-13 a period); the drift's own change,
+# left out, goes as the square of the cycles jumped: within REST_DRIFT of the event tolerance.
+REST_RECUR, REST_DRIFT = 1e-9, 1e-3
+REST_RING = 4  # events whose states are kept to find a cycle
+REST_SLIP = 1e-6  # a cycle's length off whole periods of the bob by more than this share: not one
+REST_SNAP = 16
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
 GL_X = 0.5 * (_GL_X + 1.0)  # nodes and weights on [0, 1]: to round-off over an eighth of a period
 GL_W = 0.5 * _GL_W
@@ -2607,7 +2618,8 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
     P[RP_MU], P[RP_EPS] = C[0, C_MU], C[0, C_EPS]
     P[RP_G], P[RP_G + 1] = dot3(grav, e1), dot3(grav, e2)
     touch = 2.0 * TOUCH_TOL * r
-    span = 2.0 * math.pi / om / REST_SAMPLES
+    bob = 2.0 * math.pi / om
+    span = bob / REST_SAMPLES
     start = np.zeros((3, 2))
     ends = np.zeros((3, 2))
     out = np.zeros((3, 2))
@@ -2625,6 +2637,16 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
     # A turning slide's error per interval, over the speeds: a thousandth of the tolerance (an
     # impact takes a few such intervals; a run with many is measured, as a stepped one).
     budget = max(4.0 * EPS64, REST_TURN_BUDGET * fp[FP_EVENT_TOL])
+    # Nothing here depends on the position along the wall or the orientation: once the state
+    # recurs (the bob's phase, the velocities, the mode), the motion repeats (a ball resting or
+    # rolling). A cycle is looked for between two events of the same kind, or over a period of
+    # the bob without events, and repeated in one go (`rest_repeat`). Not when recording, whose
+    # knots every interval gives.
+    snap = np.zeros(REST_SNAP)
+    lap = -1  # whole intervals without events since `snap`; -1: none taken
+    snaps = np.zeros((REST_RING, REST_SNAP))  # the state at the last few events, and their kinds
+    marks = np.full((REST_RING, 2), -9)
+    ring = 0
     while t < W:
         d_a = C[0, C_DELTA]
         dd_a = -dot3(X[0, X_V:X_V + 3], n)
@@ -2687,6 +2709,7 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         else:
             rest_events(P, mode, 0.0, touch, start)
             tau, which = rest_first(P, mode, h, touch, start, ends, out, clock)
+        whole = which < 0 and h == span and not turning
         landed = W if tau >= h and h == W - t else t + min(tau, h)
         h = landed - t
         quick = quick + 1 if which > 0 and h <= clock else 0
@@ -2756,6 +2779,37 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         if ST[S_STEPS] > fl[FL_MAXSTEPS]:
             ST[S_STATUS] = MAXSTEPS
             break
+        if not record and not turning:
+            depth = P[RP_DEQ] + math.hypot(P[RP_C], P[RP_S])
+            if which > 0:
+                # An event: the state may recur at a later one of the same kind (stuck and in the
+                # band in turn, twice a period, as a ball rolls in 3D).
+                lap = -1
+                for e in range(REST_RING):
+                    if marks[e, 0] == mode and marks[e, 1] == which:
+                        jumped = rest_repeat(G, XI, X, C, t, W, snaps[e], depth, bob, n, spin, planar, fp[FP_EVENT_TOL])
+                        if jumped != t:
+                            t = jumped
+                            geometry(X, C, CI, 1, WP, NO, NO)
+                            springs(X, C, CI, 1, 1, grav)
+                            marks[:, 0] = -9
+                            break
+                e = ring % REST_RING
+                ring += 1
+                rest_snapshot(G, XI, X, C, t, snaps[e])
+                marks[e, 0], marks[e, 1] = mode, which
+            elif whole and lap >= 0:
+                lap += 1
+                if lap == REST_SAMPLES:
+                    # A period without events (stuck, in the band or no friction throughout).
+                    t = rest_repeat(G, XI, X, C, t, W, snap, depth, bob, n, spin, planar, fp[FP_EVENT_TOL])
+                    geometry(X, C, CI, 1, WP, NO, NO)
+                    springs(X, C, CI, 1, 1, grav)
+                    rest_snapshot(G, XI, X, C, t, snap)
+                    lap = 0
+            else:
+                rest_snapshot(G, XI, X, C, t, snap)
+                lap = 0 if which < 0 else -1
         if which == 0:
             return t, KN, RC, True
         if which > 0:
@@ -2769,6 +2823,102 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
                 decided = announce = True
                 turning = mode == SLIDE and rest_turns(P)
     return t, KN, RC, False
+
+
+@jit_inline
+def rest_snapshot(G, XI, X, C, t, snap):
+    """What `rest_repeat` compares and advances: t, position, orientation, dissipated work, and
+    the state that must recur (overlap, velocity, spin)."""
+    snap[0] = t
+    for i in range(3):
+        snap[1 + i] = X[0, X_S + i]
+        snap[9 + i] = X[0, X_V + i]
+        snap[12 + i] = X[0, X_W + i]
+    for i in range(4):
+        snap[4 + i] = X[0, X_Q + i]
+    snap[8] = G[XI[0], G_WK]
+    snap[15] = C[0, C_DELTA]
+
+
+@jit_inline
+def rest_repeat(G, XI, X, C, t, W, snap, depth, bob, normal, spin, planar, event_tol):
+    """Repeat a cycle: if the state now is the one in `snap` (taken at the same point of the
+    motion: see rest_phase) but for a slow drift of the velocities (the band's dissipation), every
+    cycle after is this one moved on: the bob's phase the same, the velocities and spins drifting
+    by the cycle's change each cycle (and the displacement and turn with them), the same
+    dissipated work and events. A cycle is whole periods of the bob (`bob`, s): its length is
+    taken as that, exactly, not as the events' times say (their phase recurs to the round-off of
+    the overlap). Jumps as many whole cycles as leave one at least before W to the intervals, and
+    as keep what that leaves out within its share of the event tolerance: the drift's own change
+    (REST_DRIFT); out of the plane, the turns' commutators. Returns the new t (t itself when the
+    state did not recur)."""
+    measured = t - snap[0]
+    periods = math.floor(measured / bob + 0.5)
+    if not periods >= 1.0 or abs(measured - periods * bob) > REST_SLIP * measured:
+        return t
+    period = periods * bob
+    ratio = period / measured  # the cycle's displacement, turn and work, over the bob's periods
+    n = math.floor((W - t) / period) - 1.0
+    if not n >= 1.0:
+        return t
+    r = X[0, X_R]
+    speed, moved = 0.0, 0.0
+    for i in range(3):
+        speed += abs(X[0, X_V + i]) + r * abs(X[0, X_W + i])
+        moved += abs(X[0, X_V + i] - snap[9 + i]) + r * abs(X[0, X_W + i] - snap[12 + i])
+    # The overlap recurs to the round-off of the position it is measured from.
+    off = max(0.0, abs(C[0, C_DELTA] - snap[15]) - 16.0 * EPS64 * r) / depth if depth > 0.0 else 0.0
+    drift = moved / speed if speed > 0.0 else 0.0
+    if drift > REST_RECUR or off > 0.0:
+        return t
+    budget = REST_DRIFT * event_tol
+    if drift > 0.0:
+        n = min(n, math.floor(math.sqrt(budget) / drift))
+    # Out of the plane, the cycle's turn U as a rotation vector, and what the spins' drift adds
+    # to it each cycle: k cycles on, the turn is about theta + k * grown. Taken as one rotation,
+    # n of them leave out their commutators, n^3 |theta| |grown| / 12 (rad): within the event
+    # tolerance (the orientation does not act back on the motion).
+    tx, ty, tz, gx, gy, gz = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    if spin and not planar:
+        a, b, c, d = X[0, X_Q], X[0, X_Q + 1], X[0, X_Q + 2], X[0, X_Q + 3]
+        e, f, g, h = snap[4], -snap[5], -snap[6], -snap[7]  # the snapshot's inverse
+        u0 = a * e - b * f - c * g - d * h
+        ux, uy, uz = a * f + b * e + c * h - d * g, a * g - b * h + c * e + d * f, a * h + b * g - c * f + d * e
+        size = math.sqrt(ux * ux + uy * uy + uz * uz)
+        if size > 0.0:
+            angle = 2.0 * math.atan2(size, u0) / size
+            tx, ty, tz = angle * ux, angle * uy, angle * uz
+        gx, gy, gz = ((X[0, X_W] - snap[12]) * period, (X[0, X_W + 1] - snap[13]) * period,
+                      (X[0, X_W + 2] - snap[14]) * period)
+        left = math.sqrt(tx * tx + ty * ty + tz * tz) * math.sqrt(gx * gx + gy * gy + gz * gz)
+        if left > 0.0:
+            n = min(n, math.floor((12.0 * event_tol / left) ** (1.0 / 3.0)))
+    if n < 1.0:
+        return t
+    # Cycle k after this one moves by this one's displacement plus k times the drift's, along
+    # the wall: across it the bob's phase is exact, and its change over the cycle measured the
+    # events' phase, not a drift.
+    grow = 0.5 * n * (n + 1.0) * period
+    ds, dv = 0.0, 0.0
+    for i in range(3):
+        ds += (X[0, X_S + i] - snap[1 + i]) * normal[i]
+        dv += (X[0, X_V + i] - snap[9 + i]) * normal[i]
+    for i in range(3):
+        drift = X[0, X_V + i] - snap[9 + i] - dv * normal[i]
+        X[0, X_S + i] += n * ratio * (X[0, X_S + i] - snap[1 + i] - ds * normal[i]) + grow * drift
+        X[0, X_V + i] += n * drift
+    if spin:
+        if planar:
+            X[0, X_Q] += n * ratio * (X[0, X_Q] - snap[4]) + grow * (X[0, X_W + 2] - snap[14])
+        else:
+            tx = n * ratio * tx + grow / period * gx
+            ty = n * ratio * ty + grow / period * gy
+            tz = n * ratio * tz + grow / period * gz
+            turn(X[0, X_Q:X_Q + 4], tx, ty, tz, 1.0, NO)
+    for i in range(3):
+        X[0, X_W + i] += n * (X[0, X_W + i] - snap[12 + i])
+    G[XI[0], G_WK] += n * ratio * (G[XI[0], G_WK] - snap[8])
+    return t + n * period
 
 
 @jit_inline
@@ -3269,6 +3419,21 @@ def largest_set(parent, n):
 
 
 @jit
+def lone_on_walls(cand, eng, n):
+    """Whether a window's candidates are its engaged contacts and each a body alone on one wall
+    (a ball resting or rolling on a floor): nothing else can come in, and its rest phase may
+    repeat its cycles over a long window."""
+    if cand.shape[0] != eng.shape[0]:
+        return False
+    seen = np.zeros(n, np.int64)
+    for k in range(cand.shape[0]):
+        if cand[k, 1] >= 0 or seen[cand[k, 0]]:
+            return False
+        seen[cand[k, 0]] = 1
+    return True
+
+
+@jit
 def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     """Advance every body to the run's end (see the README's engine notes): jump to the next
     contact start while nothing touches; otherwise a window of islands. Returns the buffers and
@@ -3365,6 +3530,15 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 horizon *= 0.5
                 halved = True
                 continue
+            # Not recorded: a recording's residuals are drawn where every body has a knot, at
+            # window ends among others (two balls on a floor, apart: 8 such in 0.3 s, not 94).
+            lone = not fl[FL_RECORD] and lone_on_walls(cand, eng, n)
+            if not lone and horizon > WINDOW_STEPS * step_est:
+                # A window grown past WINDOW_STEPS while its bodies were each alone on a wall: now
+                # something may come in.
+                horizon = min(WINDOW_STEPS * step_est, t_end - t)
+                halved = True
+                continue
             # Bucket the candidates by island (counting sort on the island's root).
             count = np.zeros(n + 1, np.int64)
             for k in range(cand.shape[0]):
@@ -3421,7 +3595,8 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
         # The next window starts from this one's length, or twice it if it was not cut: the
         # candidates of a window far too long cost most of a dense run (gas-box: 64 steps, its
         # islands spanning the box, halved to 16 in each of its windows, 3 candidate searches).
-        span = min(WINDOW_STEPS, horizon / step_est * (1.0 if halved or retries > 0 else 2.0))
+        span = min(LONE_WINDOW_STEPS if lone else WINDOW_STEPS,
+                   horizon / step_est * (1.0 if halved or retries > 0 else 2.0))
     return KN, RC, IV, OP, t
 
 
