@@ -2298,7 +2298,7 @@ REST_SAMPLES = 8  # intervals per period of the bob: the event values are checke
 REST_RECUR, REST_DRIFT = 1e-9, 1e-3
 REST_RING = 4  # events whose states are kept to find a cycle
 REST_SLIP = 1e-6  # a cycle's length off whole periods of the bob by more than this share: not one
-REST_SNAP = 16
+REST_SNAP = 17
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
 GL_X = 0.5 * (_GL_X + 1.0)  # nodes and weights on [0, 1]: to round-off over an eighth of a period
 GL_W = 0.5 * _GL_W
@@ -2787,7 +2787,8 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
                 lap = -1
                 for e in range(REST_RING):
                     if marks[e, 0] == mode and marks[e, 1] == which:
-                        jumped = rest_repeat(G, XI, X, C, t, W, snaps[e], depth, bob, n, spin, planar, fp[FP_EVENT_TOL])
+                        jumped = rest_repeat(G, XI, X, C, t, W, snaps[e], depth, bob, n, grav, spin, planar,
+                                             fp[FP_EVENT_TOL], False, 0.0, 0.0)
                         if jumped != t:
                             t = jumped
                             geometry(X, C, CI, 1, WP, NO, NO)
@@ -2796,19 +2797,20 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
                             break
                 e = ring % REST_RING
                 ring += 1
-                rest_snapshot(G, XI, X, C, t, snaps[e])
+                rest_snapshot(G, XI, X, C, t, snaps[e], 0.0)
                 marks[e, 0], marks[e, 1] = mode, which
             elif whole and lap >= 0:
                 lap += 1
                 if lap == REST_SAMPLES:
-                    # A period without events (stuck, in the band or no friction throughout).
-                    t = rest_repeat(G, XI, X, C, t, W, snap, depth, bob, n, spin, planar, fp[FP_EVENT_TOL])
+                    # A period without events (stuck, sliding, in the band or no friction).
+                    t = rest_repeat(G, XI, X, C, t, W, snap, depth, bob, n, grav, spin, planar, fp[FP_EVENT_TOL],
+                                    mode == SLIDE, ends[1, 0], math.hypot(P[RP_TW], P[RP_TW + 1]))
                     geometry(X, C, CI, 1, WP, NO, NO)
                     springs(X, C, CI, 1, 1, grav)
-                    rest_snapshot(G, XI, X, C, t, snap)
+                    rest_snapshot(G, XI, X, C, t, snap, ends[1, 0])
                     lap = 0
             else:
-                rest_snapshot(G, XI, X, C, t, snap)
+                rest_snapshot(G, XI, X, C, t, snap, ends[1, 0])
                 lap = 0 if which < 0 else -1
         if which == 0:
             return t, KN, RC, True
@@ -2826,9 +2828,9 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
 
 
 @jit_inline
-def rest_snapshot(G, XI, X, C, t, snap):
-    """What `rest_repeat` compares and advances: t, position, orientation, dissipated work, and
-    the state that must recur (overlap, velocity, spin)."""
+def rest_snapshot(G, XI, X, C, t, snap, value):
+    """What `rest_repeat` compares and advances: t, position, orientation, dissipated work, the
+    state that must recur (overlap, velocity, spin), and a slide's slip value."""
     snap[0] = t
     for i in range(3):
         snap[1 + i] = X[0, X_S + i]
@@ -2838,15 +2840,24 @@ def rest_snapshot(G, XI, X, C, t, snap):
         snap[4 + i] = X[0, X_Q + i]
     snap[8] = G[XI[0], G_WK]
     snap[15] = C[0, C_DELTA]
+    snap[16] = value
 
 
 @jit_inline
-def rest_repeat(G, XI, X, C, t, W, snap, depth, bob, normal, spin, planar, event_tol):
+def rest_repeat(G, XI, X, C, t, W, snap, depth, bob, normal, grav, spin, planar, event_tol, sliding, value, spun):
     """Repeat a cycle: if the state now is the one in `snap` (taken at the same point of the
     motion: see rest_phase) but for a slow drift of the velocities (the band's dissipation), every
     cycle after is this one moved on: the bob's phase the same, the velocities and spins drifting
     by the cycle's change each cycle (and the displacement and turn with them), the same
-    dissipated work and events. A cycle is whole periods of the bob (`bob`, s): its length is
+    dissipated work and events. `sliding`: a slide along a fixed direction, whose friction (mu k
+    delta, delta periodic) changes the velocities by the same each period, exactly; its slip's
+    value (u.h - eps, `value` now) falls by the same each period, so it ends after value / fall
+    periods, less a margin for the turned spin `spun` times the lever's swing (the bob's `depth`).
+    The work each cycle dissipates is the measured cycle's, plus k times its change from one cycle
+    to the next; that change is the energies' (m |Delta v|^2 + I |Delta w|^2 - m g . Delta v P,
+    with the drifts extrapolated here), so that the energy balances over the cycles jumped. Taken
+    from the friction's closed form instead, it carried the overlap's round-off (1e-9 of it at k =
+    1e9, from the centre's height) into the balance: 1.4e-11 off where the intervals leave 1e-15. A cycle is whole periods of the bob (`bob`, s): its length is
     taken as that, exactly, not as the events' times say (their phase recurs to the round-off of
     the overlap). Jumps as many whole cycles as leave one at least before W to the intervals, and
     as keep what that leaves out within its share of the event tolerance: the drift's own change
@@ -2869,15 +2880,24 @@ def rest_repeat(G, XI, X, C, t, W, snap, depth, bob, normal, spin, planar, event
     # The overlap recurs to the round-off of the position it is measured from.
     off = max(0.0, abs(C[0, C_DELTA] - snap[15]) - 16.0 * EPS64 * r) / depth if depth > 0.0 else 0.0
     drift = moved / speed if speed > 0.0 else 0.0
-    if drift > REST_RECUR or off > 0.0:
+    if off > 0.0:
         return t
-    budget = REST_DRIFT * event_tol
-    if drift > 0.0:
-        n = min(n, math.floor(math.sqrt(budget) / drift))
+    if sliding:
+        fall = snap[16] - value
+        margin = 2.0 * abs(fall) + 2.0 * depth * spun
+        if value <= margin:
+            return t
+        if fall > 0.0:
+            n = min(n, math.floor((value - margin) / fall) - 1.0)
+    else:
+        if drift > REST_RECUR:
+            return t
+        if drift > 0.0:
+            n = min(n, math.floor(math.sqrt(REST_DRIFT * event_tol) / drift))
     # Out of the plane, the cycle's turn U as a rotation vector, and what the spins' drift adds
-    # to it each cycle: k cycles on, the turn is about theta + k * grown. Taken as one rotation,
-    # n of them leave out their commutators, n^3 |theta| |grown| / 12 (rad): within the event
-    # tolerance (the orientation does not act back on the motion).
+    # to it each cycle (g): k cycles on, the turn is about theta + k g. Taken as one rotation, n
+    # of them leave out their commutators, n^3 |theta x g| / 12 (rad): within the event tolerance
+    # (the orientation does not act back on the motion).
     tx, ty, tz, gx, gy, gz = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     if spin and not planar:
         a, b, c, d = X[0, X_Q], X[0, X_Q + 1], X[0, X_Q + 2], X[0, X_Q + 3]
@@ -2890,7 +2910,8 @@ def rest_repeat(G, XI, X, C, t, W, snap, depth, bob, normal, spin, planar, event
             tx, ty, tz = angle * ux, angle * uy, angle * uz
         gx, gy, gz = ((X[0, X_W] - snap[12]) * period, (X[0, X_W + 1] - snap[13]) * period,
                       (X[0, X_W + 2] - snap[14]) * period)
-        left = math.sqrt(tx * tx + ty * ty + tz * tz) * math.sqrt(gx * gx + gy * gy + gz * gz)
+        cx, cy, cz = ty * gz - tz * gy, tz * gx - tx * gz, tx * gy - ty * gx
+        left = math.sqrt(cx * cx + cy * cy + cz * cz)
         if left > 0.0:
             n = min(n, math.floor((12.0 * event_tol / left) ** (1.0 / 3.0)))
     if n < 1.0:
@@ -2903,8 +2924,11 @@ def rest_repeat(G, XI, X, C, t, W, snap, depth, bob, normal, spin, planar, event
     for i in range(3):
         ds += (X[0, X_S + i] - snap[1 + i]) * normal[i]
         dv += (X[0, X_V + i] - snap[9 + i]) * normal[i]
+    grown = 0.0  # the work's change from one cycle to the next
     for i in range(3):
         drift = X[0, X_V + i] - snap[9 + i] - dv * normal[i]
+        dw = X[0, X_W + i] - snap[12 + i] if spin else 0.0
+        grown -= X[0, X_M] * drift * (drift - grav[i] * period) + X[0, X_I] * dw * dw
         X[0, X_S + i] += n * ratio * (X[0, X_S + i] - snap[1 + i] - ds * normal[i]) + grow * drift
         X[0, X_V + i] += n * drift
     if spin:
@@ -2917,7 +2941,7 @@ def rest_repeat(G, XI, X, C, t, W, snap, depth, bob, normal, spin, planar, event
             turn(X[0, X_Q:X_Q + 4], tx, ty, tz, 1.0, NO)
     for i in range(3):
         X[0, X_W + i] += n * (X[0, X_W + i] - snap[12 + i])
-    G[XI[0], G_WK] += n * ratio * (G[XI[0], G_WK] - snap[8])
+    G[XI[0], G_WK] += n * ratio * (G[XI[0], G_WK] - snap[8]) + 0.5 * n * (n + 1.0) * grown
     return t + n * period
 
 
