@@ -2849,20 +2849,26 @@ def rest_repeat(G, XI, X, C, t, W, snap, depth, bob, normal, grav, spin, planar,
     motion: see rest_phase) but for a slow drift of the velocities (the band's dissipation), every
     cycle after is this one moved on: the bob's phase the same, the velocities and spins drifting
     by the cycle's change each cycle (and the displacement and turn with them), the same
-    dissipated work and events. `sliding`: a slide along a fixed direction, whose friction (mu k
-    delta, delta periodic) changes the velocities by the same each period, exactly; its slip's
-    value (u.h - eps, `value` now) falls by the same each period, so it ends after value / fall
-    periods, less a margin for the turned spin `spun` times the lever's swing (the bob's `depth`).
+    dissipated work and events. A cycle is whole periods of the bob (`bob`, s), its length taken
+    as that, exactly, not as the events' times say (their phase recurs to the overlap's
+    round-off).
+
+    `sliding`: a slide along a fixed direction, whose friction (mu k delta, delta periodic)
+    changes the velocities by the same each period, exactly; its slip's value (u.h - eps, `value`
+    now) falls by the same each period, so it ends after value / fall periods, less a margin for
+    the turned spin `spun` times the lever's swing (the bob's `depth`).
+
     The work each cycle dissipates is the measured cycle's, plus k times its change from one cycle
     to the next; that change is the energies' (m |Delta v|^2 + I |Delta w|^2 - m g . Delta v P,
     with the drifts extrapolated here), so that the energy balances over the cycles jumped. Taken
-    from the friction's closed form instead, it carried the overlap's round-off (1e-9 of it at k =
-    1e9, from the centre's height) into the balance: 1.4e-11 off where the intervals leave 1e-15. A cycle is whole periods of the bob (`bob`, s): its length is
-    taken as that, exactly, not as the events' times say (their phase recurs to the round-off of
-    the overlap). Jumps as many whole cycles as leave one at least before W to the intervals, and
-    as keep what that leaves out within its share of the event tolerance: the drift's own change
-    (REST_DRIFT); out of the plane, the turns' commutators. Returns the new t (t itself when the
-    state did not recur)."""
+    from the friction's closed form instead, it carried the overlap's round-off (1e-9 of it at
+    k = 1e9, from the centre's height) into the balance: 1.4e-11 off where the intervals leave
+    1e-15.
+
+    Jumps as many whole cycles as leave one at least before W to the intervals, and as keep what
+    that leaves out within its share of the event tolerance: the drift's own change (REST_DRIFT);
+    out of the plane, the turns' commutators. Returns the new t (t itself when the state did not
+    recur)."""
     measured = t - snap[0]
     periods = math.floor(measured / bob + 0.5)
     if not periods >= 1.0 or abs(measured - periods * bob) > REST_SLIP * measured:
