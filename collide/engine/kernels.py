@@ -2294,7 +2294,8 @@ def record_step(KN, RC, CNT, G, GI, X, XI, C, CI, na, nc, t, fl):
 REST_SAMPLES = 8  # intervals per period of the bob: the event values are checked at their ends
 # A cycle whose velocities changed by at most this, over the speeds, repeats with that change as a
 # drift (a rolling ball's, by the band's dissipation: 7e-13 a period); the drift's own change,
-# left out, goes as the square of the cycles jumped: within REST_DRIFT of the event tolerance.
+# left out, goes as the square of the cycles jumped (in the band, the drift itself, as their
+# number): within REST_DRIFT of the event tolerance.
 REST_RECUR, REST_DRIFT = 1e-9, 1e-3
 REST_RING = 4  # events whose states are kept to find a cycle
 REST_SLIP = 1e-6  # a cycle's length off whole periods of the bob by more than this share: not one
@@ -2639,8 +2640,8 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
     # impact takes a few such intervals; a run with many is measured, as a stepped one).
     budget = max(4.0 * EPS64, REST_TURN_BUDGET * fp[FP_EVENT_TOL])
     # Nothing here depends on the position along the wall or the orientation: once the state
-    # recurs (the bob's phase, the velocities, the mode), the motion repeats (a ball resting or
-    # rolling). A cycle is looked for between two events of the same kind, or over a period of
+    # recurs (the bob's phase, the velocities, the mode), the motion repeats (a ball resting,
+    # rolling or sliding straight). A cycle is looked for between two events of the same kind, or over a period of
     # the bob without events, and repeated in one go (`rest_repeat`). Not when recording, whose
     # knots every interval gives.
     snap = np.zeros(REST_SNAP)
@@ -2858,10 +2859,10 @@ def rest_repeat(G, XI, X, C, t, W, snap, depth, bob, normal, grav, spin, planar,
     `kind`: REST_STILL, a period in the band or without friction, where nothing dissipates and
     the velocities recur but for round-off (not carried on: over 20 000 cycles it left 1e-12 in
     the energy); REST_DRIFTING, a cycle with stuck phases; REST_SLIDING, a slide along a fixed
-    direction, whose friction (mu k delta, delta periodic)
-    changes the velocities by the same each period, exactly; its slip's value (u.h - eps, `value`
-    now) falls by the same each period, so it ends after value / fall periods, less a margin for
-    the turned spin `spun` times the lever's swing (the bob's `depth`).
+    direction, whose friction (mu k delta, delta periodic) changes the velocities by the same
+    each period, exactly. A slide's slip value (u.h - eps, `value` now) falls by the same each
+    period, so it ends after value / fall periods, less a margin for the turned spin `spun` times
+    the lever's swing (the bob's `depth`).
 
     The work each cycle dissipates is the measured cycle's, plus k times its change from one cycle
     to the next; that change is the energies' (m |Delta v|^2 + I |Delta w|^2 - m g . Delta v P,
@@ -3577,7 +3578,8 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
             # Not recorded: a recording's residuals are drawn where every body has a knot, at
             # window ends among others (two balls on a floor, apart: 8 such in 0.3 s, not 94).
             # A lone body stepped (a slip turning too fast for the closed form) then takes other
-            # steps recorded than not, within the tolerance. With a given dt nothing repeats.
+            # steps recorded than not: the two differ by the stepped path's own error. With a
+            # given dt nothing repeats.
             lone = fl[FL_AUTO] and not fl[FL_RECORD] and lone_on_walls(cand, eng, n)
             if not lone and horizon > WINDOW_STEPS * step_est:
                 # A window grown past WINDOW_STEPS while its bodies were each alone on a wall: now
