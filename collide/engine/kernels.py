@@ -2467,19 +2467,45 @@ def rest_first(P, mode, h, touch, start, ends, out, clock):
     end, 1 or 2 the mode's). `start` (3, 2): the values and rates at 0; `ends`, `out`: room."""
     rest_events(P, mode, h, touch, ends)
     first, which = math.inf, -1
+    # A slip's value is a difference of velocities (v + l tw, about the speed, less eps): their
+    # round-off.
+    noise = 4.0 * EPS64 * (abs(P[RP_V]) + abs(P[RP_V + 1]) + P[RP_R] * (abs(P[RP_TW]) + abs(P[RP_TW + 1])))
     for k in range(3):
         g0, g1 = start[k, 0], ends[k, 0]
         if not math.isfinite(g0) or not math.isfinite(g1):
             continue
         lo, g_lo = 0.0, max(g0, 0.0)
-        if g0 < 0.0 and start[k, 1] > 0.0:
+        floor = noise if k == 1 and mode != STICK else 0.0
+        if g0 < floor:
             # A mode just entered whose value starts a hair below zero (the round-off of the
-            # state it was judged on) and rises: its root is where it crosses back down, after.
-            lo = min(h, -4.0 * g0 / start[k, 1] + clock)
-            rest_events(P, mode, lo, touch, out)
-            g_lo = out[k, 0]
-            if g_lo < 0.0:
-                lo, g_lo = 0.0, 0.0
+            # state it was judged on), or a slip's within its round-off of it: its root is where
+            # it crosses back down, after it rose clear. Where its rate says, if it rises; else,
+            # or if not clear there, the first of points 16 times apart from the clock's tick
+            # where it is, unless it falls clear below first (it is leaving: the root is now).
+            # A rate of round-off whose value rises by the rate's own rate is a slip at the bob's
+            # turn, its hold force through zero: from an assumed zero at 0, the secant found the
+            # slip leaving the band at once, and the hold force reversing at once, over and over,
+            # until the stepped path took over (a ball rolling at k = 1e5 N/m, from its first
+            # tenth of a second); and a slide at the bob's top, where mu F_n is nil, its slip 3e-17
+            # off the band's edge and leaving it at 3e-11 m/s^2, met the edge in its round-off
+            # (8e-17) 30 000 times in 0.2 s.
+            reach = h
+            if g0 < 0.0 and start[k, 1] > 0.0:
+                lo = min(h, -4.0 * g0 / start[k, 1] + clock)
+                rest_events(P, mode, lo, touch, out)
+                g_lo = out[k, 0]
+                reach = lo
+            if not (lo > 0.0 and g_lo >= floor):
+                lo, g_lo = 0.0, max(g0, 0.0)
+                tau = clock
+                while tau < reach:
+                    rest_events(P, mode, tau, touch, out)
+                    if out[k, 0] >= floor and out[k, 0] > 0.0:
+                        lo, g_lo = tau, out[k, 0]
+                        break
+                    if out[k, 0] < min(2.0 * g0, -floor):
+                        break
+                    tau *= 16.0
         hi, g_hi = math.nan, math.nan
         if g1 < 0.0 and lo < h:
             hi, g_hi = h, g1
