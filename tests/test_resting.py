@@ -100,7 +100,7 @@ def test_a_ball_rolling_ten_seconds_repeats_its_cycles():
     """Rolling, the ball sticks and slips back into the band twice a period of its bob (the hold
     force turns with the lever r - delta): the same cycle, the velocities drifting by the band's
     dissipation (7e-13 of the speed a period); before that it slides for 0.1 s, 150 periods whose
-    velocities change by the same each. Repeated, 10 s take 365 intervals, not 161 067, and end
+    velocities change by the same each. Repeated, 10 s take 365 intervals, not 160 859, and end
     where stepping every interval does (measured: positions 5e-12 m, speeds 1e-12 of the speed,
     work 6e-15 of it); the bob's phase is then exact to 1e-12 m/s (the intervals' own: 6e-10
     m/s), as it should be: its period is known."""
