@@ -2489,16 +2489,14 @@ def rest_first(P, mode, h, touch, start, ends, out, clock):
             # tenth of a second); and a slide at the bob's top, where mu F_n is nil, its slip 3e-17
             # off the band's edge and leaving it at 3e-11 m/s^2, met the edge in its round-off
             # (8e-17) 30 000 times in 0.2 s.
-            reach = h
             if g0 < 0.0 and start[k, 1] > 0.0:
                 lo = min(h, -4.0 * g0 / start[k, 1] + clock)
                 rest_events(P, mode, lo, touch, out)
                 g_lo = out[k, 0]
-                reach = lo
             if not (lo > 0.0 and g_lo >= floor):
                 lo, g_lo = 0.0, max(g0, 0.0)
                 tau = clock
-                while tau < reach:
+                while tau < h:
                     rest_events(P, mode, tau, touch, out)
                     if out[k, 0] >= floor and out[k, 0] > 0.0:
                         lo, g_lo = tau, out[k, 0]
@@ -3112,7 +3110,17 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         # After a step the state's geometry and spring accelerations are the step's end's (its
         # last trial left them there; they depend on the positions only).
         stepped = False
+        since = ST[S_STEPS]
         while t < W and not changed and ST[S_STATUS] == OK:
+            if ST[S_STEPS] - since >= WINDOW_STEPS and rest_ready(X, C, CI, na, nc, nq, fl):
+                # The closed form again after as many steps as a window spans, as the next
+                # window would: a window of a body alone on a wall can be far longer (and what
+                # stopped it, a slip turning fast or mode changes piling up, has mostly passed).
+                t, KN, RC, changed = rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
+                carried = stepped = False
+                grown, turner = math.inf, -1
+                since = ST[S_STEPS]
+                continue
             if carried:
                 # The last step met no mode's edge: decide would keep every mode (in the plane a
                 # held direction counts by its side only) and settle nothing (the step's end
