@@ -2735,7 +2735,7 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         else:
             rest_events(P, mode, 0.0, touch, start)
             tau, which = rest_first(P, mode, h, touch, start, ends, out, clock)
-        whole = which < 0 and h == span and not turning
+        whole = which < 0 and h == span
         landed = W if tau >= h and h == W - t else t + min(tau, h)
         h = landed - t
         quick = quick + 1 if which > 0 and h <= clock else 0
@@ -2829,11 +2829,13 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
                 lap += 1
                 if lap == REST_SAMPLES:
                     # A period without events (stuck, sliding, in the band or no friction).
-                    t = rest_repeat(G, XI, X, C, t, W, snap, depth, bob, n, grav, spin, planar, fp[FP_EVENT_TOL],
-                                    REST_SLIDING if mode == SLIDE else (REST_DRIFTING if mode == STICK else REST_STILL),
-                                    ends[1, 0], math.hypot(P[RP_TW], P[RP_TW + 1]))
-                    geometry(X, C, CI, 1, WP, NO, NO)
-                    springs(X, C, CI, 1, 1, grav)
+                    kind = REST_SLIDING if mode == SLIDE else (REST_DRIFTING if mode == STICK else REST_STILL)
+                    jumped = rest_repeat(G, XI, X, C, t, W, snap, depth, bob, n, grav, spin, planar, fp[FP_EVENT_TOL],
+                                         kind, ends[1, 0], math.hypot(P[RP_TW], P[RP_TW + 1]))
+                    if jumped != t:
+                        t = jumped
+                        geometry(X, C, CI, 1, WP, NO, NO)
+                        springs(X, C, CI, 1, 1, grav)
                     rest_snapshot(G, XI, X, C, t, snap, ends[1, 0])
                     lap = 0
             else:
@@ -2965,13 +2967,12 @@ def rest_repeat(G, XI, X, C, t, W, snap, depth, bob, normal, grav, spin, planar,
     # the wall: across it the bob's phase is exact, and its change over the cycle measured the
     # events' phase, not a drift.
     grow = 0.5 * n * (n + 1.0) * period
-    ds, dv = 0.0, 0.0
+    ds = 0.0
     for i in range(3):
         ds += (X[0, X_S + i] - snap[1 + i]) * normal[i]
-        dv += (X[0, X_V + i] - snap[9 + i]) * normal[i]
     grown = 0.0  # the work's change from one cycle to the next
     for i in range(3):
-        drift = carried * (X[0, X_V + i] - snap[9 + i] - dv * normal[i])
+        drift = carried * (X[0, X_V + i] - snap[9 + i] - across * normal[i])
         dw = carried * (X[0, X_W + i] - snap[12 + i]) if spin else 0.0
         grown -= X[0, X_M] * drift * (drift - grav[i] * period) + X[0, X_I] * dw * dw
         X[0, X_S + i] += n * ratio * (X[0, X_S + i] - snap[1 + i] - ds * normal[i]) + grow * drift
