@@ -482,9 +482,10 @@ def test_friction_events_in_the_plane_cost_few_step_attempts():
     search must aim well. A slip crossing the band is aimed at through its far edge (the near
     edge's value of |slip| rose and fell back: 11 trials for one event), and refinements close
     to a trial's end are one Verlet substep from there. With these, 154 steps from a step's start
-    against 78 without friction (261 before). Out of the plane no Verlet substep is taken (a
-    small slip's direction turns faster than they resolve); in a tilted plane they are. Counted
-    with the interpreted kernels, where `step` can be wrapped."""
+    against 78 without friction (261 before). Out of the plane they are taken as far as the slips'
+    turning allows (`turning_nudges`): the tilted bonus demo tries 16 steps from a step's start
+    and 6 substeps (41 and none before 2026-12-05); in a tilted plane the planar path takes them.
+    Counted with the interpreted kernels, where `step` can be wrapped."""
     code = """
 import sys
 import collide.engine.kernels as kn
@@ -514,6 +515,7 @@ for scene in scenes + [parse_scene(tilted_bonus(tol=1e-7)), turned]:
     assert full_without > 0 and full_3d > 0
     assert full <= 2.2 * full_without
     assert substeps > 0
-    assert substeps_3d == 0
+    # Half again the 16 counted, where 41 were tried without nudges out of the plane.
+    assert substeps_3d > 0 and full_3d <= 24
     # In a tilted plane the break runs on the planar path too (turned into z = const).
     assert substeps_tilted > 0 and full_tilted <= 1.1 * full
