@@ -12,7 +12,8 @@ never asserts.
 --variants adds other breaks, each against its frictionless twin: at mu = 0.1 the rack turned
 30 degrees in its plane, balls 1.3 times larger (same density) and the cue at 3 m/s; and breaks
 with more friction mode changes: the cue ball 0.5, 1 and 2 cm off the rack's line (every mode
-changes at its own time), mu = 0.2 and 0.4.
+changes at its own time), mu = 0.2 and 0.4; and a true 3D break, the cue 5 mm above the rack's
+plane (its contacts leave the plane: the 3D kicks' cost, not the bar's planar break).
 
 --cli N also times the breaks that `--set` can make as a user runs them: `collide run
 billiards-break --json --no-record` in a fresh process each, N rounds alternating, `wall_time_s`
@@ -49,7 +50,8 @@ VARIANTS = {"rack turned 30 deg": ([], {"angle": math.pi / 6}), "balls 1.3x larg
             "cue at 3 m/s": ([], {"speed": 0.5}), "cue 0.5 cm off-centre": (["body.cue.position.y=0.005"], {}),
             "cue 1 cm off-centre": (["body.cue.position.y=0.01"], {}),
             "cue 2 cm off-centre": (["body.cue.position.y=0.02"], {}),
-            "mu = 0.2": (["contact.mu=0.2"], {}), "mu = 0.4": (["contact.mu=0.4"], {})}
+            "mu = 0.2": (["contact.mu=0.2"], {}), "mu = 0.4": (["contact.mu=0.4"], {}),
+            "cue 5 mm above the rack's plane (3D)": ([], {"lift": 0.005})}
 
 
 def rolling_ball(tol: float):
@@ -85,9 +87,10 @@ def tilted(scene):
     return parse_scene(turned_source(scene.source))
 
 
-def in_plane(source: dict, angle: float = 0.0, size: float = 1.0, speed: float = 1.0) -> dict:
+def in_plane(source: dict, angle: float = 0.0, size: float = 1.0, speed: float = 1.0, lift: float = 0.0) -> dict:
     """A 2D scene's source turned by `angle` (rad) about the origin, its lengths times `size` (masses
-    times size^3: the same density) and its velocities times `speed`."""
+    times size^3: the same density) and its velocities times `speed`; with `lift` (m), a 3D scene
+    whose first body (the cue) is that far above the others' plane: its contacts leave the plane."""
     c, s = math.cos(angle), math.sin(angle)
 
     def turned(vector: list, factor: float) -> list[float]:
@@ -95,6 +98,10 @@ def in_plane(source: dict, angle: float = 0.0, size: float = 1.0, speed: float =
 
     bodies = [dict(b, position=turned(b["position"], size), velocity=turned(b["velocity"], speed),
                    radius=b["radius"] * size, mass=b["mass"] * size ** 3) for b in source["body"]]
+    if lift:
+        bodies = [dict(b, position=[*b["position"], lift if k == 0 else 0.0], velocity=[*b["velocity"], 0.0])
+                  for k, b in enumerate(bodies)]
+        return dict(source, dim=3, body=bodies)
     return dict(source, body=bodies)
 
 
@@ -193,7 +200,8 @@ def main() -> None:
         for name, mu in ((with_friction, []), (twin, ["contact.mu=0"])):
             scene = load_scene("billiards-break", [f"tol={args.tol}", *sets, *mu])
             cases[name] = parse_scene(in_plane(scene.source, **change)) if change else scene
-        bar = "mu above the bar's 0.1" if "mu" in label else "bar 5x"
+        bar = "mu above the bar's 0.1" if "mu" in label else ("out of the plane: not the bar's break" if "3D" in label
+                                                             else "bar 5x")
         pairs.append((with_friction, twin, bar))
     for scene in cases.values():
         timed(scene, True)  # load the compiled kernels, outside the clock
