@@ -1952,9 +1952,10 @@ def turning_nudges(X, C, CI, na, nc, fl, nudge, reach, negligible, span, vc, wc,
         size = math.sqrt(sx * sx + sy * sy + sz * sz)
         if size == 0.0:
             return 0.0, 0.0
+        ux, uy, uz = sx / size, sy / size, sz / size
         gx, gy, gz = slip_rate(X, C, CI, c, vc, wc, X_UA, lc, spin, seed, YES, False)
-        along = (gx * sx + gy * sy + gz * sz) / size  # d|slip|/dt
-        gx, gy, gz = gx - along * sx / size, gy - along * sy / size, gz - along * sz / size
+        along = gx * ux + gy * uy + gz * uz  # d|slip|/dt
+        gx, gy, gz = gx - along * ux, gy - along * uy, gz - along * uz
         least = max(size + 2.0 * min(along, 0.0) * span, C[c, C_EPS])
         rate = (gx * gx + gy * gy + gz * gz) / (least * least)  # theta'^2
         force = C[c, C_MU] * C[c, C_FN] * response(X, C, CI, c, spin)
@@ -2857,12 +2858,10 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
                 lap = -1
                 for e in range(REST_RING):
                     if marks[e, 0] == mode and marks[e, 1] == which:
-                        jumped = rest_repeat(G, XI, X, C, t, W, snaps[e], depth, bob, n, grav, spin, planar,
+                        jumped = rest_repeat(G, XI, X, C, CI, WP, t, W, snaps[e], depth, bob, n, grav, spin, planar,
                                              fp[FP_EVENT_TOL], REST_DRIFTING, 0.0, 0.0)
                         if jumped != t:
                             t = jumped
-                            geometry(X, C, CI, 1, WP, NO, NO)
-                            springs(X, C, CI, 1, 1, grav)
                             marks[:, 0] = -9
                             break
                 e = ring % REST_RING
@@ -2874,12 +2873,8 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
                 if lap == REST_SAMPLES:
                     # A period without events (stuck, sliding, in the band or no friction).
                     kind = REST_SLIDING if mode == SLIDE else (REST_DRIFTING if mode == STICK else REST_STILL)
-                    jumped = rest_repeat(G, XI, X, C, t, W, snap, depth, bob, n, grav, spin, planar, fp[FP_EVENT_TOL],
-                                         kind, ends[1, 0], math.hypot(P[RP_TW], P[RP_TW + 1]))
-                    if jumped != t:
-                        t = jumped
-                        geometry(X, C, CI, 1, WP, NO, NO)
-                        springs(X, C, CI, 1, 1, grav)
+                    t = rest_repeat(G, XI, X, C, CI, WP, t, W, snap, depth, bob, n, grav, spin, planar,
+                                    fp[FP_EVENT_TOL], kind, ends[1, 0], math.hypot(P[RP_TW], P[RP_TW + 1]))
                     rest_snapshot(G, XI, X, C, t, snap, ends[1, 0])
                     lap = 0
             else:
@@ -2917,7 +2912,7 @@ def rest_snapshot(G, XI, X, C, t, snap, value):
 
 
 @jit_inline
-def rest_repeat(G, XI, X, C, t, W, snap, depth, bob, normal, grav, spin, planar, event_tol, kind, value, spun):
+def rest_repeat(G, XI, X, C, CI, WP, t, W, snap, depth, bob, normal, grav, spin, planar, event_tol, kind, value, spun):
     """Repeat a cycle: if the state now is the one in `snap` (taken at the same point of the
     motion: see rest_phase) but for a slow drift of the velocities (the band's dissipation), every
     cycle after is this one moved on: the bob's phase the same, the velocities and spins drifting
@@ -2944,7 +2939,7 @@ def rest_repeat(G, XI, X, C, t, W, snap, depth, bob, normal, grav, spin, planar,
     Jumps as many whole cycles as leave one at least before W to the intervals, and as keep what
     that leaves out within its share of the event tolerance: the drift's own change (REST_DRIFT);
     out of the plane, the turns' commutators. Returns the new t (t itself when the state did not
-    recur)."""
+    recur), the geometry and springs (C, X_A) the moved state's."""
     measured = t - snap[0]
     periods = math.floor(measured / bob + 0.5)
     if not periods >= 1.0 or abs(measured - periods * bob) > REST_SLIP * measured:
@@ -3032,6 +3027,8 @@ def rest_repeat(G, XI, X, C, t, W, snap, depth, bob, normal, grav, spin, planar,
     for i in range(3):
         X[0, X_W + i] += n * carried * (X[0, X_W + i] - snap[12 + i])
     G[XI[0], G_WK] += n * ratio * (G[XI[0], G_WK] - snap[8]) + 0.5 * n * (n + 1.0) * grown
+    geometry(X, C, CI, 1, WP, NO, NO)
+    springs(X, C, CI, 1, 1, grav)
     return t + n * period
 
 
