@@ -305,8 +305,9 @@ def _measured(run: SceneRun, integ: str, record: bool, max_steps: int) -> SceneR
     if float(candidate.error_estimate[0]) > tol:
         candidate.result.warnings.append(
             f"the measured error {float(candidate.error_estimate[0]):.2g} exceeds --tol {tol:.2g} even at a "
-            f"{tol / step_tol:.0f} times tighter step choice (contacts that follow one another amplify each "
-            "other's error); the estimate is measured, not modelled")
+            f"{tol / step_tol:.0f} times tighter step choice (the outcome moves with the step more than one "
+            "contact's error: contacts that feed one another, or a friction mode that changes at another "
+            "time with each step); the estimate is measured, not modelled")
     return candidate
 
 
