@@ -18,7 +18,7 @@ import numpy as np
 from collide.engine import dem as dk
 from collide.engine import kernels as kn
 from collide.engine import tier
-from collide.model import KISSING, TABLE_ESTAR, TABLE_K, TABLE_REST, Model, State, select_model
+from collide.model import KISSING, TABLE_ESTAR, TABLE_K, TABLE_KTR, TABLE_REST, Model, State, select_model
 from collide.stepper import (
     ContactLog,
     Progress,
@@ -143,10 +143,13 @@ def damping_ratio(restitution: np.ndarray, hertz: bool) -> np.ndarray:
 
 
 def kernel_tables(model: Model, b: int) -> tuple[np.ndarray, np.ndarray]:
-    """Member b's pair and wall tables with restitution turned into the damping ratio."""
+    """Member b's pair and wall tables with restitution turned into the damping ratio, and the
+    tangential stiffness ratio's square root added (`collide.engine.dem`'s layout)."""
     pair, wall = model.pair_table[b].copy(), model.wall_table[b].copy()
     pair[..., TABLE_REST] = damping_ratio(pair[..., TABLE_REST], model.hertz)
     wall[..., TABLE_REST] = damping_ratio(wall[..., TABLE_REST], model.hertz)
+    pair = np.concatenate([pair, np.sqrt(pair[..., TABLE_KTR:TABLE_KTR + 1])], axis=-1)
+    wall = np.concatenate([wall, np.sqrt(wall[..., TABLE_KTR:TABLE_KTR + 1])], axis=-1)
     return pair, wall
 
 

@@ -259,6 +259,25 @@ def test_settling_pile_comes_to_rest_with_its_energy_balanced():
     assert 0.3 < dg.packing_fraction(result.model, result.final.s[0]) < 0.74  # loose to densest
 
 
+def test_one_pass_between_force_passes_changes_no_bit():
+    """Between two force passes the DEM kernel makes one pass over the bodies (a step's closing
+    kick, the next one's opening kick and drift) unless it must read the velocities at the step's
+    end, as a scene that ends at rest does after every step. The same settling pile (rolling
+    resistance and tangential springs: every part of the work booked) run both ways, its rest
+    test never met, ends with the same state and work to the last bit."""
+    fused = _pile(3, 3)
+    fused["duration"] = 0.3
+    del fused["rest"]
+    unfused = dict(fused, rest=1e-30)
+    runs = [run_scene(parse_scene(raw), record=False).result for raw in (fused, unfused)]
+    assert runs[0].steps[0] == runs[1].steps[0] > 1000 and runs[0].final.t[0] == 0.3
+    first, second = runs
+    for name in ("s", "v", "w", "q", "work"):
+        assert np.array_equal(getattr(first.final, name), getattr(second.final, name)), name
+    assert np.array_equal(first.dissipation, second.dissipation)
+    assert np.abs(first.final.v).max() > 1e-3  # still moving: the passes had work to do
+
+
 def test_dem_batch_members_equal_single_runs():
     base = _wall_scene(restitution=0.5, mu=0.3, tangential="spring")
     base["body"][0]["velocity"] = [0.1, 0.0, -0.2]
@@ -272,6 +291,33 @@ def test_dem_batch_members_equal_single_runs():
         alone = run_scene(scene, record=False).result
         assert np.array_equal(batch.final.v[b], alone.final.v[0])
         assert np.array_equal(batch.final.w[b], alone.final.w[0])
+
+
+@pytest.mark.parametrize("dim", [1, 2, 3])
+@pytest.mark.parametrize("far", [False, True])
+def test_neighbour_lists_hold_every_pair_within_reach(dim, far):
+    """The DEM neighbour search against every pair: spheres of unequal radii packed in a small
+    region (a dense cell grid) and, with `far`, one of them 100 km away (the grid is hashed
+    instead); keys ascending, each with its pair's (i, j)."""
+    from collide.engine.dem import B_R, DENSE_CELLS, NB, build_pairs
+
+    rng = np.random.default_rng(dim)
+    for n in (1, 2, 40, 300):
+        P = np.zeros((n, 3))
+        P[:, :dim] = rng.uniform(-1.0, 1.0, (n, dim)) * n ** (1 / dim) * 0.4
+        if far:
+            P[0, :dim] = 1e5
+        bodies = np.zeros((n, int(NB)))
+        bodies[:, B_R] = rng.uniform(0.1, 0.5, n)
+        pad = 0.1
+        size = 2 * bodies[:, B_R].max() + pad
+        cells = np.prod(np.ptp(P[:, :dim], axis=0) / size + 1.0)
+        assert (cells > DENSE_CELLS * n) == (far and n > 1)  # the grid kind this case is for
+        keys, rows, partners = build_pairs(P, bodies, n, dim, pad)
+        gap = np.linalg.norm(P[:, None] - P[None], axis=-1) - bodies[:, None, B_R] - bodies[None, :, B_R]
+        i, j = np.nonzero(np.triu(gap < pad, 1))
+        assert n < 40 or len(i) > n // 2  # not vacuous
+        assert np.array_equal(keys, i * n + j) and np.array_equal(rows, i) and np.array_equal(partners, j)
 
 
 def test_too_large_a_dem_step_is_refused():
