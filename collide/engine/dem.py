@@ -67,8 +67,9 @@ NK, NR = 23, 9
 EP_T, EP_DAMP, EP_FRIC, EP_ROLL, EP_STORED = range(5)
 NEP = 5
 HASH_PRIMES = (73856093, 19349663, 83492791)
-# The neighbour search's grid is dense (not hashed) where it has at most this many cells a body.
-DENSE_CELLS = 64
+# The neighbour search's grid is dense (not hashed) where it has at most this many cells a body:
+# 128 bytes a body at most, less than its state takes (a settling box has about 4).
+DENSE_CELLS = 16
 # Below mu_r R* F_n, rolling resistance is a viscous torque that would stop the relative rolling
 # in this many steps: more than the 12 contacts a sphere can have, so that together they never
 # overshoot (a cap of one step each made a sphere in a pile spin up, measured).
