@@ -154,6 +154,27 @@ def build_pairs(P, Bd, n, dim, reach_pad):
         keys = np.empty(2 * keys.shape[0], np.int64)
 
 
+@jit_inline
+def _partners(P, Bd, i, n, reach_pad, order, first, last, cells, cx, cy, cz, hashed, keys, count):
+    """The bodies order[first:last] that are i's partners (j > i, within reach; `hashed`: from the
+    cell (cx, cy, cz) itself, as a hashed bucket also holds other cells') into keys from count.
+    Returns the new count."""
+    for m in range(first, last):
+        j = order[m]
+        dx = P[j, 0] - P[i, 0]
+        dy = P[j, 1] - P[i, 1]
+        dz = P[j, 2] - P[i, 2]
+        lim = Bd[i, B_R] + Bd[j, B_R] + reach_pad
+        # Written always, kept if j is a partner: a branch here is a coin toss (j > i) that the
+        # processor mispredicts half the time.
+        keys[count] = i * n + j
+        kept = (j > i) & (dx * dx + dy * dy + dz * dz < lim * lim)
+        if hashed:
+            kept &= (cells[j, 0] == cx) & (cells[j, 1] == cy) & (cells[j, 2] == cz)
+        count += kept
+    return count
+
+
 @jit
 def _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, keys):
     """The pairs of `build_pairs` into keys, each body's partners gathered from the 3^dim cells
@@ -176,33 +197,16 @@ def _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, span, de
                     high = row + min(cells[i, 2] + rz, span[2] - 1)
                     if count + start[high + 1] - start[low] > keys.shape[0]:
                         return -1
-                    for m in range(start[low], start[high + 1]):
-                        j = order[m]
-                        dx = P[j, 0] - P[i, 0]
-                        dy = P[j, 1] - P[i, 1]
-                        dz = P[j, 2] - P[i, 2]
-                        lim = Bd[i, B_R] + Bd[j, B_R] + reach_pad
-                        # Written always, kept if j is a partner: a branch here is a coin toss
-                        # (j > i) that the processor mispredicts half the time.
-                        keys[count] = i * n + j
-                        count += (j > i) & (dx * dx + dy * dy + dz * dz < lim * lim)
+                    count = _partners(P, Bd, i, n, reach_pad, order, start[low], start[high + 1], cells, cx, cy, 0,
+                                      False, keys, count)
                     continue
                 for oz in range(-rz, rz + 1):
                     cz = cells[i, 2] + oz
                     h = ((cx * HASH_PRIMES[0]) ^ (cy * HASH_PRIMES[1]) ^ (cz * HASH_PRIMES[2])) & (table - 1)
                     if count + start[h + 1] - start[h] > keys.shape[0]:
                         return -1
-                    for m in range(start[h], start[h + 1]):
-                        j = order[m]
-                        dx = P[j, 0] - P[i, 0]
-                        dy = P[j, 1] - P[i, 1]
-                        dz = P[j, 2] - P[i, 2]
-                        lim = Bd[i, B_R] + Bd[j, B_R] + reach_pad
-                        # As above; hash collisions bring other cells' bodies: j counts from its
-                        # own cell only.
-                        keys[count] = i * n + j
-                        count += ((j > i) & (cells[j, 0] == cx) & (cells[j, 1] == cy) & (cells[j, 2] == cz)
-                                  & (dx * dx + dy * dy + dz * dz < lim * lim))
+                    count = _partners(P, Bd, i, n, reach_pad, order, start[h], start[h + 1], cells, cx, cy, cz, True,
+                                      keys, count)
         # i's row ascending (a handful of partners: insertion sort).
         for a in range(first + 1, count):
             key = keys[a]
