@@ -97,21 +97,18 @@ def build_pairs(P, Bd, n, dim, reach_pad):
         rmax = max(rmax, Bd[i, B_R])
     size = 2.0 * rmax + reach_pad
     lo = np.zeros(3)
+    hi = np.zeros(3)
     span = np.ones(3, np.int64)
     total = 1.0
     for d in range(dim):
-        low, high = math.inf, -math.inf
+        lo[d], hi[d] = math.inf, -math.inf
         for i in range(n):
-            low, high = min(low, P[i, d]), max(high, P[i, d])
-        lo[d] = low
-        total *= (high - low) / size + 1.0
+            lo[d], hi[d] = min(lo[d], P[i, d]), max(hi[d], P[i, d])
+        total *= (hi[d] - lo[d]) / size + 1.0
     dense = total <= DENSE_CELLS * n  # (false for non-finite positions too)
     if dense:
         for d in range(dim):
-            high = -math.inf
-            for i in range(n):
-                high = max(high, P[i, d])
-            span[d] = _cell(high - lo[d], size) + 1
+            span[d] = _cell(hi[d] - lo[d], size) + 1
         table = span[0] * span[1] * span[2]
     else:
         table = 1

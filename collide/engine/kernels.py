@@ -143,7 +143,9 @@ C_INV = 26  # 1 / C_DIST of a pair (the slip rates' turning terms divide by it)
 C_GV = 27  # in the plane, a stuck contact's hold rate's velocity terms along e1, at a kick's last pass
 NC = 28
 CI_I, CI_J, CI_GI, CI_GJ, CI_MODE, CI_Q, CI_EDGE, CI_RETRIED, CI_FLIPPED, CI_GRAZE = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
-NCI = 10  # CI_RETRIED, CI_FLIPPED: `decide`'s marks (arrays of its own were allocated at every call)
+# CI_RETRIED, CI_FLIPPED: `decide`'s marks (arrays of its own were allocated at every call);
+# CI_GRAZE: run_island's, for the next step.
+NCI = 10
 # Q / QF: an island's candidate contacts.
 Q_I, Q_J, Q_ENG = 0, 1, 2
 QF_REACH, QF_D0, QF_R0, QF_D1, QF_R1, QF_DP, QF_RP, QF_DB, QF_RB = 0, 1, 2, 3, 4, 5, 6, 7, 8
@@ -3196,15 +3198,16 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                     ST[S_STATUS] = SINGULAR
                     FG[F_STATUS_T] = t
                     break
-                for k in range(2 * nc):
+                for c in range(nc):
                     # A mode that starts on its edge and leaves it (a slide that cannot be held
                     # yet, a slip entering the band) may come back through it within the step:
-                    # counted as just inside, that return is an event like any other.
-                    E[k, E_FORCED] = NO
-                    if abs(E[k, E_V0]) <= MODE_TOL and E[k, E_R0] > 0 and not CI[k % nc, CI_GRAZE]:
-                        E[k, E_V0] = 2.0 * MODE_TOL
-                        E[k, E_FORCED] = YES
-                for c in range(nc):
+                    # counted as just inside, that return is an event like any other (unless
+                    # the last step found the slip grazing the edge: CI_GRAZE, below).
+                    for k in (c, nc + c):
+                        E[k, E_FORCED] = NO
+                        if abs(E[k, E_V0]) <= MODE_TOL and E[k, E_R0] > 0 and not CI[c, CI_GRAZE]:
+                            E[k, E_V0] = 2.0 * MODE_TOL
+                            E[k, E_FORCED] = YES
                     CI[c, CI_GRAZE] = NO
             for a in range(na):
                 for d in range(13):
