@@ -22,7 +22,7 @@ def _state():
 def _show(state, as_json: bool) -> None:
     if as_json:
         typer.echo(json.dumps({"state": state.state, "fraction": round(state.fraction(), 3), "seconds": state.seconds,
-                               "functions": state.done, "expected": state.expected, "reason": state.reason or None,
+                               "functions": state.done, "reason": state.reason or None,
                                "cache": str(state.cache)}))
     else:
         typer.echo(f"engine: {state.describe()}")

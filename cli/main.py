@@ -39,8 +39,8 @@ def interpreted_why() -> str:
         return "interpreted kernels: COLLIDE_JIT=0"
     state = tier.engine_state()
     if state.state == "compiling":
-        return (f"interpreted kernels: the compiled ones are being built in the background, once "
-                f"({state.fraction():.0%}; `collide engine` shows how far)")
+        return ("interpreted kernels: the compiled ones are being built in the background, once; "
+                "`collide engine` shows how far")
     if state.state == "failed":
         return f"interpreted kernels: {state.describe()}; `collide engine --compile` tries again"
     return "interpreted kernels: quicker for a run this small; COLLIDE_JIT=1 compiles"

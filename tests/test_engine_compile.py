@@ -43,7 +43,8 @@ from collide.engine import tier
 tier.compile_lock().parent.mkdir(parents=True, exist_ok=True)
 fd = os.open(tier.compile_lock(), os.O_RDWR | os.O_CREAT)
 fcntl.flock(fd, fcntl.LOCK_EX)
-tier.write_status(state="compiling", started=time.time(), done=30, expected=120)
+tier.write_status(state="compiling", started=time.time(), done=30, curve=[[0, 0.0], [30, 0.25], [31, 0.5],
+                  [120, 1.0]], reference_seconds=1e6)
 print("holding", flush=True)
 time.sleep(float(sys.argv[1]))
 """
@@ -63,7 +64,9 @@ def test_a_live_compile_is_seen_with_its_progress_and_a_dead_one_is_not(tmp_path
     try:
         state = _state(tmp_path)
         assert state["state"] == "compiling"
-        assert state["functions"] == 30 and state["expected"] == 120 and state["fraction"] == 0.25
+        # At the reference's 30th function it had spent a quarter of its time, and the 31st ended
+        # at half: a compile that has spent little time since stays near the quarter.
+        assert state["functions"] == 30 and state["fraction"] == 0.25
     finally:
         holder.kill()
         holder.wait()
@@ -133,7 +136,7 @@ def test_a_large_scene_after_a_failed_compile_is_refused_with_the_cause(tmp_path
 
 
 CALLEE = """
-from collide.engine.tier import jit_inline
+from collide.engine.jit import jit_inline
 
 
 @jit_inline
@@ -143,7 +146,7 @@ def scale(x):
 
 CALLER = """
 from collide.engine.probe_callee import scale
-from collide.engine.tier import jit
+from collide.engine.jit import jit
 
 
 @jit
@@ -176,9 +179,10 @@ def test_the_cache_key_covers_what_the_kernels_import() -> None:
     from collide.engine import tier
 
     names = {p.relative_to(ROOT).as_posix() for p in tier.engine_sources()}
-    assert {"collide/engine/kernels.py", "collide/engine/dem.py", "collide/engine/tier.py",
+    assert {"collide/engine/kernels.py", "collide/engine/dem.py", "collide/engine/jit.py",
             "collide/integrators.py"} <= names
-    assert "collide/scene.py" not in names  # imported by tier's hint module, never by a kernel
+    # The choice of compiled or interpreted, and what it imports, never reach the machine code.
+    assert not {"collide/engine/tier.py", "collide/scene.py"} & names
 
 
 @pytest.mark.slow
@@ -201,5 +205,5 @@ def test_waiting_reports_a_running_compile_then_its_end(tmp_path: Path) -> None:
                          env=_env(tmp_path), cwd=ROOT, timeout=120)
     holder.wait()
     assert time.perf_counter() - started >= 1.0
-    assert "engine: compiling: 25% (30 of about 120 functions)" in out.stderr
+    assert "engine: compiling: about 25% (30 functions)" in out.stderr
     assert out.returncode == 1 and "interrupted" in out.stdout  # the holder never marked the cache ready

@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-from collide.engine.tier import jit, jit_inline
+from collide.engine.jit import jit, jit_inline
 from collide.integrators import SUZUKI4, YOSHIDA4, YOSHIDA6
 
 BAND, SLIDE, STICK = 0, 1, 2

@@ -19,6 +19,8 @@ The cache cannot go stale: numba keys a cached function on its own file only, no
 of the functions it calls or the constants it imports, so the cache folder is named after a
 hash of every source the kernels are built from and of the numba and Python versions.
 
+The decorators themselves live in `collide.engine.jit`.
+
 A command that runs one small scene can ask for the interpreted kernels even when the compiled
 ones are ready (`collide.engine.hint`): loading numba and the compiled cache costs a process
 more than such a run takes interpreted.
@@ -69,17 +71,17 @@ def _module_file(name: str) -> Path | None:
 
 def engine_sources() -> list[Path]:
     """Every file whose code or constants the compiled kernels hold: the engine's modules that
-    define kernels, and what they import from collide, followed to the end. This file counts
-    (the decorators' options) but its own imports do not reach the kernels."""
+    define kernels, and what they import from collide, followed to the end. This file, which
+    only chooses between compiled and interpreted, is not among them."""
     pending = [p for p in sorted(_ENGINE.glob("*.py")) if re.search(r"^@jit", p.read_text(), re.M)]
     found: dict[Path, None] = {}
     while pending:
         path = pending.pop()
         if path in found:
             continue
-        found[path] = None
         if path == Path(__file__):
             continue
+        found[path] = None
         for match in _IMPORT.finditer(path.read_text()):
             module, names, plain = match.groups()
             targets = [plain] if plain else [module] + [f"{module}.{n.strip()}" for n in names.split(",")]
@@ -150,8 +152,11 @@ def write_status(**status) -> None:
     partial.replace(path)
 
 
-def mark_compiled(seconds: float, functions: int) -> None:
-    _ready_file().write_text(json.dumps({"key": cache_key(), "seconds": seconds, "functions": functions}))
+def mark_compiled(seconds: float, functions: int, curve: list[list[float]]) -> None:
+    """Mark the cache ready, with the compile's time and its curve (functions done against the
+    fraction of its time) that later compiles measure their progress by."""
+    _ready_file().write_text(json.dumps({"key": cache_key(), "seconds": seconds, "functions": functions,
+                                         "curve": curve}))
 
 
 def compiled_ready() -> bool:
@@ -190,22 +195,35 @@ class EngineState:
     cache: Path
     seconds: float = 0.0  # the compile's time: so far while compiling, in all when ready or failed
     done: int = 0  # functions compiled so far
-    expected: int = 0  # functions a whole compile takes (the last compile's count, or an estimate)
     reason: str = ""  # why a compile failed
+    # A whole compile's progress to measure by (the last one here, or warm's estimate): pairs of
+    # functions done and the fraction of its time, and its time in seconds.
+    curve: tuple[tuple[float, float], ...] = ()
+    reference_seconds: float = 0.0
 
     def fraction(self) -> float:
-        """How far a running compile is, by functions compiled (at most 0.99 until it is done)."""
+        """How far a running compile is: the reference compile's share of time at this many
+        functions, moved on by the time spent since, up to its share at the next function (numba
+        spends minutes on a few large functions). At most 0.99 until it is done."""
         if self.state == "ready":
             return 1.0
-        return min(self.done / self.expected, 0.99) if self.expected else 0.0
+        lo, hi = 0.0, 1.0
+        for count, share in self.curve:
+            if count <= self.done:
+                lo = share
+            else:
+                hi = share
+                break
+        by_time = self.seconds / self.reference_seconds if self.reference_seconds > 0 else lo
+        return min(max(lo, min(by_time, hi)), 0.99)
 
     def describe(self) -> str:
         """One line for people."""
         if self.state == "ready":
             return f"compiled (in {self.seconds:.0f} s); cache {self.cache}"
         if self.state == "compiling":
-            return (f"compiling: {self.fraction():.0%} ({self.done} of about {self.expected} functions), "
-                    f"{self.seconds:.0f} s so far")
+            functions = f"{self.done} function{'' if self.done == 1 else 's'}"
+            return f"compiling: about {self.fraction():.0%} ({functions}), {self.seconds:.0f} s so far"
         if self.state == "failed":
             return f"the compile failed: {self.reason} (log: {compile_log()})"
         if self.state == "interrupted":
@@ -217,18 +235,19 @@ def engine_state() -> EngineState:
     """The compiled engine's state now."""
     ready = _read_json(_ready_file())
     if ready.get("key") == cache_key():
-        return EngineState("ready", cache_dir(), float(ready.get("seconds", 0.0)), int(ready.get("functions", 0)),
-                           int(ready.get("functions", 0)))
+        return EngineState("ready", cache_dir(), float(ready.get("seconds", 0.0)), int(ready.get("functions", 0)))
     status = _read_json(_status_file())
-    started = float(status.get("started", time.time()))
-    done, expected = int(status.get("done", 0)), int(status.get("expected", 0))
+    done = int(status.get("done", 0))
+    progress = {"curve": tuple(tuple(point) for point in status.get("curve", ())),
+                "reference_seconds": float(status.get("reference_seconds", 0.0))}
     if _lock_held():
-        return EngineState("compiling", cache_dir(), time.time() - started, done, expected)
+        started = float(status.get("started", time.time()))
+        return EngineState("compiling", cache_dir(), time.time() - started, done, **progress)
     if status.get("state") == "failed":
-        return EngineState("failed", cache_dir(), float(status.get("seconds", 0.0)), done, expected,
+        return EngineState("failed", cache_dir(), float(status.get("seconds", 0.0)), done,
                            str(status.get("reason", "unknown")))
     if status.get("state") == "compiling":
-        return EngineState("interrupted", cache_dir(), 0.0, done, expected)
+        return EngineState("interrupted", cache_dir(), 0.0, done)
     return EngineState("absent", cache_dir())
 
 
@@ -250,7 +269,7 @@ def start_compile(force: bool = False) -> bool:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             return False  # another process started one just now
-        write_status(state="compiling", started=time.time(), done=0, expected=0)
+        write_status(state="compiling", started=time.time(), done=0)
         env = dict(os.environ, COLLIDE_JIT="1", **{LOCK_FD_VARIABLE: str(fd)})
         env.pop(HINT_VARIABLE, None)
         with open(compile_log(), "w") as log:
@@ -341,26 +360,3 @@ def loading() -> Iterator[None]:
 def load_seconds() -> float:
     """Seconds this process has spent loading compiled kernels."""
     return _loading[0]
-
-
-if COMPILED:
-    from numba import config as _numba_config
-    from numba import njit
-
-    _numba_config.CACHE_DIR = str(cache_dir())
-    # error_model="numpy": a division by zero gives inf or NaN (checked after each step) instead
-    # of raising, which also keeps the compiled code smaller.
-    jit = njit(cache=True, error_model="numpy", nogil=True)
-    # Pieces called per contact, per body or per substep, which allocate nothing (a contact
-    # law's parts, a body's turn; the event engine's step with its kicks, friction solve,
-    # geometry and mode values): inlined into the loops, and without reference counting
-    # (`_nrt=False`, as numba's own sort and string helpers): a call each time, and the atomic
-    # counts of each array passed, cost more than the physics (a quarter of the DEM step; the
-    # event engine's steps 2-5 times, measured).
-    jit_inline = njit(cache=True, error_model="numpy", nogil=True, forceinline=True, _nrt=False)
-else:
-    def jit(function):
-        """Interpreted: the kernel as plain Python."""
-        return function
-
-    jit_inline = jit

@@ -21,9 +21,11 @@ import time
 import traceback
 from pathlib import Path
 
-# An estimate for the first compile on a machine: the functions a whole compile took when this
-# was written (a later compile counts its own, and the next shows progress against that).
-EXPECTED_FUNCTIONS = 120
+# How a whole compile progresses, for the first compile on a machine (later ones measure by the
+# last compile there): pairs of functions compiled and the fraction of the compile's time, and
+# that time in seconds, as measured here.
+REFERENCE_CURVE = [[0, 0.0], [200, 1.0]]
+REFERENCE_SECONDS = 200.0
 
 
 def warm() -> float:
@@ -55,17 +57,27 @@ def warm() -> float:
 class _Progress:
     """Counts the functions numba compiles and records the count for `collide engine`."""
 
-    def __init__(self, started: float, expected: int) -> None:
-        self.started, self.expected, self.done, self.written = started, expected, 0, 0.0
+    def __init__(self, started: float, curve: list, seconds: float) -> None:
+        self.started, self.written, self.ends = started, 0.0, []
+        self.reference = {"curve": curve, "reference_seconds": seconds}
 
     def compiled(self) -> None:
-        from collide.engine import tier
-
-        self.done += 1
+        self.ends.append(time.time() - self.started)
         if time.time() - self.written >= 1.0:
             self.written = time.time()
-            tier.write_status(state="compiling", started=self.started, done=self.done, expected=self.expected,
-                              pid=os.getpid())
+            self.write()
+
+    def write(self) -> None:
+        from collide.engine import tier
+
+        tier.write_status(state="compiling", started=self.started, done=len(self.ends), pid=os.getpid(),
+                          **self.reference)
+
+    def curve(self, points: int = 40) -> list[list[float]]:
+        """This compile's progress (functions done, fraction of its time), at most `points` long."""
+        total = max(self.ends[-1], 1e-9) if self.ends else 1.0
+        picked = sorted({round(i * (len(self.ends) - 1) / (points - 1)) for i in range(points)}) if self.ends else []
+        return [[0, 0.0]] + [[i + 1, round(self.ends[i] / total, 4)] for i in picked]
 
 
 def _listen(progress: _Progress) -> None:
@@ -81,12 +93,16 @@ def _listen(progress: _Progress) -> None:
     event.register("numba:compile", Listener())
 
 
-def _expected_functions(root: Path) -> int:
-    """The last whole compile's count of functions (any source), or the estimate above."""
+def _reference(root: Path) -> tuple[list, float]:
+    """The last whole compile's progress curve and time here (any source), or the estimate above."""
     from collide.engine.tier import _read_json
 
-    counts = [int(_read_json(p).get("functions", 0)) for p in root.glob("collide-*/ready.json")]
-    return max(counts, default=0) or EXPECTED_FUNCTIONS
+    done = [_read_json(p) for p in root.glob("collide-*/ready.json")]
+    done = [d for d in done if d.get("curve") and d.get("seconds")]
+    if not done:
+        return REFERENCE_CURVE, REFERENCE_SECONDS
+    last = max(done, key=lambda d: d["functions"])
+    return last["curve"], float(last["seconds"])
 
 
 def _remove_stale(root: Path, keep: Path) -> None:
@@ -95,8 +111,19 @@ def _remove_stale(root: Path, keep: Path) -> None:
     if "NUMBA_CACHE_DIR" in os.environ:
         return
     for old in root.glob("collide-*"):
-        if old.is_dir() and old != keep:
+        if not old.is_dir() or old == keep:
+            continue
+        try:
+            fd = os.open(old / "compile.lock", os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # not while a compile of that source runs
             shutil.rmtree(old, ignore_errors=True)
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
 
 
 def compile_now() -> float:
@@ -104,18 +131,18 @@ def compile_now() -> float:
     from collide.engine import tier
 
     started = time.time()
-    progress = _Progress(started, _expected_functions(tier.cache_root()))
-    tier.write_status(state="compiling", started=started, done=0, expected=progress.expected, pid=os.getpid())
+    progress = _Progress(started, *_reference(tier.cache_root()))
+    progress.write()
     try:
         _listen(progress)
         seconds = warm()
     except BaseException as exc:
         reason = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}".rstrip(": ")
         tier.write_status(state="failed", started=started, seconds=time.time() - started, reason=reason,
-                          done=progress.done, expected=progress.expected)
+                          done=len(progress.ends))
         raise
-    tier.mark_compiled(seconds, progress.done)
-    tier.write_status(state="ready", started=started, seconds=seconds, done=progress.done, expected=progress.done)
+    tier.mark_compiled(seconds, len(progress.ends), progress.curve())
+    tier.write_status(state="ready", started=started, seconds=seconds, done=len(progress.ends))
     _remove_stale(tier.cache_root(), tier.cache_dir())
     return seconds
 
