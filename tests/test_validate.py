@@ -198,7 +198,7 @@ def _scene_rows(output: str) -> list[str]:
     start = next(i for i, line in enumerate(lines) if line.startswith("----")) + 1
     rows = []
     for line in lines[start:]:
-        if not line.strip() or line.startswith("  not applicable"):
+        if not line.strip() or line.startswith("Not applicable"):
             break
         rows.append(line)
     return rows
