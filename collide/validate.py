@@ -354,10 +354,6 @@ def _with_k(scene: Scene, k: float) -> Scene:
 # Everything
 
 
-# Built-ins too heavy to run whole in CI's test suite: their scene checks cover the first seconds.
-SHORTENED = {"gas-box": 0.05, "pile": 0.3}
-
-
 @dataclass
 class Validation:
     """The whole validation: textbook tables, cross-checks, softness scans and the scene checks
@@ -434,18 +430,15 @@ def validate(scenes: list[str] | None = None, *, tol: float = DEFAULT_TOL,
              scan: bool = True, duration: float | None = None) -> Validation:
     """Run the textbook tables and every check that applies to each (given) scene: the rigid
     cross-check and softness scan where the rigid reference applies, the scene checks of
-    `collide.scene_checks` on all, over the first `duration` seconds if given (built-ins in
-    SHORTENED over theirs)."""
+    `collide.scene_checks` on all, over the first `duration` seconds if given."""
     if duration is not None and not (math.isfinite(duration) and duration > 0):
         raise ValueError(f"--duration: must be a positive number of seconds, got {duration}")
     started = time.perf_counter()
     names = list(scenes) if scenes else builtin_names()
-    builtins = set(builtin_names())
     checks, scans, reports = [], [], []
     for name in names:
         scene = load_scene(name)
-        cut = duration if duration is not None else SHORTENED.get(name) if name in builtins else None
-        check, scan_result, report = check_scene(scene, tol=tol, scan=scan, duration=cut)
+        check, scan_result, report = check_scene(scene, tol=tol, scan=scan, duration=duration)
         checks += [check] if check else []
         scans += [scan_result] if scan_result else []
         reports.append(report)
