@@ -172,18 +172,20 @@ def _parse_range(text: str | None) -> tuple[float, float] | None:
 
 def validate_command(
     scenes: Annotated[list[str] | None, typer.Argument(
-        help="Scenes to check: built-in names or .toml paths; default: all built-ins.", show_default=False)] = None,
+        help="Scenes to check: built-in names (see `collide scenes`) or .toml files; default: all built-ins.",
+        show_default=False, metavar="SCENE")] = None,
     scene: Annotated[list[str] | None, typer.Option(
         "--scene", "-s", help="Only this scene: a built-in name or a .toml path (repeatable); "
         "default: all built-ins.")] = None,
-    tol: Annotated[float, typer.Option(help="Allowed discretisation error, relative to the fastest "
-                                       "initial speed.")] = validation.DEFAULT_TOL,
+    tol: Annotated[float, typer.Option(help="Allowed discretisation error of the rigid-limit cross-check, "
+                                       "relative to the fastest initial speed (the other checks hold each "
+                                       "scene to its own tol).")] = validation.DEFAULT_TOL,
     scan: Annotated[bool, typer.Option("--scan/--no-scan", help="Rerun at k x 10, x 100 to show the "
                                        "softness shrink.")] = True,
     duration: Annotated[float | None, typer.Option(help="Check each scene over its first SECONDS only (a "
                                                    "heavy scene; the table says so).", show_default=False)] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the rows as one JSON object.")] = False,
-    suite: Annotated[str, typer.Option(help="'report' (the textbook tables and rigid-limit cross-check) "
+    suite: Annotated[str, typer.Option(help="'report' (the textbook tables and the checks of every scene) "
                                        "or 'chung-ooi' (the eight DEM impact benchmarks of Chung & Ooi "
                                        "2011).")] = "report",
     plots: Annotated[Path | None, typer.Option(help="chung-ooi: write one PNG per test to this folder "
@@ -191,11 +193,10 @@ def validate_command(
     test: Annotated[list[int] | None, typer.Option("--test", help="chung-ooi: only this test, 1-8 "
                                                    "(repeatable).")] = None,
 ) -> None:
-    """Check the simulator: the report's textbook tables (Figs 3-6), and every built-in scene
-    (or the scenes given) by the checks that fit it: the rigid-body limit where it applies
-    (discretisation error apart from model softness), else closed forms, conservation, energy
-    balance and self-convergence, one row per check. Or, with --suite chung-ooi, the Chung & Ooi
-    (2011) impact benchmarks against their closed forms.
+    """Check the simulator: the report's textbook tables (Figs 3-6) and every built-in scene (or
+    the scenes given) by the checks that fit it: the rigid-body limit where it applies, else
+    closed forms, conservation, energy balance and self-convergence, one row per check; or, with
+    --suite chung-ooi, the Chung & Ooi (2011) impact benchmarks against their closed forms.
 
     Exit code 0: every residual within its stated bound; 1: some residual beyond it.
 
@@ -205,7 +206,7 @@ def validate_command(
     scene = [*(scenes or []), *(scene or [])] or None
     if suite == "chung-ooi":
         if scene:
-            _fail("--scene: the chung-ooi suite runs its own scenes; drop --scene")
+            _fail("--scene: the chung-ooi suite runs its own scenes; drop the scenes")
         _chung_ooi(plots, test, as_json)
         return
     if suite != "report":
