@@ -1,4 +1,6 @@
-"""Validation: the report's textbook tables (Figs 3-6) and a rigid-limit cross-check (Fig 35 style).
+"""Validation: the report's textbook tables (Figs 3-6), a rigid-limit cross-check (Fig 35 style) of
+the scenes the rigid reference handles, and the scene checks (`collide.scene_checks`: closed
+forms, conservation, energy balance, self-convergence) of every scene, in one table.
 
 Errors of a run's outcome (final velocities and spins) are split in two, because they have
 different cures:
