@@ -198,6 +198,10 @@ class Session:
         self.frame_times: deque[float] = deque(maxlen=600)  # when each played frame was sent
         self.frame_costs: deque[float] = deque(maxlen=600)  # s of server work per played frame
         client.camera.on_update(self._on_camera)
+        if _camera_known(client):
+            # viser reports a tab once its first camera message has arrived: the first fit
+            # need not wait for another (a set-up thread would wait 5 s for a quiet tab).
+            self._camera_ready.set()
         self.drawer = SceneDrawer(client.scene)
         self._build_gui()
         self.uploads = UploadSink(client, self.upload._impl.uuid, app.recordings_dir, app.max_upload_bytes,
@@ -1289,6 +1293,15 @@ class Session:
         self._player.join(timeout=2.0)
         if self.uploads is not None:
             self.uploads.close()
+
+
+def _camera_known(client: Any) -> bool:
+    """True once the browser has reported its camera (never for a stand-in client)."""
+    try:
+        client.camera.wxyz  # noqa: B018 - asserts that the camera state has arrived
+    except (AssertionError, AttributeError):
+        return False
+    return True
 
 
 def _first_contact_fraction(view: ViewRun) -> float:
