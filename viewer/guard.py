@@ -7,7 +7,8 @@ the websockets library logged a 15-line traceback for it; any local client could
 at will. `guard_connections` replaces that reader with one that reads the same way, but closes
 a connection at its first unreadable message with one line on stderr naming the client; a
 message that reads but makes one of viser's handlers fail is one line too (each distinct
-failure once). The pinned viser version keeps the replaced reader stable.
+failure once); the websockets library's own errors (bytes that are not HTTP) are one line each
+too. The pinned viser version keeps the replaced reader stable.
 
 It also silences viser's warning for messages queued on a closed connection: a tab that closes
 while it is being set up or drawn gets some, by design (its session is closed right after).
@@ -16,10 +17,12 @@ while it is being set up or drawn gets some, by design (its session is closed ri
 from __future__ import annotations
 
 import asyncio
+import logging
 import sys
 import threading
 import warnings
 from collections.abc import Callable
+from concurrent.futures import Future
 from typing import Any, Union, get_args, get_origin
 
 import msgspec
@@ -89,10 +92,11 @@ async def _guarded_consumer(websocket: Any, handle_message: Callable[[Any], None
             message = read_message(raw, message_class)
         except UnreadableMessage as exc:
             report(f"closed the connection from {_peer(websocket)}: it sent {exc}")
-            # The next recv() raises ConnectionClosed, which viser's handler takes as a
-            # disconnect (the tab's teardown runs as for any closed tab).
             await websocket.close(1003, "unreadable message")
-            continue
+            # Drop what had already arrived; recv() then raises ConnectionClosed, which viser's
+            # handler takes as a disconnect (the tab's teardown runs as for any closed tab).
+            while True:
+                await websocket.recv()
         handle_message(message)
 
 
@@ -104,23 +108,48 @@ def _peer(websocket: Any) -> str:
 
 
 class _Failures:
-    """One line per distinct failure of a handler on the server's event loop."""
+    """One line per distinct failure of a handler or callback that a client's message set off
+    (viser's event loop, its thread pool): a client repeating a message that fails cannot
+    repeat the line."""
 
     def __init__(self) -> None:
         self.seen: set[str] = set()
         self.dropped = 0
         self.lock = threading.Lock()
 
-    def __call__(self, loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
-        exc = context.get("exception")
-        text = (f"{type(exc).__name__}: {_first_line(exc)}" if exc is not None
-                else str(context.get("message", "unknown error")))
+    def report(self, exc: BaseException | None, message: str = "unknown error") -> None:
+        text = f"{type(exc).__name__}: {_first_line(exc)}" if exc is not None else message
         with self.lock:
             if text in self.seen or len(self.seen) >= MAX_FAILURE_LINES:
                 self.dropped += 1
                 return
             self.seen.add(text)
         report(f"a message from a browser tab failed: {text}")
+
+    def on_loop(self, loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
+        """The event loop's exception handler."""
+        self.report(context.get("exception"), str(context.get("message", "unknown error")))
+
+    def on_future(self, future: Future) -> None:
+        """Stands in for viser's `print_threadpool_errors` (a traceback per failure)."""
+        if not future.cancelled() and future.exception() is not None:
+            self.report(future.exception())
+
+
+FAILURES = _Failures()
+
+
+class _OneLine(logging.Filter):
+    """The websockets library's errors (a handshake that fails on bytes that are not HTTP, a
+    handler that fails) as one line naming the client, without the traceback."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        if exc is not None:
+            peer = _peer(getattr(record, "websocket", None))
+            record.msg = f"collide view: {record.getMessage()} for {peer} ({type(exc).__name__}: {_first_line(exc)})"
+            record.args, record.exc_info, record.exc_text = (), None, None
+        return True
 
 
 def report(line: str) -> None:
@@ -132,14 +161,21 @@ _installed = threading.Lock()
 
 
 def guard_connections(server: viser.ViserServer) -> None:
-    """Read `server`'s incoming messages with the guarded reader and report handler failures in
-    one line (process-wide for the reader: it is a module function of viser's)."""
+    """Read `server`'s incoming messages with the guarded reader and report handler and
+    callback failures in one line each (process-wide for the reader and the callbacks' report:
+    they are module functions of viser's)."""
     with _installed:
         if _infra._message_consumer is not _guarded_consumer:
             _infra._message_consumer = _guarded_consumer
+        logger = logging.getLogger("websockets.server")
+        if not any(isinstance(f, _OneLine) for f in logger.filters):
+            logger.addFilter(_OneLine())
+        for name, module in list(sys.modules.items()):
+            if name.startswith("viser") and callable(getattr(module, "print_threadpool_errors", None)):
+                module.print_threadpool_errors = FAILURES.on_future
     warnings.filterwarnings("ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning)
     loop = server._event_loop
-    loop.call_soon_threadsafe(loop.set_exception_handler, _Failures())
+    loop.call_soon_threadsafe(loop.set_exception_handler, FAILURES.on_loop)
 
 
 def _first_line(exc: BaseException) -> str:

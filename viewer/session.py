@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 import threading
 import time
-import traceback
 from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -38,6 +37,7 @@ from viewer.background import BackgroundRunner, RunStopped
 from viewer.exports import png_bytes, run_csv
 from viewer.frames import FramesRun
 from viewer.geometry import fit_camera
+from viewer.guard import FAILURES
 from viewer.params import (
     AUTO,
     Controls,
@@ -1041,7 +1041,7 @@ class Session:
                                         f"+-{self.ens_spread.value:g} {ens.KINDS[kind].unit}) in {wall * 1e3:.0f} ms")
 
     def _job_failed(self, exc: BaseException) -> None:
-        traceback.print_exception(exc)
+        FAILURES.report(exc)  # one line, each distinct failure once: a tab's values can repeat it
         self._show_error(f"internal error: {_one_line(exc)}")
 
     # ==========================================================================================
@@ -1234,7 +1234,7 @@ class Session:
 
     def _speed(self, view: ViewRun) -> float:
         choice = self.speed.value
-        if choice == "auto":
+        if choice == "auto" or choice not in SPEEDS:  # a value no menu offers: from a forged message
             contact = sum(b - a for a, b in view.contact_windows)
             slow = (1 / SLOW_MOTION - 1) * contact if self.slowmo.value else 0.0
             return max(view.duration + slow, 1e-9) / PLAYBACK_SECONDS
@@ -1278,7 +1278,7 @@ class Session:
             except Exception as exc:  # noqa: BLE001 - a closed tab must not kill the thread noisily
                 if self._closed.is_set():
                     return
-                traceback.print_exc()
+                FAILURES.report(exc)
                 self._show_error(f"playback: {_one_line(exc)}")
                 self.toggle_play(False)
 
