@@ -7,20 +7,24 @@ threads and memory are read from /proc.
 
 from __future__ import annotations
 
+import asyncio
 import os
 import random
 import re
 import socket
 import subprocess
 import sys
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from types import SimpleNamespace
 
 import msgspec
 import pytest
 from websockets.exceptions import ConnectionClosed
 
+from viewer.tabs import Tabs
 from viewer.testing import open_socket, wait_for_message, wait_until
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -46,6 +50,54 @@ def quiet_threads(pid: int, timeout: float = 30.0) -> int:
         elif time.monotonic() - since >= 1.0:
             break
     return last
+
+
+class _Session:
+    def __init__(self, cid: int) -> None:
+        self.cid, self.closed = cid, False
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def test_every_order_of_connect_and_disconnect_ends_with_no_session():
+    """viser may report a tab's close before its open, while its session is being built, while
+    it waits for a set-up thread, or after: in each case no session is left open, and a tab
+    closed before its set-up began is never built."""
+    started = {cid: threading.Event() for cid in range(5)}
+    release = threading.Event()
+    built: list[_Session] = []
+
+    def build(client, closed):
+        started[client.client_id].set()
+        assert release.wait(10)
+        session = _Session(client.client_id)
+        built.append(session)
+        return session
+
+    tabs = Tabs(build, workers=2)
+    tab = {cid: SimpleNamespace(client_id=cid) for cid in range(5)}
+    try:
+        asyncio.run(tabs.disconnect(tab[0]))  # closed before it was reported open
+        asyncio.run(tabs.connect(tab[0]))
+        for cid in (1, 2, 3, 4):
+            asyncio.run(tabs.connect(tab[cid]))
+        assert started[1].wait(10) and started[2].wait(10)  # both set-up threads busy
+        asyncio.run(tabs.disconnect(tab[1]))  # closed while its session is built
+        asyncio.run(tabs.disconnect(tab[3]))  # closed while it waits for a set-up thread
+        release.set()
+        wait_until(lambda: len(tabs.sessions()) == 2, 10, "tabs 2 and 4 set up")
+        assert sorted(tabs.sessions()) == [2, 4]
+        assert sorted(s.cid for s in built) == [1, 2, 4]  # 0 and 3 never built
+        assert not started[0].is_set() and not started[3].is_set()
+        wait_until(lambda: next(s for s in built if s.cid == 1).closed, 10, "the session of the tab closed while built")
+        for cid in (2, 4):
+            asyncio.run(tabs.disconnect(tab[cid]))  # closed once set up
+        wait_until(lambda: all(s.closed for s in built), 10, "every session closed")
+        assert tabs.sessions() == {} and tabs.skipped == 3  # 0, 1 and 3
+    finally:
+        release.set()
+        tabs.close()
 
 
 @pytest.fixture(scope="module")

@@ -117,18 +117,21 @@ class _Failures:
         self.dropped = 0
         self.lock = threading.Lock()
 
-    def report(self, exc: BaseException | None, message: str = "unknown error") -> None:
+    def report(self, exc: BaseException | None, what: str = "a message from a browser tab",
+               message: str = "unknown error") -> None:
+        """One line: `what` failed, and why (unless the same line was written before)."""
         text = f"{type(exc).__name__}: {_first_line(exc)}" if exc is not None else message
+        line = f"{what} failed: {text}"
         with self.lock:
-            if text in self.seen or len(self.seen) >= MAX_FAILURE_LINES:
+            if line in self.seen or len(self.seen) >= MAX_FAILURE_LINES:
                 self.dropped += 1
                 return
-            self.seen.add(text)
-        report(f"a message from a browser tab failed: {text}")
+            self.seen.add(line)
+        report(line)
 
     def on_loop(self, loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
         """The event loop's exception handler."""
-        self.report(context.get("exception"), str(context.get("message", "unknown error")))
+        self.report(context.get("exception"), message=str(context.get("message", "unknown error")))
 
     def on_future(self, future: Future) -> None:
         """Stands in for viser's `print_threadpool_errors` (a traceback per failure)."""

@@ -1041,7 +1041,7 @@ class Session:
                                         f"+-{self.ens_spread.value:g} {ens.KINDS[kind].unit}) in {wall * 1e3:.0f} ms")
 
     def _job_failed(self, exc: BaseException) -> None:
-        FAILURES.report(exc)  # one line, each distinct failure once: a tab's values can repeat it
+        FAILURES.report(exc, "a tab's run")  # one line, each distinct one once: values can repeat it
         self._show_error(f"internal error: {_one_line(exc)}")
 
     # ==========================================================================================
@@ -1278,7 +1278,7 @@ class Session:
             except Exception as exc:  # noqa: BLE001 - a closed tab must not kill the thread noisily
                 if self._closed.is_set():
                     return
-                FAILURES.report(exc)
+                FAILURES.report(exc, "a tab's playback")
                 self._show_error(f"playback: {_one_line(exc)}")
                 self.toggle_play(False)
 
