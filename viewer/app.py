@@ -7,10 +7,10 @@
     app.serve_forever()                       # until Ctrl+C
 
 Each browser tab gets its own `Session` (controls, 3D scene, plots, timeline, worker); the
-first scene's run is computed once at start and shared. Tabs are set up two at a time, in the order they
-open, and torn down however viser orders their open and close (`viewer.tabs`); what a client
-sends cannot flood the log (`viewer.guard`). A scene or recording given at start
-that cannot be read raises (`SceneError`, `RunError`, `RecordingError`) before the server
+first scene's run is computed once at start and shared. Tabs are set up two at a time, in the
+order they open, and torn down however viser orders their open and close (`viewer.tabs`); what
+a client sends cannot flood the log (`viewer.guard`). A scene or recording given at start that
+cannot be read raises (`SceneError`, `RunError`, `RecordingError`) before the server
 starts, so the CLI can turn it into a one-line error.
 """
 
