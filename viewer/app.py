@@ -7,8 +7,10 @@
     app.serve_forever()                       # until Ctrl+C
 
 Each browser tab gets its own `Session` (controls, 3D scene, plots, timeline, worker); the
-first scene's run is computed once at start and shared. A scene or recording given at start
-that cannot be read raises (`SceneError`, `RunError`, `RecordingError`) before the server
+first scene's run is computed once at start and shared. Tabs are set up two at a time, in the
+order they open, and torn down however viser orders their open and close (`viewer.tabs`); what
+a client sends cannot flood the log (`viewer.guard`). A scene or recording given at start that
+cannot be read raises (`SceneError`, `RunError`, `RecordingError`) before the server
 starts, so the CLI can turn it into a one-line error.
 """
 
@@ -21,6 +23,7 @@ import re
 import socket
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import viser
@@ -28,10 +31,12 @@ import viser
 from collide.run import SceneRun, run_scene
 from collide.scene import Scene, load_scene
 from viewer import files
+from viewer.guard import guard_connections
 from viewer.params import for_viewing
 from viewer.reading import read_untrusted
 from viewer.session import Session
 from viewer.state import ViewRun
+from viewer.tabs import Tabs
 
 
 def check_listen_address(host: str, timeout: float = 3.0) -> None:
@@ -86,9 +91,7 @@ class ViewerApp:
         self.scenes_dir = Path(scenes_dir) if scenes_dir is not None else None
         self.max_upload_bytes = max_upload_bytes
         self.server: viser.ViserServer | None = None
-        self.sessions: dict[int, Session] = {}
-        self._sessions_lock = threading.Lock()
-        self._session_added = threading.Condition(self._sessions_lock)
+        self.tabs = Tabs(self._build_session)
         self.initial_scene: Scene | None = None
         self.initial_run: SceneRun | None = None
         self.initial_view: ViewRun | None = None
@@ -140,8 +143,9 @@ class ViewerApp:
             server = viser.ViserServer(host=self.host, port=self.port, label="collide view", verbose=False)
         self.server = server
         server.gui.configure_theme(show_share_button=False, brand_color=(66, 133, 244))
-        server.on_client_connect(self._connect)
-        server.on_client_disconnect(self._disconnect)
+        guard_connections(server)
+        server.on_client_connect(self.tabs.connect)
+        server.on_client_disconnect(self.tabs.disconnect)
 
     @property
     def url(self) -> str:
@@ -161,40 +165,31 @@ class ViewerApp:
             self.stop()
 
     def stop(self) -> None:
-        with self._sessions_lock:
-            sessions = list(self.sessions.values())
-            self.sessions.clear()
-        for session in sessions:
-            session.close()
+        self.tabs.close()
         if self.server is not None:
             self.server.stop()
             self.server = None
 
     # ------------------------------------------------------------------------------------------
 
-    def _connect(self, client: viser.ClientHandle) -> None:
+    @property
+    def sessions(self) -> dict[int, Session]:
+        """The connected tabs' sessions by client id (a copy; tabs still being set up are not
+        in it)."""
+        return self.tabs.sessions()
+
+    def _build_session(self, client: viser.ClientHandle, closed: Callable[[], bool]) -> Session:
+        """A new tab's session, showing the initial scene or recording (on a set-up thread);
+        the drawing is skipped once the tab has closed."""
         session = Session(self, client)
-        with self._session_added:
-            self.sessions[client.client_id] = session
-            self._session_added.notify_all()
+        if closed():
+            return session
         if self.initial_recording is not None and self.initial_view is not None:
             session.show_recording(self.initial_view, self.initial_recording)
         else:
             session.load_scene(self.initial_scene, run=self.initial_run, label=self.initial_label)
-
-    def _disconnect(self, client: viser.ClientHandle) -> None:
-        with self._sessions_lock:
-            session = self.sessions.pop(client.client_id, None)
-        if session is not None:
-            session.close()
+        return session
 
     def wait_for_session(self, count: int = 1, timeout: float = 20.0) -> list[Session]:
         """Wait until at least `count` tabs are connected (tests, benchmarks)."""
-        deadline = time.monotonic() + timeout
-        with self._session_added:
-            while len(self.sessions) < count:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise TimeoutError(f"{len(self.sessions)} of {count} browser tabs connected")
-                self._session_added.wait(left)
-            return list(self.sessions.values())
+        return self.tabs.wait(count, timeout)

@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 import threading
 import time
-import traceback
 from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -38,6 +37,7 @@ from viewer.background import BackgroundRunner, RunStopped
 from viewer.exports import png_bytes, run_csv
 from viewer.frames import FramesRun
 from viewer.geometry import fit_camera
+from viewer.guard import FAILURES
 from viewer.params import (
     AUTO,
     Controls,
@@ -198,6 +198,10 @@ class Session:
         self.frame_times: deque[float] = deque(maxlen=600)  # when each played frame was sent
         self.frame_costs: deque[float] = deque(maxlen=600)  # s of server work per played frame
         client.camera.on_update(self._on_camera)
+        if _camera_known(client):
+            # viser reports a tab once its first camera message has arrived: the first fit
+            # need not wait for another (a set-up thread would wait 5 s for a quiet tab).
+            self._camera_ready.set()
         self.drawer = SceneDrawer(client.scene)
         self._build_gui()
         self.uploads = UploadSink(client, self.upload._impl.uuid, app.recordings_dir, app.max_upload_bytes,
@@ -1037,7 +1041,7 @@ class Session:
                                         f"+-{self.ens_spread.value:g} {ens.KINDS[kind].unit}) in {wall * 1e3:.0f} ms")
 
     def _job_failed(self, exc: BaseException) -> None:
-        traceback.print_exception(exc)
+        FAILURES.report(exc, "a tab's run")  # one line, each distinct one once: values can repeat it
         self._show_error(f"internal error: {_one_line(exc)}")
 
     # ==========================================================================================
@@ -1230,7 +1234,7 @@ class Session:
 
     def _speed(self, view: ViewRun) -> float:
         choice = self.speed.value
-        if choice == "auto":
+        if choice == "auto" or choice not in SPEEDS:  # a value no menu offers: from a forged message
             contact = sum(b - a for a, b in view.contact_windows)
             slow = (1 / SLOW_MOTION - 1) * contact if self.slowmo.value else 0.0
             return max(view.duration + slow, 1e-9) / PLAYBACK_SECONDS
@@ -1274,7 +1278,7 @@ class Session:
             except Exception as exc:  # noqa: BLE001 - a closed tab must not kill the thread noisily
                 if self._closed.is_set():
                     return
-                traceback.print_exc()
+                FAILURES.report(exc, "a tab's playback")
                 self._show_error(f"playback: {_one_line(exc)}")
                 self.toggle_play(False)
 
@@ -1289,6 +1293,15 @@ class Session:
         self._player.join(timeout=2.0)
         if self.uploads is not None:
             self.uploads.close()
+
+
+def _camera_known(client: Any) -> bool:
+    """True once the browser has reported its camera (never for a stand-in client)."""
+    try:
+        client.camera.wxyz  # noqa: B018 - asserts that the camera state has arrived
+    except (AssertionError, AttributeError):
+        return False
+    return True
 
 
 def _first_contact_fraction(view: ViewRun) -> float:

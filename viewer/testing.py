@@ -284,3 +284,57 @@ def scroll_to_text(page: Any, text: str) -> None:
         const inner = all.filter(e => ![...e.children].some(c => c.innerText && c.innerText.includes(text)));
         if (inner.length) inner[0].scrollIntoView({block: 'center'});
     }""", text)
+
+
+# -- a tab without a browser: viser's websocket protocol, as a plain client ---------------------
+
+def camera_message() -> bytes:
+    """The camera message a browser sends first (viser reports a tab once it has arrived)."""
+    import msgspec
+    from viser import _messages
+
+    message = _messages.ViewerCameraMessage(wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 0.0, 3.0), fov=1.0, near=0.01,
+                                            far=100.0, image_height=800, image_width=1280, look_at=(0.0, 0.0, 0.0),
+                                            up_direction=(0.0, 1.0, 0.0))
+    return msgspec.msgpack.encode(message.as_serializable_dict())
+
+
+def open_socket(url: str, camera: bool = True, timeout: float = 30.0) -> Any:
+    """A websocket on a viewer at `url` (http://host:port) speaking viser's protocol, as a tab
+    does; with `camera`, it sends the browser's first camera message."""
+    import viser
+    from websockets.sync.client import connect
+
+    ws = connect(url.replace("http://", "ws://", 1), subprotocols=[f"viser-v{viser.__version__}"], max_size=None,
+                 open_timeout=timeout, close_timeout=5)
+    if camera:
+        ws.send(camera_message())
+    return ws
+
+
+def read_frame(frame: bytes) -> list[dict]:
+    """The messages in one frame the server sent (viser 1.1: two sizes, zstd-compressed
+    MessagePack, then raw buffers)."""
+    import msgspec
+    import zstandard
+
+    size, packed = int.from_bytes(frame[:8], "little"), int.from_bytes(frame[8:16], "little")
+    inner = zstandard.ZstdDecompressor().decompress(frame[16:16 + packed], max_output_size=size)
+    return msgspec.msgpack.decode(inner)["messages"]
+
+
+def wait_for_message(ws: Any, text: str, timeout: float = 30.0) -> list[dict]:
+    """Read frames until a message holding `text` arrives; the messages read so far (an
+    AssertionError after `timeout` s)."""
+    deadline = time.monotonic() + timeout
+    seen: list[dict] = []
+    while (left := deadline - time.monotonic()) > 0:
+        try:
+            frame = ws.recv(timeout=left)
+        except TimeoutError:
+            break
+        messages = read_frame(frame)
+        seen += messages
+        if any(text in repr(m) for m in messages):
+            return seen
+    raise AssertionError(f"no message holding {text!r} in {timeout:g} s ({len(seen)} messages)")
