@@ -88,6 +88,8 @@ def batch(
         typer.echo(f"note: {note}", err=True)
     total = len(plan.specs)
     step = parse_dt(dt)
+    from collide.output import OutputError
+
     cluster = None
     try:
         if scheduler is not None:
@@ -107,6 +109,11 @@ def batch(
             typer.echo(f"\ninterrupted: finished runs are kept in {summary}; run the same command with "
                        "--resume to finish the rest", err=True)
         raise SystemExit(130) from None
+    except OutputError as exc:
+        if summary.exists():  # a write failed mid-batch: the finished runs' rows are on disk
+            raise OutputError(f"{exc}; finished runs are kept in {summary}: make room and run the same "
+                              "command with --resume to finish the rest") from None
+        raise
     except lib.BatchError as exc:
         if cluster is not None and "lost the Dask scheduler" in str(exc):
             raise lib.BatchError(f"{exc}; finished runs are kept in {summary}: run the same command with "
