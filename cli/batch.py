@@ -88,7 +88,14 @@ def batch(
         typer.echo(f"note: {note}", err=True)
     total = len(plan.specs)
     step = parse_dt(dt)
-    from collide.output import OutputError
+    from collide.output import OutputError, check_file, check_folder
+
+    try:  # where the results go: said before the first run (exit 2), not after the last
+        check_file(summary, "file name for the summary CSV")
+        if record is not None:
+            check_folder(record)
+    except OutputError as exc:
+        raise UserError(str(exc)) from None
 
     cluster = None
     try:
