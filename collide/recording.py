@@ -1,7 +1,7 @@
 """Rerun recordings of runs: one `.rrd` per run, written in bulk and read back losslessly.
 
 This is the only module in `collide/` that imports rerun (DESIGN section 5). A recording holds
-two things:
+three things:
 
 - what a person looks at, on one timeline `sim_time` (simulated seconds): spheres with spin
   markers and trails, contact points with normal and friction force arrows, compression,
@@ -11,7 +11,10 @@ two things:
   ends of its steps and of its free flight, with its accelerations; each contact's forces at each
   step; the contact intervals) under `/collide/knots`, `/collide/contact_records` and
   `/collide/contact_intervals`, and the run's settings under `/collide/meta`, from which
-  `read_recording` rebuilds the `SceneRun`.
+  `read_recording` rebuilds the `SceneRun`;
+- a seal, `/collide/integrity`: the SHA-256 of every byte of the file (its own 64 digits read as
+  zeros), so that any changed byte, of what the viewer draws or of what is read back, makes the
+  file refused.
 
 Frames: plots (energies, momenta, compression, residuals) are drawn at the steps' ends: every
 contact step (or every `stride`-th; each contact's first and last step always) and a steady
@@ -53,6 +56,7 @@ Entity paths (`<b>` a body name, `<c>` a contact such as `ball1-ball2` or `ball1
 /world/contacts/points, normal_force          every contact at once (scenes of many contacts)
 /collide/meta                                 AnyValues: settings and shapes for read-back
 /collide/knots, contact_records, ...          AnyValues float64: the trajectory, exactly
+/collide/integrity                            AnyValues: sha256 of every byte of the file (last)
 ============================================  ==============================================
 """
 
