@@ -67,13 +67,17 @@ def temporary(path: Path) -> Path:
 
 
 def check_folder(folder: Path) -> None:
-    """Make `folder` if needed and prove a file can be created in it; else `OutputError`."""
+    """`folder` can take files: it exists and a file can be created in it, or the nearest folder
+    above it that exists can (where it would be made); else `OutputError`. Nothing is left
+    behind, not even the folder (it is made when the first file is written)."""
     folder = Path(folder)
-    if folder.exists() and not folder.is_dir():
-        raise OutputError(f"could not write into {folder}: {folder} is a file, not a folder")
-    probe = temporary(folder / "probe")
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise OutputError(f"could not write into {folder}: {existing} is a file, not a folder")
+    probe = temporary(existing / "probe")
     try:
-        folder.mkdir(parents=True, exist_ok=True)
         fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
         os.close(fd)
         probe.unlink()
@@ -82,7 +86,7 @@ def check_folder(folder: Path) -> None:
 
 
 def check_file(path: Path, what: str = "file name") -> None:
-    """`path` can be written: not a folder, and its folder exists (or was made) and is writable."""
+    """`path` can be written: not a folder, and its folder exists and is writable, or can be made."""
     path = Path(path)
     if path.is_dir():
         raise OutputError(f"could not write {path}: it is a folder; give a {what}")

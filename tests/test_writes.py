@@ -220,7 +220,8 @@ def test_resume_records_again_a_cut_or_damaged_recording(tmp_path: Path) -> None
     (["run", "demo-bonus", "--no-record", "--csv", "{tmp}/file.txt/x.csv"], "file.txt is a file, not a folder"),
     (SWEEP + ["--summary", "{tmp}"], "it is a folder"),
     (SWEEP + ["--summary", "{tmp}/s.csv", "--record", "{tmp}/file.txt"], "file.txt is a file, not a folder"),
-    (SWEEP + ["--summary", "{tmp}/s.csv", "--record", "{tmp}/file.txt/rec"], "not a directory"),
+    (SWEEP + ["--summary", "{tmp}/s.csv", "--record", "{tmp}/file.txt/rec"], "file.txt is a file, not a folder"),
+    (SWEEP + ["--summary", "{tmp}/new/deeper/s.csv", "--record", "{tmp}/file.txt/rec"], "file.txt is a file"),
 ])
 def test_unwritable_outputs_are_refused_before_the_run(tmp_path: Path, args: list[str], words: str) -> None:
     (tmp_path / "file.txt").write_text("x")
