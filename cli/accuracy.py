@@ -52,14 +52,21 @@ def accuracy(
     if unknown:
         raise UserError(f"--integrators: unknown '{unknown[0]}' (choose from {', '.join(INTEGRATORS)})")
     loaded = load_scene(scene, set_ or [])
+    plot = plot or Path("recordings") / f"{loaded.name}-accuracy.png"
+    out = out or Path("recordings") / f"{loaded.name}-accuracy.rrd"
+    from collide.output import OutputError, check_file
+
+    try:  # said before the study, not after it
+        check_file(plot)
+        check_file(out, "file name ending in .rrd")
+    except OutputError as exc:
+        raise UserError(str(exc)) from None
 
     def progress(name: str, omega_dt: float, wall: float, error: float) -> None:
         if not json_:
             typer.echo(f"  {name:<9} omega dt {omega_dt:<7g} {wall * 1e3:9.2f} ms  error {error:.2e}", err=True)
 
     wp = work_precision(loaded, names, repeats=repeats, time_budget_s=budget, progress=progress)
-    plot = plot or Path("recordings") / f"{loaded.name}-accuracy.png"
-    out = out or Path("recordings") / f"{loaded.name}-accuracy.rrd"
     plot.parent.mkdir(parents=True, exist_ok=True)
     plot_work_precision(wp, plot)
     try:

@@ -88,6 +88,15 @@ def batch(
         typer.echo(f"note: {note}", err=True)
     total = len(plan.specs)
     step = parse_dt(dt)
+    from collide.output import OutputError, check_file, check_folder
+
+    try:  # where the results go: said before the first run (exit 2), not after the last
+        check_file(summary, "file name for the summary CSV")
+        if record is not None:
+            check_folder(record)
+    except OutputError as exc:
+        raise UserError(str(exc)) from None
+
     cluster = None
     try:
         if scheduler is not None:
@@ -107,6 +116,11 @@ def batch(
             typer.echo(f"\ninterrupted: finished runs are kept in {summary}; run the same command with "
                        "--resume to finish the rest", err=True)
         raise SystemExit(130) from None
+    except OutputError as exc:
+        if summary.exists():  # a write failed mid-batch: the finished runs' rows are on disk
+            raise OutputError(f"{exc}; finished runs are kept in {summary}: make room and run the same "
+                              "command with --resume to finish the rest") from None
+        raise
     except lib.BatchError as exc:
         if cluster is not None and "lost the Dask scheduler" in str(exc):
             raise lib.BatchError(f"{exc}; finished runs are kept in {summary}: run the same command with "

@@ -61,6 +61,18 @@ def _fmt(x: Any) -> str:
     return str(x)
 
 
+def _check_outputs(*paths: Path | None) -> None:
+    """Every file the command will write can be written: said before the run, not after it."""
+    from collide.output import OutputError, check_file
+
+    for path in paths:
+        if path is not None:
+            try:
+                check_file(path)
+            except OutputError as exc:
+                raise UserError(str(exc)) from None
+
+
 SHOWN_BODIES = 8  # a summary lists this many bodies; more are totals (--all-bodies lists every one)
 
 
@@ -143,6 +155,13 @@ def run(
 
     loaded = load_scene(scene, set_ or [])
     step = parse_dt(dt)
+    recording = None
+    if not no_record:
+        from collide.batch import safe_name
+
+        # The scene's name is the user's text: it names a file in recordings/, never a path elsewhere.
+        recording = out if out is not None else Path("recordings") / f"{safe_name(loaded.name)}.rrd"
+    _check_outputs(recording, csv)
     # A few spheres meeting a few times run sooner interpreted than a process loads numba.
     prefer_interpreted(loaded, integrator, step, tol)
     compiled_for_large(len(loaded.bodies))
@@ -158,17 +177,12 @@ def run(
         every = csv_every if csv_every is not None else 100 * float(result.result.dt[0])
         if not every > 0:
             raise UserError(f"--csv-every must be positive, got {every}")
-        try:
-            csv.write_text(report_csv(result, every, csv_layout))
-        except OSError as exc:
-            raise UserError(f"cannot write {csv}: {exc.strerror}") from None
-    recording = None
-    if not no_record:
-        from collide.batch import safe_name
+        from collide.output import write_text_atomic
+
+        write_text_atomic(csv, report_csv(result, every, csv_layout))
+    if recording is not None:
         from collide.recording import DEFAULT_FPS, last_write, write_recording
 
-        # The scene's name is the user's text: it names a file in recordings/, never a path elsewhere.
-        recording = out if out is not None else Path("recordings") / f"{safe_name(loaded.name)}.rrd"
         write_recording(result, recording, stride=stride)
         if last_write.fps < DEFAULT_FPS:
             summary["warnings"].append(f"the recording draws free flight at {last_write.fps:.3g} frames per "
@@ -243,12 +257,17 @@ def main() -> None:
     Known errors (bad input, a run that cannot be trusted, usage mistakes) exit with 2. A numpy
     floating-point warning is raised as an error rather than printed above the result: a number
     that overflowed is no result. Anything else is a bug in collide: one line too (exit 1), with
-    the traceback only when COLLIDE_DEBUG is set.
+    the traceback only when COLLIDE_DEBUG is set. A file that could not be written (a full
+    disk) is one line naming it and the cause, exit 1.
     """
     import os
     import warnings
 
+    # Rerun's Rust log lines (a write error it also reports to us) are not for the terminal:
+    # collide says what went wrong in its own line. RUST_LOG set by the user still wins.
+    os.environ.setdefault("RUST_LOG", "off")
     from collide.errors import RunError
+    from collide.output import OutputError
     from collide.scene import SceneError
 
     try:
@@ -263,6 +282,8 @@ def main() -> None:
         fail(f"{exc.format_message()} (see '{command} --help')")
     except (SceneError, RunError, UserError, ValueError) as exc:
         fail(str(exc))
+    except OutputError as exc:
+        fail(str(exc), code=1)
     except OSError as exc:
         where = f": {exc.filename}" if getattr(exc, "filename", None) else ""
         fail(f"{exc.strerror or exc}{where}")

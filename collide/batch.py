@@ -26,7 +26,6 @@ import math
 import os
 import re
 import time
-import uuid
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,6 +36,7 @@ import numpy as np
 from collide.diagnostics import residuals
 from collide.engine import tier
 from collide.model import shape_key
+from collide.output import OutputError, check_file, check_folder, failed, write_text_atomic
 from collide.run import SceneRun, run_scenes
 from collide.scene import Scene, SceneError, apply_overrides, parse_scene, read_raw
 from collide.stepper import RunError
@@ -379,33 +379,9 @@ def _csv_text(header: list[str], rows: list[dict[str, str]], with_header: bool) 
 
 
 def write_csv_atomic(path: Path, header: list[str], rows: list[dict[str, str]]) -> None:
-    """Write a CSV beside `path` and move it into place: readers never see half a file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.parent / f".{path.name}.{uuid.uuid4().hex[:8]}.tmp"
-    try:
-        with open(tmp, "w", newline="") as f:
-            f.write(_csv_text(header, rows, True))
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-        _sync_folder(path.parent)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-
-
-def _sync_folder(folder: Path) -> None:
-    """fsync a folder, so that a file just renamed into it survives a power loss too."""
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass  # some file systems cannot sync a folder; the rename itself is still atomic
-    finally:
-        os.close(fd)
+    """Write a CSV beside `path`, check and sync it, move it into place: readers never see half
+    a file, and a failed write (`OutputError`) leaves the old file as it was."""
+    write_text_atomic(path, _csv_text(header, rows, True))
 
 
 class _Journal:
@@ -413,15 +389,34 @@ class _Journal:
 
     def __init__(self, path: Path, header: list[str]) -> None:
         self.header = header
-        self.file = open(path, "a", newline="")
+        self.path = path
+        try:
+            self.fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise failed(path, exc) from None
 
     def append(self, rows: list[dict[str, str]]) -> None:
-        self.file.write(_csv_text(self.header, rows, False))
-        self.file.flush()
-        os.fsync(self.file.fileno())
+        """Append whole rows or none: a failed write (a full disk) is cut back off the file, so
+        no row is left cut short, and raised as an `OutputError`."""
+        data = _csv_text(self.header, rows, False).encode("utf-8")
+        size = os.fstat(self.fd).st_size
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(self.fd, view):]
+            os.fsync(self.fd)
+        except OSError as exc:
+            try:
+                os.ftruncate(self.fd, size)
+                os.fsync(self.fd)
+            except OSError:
+                pass  # cut back as far as the disk lets us; --resume drops a row cut short
+            raise failed(self.path, exc) from None
 
     def close(self) -> None:
-        self.file.close()
+        if self.fd >= 0:
+            os.close(self.fd)
+            self.fd = -1
 
 
 def read_summary(path: Path) -> tuple[list[str], list[dict[str, str]]]:
@@ -555,6 +550,11 @@ def run_batch(plan: Plan, *, integrator: str | None = None, dt: float | str | No
     """
     if chunk_size < 1:
         raise BatchError(f"chunk size must be at least 1, got {chunk_size}")
+    # Where the results go can take them: said before the first run, not after the last.
+    if summary is not None:
+        check_file(summary, "file name for the summary CSV")
+    if record_dir is not None:
+        check_folder(record_dir)
     columns = summary_columns(plan)
     header = columns.all
     notes = list(plan.notes)
@@ -567,7 +567,7 @@ def run_batch(plan: Plan, *, integrator: str | None = None, dt: float | str | No
             done, dropped = _resumable(summary, header, plan, record_dir)
             if dropped:
                 notes.append(f"{dropped} row(s) of {summary} were cut short, malformed or without their "
-                             "recording: run again")
+                             "whole recording (missing, cut or damaged): run again")
     todo = [s for s in plan.specs if s.run_id not in done]
     total = len(plan.specs)
     rows = dict(done)
@@ -577,9 +577,15 @@ def run_batch(plan: Plan, *, integrator: str | None = None, dt: float | str | No
     failed = 0
     order = {s.run_id: i for i, s in enumerate(plan.specs)}
 
-    def save_in_order() -> None:
-        if summary is not None:
+    def save_in_order(stopping: bool = False) -> None:
+        if summary is None:
+            return
+        try:
             write_csv_atomic(summary, header, sorted(rows.values(), key=lambda r: order[r["run_id"]]))
+        except OutputError:
+            if not stopping:
+                raise
+            # Stopping for another error (a full disk): the appended rows, synced, stay as they are.
 
     save_in_order()  # the header, and the trusted rows of an earlier run (nothing torn)
     journal = _Journal(summary, header) if summary is not None else None
@@ -625,10 +631,10 @@ def run_batch(plan: Plan, *, integrator: str | None = None, dt: float | str | No
                     size = max(1, min(chunk_size, 2 * size, int(SUBCHUNK_SECONDS / max(per_run, 1e-9))))
                     if progress is not None:
                         progress(len(rows), total)
-    except (KeyboardInterrupt, BatchError):
+    except (KeyboardInterrupt, BatchError, OutputError):
         if journal is not None:
             journal.close()
-        save_in_order()  # the rows appended so far, in run order (killed, the next resume does it)
+        save_in_order(stopping=True)  # the rows so far, in run order (killed, the next resume does it)
         raise
     finally:
         if journal is not None:
@@ -731,11 +737,25 @@ def _resumable(summary: Path, header: list[str], plan: Plan,
         done[row["run_id"]] = row  # a run appended twice (rerun after a kill): the last row
     if record_dir is not None:
         missing = [i for i, row in done.items()
-                   if not row["error"] and not (record_dir / recording_name(specs[i])).is_file()]
+                   if not row["error"] and not _verified(record_dir / recording_name(specs[i]))]
         for run_id in missing:
             del done[run_id]
         dropped += len(missing)
     return done, dropped
+
+
+def _verified(path: Path) -> bool:
+    """Whether a recording is whole and unchanged (its checksum, read in a child process: a
+    damaged file must not crash the batch). One that is not is recorded again."""
+    from collide.recording import RecordingError, verify_recording
+
+    if not path.is_file():
+        return False
+    try:
+        verify_recording(path)
+    except RecordingError:
+        return False
+    return True
 
 
 def _run_chunk(chunk: list[RunSpec], integrator: str | None, dt: float | str | None, tol: float | None,

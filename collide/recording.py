@@ -1,7 +1,7 @@
 """Rerun recordings of runs: one `.rrd` per run, written in bulk and read back losslessly.
 
 This is the only module in `collide/` that imports rerun (DESIGN section 5). A recording holds
-two things:
+three things:
 
 - what a person looks at, on one timeline `sim_time` (simulated seconds): spheres with spin
   markers and trails, contact points with normal and friction force arrows, compression,
@@ -11,7 +11,10 @@ two things:
   ends of its steps and of its free flight, with its accelerations; each contact's forces at each
   step; the contact intervals) under `/collide/knots`, `/collide/contact_records` and
   `/collide/contact_intervals`, and the run's settings under `/collide/meta`, from which
-  `read_recording` rebuilds the `SceneRun`.
+  `read_recording` rebuilds the `SceneRun`;
+- a seal, `/collide/integrity`: the SHA-256 of every byte of the file (its own 64 digits read as
+  zeros), so that any changed byte, of what the viewer draws or of what is read back, makes the
+  file refused.
 
 Frames: plots (energies, momenta, compression, residuals) are drawn at the steps' ends: every
 contact step (or every `stride`-th; each contact's first and last step always) and a steady
@@ -53,6 +56,7 @@ Entity paths (`<b>` a body name, `<c>` a contact such as `ball1-ball2` or `ball1
 /world/contacts/points, normal_force          every contact at once (scenes of many contacts)
 /collide/meta                                 AnyValues: settings and shapes for read-back
 /collide/knots, contact_records, ...          AnyValues float64: the trajectory, exactly
+/collide/integrity                            AnyValues: sha256 of every byte of the file (last)
 ============================================  ==============================================
 """
 
@@ -89,15 +93,19 @@ from collide import diagnostics as dg
 from collide.colours import ENERGY_COLOURS, body_colour, body_colours
 from collide.engine import kernels as kn
 from collide.model import Model, State, compile_scenes
+from collide.output import OutputError, check_file, write_atomic
 from collide.run import SceneRun
 from collide.scene import SceneError, parse_scene
 from collide.stepper import ContactLog, RunResult, Trajectory
 
 APP_ID = "collide"
 FORMAT = "collide-recording"
+# 4: as 3, and /collide/integrity, the SHA-256 of every byte of the file before it;
 # 3: the trajectory's tables (knots, contact records, contact intervals) and `checksum` in
-# /collide/meta; 2: the same tables, no checksum (still read); 1: every step (no longer read).
-FORMAT_VERSION = 3
+# /collide/meta (still read); 2: the same tables, no checksum (still read); 1: every step (no
+# longer read).
+FORMAT_VERSION = 4
+INTEGRITY = "/collide/integrity"  # AnyValues sha256: the hash of every byte of the file (_seal)
 MANY_BODIES = 24  # from this many bodies on, one instanced entity draws them all
 MANY_CONTACTS = 24  # from this many contacts on, one entity draws them all (no per-contact plots)
 TIMELINE = "sim_time"
@@ -106,6 +114,9 @@ DEFAULT_FPS = 120.0  # frames per simulated second of free flight
 MAX_RECORDED_TIME = 9.0e9
 MAX_FREE_FRAMES = 100_000  # frames of free flight in one recording, at most (fps drops beyond)
 CONTACT_FRAMES = 100  # least frames across one contact in the 3D view
+SEAL_ATTEMPTS = 4  # writes of a recording whose seal's placeholder LZ4 did not keep verbatim
+SAFE_TIMEOUT_S = 60.0  # the reader process's limits (read_recording's defaults)
+SAFE_MEMORY_MB = 2048
 
 _AXES = "xyz"
 
@@ -152,8 +163,10 @@ def write_recording(run: SceneRun, path: Path, *, stride: int = 1, fps: float = 
     and `contact_frames` the least number of frames across each contact in the 3D view. Every
     step is stored exactly whatever these are.
 
-    The file appears under its final name only once complete (written beside it, then
-    `os.replace`d), so an interrupted write never leaves a half-written recording.
+    The file appears under its final name only once whole: written beside it, its bytes checked
+    against the integrity record (`_check_written`), synced, then renamed. A write that fails (a
+    full disk; Rerun's writer only logs its errors) is an `OutputError` naming the file and the
+    cause, and leaves nothing under either name.
     """
     if run.result.batch_size != 1:
         run = run.member(0)
@@ -170,22 +183,9 @@ def write_recording(run: SceneRun, path: Path, *, stride: int = 1, fps: float = 
     if contact_frames < 1:
         raise ValueError(f"contact_frames must be at least 1, got {contact_frames}")
     path = Path(path)
-    if path.is_dir():
-        raise _fail(path, "is a folder; give a file name ending in .rrd")
-    tmp = path.parent / f".{path.name}.{uuid.uuid4().hex[:8]}.tmp"
-    try:
-        # Fail here, in one line, rather than inside Rerun's writer (a RuntimeError from Rust).
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(tmp, "wb"):
-            pass
-    except OSError as exc:
-        raise _fail(path, f"cannot write the recording here ({exc.strerror or type(exc).__name__})") from None
-    try:
-        _Writer(run, stride, fps, contact_frames).write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    check_file(path, "file name ending in .rrd")  # one line before the work, not an error from Rust
+    writer = _Writer(run, stride, fps, contact_frames)
+    write_atomic(path, writer.write, writer.check)
     return path
 
 
@@ -291,6 +291,8 @@ def frame_times(traj: Trajectory, fps: float, stride: int, contact_frames: int,
 class _Writer:
     """Computes the frames of one run and sends them, one `send_columns` call per entity."""
 
+    seal = True  # False writes format 3 as collide did before (no integrity record): for tests
+
     def __init__(self, run: SceneRun, stride: int, fps: float, contact_frames: int) -> None:
         self.run = run
         self.scene = run.scene
@@ -306,6 +308,8 @@ class _Writer:
         self.contact_frames = contact_frames
         self.rows = 0
         self.calls = 0
+        self.placeholder = _placeholder()  # stands where the file's SHA-256 goes (_seal)
+        self.sealed = ""
         self.spin = self.model.spin_dim > 0 and self.scene.has_spin
         self.friction = self.model.friction and self.scene.has_friction
         self.dissipative = self.model.dissipative
@@ -432,6 +436,25 @@ class _Writer:
 
     def write(self, path: Path) -> None:
         self._prepare()
+        for _ in range(SEAL_ATTEMPTS):
+            self._send_all(path)
+            if not self.seal:
+                break
+            self.sealed = _seal(path, self.placeholder)
+            if self.sealed:
+                break
+            self.placeholder = _placeholder()  # LZ4 did not store it verbatim: again with another
+        else:
+            raise OutputError(f"could not write {path}: its checksum could not be stored")
+        last_write.frames = len(self.view.times)
+        last_write.exact_frames = len(self.exact.times)
+        last_write.fps = self.fps
+        last_write.steps = int(self.result.steps[0])
+        last_write.rows = self.rows
+        last_write.calls = self.calls
+
+    def _send_all(self, path: Path) -> None:
+        self.rows = self.calls = 0
         self.rec = rr.RecordingStream(APP_ID, recording_id=uuid.uuid4(), send_properties=False)
         try:
             self.rec.save(path, default_blueprint=self.blueprint())
@@ -441,16 +464,25 @@ class _Writer:
             self._write_contacts()
             self._write_conserved()
             self._write_steps()
-            self._write_meta()  # last: a truncated file has no meta and is refused on reading
+            self._write_meta()  # a truncated file has no meta and is refused on reading
+            if self.seal:
+                # Last, a slot for the SHA-256 of the whole file: filled in once Rerun closed it.
+                self._static(INTEGRITY, rr.AnyValues(sha256=self.placeholder))
             self.rec.flush()
         finally:
             self.rec.disconnect()
-        last_write.frames = len(self.view.times)
-        last_write.exact_frames = len(self.exact.times)
-        last_write.fps = self.fps
-        last_write.steps = int(self.result.steps[0])
-        last_write.rows = self.rows
-        last_write.calls = self.calls
+
+    def check(self, path: Path) -> None:
+        """The file on disk is whole: Rerun's framing complete to its footer and every byte as
+        sealed (Rerun logs its write errors, never raises them: this is where a full disk shows)."""
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise OutputError(f"could not write {path}: {exc.strerror or exc}") from None
+        digest = self.sealed
+        if _messages(data) is None or self.seal and _unsealed_sha256(data, digest) != digest:
+            raise OutputError(f"could not write {path}: the file came out incomplete (cut short); "
+                              "is the disk full?")
 
     def _write_static(self) -> None:
         r = self.result
@@ -659,7 +691,8 @@ class _Writer:
     def _write_meta(self) -> None:
         r, run, model = self.result, self.run, self.model
         meta: dict[str, Any] = {
-            "format": FORMAT, "format_version": FORMAT_VERSION, "collide_version": collide_version(),
+            "format": FORMAT, "format_version": FORMAT_VERSION if self.seal else min(FORMAT_VERSION, 3),
+            "collide_version": collide_version(),
             "scene_name": self.scene.name, "scene_toml": self.scene.to_toml(),
             "integrator": r.integrator, "dt": float(r.dt[0]), "steps": int(r.steps[0]),
             "jumps": int(r.jumps[0]), "wall_time_s": float(r.wall_time_s),
@@ -740,6 +773,108 @@ def _fail(path: Path, reason: str) -> RecordingError:
     return RecordingError(f"{path}: {reason}")
 
 
+# Rerun's .rrd framing (rerun-sdk 0.41): a 12-byte header (b"RRF2", version, options); messages,
+# each a u64 kind and a u64 length then the payload (kind 0 ends the stream, its payload the
+# footer); then a trailer: u64 footer offset, u64 footer length, u32 CRC, b"RRF2FOOT", u32.
+_RRD_HEADER = 12
+_MESSAGE = struct.Struct("<QQ")
+_TRAILER = struct.Struct("<QQI8sI")
+_END, _ARROW = 0, 2
+
+
+def _messages(data: bytes | memoryview) -> list[tuple[int, int, int]] | None:
+    """(offset, kind, length) of each message up to the end of the stream; None if the framing
+    is broken (cut short, a length past the file, no end, bytes after the trailer)."""
+    if len(data) < _RRD_HEADER + _TRAILER.size or bytes(data[:4]) != b"RRF2":
+        return None
+    out, pos = [], _RRD_HEADER
+    while pos + _MESSAGE.size <= len(data):
+        kind, length = _MESSAGE.unpack_from(data, pos)
+        if kind > 16 or pos + _MESSAGE.size + length > len(data):
+            return None
+        out.append((pos, kind, length))
+        pos += _MESSAGE.size + length
+        if kind == _END:
+            if len(data) - pos != _TRAILER.size:
+                return None
+            offset, size, _, magic, _ = _TRAILER.unpack_from(data, pos)
+            ok = magic == b"RRF2FOOT" and offset == out[-1][0] + _MESSAGE.size and size == length
+            return out if ok else None
+    return None
+
+
+_HEX = re.compile(rb"[0-9a-f]{64}")
+
+
+def _placeholder() -> str:
+    """64 letters G-Z with no 4-byte sequence twice, so that LZ4 (Rerun compresses each message)
+    most likely stores them verbatim, where `_seal` can find and overwrite them."""
+    import random
+
+    letters = "GHIJKLMNOPQRSTUVWXYZ"  # not hex digits: unlike the chunk ids in Arrow's metadata
+    rng = random.SystemRandom()
+    while True:
+        text = "".join(rng.choice(letters) for _ in range(64))
+        if len({text[i:i + 4] for i in range(61)}) == 61:
+            return text
+
+
+def _unsealed_sha256(data: bytes, digest: str) -> str | None:
+    """SHA-256 of the file with its one copy of `digest` (the seal) read as 64 zeros; None if
+    the digest is not in the file exactly once."""
+    key = digest.encode()
+    at = data.find(key)
+    if at < 0 or data.find(key, at + 1) >= 0:
+        return None
+    import hashlib
+
+    h = hashlib.sha256(memoryview(data)[:at])
+    h.update(b"0" * 64)
+    h.update(memoryview(data)[at + 64:])
+    return h.hexdigest()
+
+
+def _seal(path: Path, placeholder: str) -> str:
+    """Replace the placeholder (stored verbatim once) by the SHA-256 of the file as it is with
+    64 zeros there: every byte of the file is then covered, the seal's own included (a changed
+    seal no longer matches the rest). "" if LZ4 did not keep the placeholder verbatim."""
+    data = path.read_bytes()
+    key = placeholder.encode()
+    at = data.find(key)
+    if at < 0 or data.find(key, at + 1) >= 0:
+        return ""
+    data = data[:at] + b"0" * 64 + data[at + 64:]
+    import hashlib
+
+    digest = hashlib.sha256(data).hexdigest().encode()
+    with open(path, "r+b") as f:
+        f.seek(at)
+        f.write(digest)
+    return digest.decode()
+
+
+def _check_integrity(path: Path, chunks: list) -> bool:
+    """Refuse a file any byte of which changed since it was sealed (its SHA-256, stored in its
+    integrity record, does not match); False if it has no integrity record (an older format)."""
+    held = [c for c in chunks if c.entity_path == INTEGRITY]
+    if not held:
+        return False
+    columns = _columns(held, INTEGRITY)
+    try:
+        if len(held) != 1 or held[0].num_rows != 1 or set(columns) != {"sha256"}:
+            raise ValueError
+        digest = columns["sha256"][0].to_pylist()[0][0]
+        if not isinstance(digest, str) or _HEX.fullmatch(digest.encode()) is None:
+            raise ValueError
+    except (ValueError, IndexError, TypeError, UnicodeEncodeError):
+        raise _fail(path, "damaged collide recording (its integrity record is malformed)") from None
+    data = path.read_bytes()
+    if _messages(data) is None or _unsealed_sha256(data, digest) != digest:
+        raise _fail(path, "damaged collide recording (checksum mismatch: its bytes changed after it was "
+                          "written)")
+    return True
+
+
 def _load_chunks(path: Path) -> list:
     from rerun.chunk import RrdReader
 
@@ -785,6 +920,8 @@ def entity_paths(path: str | Path) -> list[str]:
 
 
 def _meta(path: Path, chunks: list) -> dict[str, Any]:
+    """The settings in /collide/meta, once every byte before the integrity record is checked."""
+    whole = _check_integrity(path, chunks)
     columns = _columns(chunks, "/collide/meta")
     if not columns:
         if any(c.entity_path.startswith("/collide/") for c in chunks):
@@ -806,6 +943,8 @@ def _meta(path: Path, chunks: list) -> dict[str, Any]:
     if version > FORMAT_VERSION:
         raise _fail(path, f"made by a newer collide (format {meta['format_version']}, this one reads "
                           f"{FORMAT_VERSION}); upgrade collide")
+    if version >= 4 and not whole:
+        raise _fail(path, "damaged collide recording (its integrity record is missing)")
     return meta
 
 
@@ -906,13 +1045,21 @@ def _verified_tables(path: Path, chunks: list, meta: dict[str, Any]) -> dict[str
     return tables
 
 
-def read_recording(path: str | Path) -> SceneRun:
+def read_recording(path: str | Path, *, trusted: bool = False, timeout_s: float = SAFE_TIMEOUT_S,
+                   memory_mb: int = SAFE_MEMORY_MB) -> SceneRun:
     """Rebuild the run stored in a recording: scene, model, trajectory, final state and settings.
 
-    Raises `RecordingError` (a `ValueError`) naming the file when it is not an `.rrd`, is
-    truncated or damaged (its checksum does not match), or was not written by collide. Files
-    from elsewhere: `read_recording_safely`, which also survives a crash of Rerun's reader.
+    Raises `RecordingError` (a `ValueError`) naming the file, in one line, when it is not an
+    `.rrd`, is truncated or damaged (a changed byte: its checksum does not match), was not
+    written by collide, or crashes, hangs or floods Rerun's reader.
+
+    By default the file is read in a child process (`read_recording_safely`, with `timeout_s`
+    and `memory_mb`): Rerun's reader is Rust, and a damaged file can abort the process that
+    reads it. `trusted=True` reads in this process, about a second sooner (no reader process to
+    start) and without pickling the run back: for files this program has just written itself.
     """
+    if not trusted:
+        return read_recording_safely(path, timeout_s=timeout_s, memory_mb=memory_mb)
     path = Path(path)
     chunks = _load_chunks(path)
     try:
@@ -921,6 +1068,24 @@ def read_recording(path: str | Path) -> SceneRun:
     except RecordingError:
         raise
     except Exception as exc:  # anything a foreign or damaged file's contents make the parsing raise
+        text = " ".join(str(exc).split())[:300]
+        raise _fail(path, f"not a valid collide recording ({type(exc).__name__}: {text})") from None
+
+
+def verify_recording(path: str | Path, *, trusted: bool = False, timeout_s: float = SAFE_TIMEOUT_S,
+                     memory_mb: int = SAFE_MEMORY_MB) -> None:
+    """Check a recording without rebuilding its run (cheaper than `read_recording`): it returns
+    only if `read_recording` would read the file, else raises the same `RecordingError`."""
+    path = Path(path)
+    if not trusted:
+        _safely(path, "verify", timeout_s, memory_mb)
+        return
+    chunks = _load_chunks(path)
+    try:
+        _verified_tables(path, chunks, _meta(path, chunks))
+    except RecordingError:
+        raise
+    except Exception as exc:
         text = " ".join(str(exc).split())[:300]
         raise _fail(path, f"not a valid collide recording ({type(exc).__name__}: {text})") from None
 
@@ -976,9 +1141,17 @@ def write_accuracy_recording(wp: Any, path: Path) -> Path:
     """A work-precision study (`collide.accuracy.WorkPrecision`) as a recording: for each
     integrator, log10 of the error on a `run_time` timeline (seconds of wall time), and the
     table as a text document; the blueprint shows one plot with a line per integrator."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.parent / f".{path.name}.{uuid.uuid4().hex[:8]}.tmp"
+    def produce(tmp: Path) -> None:
+        _write_accuracy(wp, tmp)
+
+    def check(tmp: Path) -> None:
+        if _messages(tmp.read_bytes()) is None:
+            raise OutputError(f"could not write {tmp}: the file is incomplete (cut short); is the disk full?")
+
+    return write_atomic(Path(path), produce, check)
+
+
+def _write_accuracy(wp: Any, tmp: Path) -> None:
     rec = rr.RecordingStream(f"{APP_ID}-accuracy", recording_id=uuid.uuid4(), send_properties=False)
     blueprint = rrb.Blueprint(rrb.Horizontal(
         rrb.TimeSeriesView(origin="/accuracy", name="log10 error against run time"),
@@ -1001,19 +1174,13 @@ def write_accuracy_recording(wp: Any, path: Path) -> Path:
                              indexes=[rr.TimeColumn("run_time", duration=[p.wall_time_s for p in pts])],
                              columns=rr.Scalars.columns(scalars=[math.log10(p.error) for p in pts]))
         rec.flush()
-        rec.disconnect()
-        os.replace(tmp, path)
     finally:
-        if tmp.exists():
-            tmp.unlink()
-    return path
+        rec.disconnect()
 
 
 # ---------------------------------------------------------------------------------------------
 # Reading untrusted files in a child process
 
-SAFE_TIMEOUT_S = 60.0
-SAFE_MEMORY_MB = 2048
 _POLL_S = 0.05
 _HEADER = struct.Struct("!Q")
 _IDLE_READERS = 2  # reader processes kept warm between reads
@@ -1041,7 +1208,7 @@ def _serve_reads() -> None:
         header = inp.read(_HEADER.size)
         if len(header) < _HEADER.size:
             return
-        path, memory_mb = pickle.loads(inp.read(_HEADER.unpack(header)[0]))
+        path, memory_mb, mode = pickle.loads(inp.read(_HEADER.unpack(header)[0]))
         try:
             # A backstop against one huge allocation between the parent's memory checks; a
             # process with rerun loaded reserves about 3 GB of address space before it reads.
@@ -1052,7 +1219,8 @@ def _serve_reads() -> None:
         except (ValueError, OSError):
             pass
         try:
-            message: tuple[str, Any] = ("ok", read_recording(path))
+            message: tuple[str, Any] = ("ok", verify_recording(path, trusted=True) if mode == "verify"
+                                        else read_recording(path, trusted=True))
         except RecordingError as exc:
             message = ("error", str(exc))
         except MemoryError:
@@ -1085,10 +1253,10 @@ class _Reader:
         except (OSError, ValueError, IndexError):
             return 0.0
 
-    def read(self, path: Path, timeout_s: float, memory_mb: int) -> tuple[str, Any]:
+    def read(self, path: Path, timeout_s: float, memory_mb: int, mode: str = "read") -> tuple[str, Any]:
         """Send one request; ("ok", run), ("error", message) or ("failed", reason)."""
         try:
-            _send_message(self.proc.stdin, (str(path), int(memory_mb)))
+            _send_message(self.proc.stdin, (str(path), int(memory_mb), mode))
         except OSError:
             return "failed", self._died()
         fd = self.proc.stdout.fileno()
@@ -1160,7 +1328,7 @@ def _give_back(reader: _Reader) -> None:
 
 def read_recording_safely(path: str | Path, *, timeout_s: float = SAFE_TIMEOUT_S,
                           memory_mb: int = SAFE_MEMORY_MB) -> SceneRun:
-    """`read_recording` in a child process, for files from anywhere (uploads, the command line).
+    """`read_recording` in a child process (its default), for files from anywhere.
 
     Rerun's reader is Rust: a damaged file can make it panic and abort the whole process, or
     loop. Here a crash, a hang (longer than `timeout_s`) or a read that needs more than
@@ -1168,7 +1336,10 @@ def read_recording_safely(path: str | Path, *, timeout_s: float = SAFE_TIMEOUT_S
     one-line message naming the file, and the caller carries on. Readers are fresh interpreters
     (about a second to start), kept warm between reads; safe to call from several threads.
     """
-    path = Path(path)
+    return _safely(Path(path), "read", timeout_s, memory_mb)
+
+
+def _safely(path: Path, mode: str, timeout_s: float, memory_mb: int) -> Any:
     if not timeout_s > 0:
         raise ValueError(f"timeout_s must be positive, got {timeout_s}")
     if not memory_mb > 0:
@@ -1180,7 +1351,7 @@ def read_recording_safely(path: str | Path, *, timeout_s: float = SAFE_TIMEOUT_S
     reader = _take_reader()
     kind, value = "failed", "the reader stopped"
     try:
-        kind, value = reader.read(path.absolute(), timeout_s, memory_mb)
+        kind, value = reader.read(path.absolute(), timeout_s, memory_mb, mode)
     finally:
         if kind == "failed":
             reader.stop()

@@ -45,7 +45,7 @@ def test_checksum_is_stored_and_matches(written: tuple) -> None:
                                       getattr(run.result.trajectory, table))
     chunks = rec._load_chunks(path)
     meta = rec._meta(path, chunks)
-    assert meta["format_version"] == 3 and len(meta["checksum"]) == 64
+    assert meta["format_version"] == 4 and len(meta["checksum"]) == 64
     assert meta["records"] > 0 and meta["intervals"] > 0  # the checksum covers non-empty tables
 
 
@@ -74,6 +74,7 @@ def test_format_2_without_checksum_is_read(written: tuple, tmp_path: Path,
     # Main's format 2 (the same tables, no checksum) is still read; with the version lowered but
     # a checksum present, the checksum is still checked.
     run, _ = written
+    monkeypatch.setattr(rec._Writer, "seal", False)  # no integrity record, as format 2 had none
     monkeypatch.setattr(rec, "FORMAT_VERSION", 2)
     any_values = rr.AnyValues
     monkeypatch.setattr(rec.rr, "AnyValues", lambda **values: any_values(
@@ -87,6 +88,7 @@ def test_format_2_without_checksum_is_read(written: tuple, tmp_path: Path,
     flipped.write_bytes(_flip_a_stored_position(run, path.read_bytes()))
     assert not np.array_equal(read_recording(flipped).result.trajectory.knots, run.result.trajectory.knots)
 
+    monkeypatch.setattr(rec._Writer, "seal", False)
     monkeypatch.setattr(rec, "FORMAT_VERSION", 2)
     path = write_recording(run, tmp_path / "v2-with-checksum.rrd")
     monkeypatch.undo()
@@ -96,6 +98,7 @@ def test_format_2_without_checksum_is_read(written: tuple, tmp_path: Path,
 
 
 def test_a_changed_position_is_refused(written: tuple, tmp_path: Path) -> None:
+    # Refused twice over: the seal (every byte) and the trajectory's own checksum.
     run, path = written
     damaged = tmp_path / "flipped.rrd"
     damaged.write_bytes(_flip_a_stored_position(run, path.read_bytes()))
@@ -115,6 +118,7 @@ def test_a_changed_setting_is_refused(written: tuple, tmp_path: Path, monkeypatc
         return value
 
     monkeypatch.setattr(rec, "checksum", stale)
+    monkeypatch.setattr(rec._Writer, "seal", False)  # else the seal, over every byte, hides this check
     path = write_recording(run, tmp_path / "stale.rrd")
     monkeypatch.undo()
     with pytest.raises(RecordingError, match="checksum mismatch"):
