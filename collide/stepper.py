@@ -459,8 +459,12 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     fp[:, kn.FP_DT], fp[:, kn.FP_OMEGA_H], fp[:, kn.FP_TEND], fp[:, kn.FP_TAIL] = dt, omega_h, t_end, tail
     fp[:, kn.FP_SCALE] = speed * event_tol / EDGE_TOL
     fp[:, kn.FP_EVENT_TOL] = event_tol
-    fp[:, kn.FP_SLOW] = 1e-9 * speed  # closing speeds under 1e-9 of the fastest are round-off, not an approach
-    fp[:, kn.FP_END_SLOW] = np.maximum(1e-9, resolved) * speed
+    # A pair closing at under 1e-9 of its own speeds closes by round-off, not an approach (a share
+    # of the pair's own: of the fastest body's, or of a dead band 1e9 times the speeds, slow pairs
+    # passed through each other unseen).
+    fp[:, kn.FP_SLOW] = 1e-9
+    fastest = np.sqrt((initial.v ** 2).sum(-1)).max(-1)
+    fp[:, kn.FP_END_SLOW] = np.where(np.asarray(resolved) > 1e-9, resolved, 0.0) * fastest
     # Contiguous already (stacked per scene); a strided view would compile the kernel anew.
     tables = [(np.ascontiguousarray(model.pair_table[b]), np.ascontiguousarray(model.wall_table[b]))
               for b in range(b_count)]
