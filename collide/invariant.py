@@ -19,8 +19,6 @@ from collide.model import TABLE_ESTAR, TABLE_K
 # Over the energy's bound: the step's own energy error (within --tol, far below this) and a
 # pile's settling under gravity stay well inside.
 SLACK = 1.5
-PAIR_BLOCK = 2_000_000  # pairs at once (memory, not results)
-FREE_FLIGHT_BODIES = 5000  # the free-flight sweep looks at every pair up to this many bodies
 
 
 def available_energy(model, state) -> np.ndarray:
@@ -113,7 +111,7 @@ def _member(model, energy: float, start: np.ndarray, final, b: int, max_overlap:
     reason = _final_pairs(model, energy, start, final, b)
     if not reason and model.n_walls:
         reason = _walls(model, energy, final, b)
-    if not reason and since is not None and model.dim > 1 and 1 < model.n_bodies <= FREE_FLIGHT_BODIES:
+    if not reason and since is not None and model.dim > 1 and model.n_bodies > 1:
         reason = _free_flight(model, energy, final, since, b)
     if not reason and max_overlap is not None:
         reason = _deepest(model, energy, max_overlap, b)
@@ -164,27 +162,49 @@ def _walls(model, energy: float, final, b: int) -> str | None:
 
 def _free_flight(model, energy: float, final, since: np.ndarray, b: int) -> str | None:
     """Pairs both of whose bodies flew freely since `since`: their relative motion is a straight
-    line (the same gravity on both), so the nearest approach over that flight is closed form."""
-    i_all, j_all = np.triu_indices(model.n_bodies, 1)
+    line (the same gravity on both), so the nearest approach over that flight is closed form.
+    Only pairs whose own flights overlap along x (padded by the radius) can have met."""
     t_end = float(final.t[b])
-    s, v = final.s[b], final.v[b]
-    for start in range(0, len(i_all), PAIR_BLOCK):
-        i, j = i_all[start:start + PAIR_BLOCK], j_all[start:start + PAIR_BLOCK]
-        span = np.maximum(t_end - np.maximum(since[i], since[j]), 0.0)
-        d, u = s[j] - s[i], v[j] - v[i]
-        uu = (u * u).sum(-1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            back = np.clip(np.where(uu > 0, (d * u).sum(-1) / uu, 0.0), 0.0, span)
-        near = np.sqrt(((d - u * back[:, None]) ** 2).sum(-1))
-        reach = model.radius[b, i] + model.radius[b, j]
-        bad = near < reach - SLACK * pair_depth(model, energy, b, i, j)
-        if bad.any():
-            k = int(np.argmax(bad))
-            names = model.body_names
-            return (f"body.{names[i[k]]} and body.{names[j[k]]} passed through each other in free flight (centres "
-                    f"{near[k]:.3g} m apart at t = {t_end - back[k]:.6g} s, {reach[k]:.3g} m at touch): the step "
-                    "did not resolve their approach; refused")
-    return None
+    s, v, r = final.s[b], final.v[b], model.radius[b]
+    span = np.maximum(t_end - since, 0.0)
+    back = s[:, 0] - v[:, 0] * span
+    g = 0.0 if model.gravity is None else float(np.linalg.norm(model.gravity[b]))
+    pad = r + 0.5 * g * span ** 2
+    i, j = overlapping(np.minimum(s[:, 0], back) - pad, np.maximum(s[:, 0], back) + pad)
+    for axis in range(1, s.shape[1]):  # their boxes overlap along the other axes too
+        back = s[:, axis] - v[:, axis] * span
+        lo, hi = np.minimum(s[:, axis], back) - pad, np.maximum(s[:, axis], back) + pad
+        keep = (lo[i] <= hi[j]) & (lo[j] <= hi[i])
+        i, j = i[keep], j[keep]
+    if not len(i):
+        return None
+    common = np.minimum(span[i], span[j])
+    d, u = s[j] - s[i], v[j] - v[i]
+    uu = (u * u).sum(-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        when = np.clip(np.where(uu > 0, (d * u).sum(-1) / uu, 0.0), 0.0, common)
+    near = np.sqrt(((d - u * when[:, None]) ** 2).sum(-1))
+    reach = r[i] + r[j]
+    bad = near < reach - SLACK * pair_depth(model, energy, b, i, j)
+    if not bad.any():
+        return None
+    k = int(np.argmax(bad))
+    names = model.body_names
+    return (f"body.{names[i[k]]} and body.{names[j[k]]} passed through each other in free flight (centres "
+            f"{near[k]:.3g} m apart at t = {t_end - when[k]:.6g} s, {reach[k]:.3g} m at touch): the step did not "
+            "resolve their approach; refused")
+
+
+def overlapping(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (i, j) whose intervals [lo, hi] overlap (sorted by lo: each against those that start
+    before it ends)."""
+    order = np.argsort(lo, kind="stable")
+    starts = lo[order]
+    ends = np.searchsorted(starts, hi[order], side="right")
+    count = np.maximum(ends - np.arange(len(order)) - 1, 0)
+    first = np.repeat(np.arange(len(order)), count)
+    offset = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    return order[first], order[first + 1 + offset]
 
 
 def check_invariant(result) -> None:
