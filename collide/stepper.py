@@ -608,11 +608,15 @@ def contact_logs(ivals: list[np.ndarray], t_end: np.ndarray) -> np.ndarray:
 
 def last_contacts(ivals: list[np.ndarray], t_end: np.ndarray, n: int) -> np.ndarray:
     """(B, N) when each body's last contact ended: 0 for none, t_end for one still open (the
-    free flight to the end that `collide.invariant` checks)."""
+    free flight to the end that `collide.invariant` checks). The seed's fixed steps log any contact
+    as one row of no body (-1): it counts for every body."""
     out = np.zeros((len(ivals), n))
     for b, iv in enumerate(ivals):
         if len(iv):
             end = np.where(np.isnan(iv[:, kn.V_END]), t_end[b], iv[:, kn.V_END])
+            anyone = iv[:, kn.V_I] < 0
+            if anyone.any():
+                out[b] = end[anyone].max()
             for col in (kn.V_I, kn.V_J):
                 body = iv[:, col].astype(np.int64)
                 mine = body >= 0
