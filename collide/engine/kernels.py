@@ -3400,27 +3400,47 @@ def engaged_now(G, P, V, n, WP, grav, dim):
 
 
 @jit_inline
-def approaches(P, V, i, j, slow, floor):
+def approaches(P, V, i, j, slow, floor, scale):
     """Whether bodies i and j close along their line of centres faster than `slow` times their
-    own speeds (round-off of the pair's own velocities: never of the scene's fastest body, beside
-    which a slow pair would pass through unseen) and than `floor` (m/s)."""
+    speed scales (`speed_scales`: round-off of the speeds the pair itself carries, never of the
+    scene's fastest body, beside which a slow pair would pass through unseen) and than `floor`
+    (m/s)."""
     dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
     closing = -((V[j, 0] - V[i, 0]) * dx + (V[j, 1] - V[i, 1]) * dy + (V[j, 2] - V[i, 2]) * dz)
-    own = math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2) + math.sqrt(V[j, 0] ** 2 + V[j, 1] ** 2 + V[j, 2] ** 2)
-    return closing > max(slow * own, floor) * math.sqrt(dx * dx + dy * dy + dz * dz)
+    return closing > max(slow * (scale[i] + scale[j]), floor) * math.sqrt(dx * dx + dy * dy + dz * dz)
 
 
 @jit
-def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow):
+def speed_scales(V, n, IV, CNT):
+    """Each body's speed scale for round-off: the fastest speed now among the bodies it has
+    exchanged momentum with, directly or through others, itself included (a ball a Newton's
+    cradle left at rest keeps the round-off of the speed it passed on, not a speed of its own)."""
+    parent = np.arange(n)
+    for k in range(CNT[CN_IVALS]):
+        i, j = int(IV[k, V_I]), int(IV[k, V_J])
+        if i >= 0 and j >= 0:
+            join(parent, i, j)
+    top = np.zeros(n)
+    for i in range(n):
+        r = root_of(parent, i)
+        top[r] = max(top[r], math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2))
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = top[root_of(parent, i)]
+    return out
+
+
+@jit
+def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow, scale):
     """The earliest contact start after t, looking `horizon` ahead (every pair if asked). Two
-    bodies closing at under `slow` times their own speeds are taken as not approaching: what is
+    bodies closing at under `slow` times their speed scales are taken as not approaching: what is
     left of a perfect exchange of velocities, round-off, would otherwise meet again billions of
     seconds later."""
     best = math.inf
     if every_pair:
         for i in range(n):
             for j in range(i + 1, n):
-                if approaches(P, V, i, j, slow, 0.0):
+                if approaches(P, V, i, j, slow, 0.0, scale):
                     best = min(best, touch_time(G, i, j, t, WP, grav))
     else:
         g = math.sqrt(grav[0] ** 2 + grav[1] ** 2 + grav[2] ** 2)
@@ -3430,7 +3450,7 @@ def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow):
         pairs = near_pairs(P, G[:, G_R], margin, n, dim)
         for p in range(pairs.shape[0]):
             i, j = pairs[p, 0], pairs[p, 1]
-            if approaches(P, V, i, j, slow, 0.0):
+            if approaches(P, V, i, j, slow, 0.0, scale):
                 best = min(best, touch_time(G, i, j, t, WP, grav))
     for w in range(WP.shape[0]):
         for i in range(n):
@@ -3439,7 +3459,7 @@ def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow):
 
 
 @jit
-def meets_again(G, P, V, n, t, WP, grav, IV, CNT, slow, resolved, within):
+def meets_again(G, P, V, n, t, WP, grav, IV, CNT, slow, resolved, within, scale):
     """Whether a wall or a pair meets again after t, a pair only if it closes faster than its
     velocities are known: each contact a body took part in left it with the run's resolved
     velocity error at most (`resolved`, m/s), so a pair whose bodies had c_i and c_j contacts
@@ -3455,10 +3475,11 @@ def meets_again(G, P, V, n, t, WP, grav, IV, CNT, slow, resolved, within):
                 count[b] += 1.0
     for i in range(n):
         for j in range(i + 1, n):
-            if not approaches(P, V, i, j, slow, 0.0):
+            if not approaches(P, V, i, j, slow, 0.0, scale):
                 continue
             tau = touch_time(G, i, j, t, WP, grav)
-            if tau <= within or (tau < math.inf and approaches(P, V, i, j, slow, (count[i] + count[j]) * resolved)):
+            floor = (count[i] + count[j]) * resolved
+            if tau <= within or (tau < math.inf and approaches(P, V, i, j, slow, floor, scale)):
                 return True
     for w in range(WP.shape[0]):
         for i in range(n):
@@ -3659,9 +3680,10 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
         eng = engaged_now(G, P, V, n, WP, grav, dim)
         if eng.shape[0] == 0:
             small = YES if n <= 64 else NO
+            scale = speed_scales(V, n, IV, CNT)
             if (t_end == math.inf and small == YES and CNT[CN_IVALS] > 0 and fp[FP_END_SLOW] > 0.0
                     and not meets_again(G, P, V, n, t, WP, grav, IV, CNT, fp[FP_SLOW], fp[FP_END_SLOW],
-                                        run_end(t, fp, IV, CNT) - t)):
+                                        run_end(t, fp, IV, CNT) - t, scale)):
                 # What still approaches closes slower than the run resolves velocities (its
                 # tolerance): the step's error, not a contact to come (a Newton's cradle at k =
                 # 1e6, tol 1e-7, left its balls at 1e-8 m/s and met them again 11 hours later).
@@ -3675,7 +3697,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                     fastest = max(fastest, math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2))
                 search = 4.0 * G[0, G_R] / fastest if fastest > 0 else 1.0
             horizon = min(search, t_end - t)
-            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, small, fp[FP_SLOW])
+            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, small, fp[FP_SLOW], scale)
             if tau <= horizon or (small == YES and tau < math.inf):
                 if not min(t + tau, t_end) > t:
                     # A contact due closer than the clock resolves that does not engage (bodies
@@ -3692,7 +3714,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 t = min(t + horizon, t_end)
                 search *= 2.0
                 continue
-            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, YES, fp[FP_SLOW])
+            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, YES, fp[FP_SLOW], scale)
             if tau < math.inf:
                 t += tau
                 continue
@@ -4079,7 +4101,8 @@ def seed_run(G, tables, WP, grav, fl, fp):
                         KN[knot_of[i], K_AN + d] = grav[d]
         # Free flight: whole steps in closed form, up to the step in which a contact begins.
         positions_at(G, n, t, grav, P, V)
-        tau = next_contact(G, P, V, n, t, WP, grav, dim, math.inf, YES, fp[FP_SLOW])
+        tau = next_contact(G, P, V, n, t, WP, grav, dim, math.inf, YES, fp[FP_SLOW],
+                           speed_scales(V, n, IV, CNT))
         if tau == math.inf and t_end == math.inf:
             t_end = t + math.ceil(tail_after(fp[FP_TAIL], IV, CNT) / dt) * dt
         jump = min(math.floor(tau / dt) * dt if tau < math.inf else math.inf, t_end - t)
