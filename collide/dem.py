@@ -122,6 +122,16 @@ def check_dem(model: Model, state: State, dt: np.ndarray, max_steps: int, durati
         what = "contact.youngs_modulus (or the materials')" if model.hertz else "contact.k"
         raise RunError(f"{what} is too soft: the overlap could reach {overlap[b]:.3g} m, beyond "
                        f"{reach[b]:.3g} m; the spheres would pass through. Use a stiffer contact")
+    # "In contact" is an overlap at a step: a pair that closes by more than the distance between
+    # centres at touch within one step can cross unseen (the stability limit allows twice that).
+    speed = approach_bound(model, state)
+    if model.n_walls:
+        speed = np.maximum(speed, np.sqrt((state.v ** 2).sum(-1)).max(axis=1))
+    if (speed * dt >= reach).any():
+        b = int(np.argmax(speed * dt / reach))
+        raise RunError(f"dt = {dt[b]:.3g} s is too long for the approach speeds (up to {speed[b]:.3g} m/s): a pair "
+                       f"closes by {speed[b] * dt[b]:.3g} m in one step, beyond {reach[b]:.3g} m, and could pass "
+                       "through unseen; use a smaller dt or auto")
     per_contact = t_c / dt
     if np.isfinite(duration).all():
         steps = duration / dt

@@ -11,6 +11,7 @@ import numpy as np
 
 from collide import diagnostics as dg
 from collide.integrators import INTEGRATORS
+from collide.invariant import check_invariant
 from collide.model import compile_scenes, reference_frequency
 from collide.scene import Scene, SceneError, dem_reason
 from collide.stepper import EDGE_TOL, MAX_STEPS_DEFAULT, Progress, RunError, RunResult, simulate
@@ -208,6 +209,7 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
                           record=record, max_steps=max_steps, event_tol=event_tol, auto=np.array(auto_used),
                           omega_h=omega_h, progress=progress, resolved=np.where(auto_used, tols, estimate))
     check_finite(result, scenes)
+    check_invariant(result)
     run = SceneRun(list(scenes), result, dt, [float(x) for x in tols], estimate, auto_used, ["model"] * len(scenes))
     if not measure:
         return run  # a measuring run: its caller judges it
@@ -328,6 +330,7 @@ def _run_dem(scenes: list[Scene], model, state, requested: list, auto_used: list
     result = simulate(model, state, integrator="dem", dt=steps, duration=duration, tail=tail, record=record,
                       max_steps=max_steps, rest=rest, progress=progress)
     check_finite(result, scenes)
+    check_invariant(result)
     t_c, _, _ = dem.contact_time(model, state)
     estimate = dem.predicted_error(t_c / steps)
     result.warnings.extend(balance_warnings(result, scenes, np.maximum(tols, estimate), auto_used))

@@ -200,6 +200,7 @@ class RunResult:
     dissipation: np.ndarray | None = None  # (B, 3) DEM: J taken out by damping, friction, rolling
     closed_steps: np.ndarray | None = None  # (B,) of the steps, intervals run in closed form (a sphere on a wall)
     attempts: np.ndarray | None = None  # (B,) whole steps tried from a step's start (events cost more than one)
+    free_since: np.ndarray | None = None  # (B, N) when each body's last contact ended (0: none; the end: open)
 
     @property
     def batch_size(self) -> int:
@@ -227,7 +228,7 @@ class RunResult:
                          select_state(self.final, index), self.integrator, pick(self.dt), pick(self.steps),
                          pick(self.jumps), self.wall_time_s, log, trajectories, list(self.warnings),
                          pick(self.dt_min), pick(self.windows), pick(self.dissipation), pick(self.closed_steps),
-                         pick(self.attempts))
+                         pick(self.attempts), pick(self.free_since))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -458,8 +459,12 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     fp[:, kn.FP_DT], fp[:, kn.FP_OMEGA_H], fp[:, kn.FP_TEND], fp[:, kn.FP_TAIL] = dt, omega_h, t_end, tail
     fp[:, kn.FP_SCALE] = speed * event_tol / EDGE_TOL
     fp[:, kn.FP_EVENT_TOL] = event_tol
-    fp[:, kn.FP_SLOW] = 1e-9 * speed  # closing speeds under 1e-9 of the fastest are round-off, not an approach
-    fp[:, kn.FP_END_SLOW] = np.maximum(1e-9, resolved) * speed
+    # A pair closing at under 1e-9 of its own speeds closes by round-off, not an approach (a share
+    # of the pair's own: of the fastest body's, or of a dead band 1e9 times the speeds, slow pairs
+    # passed through each other unseen).
+    fp[:, kn.FP_SLOW] = 1e-9
+    fastest = np.sqrt((initial.v ** 2).sum(-1)).max(-1)
+    fp[:, kn.FP_END_SLOW] = np.where(np.asarray(resolved) > 1e-9, resolved, 0.0) * fastest
     # Contiguous already (stacked per scene); a strided view would compile the kernel anew.
     tables = [(np.ascontiguousarray(model.pair_table[b]), np.ascontiguousarray(model.wall_table[b]))
               for b in range(b_count)]
@@ -493,6 +498,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
         if record:
             trajectories.append(Trajectory(knots, recs, ival, select_model(model, b)))
     logs = contact_logs(ivals, t_final)
+    free_since = last_contacts(ivals, t_final, model.n_bodies)
     for b in np.flatnonzero(stats[:, kn.S_UNLOCATED]):
         member = f"run {b}: " if b_count > 1 else ""
         count = int(stats[b, kn.S_UNLOCATED])
@@ -513,7 +519,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
                      steps=stats[:, kn.S_STEPS].copy(), jumps=stats[:, kn.S_JUMPS].copy(),
                      wall_time_s=wall_time, contacts=log, trajectories=trajectories, warnings=warnings,
                      dt_min=dt_min, windows=stats[:, kn.S_WINDOWS].copy(), closed_steps=stats[:, kn.S_REST].copy(),
-                     attempts=stats[:, kn.S_ATTEMPTS].copy())
+                     attempts=stats[:, kn.S_ATTEMPTS].copy(), free_since=free_since)
 
 
 def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Progress | None,
@@ -597,6 +603,24 @@ def contact_logs(ivals: list[np.ndarray], t_end: np.ndarray) -> np.ndarray:
             reached = np.maximum.accumulate(e)[:-1]
             added = np.maximum(e[1:] - np.maximum(s[1:], reached), 0.0)
             out[b] = start.min(), end.max(), (e[0] - s[0]) + added.sum()
+    return out
+
+
+def last_contacts(ivals: list[np.ndarray], t_end: np.ndarray, n: int) -> np.ndarray:
+    """(B, N) when each body's last contact ended: 0 for none, t_end for one still open (the
+    free flight to the end that `collide.invariant` checks). The seed's fixed steps log any contact
+    as one row of no body (-1): it counts for every body."""
+    out = np.zeros((len(ivals), n))
+    for b, iv in enumerate(ivals):
+        if len(iv):
+            end = np.where(np.isnan(iv[:, kn.V_END]), t_end[b], iv[:, kn.V_END])
+            anyone = iv[:, kn.V_I] < 0
+            if anyone.any():
+                out[b] = end[anyone].max()
+            for col in (kn.V_I, kn.V_J):
+                body = iv[:, col].astype(np.int64)
+                mine = body >= 0
+                np.maximum.at(out[b], body[mine], end[mine])
     return out
 
 

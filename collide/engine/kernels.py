@@ -3404,23 +3404,47 @@ def engaged_now(G, P, V, n, WP, grav, dim):
 
 
 @jit_inline
-def approaches(P, V, i, j, slow):
-    """Whether bodies i and j close faster than `slow` (m/s) along their line of centres."""
+def approaches(P, V, i, j, slow, floor, scale):
+    """Whether bodies i and j close along their line of centres faster than `slow` times their
+    speed scales (`speed_scales`: round-off of the speeds the pair itself carries, never of the
+    scene's fastest body, beside which a slow pair would pass through unseen) and than `floor`
+    (m/s)."""
     dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
     closing = -((V[j, 0] - V[i, 0]) * dx + (V[j, 1] - V[i, 1]) * dy + (V[j, 2] - V[i, 2]) * dz)
-    return closing > slow * math.sqrt(dx * dx + dy * dy + dz * dz)
+    return closing > max(slow * (scale[i] + scale[j]), floor) * math.sqrt(dx * dx + dy * dy + dz * dz)
 
 
 @jit
-def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow):
+def speed_scales(V, n, IV, CNT):
+    """Each body's speed scale for round-off: the fastest speed now among the bodies it has
+    exchanged momentum with, directly or through others, itself included (a ball a Newton's
+    cradle left at rest keeps the round-off of the speed it passed on, not a speed of its own)."""
+    parent = np.arange(n)
+    for k in range(CNT[CN_IVALS]):
+        i, j = int(IV[k, V_I]), int(IV[k, V_J])
+        if i >= 0 and j >= 0:
+            join(parent, i, j)
+    top = np.zeros(n)
+    for i in range(n):
+        r = root_of(parent, i)
+        top[r] = max(top[r], math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2))
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = top[root_of(parent, i)]
+    return out
+
+
+@jit
+def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow, scale):
     """The earliest contact start after t, looking `horizon` ahead (every pair if asked). Two
-    bodies closing at under `slow` (m/s) are taken as not approaching: what is left of a perfect
-    exchange of velocities, round-off, would otherwise meet again billions of seconds later."""
+    bodies closing at under `slow` times their speed scales are taken as not approaching: what is
+    left of a perfect exchange of velocities, round-off, would otherwise meet again billions of
+    seconds later."""
     best = math.inf
     if every_pair:
         for i in range(n):
             for j in range(i + 1, n):
-                if approaches(P, V, i, j, slow):
+                if approaches(P, V, i, j, slow, 0.0, scale):
                     best = min(best, touch_time(G, i, j, t, WP, grav))
     else:
         g = math.sqrt(grav[0] ** 2 + grav[1] ** 2 + grav[2] ** 2)
@@ -3430,7 +3454,7 @@ def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow):
         pairs = near_pairs(P, G[:, G_R], margin, n, dim)
         for p in range(pairs.shape[0]):
             i, j = pairs[p, 0], pairs[p, 1]
-            if approaches(P, V, i, j, slow):
+            if approaches(P, V, i, j, slow, 0.0, scale):
                 best = min(best, touch_time(G, i, j, t, WP, grav))
     for w in range(WP.shape[0]):
         for i in range(n):
@@ -3439,12 +3463,14 @@ def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow):
 
 
 @jit
-def meets_again(G, P, V, n, t, WP, grav, IV, CNT, slow, resolved):
+def meets_again(G, P, V, n, t, WP, grav, IV, CNT, slow, resolved, within, scale):
     """Whether a wall or a pair meets again after t, a pair only if it closes faster than its
     velocities are known: each contact a body took part in left it with the run's resolved
     velocity error at most (`resolved`, m/s), so a pair whose bodies had c_i and c_j contacts
     closes by error alone below (c_i + c_j) resolved (a Newton's cradle at tol 1e-7: its middle
-    balls, two contacts each, parted at 8e-8 m/s and closed at 1.07e-7, met again 7.8 hours on)."""
+    balls, two contacts each, parted at 8e-8 m/s and closed at 1.07e-7, met again 7.8 hours on).
+    A pair that closes slower than that but meets `within` (before the run would end) meets:
+    ended without it, the two would end the run inside each other."""
     count = np.zeros(n)
     for k in range(CNT[CN_IVALS]):
         for col in (V_I, V_J):
@@ -3453,8 +3479,11 @@ def meets_again(G, P, V, n, t, WP, grav, IV, CNT, slow, resolved):
                 count[b] += 1.0
     for i in range(n):
         for j in range(i + 1, n):
-            if (approaches(P, V, i, j, max(slow, (count[i] + count[j]) * resolved))
-                    and touch_time(G, i, j, t, WP, grav) < math.inf):
+            if not approaches(P, V, i, j, slow, 0.0, scale):
+                continue
+            tau = touch_time(G, i, j, t, WP, grav)
+            floor = (count[i] + count[j]) * resolved
+            if tau <= within or (tau < math.inf and approaches(P, V, i, j, slow, floor, scale)):
                 return True
     for w in range(WP.shape[0]):
         for i in range(n):
@@ -3467,7 +3496,8 @@ def meets_again(G, P, V, n, t, WP, grav, IV, CNT, slow, resolved):
 def window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim):
     """Contacts that may go on or start within the window: pairs and walls whose gap could close
     within `horizon`, each body's speed bounded by the energy its engaged cluster holds (spin
-    included: friction can turn it into motion), plus gravity's pull. (K, 2)."""
+    included: friction can turn it into motion), plus gravity's pull. (K, 2), and each body's
+    margin (how far it was taken to move)."""
     ptab, wtab = tables
     parent = np.arange(n)
     for p in range(eng.shape[0]):
@@ -3514,12 +3544,13 @@ def window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim):
             if gap <= margin[i]:
                 out[m, 0], out[m, 1] = i, -1 - w
                 m += 1
-    return out[:m]
+    return out[:m], margin
 
 
 @jit
-def missed_contact(G, P, V, n, t, cand, WP, grav, dim):
-    """Whether bodies (or a body and a wall) overlap at t without having been candidates."""
+def missed_contact(G, P, V, n, t, cand, WP, grav, dim, P0, margin):
+    """Whether bodies (or a body and a wall) overlap at t without having been candidates, or
+    went through each other since the window's start (positions P0)."""
     positions_at(G, n, t, grav, P, V)
     # Each body's candidates, for a quick lookup (CSR).
     start = np.zeros(n + 1, np.int64)
@@ -3551,6 +3582,42 @@ def missed_contact(G, P, V, n, t, cand, WP, grav, dim):
                 found = True
                 break
         if not found:
+            return True
+    return crossed(P0, P, G, n, start, other, margin)
+
+
+@jit
+def crossed(P0, P, G, n, start, other, margin):
+    """Whether two bodies, neither the other's candidate, went through each other between P0 and
+    P. Only a body that moved past its margin can have (a speed bound that failed: a body at rest
+    sent on by a candidate within the window, in a row of spheres, went through the next one
+    whole, touching it at neither end). Their relative motion taken straight from P0 to P; in 1D
+    exact: their order flipped."""
+    for i in range(n):
+        mx, my, mz = P[i, 0] - P0[i, 0], P[i, 1] - P0[i, 1], P[i, 2] - P0[i, 2]
+        if mx * mx + my * my + mz * mz <= margin[i] * margin[i]:
+            continue
+        for j in range(n):
+            if j == i or listed(start, other, i, j) or listed(start, other, j, i):
+                continue
+            ax, ay, az = P0[j, 0] - P0[i, 0], P0[j, 1] - P0[i, 1], P0[j, 2] - P0[i, 2]
+            ux = P[j, 0] - P[i, 0] - ax
+            uy = P[j, 1] - P[i, 1] - ay
+            uz = P[j, 2] - P[i, 2] - az
+            uu = ux * ux + uy * uy + uz * uz
+            s = min(max(-(ax * ux + ay * uy + az * uz) / uu, 0.0), 1.0) if uu > 0.0 else 0.0
+            cx, cy, cz = ax + ux * s, ay + uy * s, az + uz * s
+            reach = G[i, G_R] + G[j, G_R]
+            if cx * cx + cy * cy + cz * cz < reach * reach:
+                return True
+    return False
+
+
+@jit_inline
+def listed(start, other, i, j):
+    """Whether j is among i's candidates (CSR)."""
+    for k in range(start[i], start[i + 1]):
+        if other[k] == j:
             return True
     return False
 
@@ -3617,8 +3684,10 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
         eng = engaged_now(G, P, V, n, WP, grav, dim)
         if eng.shape[0] == 0:
             small = YES if n <= 64 else NO
-            if (t_end == math.inf and small == YES and CNT[CN_IVALS] > 0 and fp[FP_END_SLOW] > fp[FP_SLOW]
-                    and not meets_again(G, P, V, n, t, WP, grav, IV, CNT, fp[FP_SLOW], fp[FP_END_SLOW])):
+            scale = speed_scales(V, n, IV, CNT)
+            if (t_end == math.inf and small == YES and CNT[CN_IVALS] > 0 and fp[FP_END_SLOW] > 0.0
+                    and not meets_again(G, P, V, n, t, WP, grav, IV, CNT, fp[FP_SLOW], fp[FP_END_SLOW],
+                                        run_end(t, fp, IV, CNT) - t, scale)):
                 # What still approaches closes slower than the run resolves velocities (its
                 # tolerance): the step's error, not a contact to come (a Newton's cradle at k =
                 # 1e6, tol 1e-7, left its balls at 1e-8 m/s and met them again 11 hours later).
@@ -3632,7 +3701,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                     fastest = max(fastest, math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2))
                 search = 4.0 * G[0, G_R] / fastest if fastest > 0 else 1.0
             horizon = min(search, t_end - t)
-            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, small, fp[FP_SLOW])
+            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, small, fp[FP_SLOW], scale)
             if tau <= horizon or (small == YES and tau < math.inf):
                 if not min(t + tau, t_end) > t:
                     # A contact due closer than the clock resolves that does not engage (bodies
@@ -3649,7 +3718,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 t = min(t + horizon, t_end)
                 search *= 2.0
                 continue
-            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, YES, fp[FP_SLOW])
+            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, YES, fp[FP_SLOW], scale)
             if tau < math.inf:
                 t += tau
                 continue
@@ -3683,8 +3752,9 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
         retries = 0
         safety = WINDOW_SAFETY
         halved = False
+        P0 = P.copy()
         while True:
-            cand = window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim)
+            cand, margin = window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim)
             parent = np.arange(n)
             for k in range(cand.shape[0]):
                 if cand[k, 1] >= 0:
@@ -3731,7 +3801,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                                             (KN, RC, IV, OP), CNT, ST, FG)
                 if ST[S_STATUS] != OK:
                     break
-            if ST[S_STATUS] != OK or not missed_contact(G, P, V, n, t + horizon, cand, WP, grav, dim):
+            if ST[S_STATUS] != OK or not missed_contact(G, P, V, n, t + horizon, cand, WP, grav, dim, P0, margin):
                 break
             # A contact between islands: a speed bound failed. Redo the window, shorter and safer.
             ST[S_RETRIES] += 1
@@ -4035,7 +4105,8 @@ def seed_run(G, tables, WP, grav, fl, fp):
                         KN[knot_of[i], K_AN + d] = grav[d]
         # Free flight: whole steps in closed form, up to the step in which a contact begins.
         positions_at(G, n, t, grav, P, V)
-        tau = next_contact(G, P, V, n, t, WP, grav, dim, math.inf, YES, fp[FP_SLOW])
+        tau = next_contact(G, P, V, n, t, WP, grav, dim, math.inf, YES, fp[FP_SLOW],
+                           speed_scales(V, n, IV, CNT))
         if tau == math.inf and t_end == math.inf:
             t_end = t + math.ceil(tail_after(fp[FP_TAIL], IV, CNT) / dt) * dt
         jump = min(math.floor(tau / dt) * dt if tau < math.inf else math.inf, t_end - t)
