@@ -1,6 +1,6 @@
 """Rerun recordings of runs: one `.rrd` per run, written in bulk and read back losslessly.
 
-This is the only module in `collide/` that imports rerun (DESIGN section 5). A recording holds
+This is the only module in `collide/` that imports rerun (docs/design.md section 5). A recording holds
 two things:
 
 - what a person looks at, on one timeline `sim_time` (simulated seconds): spheres with spin
