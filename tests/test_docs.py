@@ -55,7 +55,6 @@ VIEW_TIMEOUT = 120.0  # s: until `collide view` prints its URL
 PENDING = {
     "collide engine": "`collide engine` is being added by the integrator",
     "--all-bodies": "`collide run --all-bodies` is being added by the integrator",
-    "collide validate --scene": "`collide validate` is being fixed on branch `validate`",
 }
 
 
