@@ -220,6 +220,28 @@ def test_the_pages_have_commands_to_run() -> None:
     assert any(i.kind == "file" and i.name == "my-scene.toml" for i in ITEMS)
 
 
+def test_the_convention_for_commands_is_read_as_documented(tmp_path) -> None:
+    """The directives of the module docstring, on a page made for the purpose."""
+    page = tmp_path / "page.md"
+    page.write_text("\n".join([
+        "```bash", "collide run demo-bonus", "collide run nothing.toml  # test: exit 2",
+        "collide run pile  # test: args --set duration=0.05", "collide view  # test: skip (a server)",
+        "echo collide run x", "```", "", "<!-- test: skip (needs a cluster) -->", "```bash",
+        "$ collide batch demo-bonus --scheduler tcp://HOST:8786", "```", "<!-- test: file a.toml -->",
+        "```toml", "dim = 1", "```", "```json", "collide run not-a-command", "```", "```python", "print(1)", "```"]))
+    items = page_items(page)
+    shown = [(i.kind, i.text, i.skip, i.expect, i.args, i.name) for i in items]
+    assert shown == [
+        ("command", "collide run demo-bonus", "", 0, "", ""),
+        ("command", "collide run nothing.toml", "", 2, "", ""),
+        ("command", "collide run pile", "", 0, "--set duration=0.05", ""),
+        ("command", "collide view", "a server", 0, "", ""),
+        ("command", "collide batch demo-bonus --scheduler tcp://HOST:8786", "needs a cluster", 0, "", ""),
+        ("file", "dim = 1\n", "", 0, "", "a.toml"),
+        ("python", "print(1)", "", 0, "", ""),
+    ]
+
+
 # ---------------------------------------------------------------------------------------------
 # Size, dates, links
 
