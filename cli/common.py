@@ -106,12 +106,25 @@ LARGE_SCENE = 16  # bodies: above this, interpreted kernels would take minutes t
 def compiled_for_large(bodies: int) -> None:
     """On the first runs after install the kernels run interpreted while they compile in the
     background (fine for a few spheres); a large scene would take hours that way, so the command
-    starts again with the compiled kernels (compiling them now, about two minutes, once)."""
+    waits for that compile (showing how far it is) and starts again on the compiled kernels. When
+    the compile failed, the run is refused with the cause."""
     from collide.engine import tier
 
     command = os.path.basename(sys.argv[0]) if sys.argv else ""
-    if tier.COMPILED or not tier.BACKGROUND or bodies <= LARGE_SCENE or command not in ("collide", "main.py"):
+    if tier.COMPILED or bodies <= LARGE_SCENE or tier.jit_setting() == "interpreted":
         return
-    sys.stderr.write(f"compiling the engine first for {bodies} bodies (once after install, about two minutes)\n")
+    state = tier.engine_state()
+    if state.state == "failed":
+        raise tier.EngineUnavailable(
+            f"{bodies} bodies need the compiled engine, and {state.describe()}; `collide engine --compile` tries "
+            "again (COLLIDE_JIT=0 runs it interpreted, for hours)")
+    if command not in ("collide", "main.py"):
+        return
+    sys.stderr.write(f"{bodies} bodies: waiting for the engine's compile (once after install; "
+                     "`collide engine` shows how far)\n")
     sys.stderr.flush()
+    from cli.engine import progress_line
+
+    tier.start_compile()
+    tier.wait_compiled(progress_line, every=2.0 if sys.stderr.isatty() else 15.0)
     os.execve(sys.executable, [sys.executable, "-m", "cli.main", *sys.argv[1:]], dict(os.environ, COLLIDE_JIT="1"))

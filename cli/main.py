@@ -35,10 +35,14 @@ def interpreted_why() -> str:
     """Why this process ran the interpreted kernels (its wall time is theirs)."""
     from collide.engine import tier
 
-    if tier.BACKGROUND:
-        return "interpreted kernels: the compiled ones are being built in the background, once"
     if tier.jit_setting() == "interpreted":
         return "interpreted kernels: COLLIDE_JIT=0"
+    state = tier.engine_state()
+    if state.state == "compiling":
+        return ("interpreted kernels: the compiled ones are being built in the background, once; "
+                "`collide engine` shows how far")
+    if state.state == "failed":
+        return f"interpreted kernels: {state.describe()}; `collide engine --compile` tries again"
     return "interpreted kernels: quicker for a run this small; COLLIDE_JIT=1 compiles"
 
 
@@ -57,15 +61,30 @@ def _fmt(x: Any) -> str:
     return str(x)
 
 
-def print_summary(summary: dict[str, Any], recording: Path | None) -> None:
+SHOWN_BODIES = 8  # a summary lists this many bodies; more are totals (--all-bodies lists every one)
+
+
+def _print_bodies(bodies: list[dict[str, Any]], every: bool) -> None:
+    """Each body's final velocity and spin; for a large scene the first few and the speeds' spread."""
+    shown = bodies if every or len(bodies) <= SHOWN_BODIES else bodies[:SHOWN_BODIES // 2]
+    width = max(len(b["name"]) for b in shown)
+    for body in shown:
+        spin = f"  spin {_fmt(body['spin'])} rad/s" if "spin" in body else ""
+        typer.echo(f"  {body['name']:<{width}}  velocity {_fmt(body['velocity'])} m/s{spin}")
+    if len(shown) < len(bodies):
+        speeds = [math.hypot(*b["velocity"]) if isinstance(b["velocity"], list) else abs(b["velocity"])
+                  for b in bodies]
+        typer.echo(f"  ... and {len(bodies) - len(shown)} more bodies ({len(bodies)} in all; final speeds "
+                   f"{min(speeds):.4g} to {max(speeds):.4g} m/s, mean {sum(speeds) / len(speeds):.4g}); "
+                   "--all-bodies lists every one, --json holds every one")
+
+
+def print_summary(summary: dict[str, Any], recording: Path | None, every_body: bool = False) -> None:
     """A readable summary: final state, residuals, cost."""
     auto = " (auto)" if summary.get("dt_auto") else ""
     typer.echo(f"{summary['scene']}: {summary['dim']}D, integrator {summary['integrator']}, "
                f"dt {summary['dt']:.3g} s{auto}")
-    width = max(len(b["name"]) for b in summary["bodies"])
-    for body in summary["bodies"]:
-        spin = f"  spin {_fmt(body['spin'])} rad/s" if "spin" in body else ""
-        typer.echo(f"  {body['name']:<{width}}  velocity {_fmt(body['velocity'])} m/s{spin}")
+    _print_bodies(summary["bodies"], every_body)
     res = summary["residuals"]
     typer.echo(f"  residuals: energy {_fmt(res['energy'])}, momentum {_fmt(res['momentum'])}, "
                f"angular momentum {_fmt(res['angular_momentum'])} (relative)")
@@ -103,6 +122,9 @@ def run(
     no_record: Annotated[bool, typer.Option("--no-record", help="Do not write a recording.")] = False,
     stride: Annotated[int, typer.Option(help="Record every n-th contact step.", min=1)] = 1,
     spawn: Annotated[bool, typer.Option(help="Open the recording in the Rerun viewer.")] = False,
+    all_bodies: Annotated[bool, typer.Option(
+        "--all-bodies", help=f"List every body in the summary (by default a scene of more than {SHOWN_BODIES} "
+        "lists a few and the spread of speeds).")] = False,
 ) -> None:
     """Run one scene, print a summary and write a Rerun recording.
 
@@ -155,7 +177,7 @@ def run(
     if json_:
         typer.echo(json.dumps(summary))
     else:
-        print_summary(summary, recording)
+        print_summary(summary, recording, all_bodies)
         if csv is not None:
             typer.echo(f"  csv: {csv}")
     if spawn and recording is not None:
@@ -192,7 +214,7 @@ def _register_optional() -> None:
     """Commands that live in their own modules."""
     import importlib
 
-    for module in ("cli.numerics", "cli.batch", "cli.accuracy", "cli.view", "cli.bench"):
+    for module in ("cli.numerics", "cli.batch", "cli.accuracy", "cli.view", "cli.bench", "cli.engine"):
         try:
             mod = importlib.import_module(module)
         except ModuleNotFoundError as exc:

@@ -1,4 +1,6 @@
-"""Validation: the report's textbook tables (Figs 3-6) and a rigid-limit cross-check (Fig 35 style).
+"""Validation: the report's textbook tables (Figs 3-6), a rigid-limit cross-check (Fig 35 style) of
+the scenes the rigid reference handles, and the scene checks (`collide.scene_checks`: closed
+forms, conservation, energy balance, self-convergence) of every scene, in one table.
 
 Errors of a run's outcome (final velocities and spins) are split in two, because they have
 different cures:
@@ -25,6 +27,7 @@ import numpy as np
 
 from collide.rigid import reference_speed, rigid_outcome, softness_estimate
 from collide.scene import Scene, apply_overrides, builtin_names, load_scene, parse_scene, with_settings
+from collide.scene_checks import Check, SceneReport, rigid_reason, scene_checks
 
 # collide.run (the engine) is imported by the functions that run scenes: the command line imports
 # this module to list its commands, before a run decides compiled or interpreted kernels
@@ -355,18 +358,20 @@ def _with_k(scene: Scene, k: float) -> Scene:
 
 @dataclass
 class Validation:
-    """The whole validation: textbook tables, cross-checks, softness scans; passed = all rows."""
+    """The whole validation: textbook tables, cross-checks, softness scans and the scene checks
+    (`collide.scene_checks`); passed = all rows."""
 
     textbook: list[TextbookRow]
     checks: list[SceneCheck]
     scans: list[SoftnessScan]
     tol: float
     wall_time_s: float
+    scenes: list[SceneReport] = field(default_factory=list)
 
     @property
     def passed(self) -> bool:
         return (all(r.passed for r in self.textbook) and all(c.passed for c in self.checks)
-                and all(s.passed for s in self.scans))
+                and all(s.passed for s in self.scans) and all(s.passed for s in self.scenes))
 
     def to_dict(self) -> dict:
         """Plain data for JSON."""
@@ -378,21 +383,67 @@ class Validation:
             checks.append(d)
         return {"passed": self.passed, "tol": self.tol, "wall_time_s": self.wall_time_s,
                 "textbook": [asdict(r) for r in self.textbook], "cross_check": checks,
-                "softness_scan": [asdict(s) for s in self.scans]}
+                "softness_scan": [asdict(s) for s in self.scans],
+                "scene_checks": [s.to_dict() for s in self.scenes]}
+
+
+def rigid_rows(check: SceneCheck) -> list[Check]:
+    """The rigid cross-check of one scene as two rows of the scene table: the converged soft run
+    against the rigid limit, and the scene's run against the converged one."""
+    soft = max(check.rows, key=lambda r: r.softness / r.softness_tol)
+    disc = max(check.rows, key=lambda r: r.discretisation / r.discretisation_tol)
+    ladder = ", ".join(f"{dt:.2g}" for dt in check.ladder_dt)
+    return [
+        Check(check.scene, "rigid limit", f"converged soft run's final velocities and spins vs the rigid "
+              f"impact ({check.regime}), / fastest initial speed", soft.softness, soft.softness_tol,
+              "a-priori softness of the contact (k^(-1/2), rigid.softness_estimate) + tol", bool(
+                  check.converged and soft.softness <= soft.softness_tol)),
+        Check(check.scene, "step ladder", f"scene's run vs converged {LADDER_INTEGRATOR} run (dt {ladder} s), "
+              "/ fastest initial speed", disc.discretisation, disc.discretisation_tol,
+              "tol of the rigid cross-check (--tol)" + ("" if check.converged else "; the ladder did NOT converge"),
+              bool(check.converged and disc.discretisation <= disc.discretisation_tol)),
+    ]
+
+
+def check_scene(scene: Scene, *, tol: float = DEFAULT_TOL, scan: bool = True,
+                duration: float | None = None) -> tuple[SceneCheck | None, SoftnessScan | None, SceneReport]:
+    """Every check that applies to one scene: the rigid cross-check (and softness scan) where the
+    rigid reference applies, and the scene checks (`collide.scene_checks`)."""
+    started = time.perf_counter()
+    reason = rigid_reason(scene)
+    if reason is None and rigid_outcome(scene).impact is None:
+        reason = "rigid reference: the bodies never touch"
+    check = scan_result = None
+    if reason is None:
+        check = cross_check(scene, tol=tol)
+        if scan and softness_estimate(scene) > 0.0:
+            scan_result = softness_scan(scene)
+    # The rigid reference needs the whole impact (and two spheres are no heavy run): no cut.
+    report = scene_checks(scene, duration=None if check else duration, skip=("ladder",) if check else ())
+    if check is not None:
+        report.checks[:0] = rigid_rows(check)
+    elif reason is not None:
+        report.not_applicable.insert(0, reason)
+    report.wall_time_s = time.perf_counter() - started
+    return check, scan_result, report
 
 
 def validate(scenes: list[str] | None = None, *, tol: float = DEFAULT_TOL,
-             scan: bool = True) -> Validation:
-    """Run the textbook tables, the rigid cross-check of every (given) built-in scene, and the
-    softness scan of those with a non-zero softness bound."""
+             scan: bool = True, duration: float | None = None) -> Validation:
+    """Run the textbook tables and every check that applies to each (given) scene: the rigid
+    cross-check and softness scan where the rigid reference applies, the scene checks of
+    `collide.scene_checks` on all, over the first `duration` seconds if given."""
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise ValueError(f"--duration: must be a positive number of seconds, got {duration}")
     started = time.perf_counter()
     names = list(scenes) if scenes else builtin_names()
-    checks, scans = [], []
+    checks, scans, reports = [], [], []
     for name in names:
         scene = load_scene(name)
-        checks.append(cross_check(scene, tol=tol))
-        if scan and softness_estimate(scene) > 0.0:
-            scans.append(softness_scan(scene))
+        check, scan_result, report = check_scene(scene, tol=tol, scan=scan, duration=duration)
+        checks += [check] if check else []
+        scans += [scan_result] if scan_result else []
+        reports.append(report)
     finals = {c.scene: np.array(c.final_v) for c in checks}
     textbook = textbook_table(names, tol=tol, finals=finals)
-    return Validation(textbook, checks, scans, tol, time.perf_counter() - started)
+    return Validation(textbook, checks, scans, tol, time.perf_counter() - started, reports)

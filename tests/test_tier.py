@@ -8,8 +8,6 @@ import json
 import os
 import subprocess
 import sys
-import threading
-import time
 
 import pytest
 
@@ -96,21 +94,3 @@ def test_the_hint_is_not_inherited_by_child_processes() -> None:
     env = dict(os.environ, COLLIDE_JIT_HINT="interpreted")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
     assert out.stdout.strip() == "gone", out.stderr
-
-
-def test_the_foreground_compile_waits_for_a_running_background_one(tmp_path, monkeypatch) -> None:
-    """`python -m collide.engine.warm` (the test script's) waits while a background compile holds
-    its lock, and not for a dead one's lock."""
-    from collide.engine import tier, warm
-
-    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
-    monkeypatch.setenv("COLLIDE_JIT", "1")  # restored afterwards: the wait sets it
-    lock = tier.compile_lock()
-    lock.write_text("1")
-    threading.Timer(0.3, lock.unlink).start()
-    assert warm.wait_for_background(poll=0.01) >= 0.3
-    lock.write_text("1")
-    dead = time.time() - 2 * tier.LOCK_FRESH
-    os.utime(lock, (dead, dead))
-    assert warm.wait_for_background(poll=0.01) < 0.3
-

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from cli.main import app as collide_app
 from collide import rigid
 from collide import validate as v
-from collide.scene import builtin_text, load_scene, parse_scene
+from collide.scene import builtin_names, builtin_text, load_scene, parse_scene
 
 
 @pytest.fixture(scope="module")
@@ -139,3 +139,162 @@ def test_head_on_soft_collision_is_already_rigid() -> None:
     assert check.passed and max(r.softness for r in check.rows) < 1e-9
     scan = v.softness_scan(scene)
     assert scan.passed and math.isnan(scan.exponent)
+
+
+# ---------------------------------------------------------------------------------------------
+# Scene checks: every built-in, a user's scene file, a scene with nothing to check, and checks
+# that must fail
+
+CRADLE3 = """name = "my-cradle"
+dim = 1
+{settings}
+[contact]
+k = 1e6
+
+[[body]]
+name = "a"
+mass = 0.1
+radius = 0.01
+position = 0.0
+velocity = 0.5
+
+[[body]]
+name = "b"
+mass = 0.1
+radius = 0.01
+position = 0.05
+velocity = 0.0
+
+[[body]]
+name = "c"
+mass = 0.1
+radius = 0.01
+position = 0.075
+velocity = 0.0
+"""
+
+APART = """name = "apart"
+dim = 2
+
+[[body]]
+name = "a"
+mass = 1.0
+radius = 0.1
+position = [0.0, 0.0]
+velocity = [-1.0, 0.0]
+
+[[body]]
+name = "b"
+mass = 1.0
+radius = 0.1
+position = [0.5, 0.0]
+velocity = [1.0, 0.0]
+"""
+
+
+def _scene_rows(output: str) -> list[str]:
+    """The rows of the scene table (after its header's dashes, up to the blank line)."""
+    lines = output.split("Scene checks:")[1].splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("----")) + 1
+    rows = []
+    for line in lines[start:]:
+        if not line.strip() or line.startswith("Not applicable"):
+            break
+        rows.append(line)
+    return rows
+
+
+def test_full_validate_passes_with_a_row_per_builtin() -> None:
+    result = CliRunner().invoke(collide_app, ["validate"])
+    assert result.exit_code == 0, result.output
+    rows = _scene_rows(result.stdout)
+    first_cells = [row.split()[0] for row in rows if not row.startswith(" ")]
+    assert first_cells == builtin_names()
+    assert all(row.rstrip().split("  ")[-1] for row in rows)  # every row says what and why
+    named = {row.split()[0]: row for row in rows if not row.startswith(" ")}
+    assert "whole run" in named["pile"] and "whole run" in named["gas-box"]
+    checks = " ".join(rows)
+    for name in ("velocity exchange", "bounce heights", "tolerance ladder", "energy balance",
+                 "energy conservation", "rigid limit", "momentum"):
+        assert name in checks, name
+    assert "FAIL" not in result.stdout and result.stdout.rstrip().splitlines()[-1].startswith("PASS")
+
+
+def test_a_user_scene_file_gets_the_checks_that_apply(tmp_path: Path) -> None:
+    path = tmp_path / "cradle3.toml"
+    path.write_text(CRADLE3.format(settings=""))
+    result = CliRunner().invoke(collide_app, ["validate", str(path), "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    (report,) = data["scene_checks"]
+    names = [c["check"] for c in report["checks"]]
+    assert names == ["energy conservation", "momentum", "velocity exchange", "tolerance ladder"]
+    assert all(c["passed"] and c["deviation"] <= c["bound"] for c in report["checks"])
+    assert report["not_applicable"][0].startswith("rigid reference: handles 2 spheres")
+    assert data["cross_check"] == [] and data["textbook"] == []
+    # The velocity exchange against its closed form: the last ball leaves at 0.5 m/s.
+    exchange = report["checks"][2]
+    assert 0 < exchange["deviation"] < 1e-5
+
+
+def test_a_scene_with_nothing_to_check_says_why(tmp_path: Path) -> None:
+    path = tmp_path / "apart.toml"
+    path.write_text(APART)
+    result = CliRunner().invoke(collide_app, ["validate", str(path), "--no-scan"])
+    assert result.exit_code == 0, result.output
+    (row,) = _scene_rows(result.stdout)
+    assert row.split()[0] == "apart" and "no check applies" in row and "never touch" in row
+    assert "PASS" in result.stdout
+
+
+def test_a_wrong_expected_value_fails_the_exchange() -> None:
+    from collide import scene_checks as sc
+    from collide.run import run_scene
+
+    scene = load_scene("newtons-cradle")
+    run = run_scene(scene, record=False)
+    assert sc.exchange_check(scene, run).passed
+    # The same run judged against a first ball that came in 1 % faster: the last ball's speed is off.
+    wrong = load_scene("newtons-cradle", ["body.ball1.velocity=1.01"])
+    check = sc.exchange_check(wrong, run)
+    assert not check.passed and check.deviation == pytest.approx(0.01 / 1.01, rel=1e-3)
+
+
+def test_a_gross_step_with_the_seed_integrator_fails(tmp_path: Path) -> None:
+    # omega dt = 0.32 with the report's first-order update: energy drifts far beyond tol.
+    path = tmp_path / "coarse-cradle.toml"
+    path.write_text(CRADLE3.format(settings='integrator = "seed"\ndt = 1e-4\ntol = 1e-4\n'))
+    result = CliRunner().invoke(collide_app, ["validate", str(path), "--json"])
+    assert result.exit_code == 1, result.output
+    (report,) = json.loads(result.stdout)["scene_checks"]
+    failed = {c["check"] for c in report["checks"] if not c["passed"]}
+    assert "energy conservation" in failed
+    energy = next(c for c in report["checks"] if c["check"] == "energy conservation")
+    assert energy["deviation"] > 10 * energy["bound"]
+
+
+def test_a_shortened_run_says_so_and_drops_what_needs_the_whole_run() -> None:
+    result = CliRunner().invoke(collide_app, ["validate", "bounce", "--duration", "1", "--json"])
+    assert result.exit_code == 0, result.output
+    (report,) = json.loads(result.stdout)["scene_checks"]
+    assert report["span"] == "first 1 s"
+    # Two flights in the first second: one apex ratio, too few to judge the restitution law.
+    assert any(n.startswith("bounce heights: only 2 flights") for n in report["not_applicable"])
+    assert [c["check"] for c in report["checks"]] == ["energy balance", "tolerance ladder"]
+    bad = CliRunner().invoke(collide_app, ["validate", "bounce", "--duration", "-1"])
+    assert bad.exit_code == 2 and bad.stderr.startswith("error: --duration")
+
+
+def test_a_pile_cut_before_it_settles_is_not_at_rest() -> None:
+    from collide import scene_checks as sc
+    from collide.run import run_scene
+    from tests.test_contact_laws import _pile
+
+    raw = _pile(3, 3)
+    settled = parse_scene(raw)
+    run = run_scene(settled, record=False)
+    assert float(run.result.final.t[0]) < settled.duration  # it stopped at rest
+    assert sc.rest_check(settled, run).passed
+    falling = parse_scene(dict(raw, duration=0.05))  # still falling: kinetic energy far above rest
+    check = sc.rest_check(falling, run_scene(falling, record=False))
+    assert not check.passed and check.deviation > 1e3 * check.bound

@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 
 from tests.conftest import BROWSER_MARKS
+from viewer.testing import screenshot_dir
 
-DOCS = Path(__file__).resolve().parent.parent / "docs"
+DOCS = screenshot_dir()
 
 try:
     from playwright.sync_api import Page
@@ -163,7 +164,6 @@ def test_screenshot_of_demo_bonus_mid_contact(page):
     assert frame.contacts and np.linalg.norm(frame.contacts[0].friction_force) > 1.0
     session.fit_camera("contact")
     page.wait_for_timeout(2500)
-    DOCS.mkdir(exist_ok=True)
     png = page.screenshot(path=str(DOCS / "viewer-demo-bonus.png"))
     scene = canvas_shot(page)
     # ball1 blue, ball2 orange, the friction arrow green, the normal arrow red.

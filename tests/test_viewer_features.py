@@ -29,6 +29,7 @@ from viewer.testing import (
     open_page,
     plot,
     project,
+    screenshot_dir,
     scroll_to_text,
     settle,
     text_box,
@@ -38,7 +39,7 @@ from viewer.testing import (
 )
 
 pytestmark = BROWSER_MARKS
-DOCS = Path(__file__).resolve().parent.parent / "docs"
+DOCS = screenshot_dir()
 CHAIN = (190, 60, 60)  # the force chains' red as lit (the axes gizmo's red also matches: compare counts)
 
 
@@ -338,7 +339,6 @@ def test_engine_run_of_dozens_of_spheres_on_a_floor(page):
     px = project(session.client.camera, corners, box["width"], box["height"])
     assert px[:, 0].min() > -5 and px[:, 0].max() < box["width"] + 5  # framed on the bodies
     assert px[:, 0].max() - px[:, 0].min() > 0.35 * box["width"]  # and not lost in the distance
-    DOCS.mkdir(exist_ok=True)
     page.screenshot(path=str(DOCS / "viewer-drop-32.png"), timeout=120_000)
 
 

@@ -20,6 +20,17 @@ from typing import Any
 import numpy as np
 
 CHROMIUM = Path("/usr/bin/chromium")
+_ROOT = Path(__file__).resolve().parents[1]
+
+
+def screenshot_dir() -> Path:
+    """Where the browser tests save their screenshots: build/screenshots (ignored by git), so a
+    test run leaves the work tree as it found it; COLLIDE_UPDATE_DOCS=1 writes docs/'s pictures."""
+    import os
+
+    folder = _ROOT / "docs" if os.environ.get("COLLIDE_UPDATE_DOCS") == "1" else _ROOT / "build" / "screenshots"
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
 # Flags measured to render viser's WebGL canvas headless through SwiftShader (TESTING.md).
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader", "--disable-quic",
                  "--no-first-run", "--disable-background-networking", "--disable-component-update",

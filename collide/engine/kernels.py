@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-from collide.engine.tier import jit, jit_inline
+from collide.engine.jit import jit, jit_inline
 from collide.integrators import SUZUKI4, YOSHIDA4, YOSHIDA6
 
 BAND, SLIDE, STICK = 0, 1, 2
@@ -2654,7 +2654,11 @@ def rest_aim(P, h, touch, start, ends, out, clock, budget):
                 total += weight[q]
             mean, error = 0.0, 0.0
             for q in range(GL8_X.shape[0]):
-                turned = reach * (GL8_S[q] @ rate)
+                # A plain sum, not `@`: numba's matrix product needs scipy's BLAS.
+                turned = 0.0
+                for j in range(GL8_X.shape[0]):
+                    turned += GL8_S[q, j] * rate[j]
+                turned *= reach
                 mean += weight[q] * turned
                 error += weight[q] * turned * turned
             mean /= total

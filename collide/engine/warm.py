@@ -1,19 +1,33 @@
 """Compile the engine's kernels into numba's on-disk cache: `python -m collide.engine.warm`.
 
 Runs every entry point once on a tiny scene of each kind it can be called for, so that every
-signature a run uses is compiled; then marks the cache ready (`tier.compiled_ready`). The
-first `collide` command after install starts this in the background by itself; run it by hand
-to compile in the foreground (the test script does): it first waits for a background compile
-that is running, rather than compile beside it.
+signature a run uses is compiled; then marks the cache ready (`tier.compiled_ready`). The first
+`collide` command after install starts this in the background by itself (`tier.start_compile`,
+which hands it the compile lock); run by hand (`collide engine --compile`, the test script) it
+takes the lock itself, waiting for a compile that is running rather than compile beside it.
+
+While it runs it records how many functions it has compiled (`collide engine` shows that as a
+fraction of the last compile's count); a failure is recorded with its cause in one line.
 """
 
 from __future__ import annotations
 
 import argparse
+import fcntl
 import os
+import shutil
 import sys
 import time
+import traceback
 from pathlib import Path
+
+# How a whole compile progresses, for the first compile on a machine (later ones measure by the
+# last compile there): pairs of functions compiled and the fraction of the compile's time, and
+# that time in seconds, as measured here.
+REFERENCE_CURVE = [[0, 0.0], [13, 0.0083], [32, 0.013], [51, 0.0206], [69, 0.0351], [88, 0.0773], [106, 0.1209],
+                   [125, 0.1479], [144, 0.2146], [162, 0.2514], [181, 0.3182], [200, 0.9007], [218, 0.9439],
+                   [237, 0.9784], [243, 1.0]]
+REFERENCE_SECONDS = 250.0  # on a quiet machine; three to five times that at a load of 10
 
 
 def warm() -> float:
@@ -39,36 +53,138 @@ def warm() -> float:
                                  "velocity": [1.0, 0.0, -1.0]}],
                        "wall": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]})
     run_scene(dem, record=True)
-    tier.mark_compiled()
     return time.perf_counter() - started
 
 
-def wait_for_background(poll: float = 1.0) -> float:
-    """Wait while a background compile runs (the first `collide` command after install starts
-    one): compiling beside it doubles the work on the same cache. Returns the seconds waited."""
-    os.environ["COLLIDE_JIT"] = "1"  # before the engine is imported: no compile of its own starts
+class _Progress:
+    """Counts the functions numba compiles and records the count for `collide engine`."""
+
+    def __init__(self, started: float, curve: list, seconds: float) -> None:
+        self.started, self.written, self.ends = started, 0.0, []
+        self.reference = {"curve": curve, "reference_seconds": seconds}
+
+    def compiled(self) -> None:
+        self.ends.append(time.time() - self.started)
+        if time.time() - self.written >= 1.0:
+            self.written = time.time()
+            self.write()
+
+    def write(self) -> None:
+        from collide.engine import tier
+
+        tier.write_status(state="compiling", started=self.started, done=len(self.ends), pid=os.getpid(),
+                          **self.reference)
+
+    def curve(self, points: int = 40) -> list[list[float]]:
+        """This compile's progress (functions done, fraction of its time), at most `points` long."""
+        total = max(self.ends[-1], 1e-9) if self.ends else 1.0
+        picked = sorted({round(i * (len(self.ends) - 1) / (points - 1)) for i in range(points)}) if self.ends else []
+        return [[0, 0.0]] + [[i + 1, round(self.ends[i] / total, 4)] for i in picked]
+
+
+def _listen(progress: _Progress) -> None:
+    from numba.core import event
+
+    class Listener(event.Listener):
+        def on_start(self, ev) -> None:
+            pass
+
+        def on_end(self, ev) -> None:
+            progress.compiled()
+
+    event.register("numba:compile", Listener())
+
+
+def _reference(root: Path) -> tuple[list, float]:
+    """The last whole compile's progress curve and time here (any source), or the estimate above."""
+    from collide.engine.tier import _read_json
+
+    done = [_read_json(p) for p in root.glob("collide-*/ready.json")]
+    done = [d for d in done if d.get("curve") and d.get("seconds")]
+    if not done:
+        return REFERENCE_CURVE, REFERENCE_SECONDS
+    last = max(done, key=lambda d: d["functions"])
+    return last["curve"], float(last["seconds"])
+
+
+def _remove_stale(root: Path, keep: Path) -> None:
+    """Caches of other sources or versions are never read again: remove them (only from the
+    cache beside the source; a NUMBA_CACHE_DIR may be shared by installs of other versions)."""
+    if "NUMBA_CACHE_DIR" in os.environ:
+        return
+    for old in root.glob("collide-*"):
+        if not old.is_dir() or old == keep:
+            continue
+        try:
+            fd = os.open(old / "compile.lock", os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # not while a compile of that source runs
+            shutil.rmtree(old, ignore_errors=True)
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+
+
+def compile_now() -> float:
+    """Compile with the lock held by this process; record the outcome. Returns the seconds."""
     from collide.engine import tier
 
-    started = time.perf_counter()
-    if tier.compiling_elsewhere():
-        print("waiting for the background compile of the engine to finish", flush=True)
-    while tier.compiling_elsewhere() and not tier.compiled_ready():
-        time.sleep(poll)
-    return time.perf_counter() - started
-
-
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--lock", help="a lock file to remove when done (set by the background start)")
-    args = parser.parse_args()
+    started = time.time()
+    progress = _Progress(started, *_reference(tier.cache_root()))
+    progress.write()
     try:
-        if not args.lock:
-            wait_for_background()
+        _listen(progress)
         seconds = warm()
-        print(f"collide engine compiled in {seconds:.1f} s")
-    finally:
-        if args.lock:
-            Path(args.lock).unlink(missing_ok=True)
+    except BaseException as exc:
+        reason = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}".rstrip(": ")
+        tier.write_status(state="failed", started=started, seconds=time.time() - started, reason=reason,
+                          done=len(progress.ends))
+        raise
+    tier.mark_compiled(seconds, len(progress.ends), progress.curve())
+    tier.write_status(state="ready", started=started, seconds=seconds, done=len(progress.ends))
+    _remove_stale(tier.cache_root(), tier.cache_dir())
+    return seconds
+
+
+def _take_lock(report) -> int | None:
+    """Take the compile lock, waiting for a compile that holds it. Returns the descriptor, or
+    None when the kernels turned out ready (the other compile did the work)."""
+    from collide.engine import tier
+
+    tier.compile_lock().parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(tier.compile_lock(), os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        tier.wait_compiled(report)
+        fcntl.flock(fd, fcntl.LOCK_EX)
+    if tier.compiled_ready():
+        os.close(fd)
+        return None
+    return fd
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.parse_args()
+    handed = os.environ.pop("COLLIDE_COMPILE_LOCK_FD", None)
+    os.environ["COLLIDE_COMPILING"] = "1"  # this process compiles: the engine must not wait for the lock
+    from collide.engine import tier
+
+    if handed is None and _take_lock(lambda s: print(f"waiting: {s.describe()}", flush=True)) is None:
+        print(f"collide engine: {tier.engine_state().describe()}")
+        return 0
+    try:
+        seconds = compile_now()
+    except BaseException:
+        traceback.print_exc()
+        print(f"collide engine: {tier.engine_state().describe()}", file=sys.stderr)
+        return 1
+    print(f"collide engine compiled in {seconds:.1f} s")
+    return 0
 
 
 if __name__ == "__main__":
