@@ -53,8 +53,6 @@ VIEW_TIMEOUT = 120.0  # s: until `collide view` prints its URL
 
 # Documented behaviour that other branches are adding or fixing; remove an entry once merged.
 PENDING = {
-    "collide engine": "`collide engine` is being added by the integrator",
-    "--all-bodies": "`collide run --all-bodies` is being added by the integrator",
 }
 
 
