@@ -122,7 +122,8 @@ def run(
     integrator: IntegratorOption = None,
     dt: DtOption = None,
     tol: TolOption = None,
-    json_: Annotated[bool, typer.Option("--json", help="Print the JSON summary (DESIGN section 4) only.")] = False,
+    json_: Annotated[bool, typer.Option(
+        "--json", help="Print the JSON summary (docs/design.md section 4) only.")] = False,
     csv: Annotated[Path | None, typer.Option(help="Write the report's CSV columns to this file.")] = None,
     csv_every: Annotated[float | None, typer.Option(
         help="CSV row interval in seconds.", show_default="100 steps, as the report printed")] = None,

@@ -132,7 +132,7 @@ def lever_factor() -> float:
     impact, int delta F dt / int F dt over delta_max, from the dimensionless impact
     y'' = -y^(3/2), y(0) = 0, y'(0) = 1 (RK4, 20 000 steps; independent of the engine).
     Our friction torque acts at the contact point, r - delta from a sphere's centre on a wall
-    and r - delta/2 between spheres (DESIGN section 2), so the spin change of a sliding impact
+    and r - delta/2 between spheres (docs/design.md section 2), so the spin change of a sliding impact
     is the rigid one times 1 - c delta_max / r (wall)."""
     if _LEVER:
         return _LEVER[0]

@@ -1,5 +1,5 @@
 """Running scenes through the fixed-step DEM kernel (`collide.engine.dem`): the contact laws of
-DESIGN section 9 (Hertz, restitution, tangential springs, rolling resistance, materials).
+docs/design.md section 9 (Hertz, restitution, tangential springs, rolling resistance, materials).
 
 The event engine (`collide.engine.kernels`) locates every contact start and end and every
 friction mode change, which makes the report's law exact to the tolerance; a DEM step does not

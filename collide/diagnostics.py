@@ -1,4 +1,4 @@
-"""Diagnostics of a run: conserved quantities, contacts and residuals (DESIGN sections 2 and 4).
+"""Diagnostics of a run: conserved quantities, contacts and residuals (docs/design.md sections 2 and 4).
 
 Functions take states with any leading shape (..., B, N, D), so the same code serves a final
 state (B, N, D) and frames of a trajectory (T, 1, N, D). Contacts are lists (C, 2) of body

@@ -265,8 +265,8 @@ def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
     k = np.array([s.contact.k for s in scenes], dtype=float)
     mu = np.array([s.contact.mu for s in scenes], dtype=float)
     eps = np.array([s.contact.eps for s in scenes], dtype=float)
-    # Every sphere is a spring of constant k, two in series (DESIGN section 2); materials add
-    # Hertz constants and their own contact values (DESIGN section 9).
+    # Every sphere is a spring of constant k, two in series (docs/design.md section 2); materials add
+    # Hertz constants and their own contact values (docs/design.md section 9).
     tables = [contact_tables(s) for s in scenes]
     pair_table = np.stack([t[0] for t in tables])
     wall_table = np.stack([t[1] for t in tables])

@@ -1,7 +1,7 @@
 """Rerun recordings of runs: one `.rrd` per run, written in bulk and read back losslessly.
 
-This is the only module in `collide/` that imports rerun (DESIGN section 5). A recording holds
-three things:
+This is the only module in `collide/` that imports rerun (docs/design.md section 5). A recording
+holds three things:
 
 - what a person looks at, on one timeline `sim_time` (simulated seconds): spheres with spin
   markers and trails, contact points with normal and friction force arrows, compression,

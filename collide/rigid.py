@@ -3,7 +3,7 @@
 This module is written apart from the stepper (it imports nothing from `collide.physics`,
 `collide.stepper` or `collide.integrators`) so that it can check them.
 
-Why this is the k -> infinity limit of the soft model (DESIGN section 2)
+Why this is the k -> infinity limit of the soft model (docs/design.md section 2)
 -------------------------------------------------------------------------
 In the soft model two spheres touch through springs of stiffness k_eff = k/2 (a sphere on a
 rigid wall: k). A contact lasts T = pi sqrt(m_red / k_eff) and compresses by at most

@@ -1,4 +1,4 @@
-"""Scene files: load, validate and override TOML scenes (DESIGN section 3).
+"""Scene files: load, validate and override TOML scenes (docs/design.md section 3).
 
 A scene is plain data. `load_scene` turns a built-in name or a `.toml` path into a `Scene`;
 `apply_overrides` edits the raw TOML table with `key=value` strings before validation, so an
@@ -56,13 +56,13 @@ class Wall:
 
 @dataclass(frozen=True)
 class Contact:
-    """Contact law for every pair and wall (DESIGN sections 2 and 9): a normal model (the
+    """Contact law for every pair and wall (docs/design.md sections 2 and 9): a normal model (the
     report's linear springs in series, or Hertz), optional normal damping for a restitution,
     a tangential model (the report's Coulomb slip with a dead band, or a history spring capped
     by Coulomb) and optional rolling resistance.
 
     `lever = "seed"` reproduces the report: slip measured with the undeformed radius while the
-    torque acts at the deformed contact point (DESIGN section 2).
+    torque acts at the deformed contact point (docs/design.md section 2).
     """
 
     model: str = "linear"
@@ -370,14 +370,26 @@ def _set_component(vector: list, component: str, value: Any, key: str) -> None:
 # ---------------------------------------------------------------------------------------------
 # Validation
 
-_TOP_KEYS = {"name", "description", "dim", "dt", "integrator", "duration", "tail", "tol",
-             "gravity", "contact", "body", "wall", "material", "pair", "rest"}
-_CONTACT_KEYS = {"model", "k", "mu", "eps", "lever", "youngs_modulus", "poisson_ratio", "restitution",
-                 "tangential", "tangential_stiffness_ratio", "rolling_friction"}
-_MATERIAL_KEYS = {"name", "density", "youngs_modulus", "poisson_ratio", "mu", "restitution", "rolling_friction"}
-_PAIR_KEYS = {"materials", "mu", "restitution", "rolling_friction"}
-_BODY_KEYS = {"name", "mass", "radius", "inertia", "position", "velocity", "spin", "material"}
-_WALL_KEYS = {"point", "normal"}
+# The keys each table of a scene file accepts: the single source of truth. The parser refuses
+# any other key, and tests/test_docs.py holds docs/design.md's scene-key reference to exactly
+# these ("scene" is the top level; "body", "wall", "material" and "pair" are arrays of tables).
+SCENE_KEYS: dict[str, frozenset[str]] = {
+    "scene": frozenset({"name", "description", "dim", "dt", "integrator", "duration", "tail", "tol",
+                        "gravity", "contact", "body", "wall", "material", "pair", "rest"}),
+    "contact": frozenset({"model", "k", "mu", "eps", "lever", "youngs_modulus", "poisson_ratio", "restitution",
+                          "tangential", "tangential_stiffness_ratio", "rolling_friction"}),
+    "body": frozenset({"name", "mass", "radius", "inertia", "position", "velocity", "spin", "material"}),
+    "wall": frozenset({"point", "normal"}),
+    "material": frozenset({"name", "density", "youngs_modulus", "poisson_ratio", "mu", "restitution",
+                           "rolling_friction"}),
+    "pair": frozenset({"materials", "mu", "restitution", "rolling_friction"}),
+}
+_TOP_KEYS = SCENE_KEYS["scene"]
+_CONTACT_KEYS = SCENE_KEYS["contact"]
+_MATERIAL_KEYS = SCENE_KEYS["material"]
+_PAIR_KEYS = SCENE_KEYS["pair"]
+_BODY_KEYS = SCENE_KEYS["body"]
+_WALL_KEYS = SCENE_KEYS["wall"]
 
 
 def _shown(value: Any) -> str:
@@ -421,7 +433,7 @@ def _vector(value: Any, key: str, length: int) -> tuple[float, ...]:
     return tuple(_number(v, f"{key}[{i}]") for i, v in enumerate(value))
 
 
-def _check_keys(table: Any, allowed: set[str], where: str) -> None:
+def _check_keys(table: Any, allowed: frozenset[str], where: str) -> None:
     if not isinstance(table, dict):
         raise SceneError(f"{where}: expected a table")
     unknown = sorted(set(table) - allowed)
@@ -670,7 +682,7 @@ def _parse_pairs(tables: Any, materials: dict[str, Material]) -> tuple[PairLaw, 
 
 
 def _check_start_overlap(scene: Scene) -> None:
-    """Spheres may touch at the start, never overlap (DESIGN section 3)."""
+    """Spheres may touch at the start, never overlap (docs/design.md section 3)."""
     bodies = scene.bodies
     for i, a in enumerate(bodies):
         for b in bodies[i + 1:]:

@@ -1,4 +1,4 @@
-"""The JSON summary (DESIGN section 4) and the report's CSV columns (section III's printf)."""
+"""The JSON summary (docs/design.md section 4) and the report's CSV columns (section III's printf)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ def _finite_or_none(x: float) -> float | None:
 
 
 def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
-    """The DESIGN section 4 object for one member of a run. Inapplicable residuals are None."""
+    """The docs/design.md section 4 object for one member of a run. Inapplicable residuals are None."""
     r = run.result
     scene = run.scenes[member]
     res = dg.residuals(r)
@@ -181,7 +181,7 @@ def csv_table(run: SceneRun, times: np.ndarray, layout: str = "aligned") -> tupl
 
     layout "aligned": every column at the row's time. layout "report": as the report's program
     printed them: positions, velocities and spins one step (dt) after the printed time, the
-    sums (centre of mass, momenta, angular momenta, energies) at it (DESIGN section 8).
+    sums (centre of mass, momenta, angular momenta, energies) at it (docs/design.md section 8).
     """
     r = run.result
     if r.trajectory is None:

@@ -41,7 +41,7 @@ EXPONENT_TOL = 0.05  # |observed exponent - (-1/2)| allowed between the two stif
 SCAN_FLOOR = 1e-9  # softness below this is round-off: the soft model is exact there
 
 # ---------------------------------------------------------------------------------------------
-# The textbook problems (report section II; exact answers from DESIGN section 8)
+# The textbook problems (report section II; exact answers from docs/design.md section 8)
 
 _M2_1D = 0.340 * 0.54 / 1.86  # the cart mass the textbook's part (a) gives
 _DEG37 = math.radians(37.0)

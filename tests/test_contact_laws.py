@@ -1,4 +1,4 @@
-"""Contact laws beyond the report's (DESIGN section 9), run by the DEM kernel: Hertz, restitution,
+"""Contact laws beyond the report's (docs/design.md section 9), run by the DEM kernel: Hertz, restitution,
 tangential springs, rolling resistance, materials. Each test compares with a closed form or a
 conservation law; tolerances are stated where they are set."""
 

@@ -1,4 +1,4 @@
-"""The stepper against closed forms and conservation laws (DESIGN section 2)."""
+"""The stepper against closed forms and conservation laws (docs/design.md section 2)."""
 
 from __future__ import annotations
 

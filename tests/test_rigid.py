@@ -193,7 +193,7 @@ def test_2d_and_3d_agree(mu: float) -> None:
 
 
 def test_rigid_outcome_of_textbook_scenes_is_the_textbook_answer() -> None:
-    # The scene files carry the textbook set-ups: the rigid limit must give DESIGN section 8's numbers.
+    # The scene files carry the textbook set-ups: the rigid limit must give docs/design.md section 8's numbers.
     glancing = rigid.rigid_outcome(load_scene("textbook-glancing"))
     speeds = np.linalg.norm(glancing.v, axis=1)
     assert speeds == pytest.approx([5 * math.cos(math.radians(37)), 5 * math.sin(math.radians(37))], rel=1e-9)

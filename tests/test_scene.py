@@ -1,4 +1,4 @@
-"""Scene files: every bad input gets one clear message naming the key (DESIGN section 3)."""
+"""Scene files: every bad input gets one clear message naming the key (docs/design.md section 3)."""
 
 from __future__ import annotations
 
@@ -80,7 +80,7 @@ def test_builtins_round_trip_through_toml(name, tmp_path):
 
 
 def test_report_set_ups_of_the_demos():
-    """DESIGN section 8: the demos' physical set-ups that reproduce the report's figures."""
+    """docs/design.md section 8: the demos' physical set-ups that reproduce the report's figures."""
     expect = {"demo-1d": (1000, 0.0), "demo-2d-stationary": (1000, 0.0), "demo-2d-moving": (1000, 0.0),
               "demo-bonus": (1500, 0.5)}
     for name, (k, mu) in expect.items():

@@ -1,6 +1,6 @@
 """Geometry for drawing: meshes, the compressed sphere, orientations and the camera fit.
 
-Pure numpy. 1D and 2D scenes live in the z = 0 plane (DESIGN section 5).
+Pure numpy. 1D and 2D scenes live in the z = 0 plane (docs/design.md section 5).
 """
 
 from __future__ import annotations

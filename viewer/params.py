@@ -217,7 +217,7 @@ CONTACT_PARAMS: tuple[ContactParam, ...] = (
                  "Coulomb friction coefficient", nonneg=True),
     ContactParam("eps", "eps", "m/s", lambda s: s.dim > 1, lambda x: (0.0, max(0.1, 10 * x), 1e-7),
                  "friction dead band: slip below it feels no friction", nonneg=True),
-    # The elasticity slider (DESIGN section 9), for every scene: below 1 the run goes to the
+    # The elasticity slider (docs/design.md section 9), for every scene: below 1 the run goes to the
     # DEM kernel (`build_scene`), which has the dashpot. Below 0.05 a contact is nearly plastic
     # and the dashpot's step limit makes runs slow.
     ContactParam("restitution", "restitution", "", lambda s: hasattr(s.contact, "restitution"),

@@ -1,4 +1,4 @@
-"""The fixed-step DEM kernel: the contact laws of DESIGN section 9, stepped as DEM codes step them.
+"""The fixed-step DEM kernel: the contact laws of docs/design.md section 9, stepped as DEM codes step them.
 
 Velocity Verlet at a fixed dt (half kick, drift, forces, half kick: LIGGGHTS' `nve/sphere`),
 with forces from the positions after the drift and the half-step velocities; contacts switch on

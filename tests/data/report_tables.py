@@ -3,7 +3,7 @@
 Each table: the scene, the time step that produced it, the printed times of its rows, the CSV
 columns it shows, and the printed values. The report printed with "%f" and the tables drop
 trailing zeros, so a value matches when it agrees to the last digit printed.
-Fig 14's rows 9-10 repeat object 1's numbers (a copy error, DESIGN section 8) and are left out.
+Fig 14's rows 9-10 repeat object 1's numbers (a copy error, docs/design.md section 8) and are left out.
 """
 
 T_1D = [0.312 + 0.002 * i for i in range(10)]
@@ -121,7 +121,7 @@ TABLES = [
 TRUNCATED = {("Fig 31", "w2")}
 
 # Final conditions (Figs 11, 18, 25, 34): velocities (and spins), with the report's typo
-# 0.87703 read as 0.877703 (DESIGN section 8).
+# 0.87703 read as 0.877703 (docs/design.md section 8).
 FINALS = [
     ("Fig 11", "demo-1d", 2e-5, {"ball1.velocity": ["-2.004682"], "ball2.velocity": ["1.004682"]}),
     ("Fig 18", "demo-2d-stationary", 1e-6,
