@@ -107,8 +107,8 @@ def test_leave_out_rule(written: dict) -> None:
 
 
 def _readme_entity_patterns() -> list[re.Pattern]:
-    """The entity paths of the README's table, `<b>`, `<c>` and `<k>` as any name."""
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    """The entity paths of the design's table (docs/design.md section 5), `<b>`, `<c>` and `<k>` as any name."""
+    readme = (Path(__file__).resolve().parent.parent / "docs" / "design.md").read_text()
     patterns = []
     for line in readme.splitlines():
         first = line.split("|")[1] if line.startswith("| `/") else ""
@@ -121,7 +121,7 @@ def _readme_entity_patterns() -> list[re.Pattern]:
 
 def test_readme_lists_every_entity(written: dict, tmp_path: Path) -> None:
     """Every entity of a few-body recording and of a many-body, many-contact one (a row of 30
-    balls in 2D with friction: one instanced entity, 29 touching pairs) is in the README's table."""
+    balls in 2D with friction: one instanced entity, 29 touching pairs) is in docs/design.md's table."""
     bodies = [{"name": f"b{i}", "mass": 0.1, "radius": 0.01, "position": [0.0201 * i + (0.01 if i else 0.0), 0.0],
                "velocity": [1.0 if i == 0 else 0.0, 0.0]} for i in range(30)]
     row = parse_scene({"name": "row", "dim": 2, "contact": {"k": 1e5, "mu": 0.2}, "body": bodies}, "row")
@@ -130,9 +130,9 @@ def test_readme_lists_every_entity(written: dict, tmp_path: Path) -> None:
     patterns = _readme_entity_patterns()
     for name, (_, path) in written.items():
         for entity in entity_paths(path):
-            assert any(p.fullmatch(entity) for p in patterns), f"{name}: {entity} is not in the README"
+            assert any(p.fullmatch(entity) for p in patterns), f"{name}: {entity} is not in docs/design.md"
     for entity in many:
-        assert any(p.fullmatch(entity) for p in patterns), f"row: {entity} is not in the README"
+        assert any(p.fullmatch(entity) for p in patterns), f"row: {entity} is not in docs/design.md"
 
 
 def test_frames_include_contact_start_and_end_and_free_flight_is_sparse(written: dict) -> None:
