@@ -166,7 +166,8 @@ def check_stiffness(scenes: list[Scene], model, state, tols: np.ndarray) -> None
                 f"to {positions[b]:.2g} of itself")
     else:
         what = f"the clock's tick at t = {durations[b]:.6g} s resolves a contact to {clock[b]:.2g}"
-    raise RunError(f"contact.k = {k:.3g} is too stiff to integrate in float64 at --tol {tols[b]:.3g}: {what}; "
+    who = f"{scenes[b].name}: " if len(scenes) > 1 else ""
+    raise RunError(f"{who}contact.k = {k:.3g} is too stiff to integrate in float64 at --tol {tols[b]:.3g}: {what}; "
                    f"this scene takes at most k = {k * lo * lo:.2g} (or a --tol of {max(positions[b], clock[b]):.1g})")
 
 
