@@ -245,10 +245,22 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
                      figures[:, dk.G_OVERLAP].copy(), stats[:, dk.S_CONTACTS].copy(), figures[:, dk.G_FORCE].copy())
     result = RunResult(model=model, initial=initial, final=final, integrator="dem", dt=dt.copy(),
                        steps=stats[:, dk.S_STEPS].copy(), jumps=stats[:, dk.S_JUMPS].copy(), wall_time_s=wall_time,
-                       contacts=log, trajectories=trajectories, warnings=[], dt_min=dt.copy(),
+                       contacts=log, trajectories=trajectories, warnings=_never_met(stats, finals, duration),
+                       dt_min=dt.copy(),
                        windows=np.zeros(b_count, np.int64))
     result.dissipation = figures[:, [dk.G_DAMP, dk.G_FRIC, dk.G_ROLL]].copy()
     return result
+
+
+def _never_met(stats: np.ndarray, finals: list[tuple], duration: np.ndarray) -> list[str]:
+    """Say why a run with no duration ended where it began: nothing in it can ever touch."""
+    out = []
+    for b, (t, _, _) in enumerate(finals):
+        if np.isnan(duration[b]) and stats[b, dk.S_CONTACTS] == 0 and t == 0.0:
+            member = f"run {b}: " if len(finals) > 1 else ""
+            out.append(f"{member}no two spheres, and no sphere and wall, can ever meet (all part or fly clear): "
+                       "the run ends at its start; set a duration to see them fly")
+    return out
 
 
 _LOADED: list[bool] = []

@@ -12,9 +12,9 @@ import numpy as np
 from collide import diagnostics as dg
 from collide.integrators import INTEGRATORS
 from collide.invariant import check_invariant
-from collide.model import compile_scenes, reference_frequency
+from collide.model import compile_scenes, reference_frequency, select_model, select_state
 from collide.scene import Scene, SceneError, dem_reason
-from collide.stepper import EDGE_TOL, MAX_STEPS_DEFAULT, Progress, RunError, RunResult, simulate
+from collide.stepper import EDGE_TOL, MAX_STEPS_DEFAULT, Progress, RunError, RunResult, approach_bound, simulate
 
 
 @dataclass
@@ -112,16 +112,88 @@ def predicted_error(integrator: str, regimes: list[str], omega_h: np.ndarray) ->
     return _error_model(integrator, regimes)(omega_h)
 
 
+def check_tol_floor(integrator: str, tol: np.ndarray) -> None:
+    """Refuse a tolerance below float64's round-off for this integrator: no step meets it (a
+    given step as little as an automatic one; its error model would quote 1e-20 at dt = 1e-5 while
+    the outcome moves by 5e-13 from step to step)."""
+    floor = TOL_FLOOR[integrator]
+    if (tol < floor).any():
+        b = int(np.argmax(tol < floor))
+        raise RunError(f"--tol {tol[b]:.3g} is below what '{integrator}' reaches in float64 at any step (round-off); "
+                       f"the finest reachable is about {floor:.0e}: use --tol {floor:.0e} or looser")
+
+
+# The outcome's round-off was measured at 0.1 to 1 times `float_resolution`'s figure: a contact is
+# refused where it is beyond this many times the tolerance (its error then past the tolerance for
+# certain); a head-on pair at tol 1e-6 kept it up to k = 2e20 (1e-6) and lost 4 % at 1e25.
+ROUND_OFF_SLACK = 10.0
+
+
+def float_resolution(model, state, durations: np.ndarray, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """What float64 resolves of the scene's stiffest collision (B,), its contact frequency
+    scaled by `scale`: (positions, clock). Positions: the collision's overlap, about v / omega
+    (v the fastest approach, `approach_bound`) plus g / omega^2 (resting under gravity), is
+    known to an ulp of the coordinates where contacts happen (the bodies' and the walls'
+    distances from the origin), and each step's force errs by that share: the outcome's
+    velocities err by about ulp / overlap (measured: 0.1 to 1 times it, a head-on pair at
+    k = 1e16 to 1e24). Clock: a contact begun a tick of the clock late (at the run's end,
+    its duration) starts at an overlap of v x tick, whose energy is (omega tick)^2 of the
+    collision's: the clock limits the outcome to the square of omega x tick."""
+    omega = reference_frequency(model) * scale
+    speed = approach_bound(model, state)
+    if model.n_walls:  # a wall stays put: a sphere's own speed is its approach
+        speed = np.maximum(speed, np.sqrt((state.v ** 2).sum(-1)).max(axis=1))
+    g = np.zeros(model.batch) if model.gravity is None else np.sqrt((model.gravity ** 2).sum(-1))
+    reach = (np.sqrt((state.s ** 2).sum(-1)) + model.radius).max(axis=1)
+    if model.n_walls:
+        offset = np.abs((model.wall_point * model.wall_normal).sum(-1)).max()
+        reach = np.maximum(reach, offset)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        overlap = speed / omega + g / omega ** 2
+        positions = np.where(overlap > 0, np.spacing(reach) / overlap, 0.0)
+        clock = (omega * np.spacing(np.where(np.isfinite(durations), durations, 0.0))) ** 2
+    return np.nan_to_num(positions), np.nan_to_num(clock)
+
+
+def check_stiffness(scenes: list[Scene], model, state, tols: np.ndarray) -> None:
+    """Refuse a contact too stiff for float64 at the run's tolerance (`float_resolution`),
+    with the stiffest this scene takes."""
+    durations = np.array([np.nan if s.duration is None else s.duration for s in scenes])
+    positions, clock = float_resolution(model, state, durations)
+    bad = np.maximum(positions, clock) > ROUND_OFF_SLACK * tols
+    if not bad.any():
+        return
+    b = int(np.argmax(bad))
+    lo, hi = 1e-30, 1.0  # the frequency's scale that meets tol: resolution grows with it
+    for _ in range(200):
+        mid = math.sqrt(lo * hi)
+        p, c = float_resolution(select_model(model, b), select_state(state, b), durations[b:b + 1], mid)
+        lo, hi = (mid, hi) if max(p[0], c[0]) <= ROUND_OFF_SLACK * tols[b] else (lo, mid)
+    k = scenes[b].contact.k
+    if positions[b] >= clock[b]:
+        what = (f"a collision's overlap (about {_overlap(model, state, b):.2g} m) is resolved by the positions "
+                f"to {positions[b]:.2g} of itself")
+    else:
+        what = f"the clock's tick at t = {durations[b]:.6g} s resolves a contact to {clock[b]:.2g}"
+    who = f"{scenes[b].name}: " if len(scenes) > 1 else ""
+    raise RunError(f"{who}contact.k = {k:.3g} is too stiff to integrate in float64 at --tol {tols[b]:.3g}: {what}; "
+                   f"this scene takes at most k = {k * lo * lo:.2g} (or a --tol of "
+                   f"{max(positions[b], clock[b]) / ROUND_OFF_SLACK:.1g})")
+
+
+def _overlap(model, state, b: int) -> float:
+    """The stiffest collision's overlap of member b (see `float_resolution`)."""
+    omega = float(reference_frequency(model)[b])
+    g = 0.0 if model.gravity is None else float(np.sqrt((model.gravity[b] ** 2).sum()))
+    return float(approach_bound(model, state)[b]) / omega + g / omega ** 2
+
+
 def auto_omega_h(scenes: list[Scene], integrator: str, tol: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The largest omega h (B,) whose predicted error meets tol, within the integrator's
     stability limit, and that prediction. Each island steps by it over its own stiffest
     frequency; with contact start and end located exactly, the approach speed does not set
     the step (a linear-spring contact lasts pi / omega at any speed)."""
-    floor = TOL_FLOOR[integrator]
-    if (tol < floor).any():
-        b = int(np.argmax(tol < floor))
-        raise RunError(f"--tol {tol[b]:.3g} is below what '{integrator}' reaches in float64 (about {floor:.0e}: "
-                       "round-off); use a looser --tol")
+    check_tol_floor(integrator, tol)
     regimes = [error_regime(scene) for scene in scenes]
     ceiling = min(MAX_OMEGA_H[integrator], 0.5 * INTEGRATORS[integrator].stability)
     model = _error_model(integrator, regimes)
@@ -176,6 +248,8 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
                          f"({dem_reason(needs)}) runs with --integrator dem")
     if integ == "dem":
         return _run_dem(scenes, model, state, requested, auto_used, tols, dt, record, max_steps, progress)
+    check_tol_floor(integ, tols)
+    check_stiffness(scenes, model, state, tols)
     omega = reference_frequency(model)
     omega_h = np.zeros(len(scenes))
     if any(auto_used):
@@ -189,7 +263,9 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
             raise SceneError("body: a scene of one sphere and no walls has no contact to step; add a body or a wall")
         raise SceneError(f"dt: must be a positive number or 'auto', got {dt!r}")
     omega_h = np.where(auto_used, omega_h, dt_arr * omega)
-    estimate = predicted_error(integ, [error_regime(scene) for scene in scenes], omega_h)
+    # No step leaves the outcome finer than round-off, whatever the model says of a tiny one.
+    estimate = np.maximum(predicted_error(integ, [error_regime(scene) for scene in scenes], omega_h),
+                          TOL_FLOOR[integ])
     duration = np.array([np.nan if s.duration is None else s.duration for s in scenes])
     tail = np.array([np.nan if s.tail is None else s.tail for s in scenes])
     if model.gravity is not None and model.n_walls and np.isnan(duration).any():

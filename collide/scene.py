@@ -451,6 +451,8 @@ def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
     name = raw.get("name", default_name)
     if not isinstance(name, str) or not name:
         raise SceneError(f"name: expected a non-empty string, got {_shown(name)}")
+    if not isinstance(raw.get("description", ""), str):
+        raise SceneError(f"description: expected a string, got {_shown(raw['description'])}")
 
     dt_raw = raw.get("dt", "auto")
     dt: float | str = "auto" if dt_raw == "auto" else _number(dt_raw, "dt", positive=True)
@@ -491,6 +493,8 @@ def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
                 raise SceneError(f"{where}.{required}: missing")
         radius = _number(b["radius"], f"{where}.radius", positive=True)
         material = b.get("material")
+        if material is not None and not isinstance(material, str):
+            raise SceneError(f"{where}.material: expected a material's name, got {_shown(material)}")
         if material is not None and material not in by_name:
             known = ", ".join(sorted(by_name)) or "none defined"
             raise SceneError(f"{where}.material: unknown {_shown(material)} (materials: {known})")
@@ -547,7 +551,7 @@ def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
     scene = Scene(name=name, dim=dim, dt=dt, integrator=integrator, contact=contact,
                   bodies=tuple(bodies), walls=tuple(walls), materials=materials, pairs=pairs,
                   gravity=gravity, duration=duration, tail=tail, tol=tol, rest=rest,
-                  description=str(raw.get("description", "")), source=raw)
+                  description=raw.get("description", ""), source=raw)
     if scene.needs_dem:
         if "integrator" not in raw:
             scene = replace(scene, integrator="dem")

@@ -678,8 +678,10 @@ def _kinetic(V, W, Bd, n):
 
 
 @jit
-def _will_meet(X, V, Bd, WP, n):
-    """Whether any two spheres, or a sphere and a wall, will touch in free flight (no gravity)."""
+def _will_meet(X, V, Bd, WP, grav, n):
+    """Whether any two spheres, or a sphere and a wall, may touch in free flight: a pair on
+    straight lines (a uniform gravity cancels in their relative motion), a wall when a sphere
+    heads for it or gravity pulls it back (conservative: any component)."""
     for i in range(n):
         for j in range(i + 1, n):
             dx, dy, dz = X[j, 0] - X[i, 0], X[j, 1] - X[i, 1], X[j, 2] - X[i, 2]
@@ -696,6 +698,8 @@ def _will_meet(X, V, Bd, WP, n):
                 return True
         for w in range(WP.shape[0]):
             if V[i, 0] * WP[w, 3] + V[i, 1] * WP[w, 4] + V[i, 2] * WP[w, 5] < 0.0:
+                return True
+            if grav[0] * WP[w, 3] + grav[1] * WP[w, 4] + grav[2] * WP[w, 5] < 0.0:
                 return True
     return False
 
@@ -763,6 +767,11 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     moved = 0.0
     while not last:
         if engaged == 0:
+            # Nothing touches and nothing ever can (with no end set): the run is over, whether
+            # or not anything touched before (bodies moving apart from the start, with nothing
+            # ahead, stepped on until the step limit).
+            if not math.isfinite(t_end) and not _will_meet(X, V, Bd, WP, grav, n):
+                break
             # Nothing touches: fly in closed form as far as no contact can begin (free flight is
             # not stepped, as in the event engine), then step again.
             keys, PI, PJ, hist, WL = _rebuild(X, X0, Bd, WP, WH, n, dim, skin, keys, hist, ST)
@@ -788,7 +797,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
                     KN, nkn = _frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
                 if t >= t_end * (1.0 - 1e-12):
                     break
-                if not math.isfinite(t_end) and ever and not _will_meet(X, V, Bd, WP, n):
+                if not math.isfinite(t_end) and ever and not _will_meet(X, V, Bd, WP, grav, n):
                     break
         h = dt
         if t + h >= t_end * (1.0 - 1e-12):
@@ -853,7 +862,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             break
         if rest > 0.0 and ever and kinetic < rest * peak:
             break
-        if not math.isfinite(t_end) and ever and engaged == 0 and not _will_meet(X, V, Bd, WP, n):
+        if not math.isfinite(t_end) and ever and engaged == 0 and not _will_meet(X, V, Bd, WP, grav, n):
             break
     ST[S_STEPS] = steps
     ST[S_PAIRS] = keys.shape[0]

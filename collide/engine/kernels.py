@@ -1786,6 +1786,25 @@ def energy(X, C, na, nc, grav, spin):
 
 
 @jit_inline
+def energy_scale(X, C, na, nc, grav, spin):
+    """The energy the island's stepped bodies can exchange, whatever the origin of heights: kinetic,
+    rotational and spring energy, and each body's weight over its radius (what a bounce or a
+    settling exchanges with gravity at the least). Its total energy (`energy`) is zero for a ball
+    dropped from the origin: growth measured against that alone is round-off judged unstable."""
+    e = 0.0
+    g = math.sqrt(grav[0] ** 2 + grav[1] ** 2 + grav[2] ** 2)
+    for a in range(na):
+        e += X[a, X_M] * g * X[a, X_R]
+        for d in range(3):
+            e += 0.5 * X[a, X_M] * X[a, X_V + d] ** 2
+            if spin:
+                e += 0.5 * X[a, X_I] * X[a, X_W + d] ** 2
+    for c in range(nc):
+        e += 0.5 * C[c, C_K] * C[c, C_DELTA] ** 2
+    return e
+
+
+@jit_inline
 def slip_turn(X, C, CI, nc, fl, h, negligible):
     """The largest angle (rad) a sliding contact's slip turned by over the step just taken (h),
     seen in the contact's frame: from its direction at the step's start (held, carried onto the
@@ -2801,6 +2820,10 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
             tau, which = rest_first(P, mode, h, touch, start, ends, out, clock)
         whole = which < 0 and h == span
         landed = W if tau >= h and h == W - t else t + min(tau, h)
+        if landed == t and which == 0 and tau <= h:
+            # The contact ends closer than the clock resolves: on its next tick (a tick past the
+            # end, the overlap is gone by at most the speed times a tick), not again and again.
+            landed = min(np.nextafter(t, math.inf), W)
         h = landed - t
         quick = quick + 1 if which > 0 and h <= clock else 0
         if quick > REST_STUCK_LIMIT:
@@ -3085,6 +3108,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
     stalled = 0
     tiny = 0
     restarts = 0
+    idle = 0  # contact phases in a row that ended where they began
     while t < W and ST[S_STATUS] == OK:
         n_eng = 0
         for k in range(nq):
@@ -3102,13 +3126,17 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 tau = min(tau, touch_time(G, Q[k, Q_I], Q[k, Q_J], t, WP, grav))
             if t + tau >= W:
                 break
-            # A touch closer than the clock resolves, over and over, is a stall, not progress.
+            # A touch closer than the clock resolves lands on its next tick (late by less than one:
+            # the clock's resolution at t), where it is found touching; a float clock's ticks
+            # grow with t (5.7e-14 s at 256 s), and a bounce landed on time to within a tick came
+            # down just short of the floor, over and over. The same touch met at every tick is
+            # still a stall.
             stalled = stalled + 1 if t + tau == t else 0
             if stalled > STALL_LIMIT:
                 ST[S_STATUS] = STALL
                 FG[F_STATUS_T], FG[F_STATUS_A] = t, 2.0
                 break
-            t += tau
+            t = t + tau if stalled == 0 else np.nextafter(t, math.inf)
             continue
         # A contact phase: the bodies of the engaged contacts are stepped.
         for k in range(nq):
@@ -3154,6 +3182,8 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         geometry(X, C, CI, nc, WP, fl[FL_SEED], fl[FL_FRICTION])
         springs(X, C, CI, na, nc, grav)
         e_start = energy(X, C, na, nc, grav, spin)
+        t_phase = t
+        e_room = max(abs(e_start), energy_scale(X, C, na, nc, grav, spin))
         if record:
             # Where a body's free flight ends and its steps begin.
             for a in range(na):
@@ -3328,7 +3358,13 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                         CI[c, CI_EDGE] = FLIP
         # The phase ends here: the stepped bodies go back to base states at t.
         e_end = energy(X, C, na, nc, grav, spin)
-        if e_end - e_start > 0.5 * abs(e_start) + 1e-300 and ST[S_STATUS] == OK:
+        # Phases that end where they began, over and over, are a stall, never a hang.
+        idle = idle + 1 if t == t_phase else 0
+        if idle > STALL_LIMIT and ST[S_STATUS] == OK:
+            ST[S_STATUS] = STALL
+            FG[F_STATUS_T] = t
+        # An unstable step multiplies the energy every step: half the scale is reached in a few.
+        if e_end - e_start > 0.5 * e_room + 1e-300 and ST[S_STATUS] == OK:
             ST[S_STATUS] = ENERGY
             FG[F_STATUS_T], FG[F_STATUS_A], FG[F_STATUS_B] = t, e_start, e_end
         for a in range(na):
@@ -3677,6 +3713,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     t_end = fp[FP_TEND]
     search = math.inf
     span = float(WINDOW_STEPS)  # the next window's length, in steps of its stiffest contact
+    ticks = 0  # jumps in a row to a contact due within the clock's resolution
     while ST[S_STATUS] == OK and t < t_end:
         fp[FP_NOW] = t
         fp[FP_NOW_STEPS] = ST[S_STEPS]
@@ -3704,11 +3741,18 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
             tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, small, fp[FP_SLOW], scale)
             if tau <= horizon or (small == YES and tau < math.inf):
                 if not min(t + tau, t_end) > t:
-                    # A contact due closer than the clock resolves that does not engage (bodies
-                    # far from the origin, where positions are coarse): refused, never a hang.
-                    ST[S_STATUS] = STALL
-                    FG[F_STATUS_T] = t
-                    break
+                    # A contact due closer than the clock resolves lands on its next tick (see
+                    # run_island); one that still does not engage tick after tick (bodies far
+                    # from the origin, where positions are coarse) is refused, never a hang.
+                    ticks += 1
+                    if ticks > STALL_LIMIT:
+                        ST[S_STATUS] = STALL
+                        FG[F_STATUS_T] = t
+                        break
+                    t = np.nextafter(t, math.inf)
+                    ST[S_JUMPS] += 1
+                    continue
+                ticks = 0
                 t = min(t + tau, t_end)
                 ST[S_JUMPS] += 1
                 search = 2.0 * tau if tau > 0 else search
