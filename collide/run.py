@@ -139,9 +139,13 @@ def float_resolution(model, state, durations: np.ndarray, scale: float = 1.0) ->
     its duration) starts at an overlap of v x tick, whose energy is (omega tick)^2 of the
     collision's: the clock limits the outcome to the square of omega x tick."""
     omega = reference_frequency(model) * scale
+    fastest = np.sqrt((state.v ** 2).sum(-1)).max(axis=1)
     speed = approach_bound(model, state)
+    # Under 1e-9 of the fastest body's speed an approach is round-off (bodies moving together), as
+    # the engine takes it (`simulate`'s FP_SLOW).
+    speed = np.where(speed > 1e-9 * fastest, speed, 0.0)
     if model.n_walls:  # a wall stays put: a sphere's own speed is its approach
-        speed = np.maximum(speed, np.sqrt((state.v ** 2).sum(-1)).max(axis=1))
+        speed = np.maximum(speed, fastest)
     g = np.zeros(model.batch) if model.gravity is None else np.sqrt((model.gravity ** 2).sum(-1))
     reach = (np.sqrt((state.s ** 2).sum(-1)) + model.radius).max(axis=1)
     if model.n_walls:
