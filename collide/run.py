@@ -140,9 +140,13 @@ def float_resolution(model, state, durations: np.ndarray, scale: float = 1.0) ->
     its duration) starts at an overlap of v x tick, whose energy is (omega tick)^2 of the
     collision's: the clock limits the outcome to the square of omega x tick."""
     omega = reference_frequency(model) * scale
+    fastest = np.sqrt((state.v ** 2).sum(-1)).max(axis=1)
     speed = approach_bound(model, state)
+    # Under 1e-9 of the fastest body's speed an approach is round-off (bodies moving together), as
+    # the engine takes it (`simulate`'s FP_SLOW).
+    speed = np.where(speed > 1e-9 * fastest, speed, 0.0)
     if model.n_walls:  # a wall stays put: a sphere's own speed is its approach
-        speed = np.maximum(speed, np.sqrt((state.v ** 2).sum(-1)).max(axis=1))
+        speed = np.maximum(speed, fastest)
     g = np.zeros(model.batch) if model.gravity is None else np.sqrt((model.gravity ** 2).sum(-1))
     reach = (np.sqrt((state.s ** 2).sum(-1)) + model.radius).max(axis=1)
     if model.n_walls:
@@ -155,14 +159,14 @@ def float_resolution(model, state, durations: np.ndarray, scale: float = 1.0) ->
     return np.nan_to_num(positions), np.nan_to_num(clock)
 
 
-def check_stiffness(scenes: list[Scene], model, state, tols: np.ndarray) -> None:
+def check_stiffness(scenes: list[Scene], model, state, tols: np.ndarray) -> np.ndarray:
     """Refuse a contact too stiff for float64 at the run's tolerance (`float_resolution`),
-    with the stiffest this scene takes."""
+    with the stiffest this scene takes; else return the outcome's round-off figure (B,)."""
     durations = np.array([np.nan if s.duration is None else s.duration for s in scenes])
     positions, clock = float_resolution(model, state, durations)
     bad = np.maximum(positions, clock) > ROUND_OFF_SLACK * tols
     if not bad.any():
-        return
+        return np.maximum(positions, clock)
     b = int(np.argmax(bad))
     lo, hi = 1e-30, 1.0  # the frequency's scale that meets tol: resolution grows with it
     for _ in range(200):
@@ -249,7 +253,7 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     if integ == "dem":
         return _run_dem(scenes, model, state, requested, auto_used, tols, dt, record, max_steps, progress)
     check_tol_floor(integ, tols)
-    check_stiffness(scenes, model, state, tols)
+    round_off = check_stiffness(scenes, model, state, tols)
     omega = reference_frequency(model)
     omega_h = np.zeros(len(scenes))
     if any(auto_used):
@@ -263,9 +267,10 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
             raise SceneError("body: a scene of one sphere and no walls has no contact to step; add a body or a wall")
         raise SceneError(f"dt: must be a positive number or 'auto', got {dt!r}")
     omega_h = np.where(auto_used, omega_h, dt_arr * omega)
-    # No step leaves the outcome finer than round-off, whatever the model says of a tiny one.
+    # No step leaves the outcome finer than round-off, whatever the model says of a tiny one (nor
+    # than the positions resolve of a stiff contact's overlap).
     estimate = np.maximum(predicted_error(integ, [error_regime(scene) for scene in scenes], omega_h),
-                          TOL_FLOOR[integ])
+                          np.maximum(TOL_FLOOR[integ], round_off))
     duration = np.array([np.nan if s.duration is None else s.duration for s in scenes])
     tail = np.array([np.nan if s.tail is None else s.tail for s in scenes])
     if model.gravity is not None and model.n_walls and np.isnan(duration).any():

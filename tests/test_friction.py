@@ -412,7 +412,8 @@ def test_stiff_friction_at_a_tight_tolerance_does_not_stall():
     event is taken as passed (by under 1e-15 s)."""
     run = run_scene(load_scene("demo-bonus", ["contact.k=1e12"]), tol=1e-9, record=False)
     assert int(run.result.steps[0]) < 60
-    reference = run_scene(load_scene("demo-bonus", ["contact.k=1e12"]), tol=1e-11, record=False)
+    # (At k = 1e12 the positions resolve the overlap to 2.3e-10: a tol of 1e-11 is refused.)
+    reference = run_scene(load_scene("demo-bonus", ["contact.k=1e12"]), tol=1e-10, record=False)
     scene = load_scene("demo-bonus")
     assert np.abs(outcome(run.result) - outcome(reference.result)).max() / speed_scale(scene) < 1e-8
 
