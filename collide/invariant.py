@@ -15,10 +15,18 @@ import numpy as np
 
 from collide.errors import RunError
 from collide.model import TABLE_ESTAR, TABLE_K
+from collide.scene import TOUCHING
 
 # Over the energy's bound: the step's own energy error (within --tol, far below this) and a
 # pile's settling under gravity stay well inside.
 SLACK = 1.5
+ULPS = 16.0  # positions' round-off, in units in the last place of the larger coordinate
+
+
+def round_off(reach: np.ndarray | float, where: np.ndarray | float) -> np.ndarray | float:
+    """An overlap that is no contact: spheres that start touching to round-off (the scene's
+    TOUCHING share of r_i + r_j) and the positions' own round-off at coordinates of size `where`."""
+    return TOUCHING * reach + ULPS * np.spacing(np.abs(where))
 
 
 def available_energy(model, state) -> np.ndarray:
@@ -114,13 +122,14 @@ def _member(model, energy: float, start: np.ndarray, final, b: int, max_overlap:
     if not reason and since is not None and model.dim > 1 and model.n_bodies > 1:
         reason = _free_flight(model, energy, final, since, b)
     if not reason and max_overlap is not None:
-        reason = _deepest(model, energy, max_overlap, b)
+        reason = _deepest(model, energy, max_overlap, b, float(np.abs(final.s[b]).max()))
     return reason
 
 
-def _deepest(model, energy: float, overlap: float, b: int) -> str | None:
+def _deepest(model, energy: float, overlap: float, b: int, where: float) -> str | None:
     bound = deepest_any(model, energy, b)
-    if np.isfinite(overlap) and overlap > SLACK * bound:
+    floor = round_off(2.0 * float(model.radius[b].max()), where)
+    if np.isfinite(overlap) and overlap > SLACK * bound + floor:
         return (f"a contact reached an overlap of {overlap:.3g} m, beyond the {bound:.3g} m the contact law can "
                 "store from the scene's energy: its approach was found too late (the bodies went into each "
                 "other); refused")
@@ -140,7 +149,8 @@ def _final_pairs(model, energy: float, start: np.ndarray, final, b: int) -> str 
         i, j = near_pairs(s, 2.0 * float(model.radius[b].max()))
         gap = np.sqrt(((s[j] - s[i]) ** 2).sum(-1))
     reach = model.radius[b, i] + model.radius[b, j]
-    bad = gap < reach - SLACK * pair_depth(model, energy, b, i, j)
+    where = np.maximum(np.abs(s[i]).max(-1), np.abs(s[j]).max(-1)) if s.ndim > 1 else np.maximum(abs(s[i]), abs(s[j]))
+    bad = gap < reach - SLACK * pair_depth(model, energy, b, i, j) - round_off(reach, where)
     if not bad.any():
         return None
     k = int(np.argmax(bad))
@@ -152,7 +162,9 @@ def _final_pairs(model, energy: float, start: np.ndarray, final, b: int) -> str 
 
 def _walls(model, energy: float, final, b: int) -> str | None:
     height = final.s[b] @ model.wall_normal.T - (model.wall_point * model.wall_normal).sum(-1)[None, :]  # (N, W)
-    bad = height < model.radius[b][:, None] - SLACK * wall_depth(model, energy, b)[:, None]
+    where = np.abs(final.s[b]).max(-1)[:, None] + np.abs(model.wall_point).max(-1)[None, :]
+    bad = height < model.radius[b][:, None] - SLACK * wall_depth(model, energy, b)[:, None] - \
+        round_off(model.radius[b][:, None], where)
     if not bad.any():
         return None
     i, w = np.unravel_index(int(np.argmax(bad)), bad.shape)
@@ -185,7 +197,8 @@ def _free_flight(model, energy: float, final, since: np.ndarray, b: int) -> str 
         when = np.clip(np.where(uu > 0, (d * u).sum(-1) / uu, 0.0), 0.0, common)
     near = np.sqrt(((d - u * when[:, None]) ** 2).sum(-1))
     reach = r[i] + r[j]
-    bad = near < reach - SLACK * pair_depth(model, energy, b, i, j)
+    where = np.maximum(np.abs(s[i]).max(-1), np.abs(s[j]).max(-1))
+    bad = near < reach - SLACK * pair_depth(model, energy, b, i, j) - round_off(reach, where)
     if not bad.any():
         return None
     k = int(np.argmax(bad))

@@ -685,18 +685,23 @@ def _parse_pairs(tables: Any, materials: dict[str, Material]) -> tuple[PairLaw, 
     return tuple(out)
 
 
+# Spheres whose overlap at the start is within this share of r_i + r_j (a radius on a wall) touch:
+# positions written in decimal place touching spheres a few ulps apart either way.
+TOUCHING = 1e-12
+
+
 def _check_start_overlap(scene: Scene) -> None:
     """Spheres may touch at the start, never overlap (docs/design.md section 3)."""
     bodies = scene.bodies
     for i, a in enumerate(bodies):
         for b in bodies[i + 1:]:
             gap = math.dist(a.position, b.position) - a.radius - b.radius
-            if gap < -1e-12 * (a.radius + b.radius):
+            if gap < -TOUCHING * (a.radius + b.radius):
                 raise SceneError(f"body.{a.name}.position: overlaps body.{b.name} at the start "
                                  f"by {-gap:.3g} m")
         for index, wall in enumerate(scene.walls):
             height = sum((p - q) * n for p, q, n in zip(a.position, wall.point, wall.normal))
-            if height < a.radius * (1 - 1e-12):
+            if height < a.radius * (1 - TOUCHING):
                 raise SceneError(f"body.{a.name}.position: overlaps wall[{index}] at the start "
                                  f"(distance {height:.3g} m < radius {a.radius:.3g} m)")
 

@@ -224,3 +224,19 @@ def test_a_dem_step_a_pair_closes_across_is_refused(offset: float, monkeypatch: 
                                     "contact": {"k": 44.0}, "body": bodies}), monkeypatch)
     assert not isinstance(run, str), run
     _assert_not_through(run)
+
+
+@pytest.mark.parametrize("dim", [1, 2, 3])
+def test_spheres_at_rest_touching_to_round_off_are_no_pass_through(dim: int) -> None:
+    """Touching spheres placed in decimal overlap by a few ulps (2.8e-17 m here), with no energy
+    to press them: that is the scene's own touching, not a pass-through (the viewer's round-off
+    scene was refused)."""
+    def place(x: float) -> list[float] | float:
+        return x if dim == 1 else [x] + [0.0] * (dim - 1)
+
+    raw = {"name": "touching", "dim": dim, "duration": 0.05, "contact": {"k": 1500.0},
+           "body": [{"name": f"ball{n + 1}", "mass": 0.0254, "radius": 0.03021, "position": place(x)}
+                    for n, x in enumerate([0.0, 0.1, 0.16041999999999998])]}
+    result = run_scene(parse_scene(raw, "touching"))
+    assert result.result.final.s[0, 2, 0] - result.result.final.s[0, 1, 0] < 2 * 0.03021  # they do overlap
+    check_invariant(result.result)  # and that is no pass-through
