@@ -120,20 +120,78 @@ def fuzz_recordings(seed: int, count: int) -> int:
     return len(broken)
 
 
+def _worker(conn, seed: int, max_bodies: int) -> None:
+    """Runs the scenes it is sent (their numbers) and answers each verdict."""
+    import random
+
+    from tests.scene_fuzz import random_raw, run_in_process
+
+    while True:
+        i = conn.recv()
+        if i is None:
+            return
+        verdict, _ = run_in_process(random_raw(random.Random(seed * 1_000_003 + i), max_bodies))
+        conn.send(verdict)
+
+
+class Runner:
+    """Scenes run in a child process (this process stays the judge): a run past the time limit,
+    in compiled code no alarm interrupts, is ended from here and the child replaced."""
+
+    def __init__(self, seed: int, max_bodies: int, limit_s: float) -> None:
+        self.seed, self.max_bodies, self.limit_s = seed, max_bodies, limit_s
+        self.child = None
+
+    def _start(self) -> None:
+        import multiprocessing
+
+        context = multiprocessing.get_context("fork")
+        self.conn, theirs = context.Pipe()
+        self.child = context.Process(target=_worker, args=(theirs, self.seed, self.max_bodies), daemon=True)
+        self.child.start()
+
+    def run(self, i: int):
+        from tests.scene_fuzz import Verdict
+
+        if self.child is None or not self.child.is_alive():
+            self._start()
+        began = time.perf_counter()
+        self.conn.send(i)
+        if self.conn.poll(self.limit_s):
+            try:
+                return self.conn.recv()
+            except EOFError:
+                pass
+        crashed = self.child.is_alive() is False
+        self.child.kill()
+        self.child.join()
+        self.child = None
+        took = time.perf_counter() - began
+        if crashed:
+            return Verdict("violation", "crash", "the run killed its process", took)
+        return Verdict("violation", "too slow", f"still running after {took:.0f} s (ended)", took)
+
+    def close(self) -> None:
+        if self.child is not None:
+            self.conn.send(None)
+            self.child.join(5)
+
+
 def fuzz_scenes(seed: int, count: int, found: Path, cli_every: int, max_bodies: int) -> int:
     """Scene i of seed S is drawn from random.Random(S * 1_000_003 + i)."""
     import random
 
     from collide.scene import dump_toml
-    from tests.scene_fuzz import Verdict, random_raw, run_cli, run_in_process
+    from tests.scene_fuzz import TIME_LIMIT_S, Verdict, random_raw, run_cli
 
     outcomes: collections.Counter[str] = collections.Counter()
     broken: list[str] = []
     slowest = (0.0, -1)
     started = time.perf_counter()
+    runner = Runner(seed, max_bodies, 1.5 * TIME_LIMIT_S)
     for i in range(count):
         raw = random_raw(random.Random(seed * 1_000_003 + i), max_bodies)
-        verdict, _ = run_in_process(raw)
+        verdict = runner.run(i)
         slowest = max(slowest, (verdict.seconds, i))
         path = found / f"scene-{seed}-{i}.toml"
         if cli_every and i % cli_every == 0 and verdict.outcome != "violation":
@@ -153,9 +211,11 @@ def fuzz_scenes(seed: int, count: int, found: Path, cli_every: int, max_bodies: 
             found.mkdir(parents=True, exist_ok=True)
             path.write_text(dump_toml(raw))
             broken.append(f"{verdict.kind}: {verdict.message[:300]}\n    collide run {path}")
+            print(f"  scene {i}: {broken[-1]}", file=sys.stderr, flush=True)
         if (i + 1) % 100 == 0:
             print(f"  ... {i + 1} scenes, {len(broken)} violations, {time.perf_counter() - started:.0f} s",
                   file=sys.stderr, flush=True)
+    runner.close()
     took = time.perf_counter() - started
     counts = ", ".join(f"{what} {n}" for what, n in sorted(outcomes.items()))
     print(f"scenes: {count} (seed {seed}) in {took:.0f} s: {counts}; slowest {slowest[0]:.1f} s (scene {slowest[1]})")
