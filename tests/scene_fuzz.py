@@ -53,7 +53,7 @@ def _place(rng: Any, dim: int, radii: list[float], box: float, floor: bool, touc
     `touching`: the second body starts exactly touching the first along x."""
     placed: list[list[float]] = []
     for r in radii:
-        for _ in range(400):
+        for _ in range(100):
             p = [rng.uniform(-box / 2, box / 2) for _ in range(dim)]
             if floor:
                 p[-1] = abs(p[-1]) + r * (1.0 + rng.choice([0.0, 0.01, 0.5, 3.0]))
@@ -69,8 +69,10 @@ def _place(rng: Any, dim: int, radii: list[float], box: float, floor: bool, touc
     return placed
 
 
-def random_raw(rng: Any, max_bodies: int = 30) -> dict:
-    """A random scene's TOML table (see the module's docstring)."""
+def random_raw(rng: Any, max_bodies: int = 30, quick: bool = False) -> dict:
+    """A random scene's TOML table (see the module's docstring). `quick`: collisions no shorter
+    than a hundredth of the crossing time and at most 100 of them in the duration (a few seconds
+    with the kernels interpreted, as the test suite may run them)."""
     dim = rng.choice([1, 2, 2, 3, 3])
     n = min(max_bodies, max(1, int(_log_uniform(rng, 1, 31))))
     r0 = _log_uniform(rng, 1e-3, 1.0)
@@ -101,7 +103,7 @@ def random_raw(rng: Any, max_bodies: int = 30) -> dict:
             body["spin"] = spin[0] if dim == 2 else spin
         bodies.append(body)
     meet = box / v0  # the time to cross the box at the typical speed
-    t_c = meet * _log_uniform(rng, 1e-3, 0.05)  # a collision's duration
+    t_c = meet * _log_uniform(rng, 1e-2 if quick else 1e-3, 0.05)  # a collision's duration
     m_eff = 0.5 * min(masses)
     k = m_eff * (math.pi / t_c) ** 2 if rng.random() > 0.1 else _log_uniform(rng, 1.0, 1e10)
     contact: dict[str, Any] = {"k": k}
@@ -147,9 +149,9 @@ def random_raw(rng: Any, max_bodies: int = 30) -> dict:
         walls.append({"point": [-box / 2 - 2 * max(radii)] + [0.0] * (dim - 1), "normal": normal})
     if walls:
         raw["wall"] = walls
-    if walls or rng.random() < 0.3:
+    if walls or quick or rng.random() < 0.3:
         # Bounded: a resting pile costs steps every collision time.
-        raw["duration"] = min(meet * rng.uniform(0.5, 4.0), 3000 * t_c)
+        raw["duration"] = min(meet * rng.uniform(0.5, 4.0), (100 if quick else 3000) * t_c)
     return raw
 
 
