@@ -186,7 +186,7 @@ def fuzz_scenes(seed: int, count: int, found: Path, cli_every: int, max_bodies: 
 
     outcomes: collections.Counter[str] = collections.Counter()
     broken: list[str] = []
-    slowest = (0.0, -1)
+    slowest, worst_energy = (0.0, -1), (0.0, -1)
     started = time.perf_counter()
     runner = Runner(seed, max_bodies, 1.5 * TIME_LIMIT_S)
     for i in range(count):
@@ -207,18 +207,22 @@ def fuzz_scenes(seed: int, count: int, found: Path, cli_every: int, max_bodies: 
                                   f"in process: {verdict.outcome}, CLI: {by_cli.outcome} {by_cli.message}")
         key = verdict.outcome if verdict.outcome == "ran" else f"{verdict.outcome}: {verdict.kind}"
         outcomes[key] += 1
+        if verdict.energy_residual is not None:
+            outcomes["ran with nothing dissipating (energy checked)"] += 1
+            worst_energy = max(worst_energy, (verdict.energy_residual, i))
         if verdict.outcome == "violation":
             found.mkdir(parents=True, exist_ok=True)
             path.write_text(dump_toml(raw))
             broken.append(f"{verdict.kind}: {verdict.message[:300]}\n    collide run {path}")
             print(f"  scene {i}: {broken[-1]}", file=sys.stderr, flush=True)
         if (i + 1) % 100 == 0:
-            print(f"  ... {i + 1} scenes, {len(broken)} violations, {time.perf_counter() - started:.0f} s",
-                  file=sys.stderr, flush=True)
+            so_far = ", ".join(f"{what} {n}" for what, n in sorted(outcomes.items()))
+            print(f"  ... {i + 1} scenes in {time.perf_counter() - started:.0f} s: {so_far}", file=sys.stderr, flush=True)
     runner.close()
     took = time.perf_counter() - started
     counts = ", ".join(f"{what} {n}" for what, n in sorted(outcomes.items()))
-    print(f"scenes: {count} (seed {seed}) in {took:.0f} s: {counts}; slowest {slowest[0]:.1f} s (scene {slowest[1]})")
+    print(f"scenes: {count} (seed {seed}) in {took:.0f} s: {counts}; slowest {slowest[0]:.1f} s (scene {slowest[1]}); "
+          f"largest energy residual where nothing dissipates {worst_energy[0]:.2g} (scene {worst_energy[1]})")
     for line in broken:
         print("  " + line)
     return len(broken)

@@ -25,7 +25,7 @@ import signal
 import time
 import tomllib
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from collide.scene import dump_toml
@@ -170,7 +170,7 @@ class Verdict:
     kind: str = ""  # the refusal's cause or the violation's kind
     message: str = ""
     seconds: float = 0.0
-    notes: list[str] = field(default_factory=list)
+    energy_residual: float | None = None  # where nothing dissipates (the judge's own)
 
 
 def _vec(value: Any) -> list[float]:
@@ -294,16 +294,23 @@ def check_run(raw: dict, summary: dict) -> tuple[str, str] | None:
             if overlap > DEPTH_SLACK * bound:
                 return "through-wall", (f"{spec[i]['name']} overlaps wall {w} by {overlap:.3g} m at the end; all the "
                                         f"energy presses at most {bound:.3g} m")
-    if not dissipative(raw) and raw.get("dt", "auto") == "auto":
-        e0 = energy_of(raw, [{"position": b["position"], "velocity": b["velocity"],
-                              **({"spin": b["spin"]} if "spin" in b else {})} for b in spec])
-        e1 = energy_of(raw, final)
-        scale = _energy_scale(raw, e0)
-        if scale > 0 and abs(e1 - e0) / scale > ENERGY_TOL:
-            return "energy", (f"energy {e0:.6g} J at the start, {e1:.6g} J at the end: residual "
-                              f"{abs(e1 - e0) / scale:.3g} > {ENERGY_TOL:g} with nothing that dissipates "
-                              f"(the engine's: {summary['residuals']['energy']})")
+    residual = energy_residual(raw, summary)
+    if residual is not None and residual > ENERGY_TOL:
+        return "energy", (f"energy residual {residual:.3g} > {ENERGY_TOL:g} with nothing that dissipates "
+                          f"(the engine's: {summary['residuals']['energy']})")
     return None
+
+
+def energy_residual(raw: dict, summary: dict) -> float | None:
+    """|E_end - E_start| / E_start where nothing dissipates and the step was chosen for the
+    tolerance (a given dt is the user's accuracy), else None."""
+    if dissipative(raw) or raw.get("dt", "auto") != "auto":
+        return None
+    e0 = energy_of(raw, [{"position": b["position"], "velocity": b["velocity"],
+                          **({"spin": b["spin"]} if "spin" in b else {})} for b in raw["body"]])
+    e1 = energy_of(raw, summary["bodies"])
+    scale = _energy_scale(raw, e0)
+    return abs(e1 - e0) / scale if scale > 0 else None
 
 
 def _energy_scale(raw: dict, e0: float) -> float:
@@ -387,7 +394,7 @@ def run_in_process(raw: dict, hard_limit_s: int = 180) -> tuple[Verdict, dict | 
         return Verdict("violation", problem[0], problem[1], took), summary
     if took > TIME_LIMIT_S:
         return Verdict("violation", "too slow", f"took {took:.0f} s", took), summary
-    return Verdict("ran", "", "", took), summary
+    return Verdict("ran", "", "", took, energy_residual(raw, summary)), summary
 
 
 def run_cli(path: str, timeout_s: float = TIME_LIMIT_S) -> Verdict:
