@@ -217,7 +217,8 @@ def fuzz_scenes(seed: int, count: int, found: Path, cli_every: int, max_bodies: 
             print(f"  scene {i}: {broken[-1]}", file=sys.stderr, flush=True)
         if (i + 1) % 100 == 0:
             so_far = ", ".join(f"{what} {n}" for what, n in sorted(outcomes.items()))
-            print(f"  ... {i + 1} scenes in {time.perf_counter() - started:.0f} s: {so_far}", file=sys.stderr, flush=True)
+            print(f"  ... {i + 1} scenes in {time.perf_counter() - started:.0f} s: {so_far}", file=sys.stderr,
+                  flush=True)
     runner.close()
     took = time.perf_counter() - started
     counts = ", ".join(f"{what} {n}" for what, n in sorted(outcomes.items()))
