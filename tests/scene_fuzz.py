@@ -338,7 +338,8 @@ class _TooLong(BaseException):
 
 
 REFUSAL_CAUSES = [
-    ("overlaps", "start overlap"), ("too soft", "too soft"), ("passed through", "pass-through caught"),
+    ("overlaps", "start overlap"), ("too soft", "too soft"), ("stability limit", "dt beyond the stability limit"),
+    ("passed through", "pass-through caught"),
     ("through wall", "pass-through caught"),
     ("beyond the", "pass-through caught"), ("stiff", "too stiff"), ("round-off", "too stiff"),
     ("tol", "tolerance unreachable"), ("steps", "too many steps"), ("not finite", "non-finite"),
