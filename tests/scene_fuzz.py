@@ -379,6 +379,8 @@ def run_in_process(raw: dict, hard_limit_s: int = 180) -> tuple[Verdict, dict | 
         text = str(exc)
         if "\n" in text.strip():
             return Verdict("violation", "refusal not one line", text[:300], took), None
+        if took > TIME_LIMIT_S:
+            return Verdict("violation", "too slow", f"refused after {took:.0f} s: {text}", took), None
         return Verdict("refused", refusal_cause(text), text, took), None
     except RuntimeWarning as exc:
         return Verdict("violation", "overflow net", f"a RuntimeWarning escaped the engine: {exc}",
