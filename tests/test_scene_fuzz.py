@@ -24,6 +24,8 @@ SLOW = {
     "dem-1d-7-bodies-no-duration.toml": "7 spheres in 1D, DEM, no duration: past 1e6 steps (19 s) unended",
     "seed-1d-16-bodies-no-duration.toml": "16 spheres in 1D, seed at tol 1.6e-4, no duration: past 1e6 steps (16 s) "
                                           "unended",
+    "seed-1d-27-bodies-step-limit.toml": "27 spheres in 1D, seed at tol 7.8e-5, no duration: refused at the 2e7-step "
+                                         "limit after 80-95 s",
 }
 
 
