@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -115,6 +117,14 @@ def batch(
         else:
             typer.echo(f"\ninterrupted: finished runs are kept in {summary}; run the same command with "
                        "--resume to finish the rest", err=True)
+        if cluster is not None:
+            # Dask's futures still pending at exit print a traceback from their __del__ while the
+            # interpreter tears down (now and then): the rows are synced, so end here, quietly.
+            with contextlib.suppress(Exception):
+                cluster.close()
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(130)
         raise SystemExit(130) from None
     except OutputError as exc:
         if summary.exists():  # a write failed mid-batch: the finished runs' rows are on disk

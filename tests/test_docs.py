@@ -127,17 +127,8 @@ def page_items(page: Path) -> list[Item]:
 ITEMS = [item for page in PAGES for item in page_items(page)]
 
 
-def _params() -> list:
-    params = []
-    for item in ITEMS:
-        if item.kind == "file":
-            continue
-        marks = [pytest.mark.skip(reason=item.skip)] if item.skip else []
-        pending = next((why for key, why in PENDING.items() if key in item.text), None)
-        if pending:
-            marks.append(pytest.mark.xfail(strict=False, reason=pending))
-        params.append(pytest.param(item, id=item.id, marks=marks))
-    return params
+def _runnable(page: Path) -> list[Item]:
+    return [item for item in page_items(page) if item.kind != "file"]
 
 
 @pytest.fixture(scope="module")
@@ -189,25 +180,43 @@ def _run_view(command: str, cwd: Path) -> None:
             process.wait()
 
 
-@pytest.mark.parametrize("item", _params())
-def test_documented_command_runs(item: Item, workdirs) -> None:
-    cwd = workdirs(item.page)
+def _run_item(item: Item, cwd: Path) -> str | None:
+    """Run one documented command or snippet in `cwd`; what went wrong, or None."""
     if item.kind == "python":
         done = subprocess.run([sys.executable, "-c", item.text], cwd=cwd, env=_env(), capture_output=True,
                               text=True, timeout=COMMAND_TIMEOUT)
-        assert done.returncode == 0, f"the snippet at line {item.line} failed:\n{done.stderr[-2000:]}"
-        return
+        return None if done.returncode == 0 else f"the snippet at line {item.line} failed:\n{done.stderr[-2000:]}"
     command = f"{item.text} {item.args}".strip()
     if command.startswith("collide view") and "--help" not in command:
-        _run_view(command, cwd)
-        return
+        try:
+            _run_view(command, cwd)
+        except pytest.fail.Exception as exc:
+            return str(exc)
+        return None
     done = subprocess.run(["bash", "-c", command], cwd=cwd, env=_env(), capture_output=True, text=True,
                           timeout=COMMAND_TIMEOUT)
-    assert done.returncode == item.expect, (
-        f"`{command}` exited {done.returncode}, documented {item.expect}:\n"
-        f"{done.stdout[-1500:]}\n{done.stderr[-1500:]}")
-    if item.expect == 0:
-        assert "Traceback" not in done.stderr
+    if done.returncode != item.expect:
+        return (f"`{command}` exited {done.returncode}, documented {item.expect}:\n"
+                f"{done.stdout[-1500:]}\n{done.stderr[-1500:]}")
+    if item.expect == 0 and "Traceback" in done.stderr:
+        return f"`{command}` printed a traceback:\n{done.stderr[-1500:]}"
+    return None
+
+
+# One test per page, its commands in page order in one folder: a later command reads what an
+# earlier one wrote (a recording), and the test runner may spread tests over processes.
+@pytest.mark.parametrize("page", PAGES, ids=lambda page: page.relative_to(REPO).as_posix())
+def test_documented_commands_run(page: Path, workdirs) -> None:
+    cwd = workdirs(page)
+    failures = []
+    for item in _runnable(page):
+        if item.skip:
+            continue
+        problem = _run_item(item, cwd)
+        pending = next((why for key, why in PENDING.items() if key in item.text), None)
+        if problem and not pending:
+            failures.append(f"{page.name}:{item.line}: {problem}")
+    assert not failures, "\n\n".join(failures)
 
 
 def test_the_pages_have_commands_to_run() -> None:
