@@ -20,6 +20,7 @@ from cli.common import (
     fail,
     parse_dt,
 )
+from collide.limits import MAX_STEPS_DEFAULT, OPEN_RUN_STEPS
 
 app = typer.Typer(
     name="collide",
@@ -137,6 +138,9 @@ def run(
     all_bodies: Annotated[bool, typer.Option(
         "--all-bodies", help=f"List every body in the summary (by default a scene of more than {SHOWN_BODIES} "
         "lists a few and the spread of speeds).")] = False,
+    max_steps: Annotated[int | None, typer.Option(
+        "--max-steps", min=1, help="Refuse the run past this many steps.",
+        show_default=f"{MAX_STEPS_DEFAULT:.0e} with a duration, {OPEN_RUN_STEPS:.0e} without one")] = None,
 ) -> None:
     """Run one scene, print a summary and write a Rerun recording.
 
@@ -172,7 +176,8 @@ def run(
     # The trajectory is kept only for what uses it: the recording and the CSV.
     keep = not no_record or csv is not None
     with progress_display(loaded.name) as show:
-        result = run_scene(loaded, integrator=integrator, dt=step, tol=tol, record=keep, progress=show)
+        result = run_scene(loaded, integrator=integrator, dt=step, tol=tol, record=keep, progress=show,
+                           max_steps=max_steps)
     summary = run_summary(result)
     if csv is not None:
         every = csv_every if csv_every is not None else 100 * float(result.result.dt[0])

@@ -28,6 +28,7 @@ from collide.stepper import (
     _pad3,
     approach_bound,
     run_members,
+    step_limit_error,
     unpack_state,
 )
 
@@ -138,7 +139,7 @@ def check_dem(model: Model, state: State, dt: np.ndarray, max_steps: int, durati
         if (steps > max_steps).any():
             b = int(np.argmax(steps))
             raise RunError(f"dt = {dt[b]:.3g} s over {duration[b]:.3g} s is {steps[b]:.3g} steps (limit "
-                           f"{max_steps:.3g}); use a larger dt or a shorter duration")
+                           f"{max_steps:.3g}); use a larger dt or a shorter duration, or allow more (--max-steps)")
     return per_contact
 
 
@@ -223,7 +224,7 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
             raise RunError(f"non-finite numbers at t = {fg[dk.G_STATUS_T]:.6g} s: the DEM step is unstable; "
                            "try a smaller dt")
         if st[dk.S_STATUS] == dk.MAXSTEPS:
-            raise RunError(f"the run did not end within {int(st[dk.S_STEPS])} steps; set a duration or a larger dt")
+            raise step_limit_error(int(st[dk.S_STEPS]), float(t), not np.isfinite(t_end))
         if not np.isfinite(t_end) and np.isnan(rest[b]) and np.isfinite(tail[b]) and tail[b] > 0:
             X += V * tail[b] + 0.5 * grav * tail[b] ** 2  # free flight after the last contact
             V += grav * tail[b]

@@ -12,9 +12,10 @@ import numpy as np
 from collide import diagnostics as dg
 from collide.integrators import INTEGRATORS
 from collide.invariant import check_invariant
+from collide.limits import step_limit
 from collide.model import compile_scenes, reference_frequency, select_model, select_state
 from collide.scene import Scene, SceneError, dem_reason
-from collide.stepper import EDGE_TOL, MAX_STEPS_DEFAULT, Progress, RunError, RunResult, approach_bound, simulate
+from collide.stepper import EDGE_TOL, Progress, RunError, RunResult, approach_bound, simulate
 
 
 @dataclass
@@ -228,9 +229,11 @@ def auto_dt(scenes: list[Scene], integrator: str, tol: np.ndarray) -> tuple[np.n
 
 def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float | str | None = None,
                tol: float | None = None, record: bool = True,
-               max_steps: int = MAX_STEPS_DEFAULT, progress: Progress | None = None,
+               max_steps: int | None = None, progress: Progress | None = None,
                measure: bool = True) -> SceneRun:
     """Run B same-shaped scenes in one batch. `integrator`, `dt` and `tol` override the scenes'.
+    `max_steps` bounds each member's steps (by default `stepper.step_limit`: fewer for a run with
+    no duration); a measured run's tighter runs share it.
 
     A single run whose error the model does not cover (see MEASURED_MAX_BODIES) has it measured
     (`measure`; `error_method` says which)."""
@@ -238,6 +241,9 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     if len(names) != 1:
         raise SceneError("scenes in one batch must use the same integrator")
     integ = names.pop()
+    max_steps = step_limit([scene.duration for scene in scenes], max_steps)
+    if max_steps < 1:
+        raise SceneError(f"--max-steps must be a positive number of steps, got {max_steps}")
     if integ not in INTEGRATORS:
         raise SceneError(f"integrator: unknown '{integ}' (choose from {', '.join(INTEGRATORS)})")
     model, state = compile_scenes(scenes)
@@ -345,6 +351,7 @@ def _measured(run: SceneRun, integ: str, record: bool, max_steps: int) -> SceneR
     candidate, step_tol = run, tol
     candidate_model = float(run.error_estimate[0])  # the model's estimate for the candidate
     spent = run.result.wall_time_s
+    budget = max_steps - int(run.result.steps[0])  # the tighter runs share the run's step limit
     same = refined = 0
     while refined < MEASURE_REFINEMENTS:
         finer_tol = step_tol / 10
@@ -357,16 +364,17 @@ def _measured(run: SceneRun, integ: str, record: bool, max_steps: int) -> SceneR
                and float(auto_dt([scene], integ, np.array([finer_tol]))[0][0]) == float(candidate.result.dt[0])):
             finer_tol /= 10
             same += 1
-        if finer_tol < floor:
+        if finer_tol < floor or budget < 1:
             break
         try:
-            finer = run_scenes([scene], integrator=integ, tol=finer_tol, record=record, max_steps=max_steps,
+            finer = run_scenes([scene], integrator=integ, tol=finer_tol, record=record, max_steps=budget,
                                measure=False)
         except RunError as exc:
             candidate.result.warnings.append(f"the error could not be measured (a run at --tol {finer_tol:.2g}: "
                                              f"{exc}); the estimate is the model's")
             break
         spent += finer.result.wall_time_s
+        budget -= int(finer.result.steps[0])
         refined += 1
         model_estimate = float(candidate_model)
         candidate_model = float(finer.error_estimate[0])

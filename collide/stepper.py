@@ -24,6 +24,7 @@ from collide.engine import kernels as kn
 from collide.engine import tier
 from collide.errors import RunError
 from collide.integrators import INTEGRATORS, Integrator
+from collide.limits import MAX_STEPS_DEFAULT
 from collide.model import (
     TABLE_K,
     Model,
@@ -36,9 +37,19 @@ from collide.model import (
     turned_quaternions,
 )
 
-MAX_STEPS_DEFAULT = 20_000_000
 EDGE_TOL = float(kn.EDGE_TOL)
 EDGE_BAND_SHARE = 0.5  # of eps: the widest a band's edge may count (see simulate)
+
+
+def step_limit_error(steps: int, t: float, open_ended: bool) -> RunError:
+    """The refusal of a run that reached its step limit, naming the way out."""
+    at = f" (at t = {t:.6g} s)" if np.isfinite(t) else ""
+    if open_ended:
+        return RunError(f"the run had not ended after {steps} steps{at}: a run with no duration goes on until "
+                        "nothing can meet again; give it one (--set duration=SECONDS) or allow more steps "
+                        "(--max-steps)")
+    return RunError(f"the run reached its limit of {steps} steps{at}; use a larger dt or a shorter duration, or "
+                    "allow more (--max-steps)")
 
 
 # A progress display: called about 4 times a second while a run is going, with (member, members,
@@ -301,8 +312,8 @@ def check_run(model: Model, state: State, dt: np.ndarray, integrator: Integrator
         math.pi / (slowest * dt)
     if (per_contact > max_steps).any():
         b = int(np.argmax(per_contact))
-        raise RunError(f"dt = {dt[b]:.3g} s is so small that one contact would take "
-                       f"{per_contact[b]:.3g} steps (limit {max_steps:.3g}); use a larger dt or auto")
+        raise RunError(f"dt = {dt[b]:.3g} s is so small that one contact would take {per_contact[b]:.3g} steps "
+                       f"(limit {max_steps:.3g}); use a larger dt (or a looser --tol), or allow more (--max-steps)")
     return warnings
 
 
@@ -491,7 +502,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     for b, (turn, _, orientation) in flat.items():
         out_of_plane(G[b], outcomes[b][1], outcomes[b][2], turn, orientation, model.spin_dim)
     for b, (t, knots, recs, ival, st, fg) in enumerate(outcomes):
-        _check_status(model, b, st, fg, dt, integ)
+        _check_status(model, b, st, fg, dt, integ, open_ended=not np.isfinite(t_end[b]), t=t)
         t_final[b] = t
         stats[b], figures[b] = st, fg
         ivals.append(ival)
@@ -646,7 +657,8 @@ def longest_contacts(model: Model, ivals: list[np.ndarray], t_end: np.ndarray) -
     return out
 
 
-def _check_status(model: Model, b: int, st: np.ndarray, fg: np.ndarray, dt: np.ndarray, integ: Integrator) -> None:
+def _check_status(model: Model, b: int, st: np.ndarray, fg: np.ndarray, dt: np.ndarray, integ: Integrator, *,
+                  open_ended: bool, t: float) -> None:
     """Turn a kernel's status into a RunError naming the cause."""
     status = int(st[kn.S_STATUS])
     if status == kn.OK:
@@ -663,7 +675,7 @@ def _check_status(model: Model, b: int, st: np.ndarray, fg: np.ndarray, dt: np.n
         raise RunError(f"the run stopped advancing at {at} (events closer than the clock resolves); report this "
                        "scene, or try a looser --tol or a given --dt")
     if status == kn.MAXSTEPS:
-        raise RunError(f"the run did not end within {int(st[kn.S_STEPS])} steps; set a duration or a larger dt")
+        raise step_limit_error(int(st[kn.S_STEPS]), t, open_ended)
     if status == kn.SINGULAR:
         raise RunError(f"the stuck contacts' friction could not be solved at {at} (a singular hold system)")
     raise RunError(f"the engine stopped with status {status} at {at}")

@@ -255,3 +255,30 @@ def test_a_material_given_as_a_list_is_one_line(monkeypatch, capsys, tmp_path: P
                      'radius = 0.1\nposition = [1.0, 0.0]\n')
     code, out, err = _main(["run", str(scene), "--no-record"], monkeypatch, capsys, tmp_path)
     _one_line_error(code, out, err, "body.a.material: expected a material's name")
+
+
+def test_a_run_with_no_duration_is_refused_at_its_step_limit_and_max_steps_moves_it(monkeypatch, capsys,
+                                                                                    tmp_path) -> None:
+    """A run with no duration has a smaller step limit than one with a duration (collide/limits.py):
+    the cradle ends by itself in a few dozen steps; held to 20 (more than one contact takes) it is
+    refused in one line naming the way out, and `--max-steps` is that limit for either kind of run."""
+    from collide.limits import MAX_STEPS_DEFAULT, OPEN_RUN_STEPS, step_limit
+
+    assert step_limit([None, 1.0], None) == OPEN_RUN_STEPS < MAX_STEPS_DEFAULT == step_limit([1.0, 2.0], None)
+    assert step_limit([None], 7) == 7
+    from collide.scene import load_scene
+
+    cradle = run_scene(load_scene("newtons-cradle"), record=False)
+    steps = int(cradle.result.steps[0])
+    assert 20 < steps < OPEN_RUN_STEPS
+    code, out, err = _main(["run", "newtons-cradle", "--no-record", "--max-steps", "20"], monkeypatch, capsys,
+                           tmp_path)
+    _one_line_error(code, out, err, "had not ended after")
+    assert "--set duration=" in err and "--max-steps" in err
+    code, out, _ = _main(["run", "newtons-cradle", "--no-record", "--json", "--max-steps", str(steps)],
+                         monkeypatch, capsys, tmp_path)
+    assert code == 0 and f'"steps": {steps}' in out
+    # With a duration the limit is said before the run (DEM: the steps are known).
+    code, out, err = _main(["run", "bounce", "--no-record", "--max-steps", "100"], monkeypatch, capsys, tmp_path)
+    _one_line_error(code, out, err, "(limit 100)")
+
