@@ -8,10 +8,17 @@ MAX_STEPS_DEFAULT = 20_000_000  # a run with a duration: it ends, the limit only
 # spheres with long free flights took 2e7 DEM steps (134 s) without ending. The built-ins that end
 # by themselves take 9 to 31 065 steps.
 OPEN_RUN_STEPS = 1_000_000
+# ... or this many contacts' worth of steps, if more: a step the user made fine (demo-bonus at
+# dt = 1e-8 takes 1.3e6 steps for its one contact) is theirs to pay for, up to the limit of a
+# run with a duration.
+OPEN_RUN_CONTACTS = 50
 
 
-def step_limit(durations: list[float | None], max_steps: int | None) -> int:
-    """The steps a run may take: `max_steps` if given, else by whether every member has a duration."""
+def step_limit(durations: list[float | None], max_steps: int | None, steps_per_contact: float = 0.0) -> int:
+    """The steps a run may take: `max_steps` if given, else by whether every member has a duration
+    (and, for one that has not, by the steps one contact takes at its step)."""
     if max_steps is not None:
         return max_steps
-    return MAX_STEPS_DEFAULT if all(d is not None for d in durations) else OPEN_RUN_STEPS
+    if all(d is not None for d in durations):
+        return MAX_STEPS_DEFAULT
+    return int(max(OPEN_RUN_STEPS, min(MAX_STEPS_DEFAULT, OPEN_RUN_CONTACTS * steps_per_contact)))

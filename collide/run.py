@@ -232,7 +232,7 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
                max_steps: int | None = None, progress: Progress | None = None,
                measure: bool = True) -> SceneRun:
     """Run B same-shaped scenes in one batch. `integrator`, `dt` and `tol` override the scenes'.
-    `max_steps` bounds each member's steps (by default `stepper.step_limit`: fewer for a run with
+    `max_steps` bounds each member's steps (by default `limits.step_limit`: fewer for a run with
     no duration); a measured run's tighter runs share it.
 
     A single run whose error the model does not cover (see MEASURED_MAX_BODIES) has it measured
@@ -241,9 +241,9 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     if len(names) != 1:
         raise SceneError("scenes in one batch must use the same integrator")
     integ = names.pop()
-    max_steps = step_limit([scene.duration for scene in scenes], max_steps)
-    if max_steps < 1:
+    if max_steps is not None and max_steps < 1:
         raise SceneError(f"--max-steps must be a positive number of steps, got {max_steps}")
+    durations = [scene.duration for scene in scenes]
     if integ not in INTEGRATORS:
         raise SceneError(f"integrator: unknown '{integ}' (choose from {', '.join(INTEGRATORS)})")
     model, state = compile_scenes(scenes)
@@ -273,6 +273,7 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
             raise SceneError("body: a scene of one sphere and no walls has no contact to step; add a body or a wall")
         raise SceneError(f"dt: must be a positive number or 'auto', got {dt!r}")
     omega_h = np.where(auto_used, omega_h, dt_arr * omega)
+    max_steps = step_limit(durations, max_steps, _steps_per_contact(np.pi / np.where(omega_h > 0, omega_h, np.inf)))
     # No step leaves the outcome finer than round-off, whatever the model says of a tiny one (nor
     # than the positions resolve of a stiff contact's overlap).
     estimate = np.maximum(predicted_error(integ, [error_regime(scene) for scene in scenes], omega_h),
@@ -308,6 +309,12 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     run.result.warnings.extend(balance_warnings(run.result, scenes, np.maximum(tols, run.error_estimate),
                                                 auto_used))
     return run
+
+
+def _steps_per_contact(steps: np.ndarray) -> float:
+    """The most steps one contact takes over a batch (0 where no contact can happen)."""
+    finite = steps[np.isfinite(steps)]
+    return float(finite.max()) if finite.size else 0.0
 
 
 def _outside_model(run: SceneRun) -> bool:
@@ -405,7 +412,7 @@ def _measured(run: SceneRun, integ: str, record: bool, max_steps: int) -> SceneR
 
 
 def _run_dem(scenes: list[Scene], model, state, requested: list, auto_used: list[bool], tols: np.ndarray,
-             dt_request: float | str | None, record: bool, max_steps: int,
+             dt_request: float | str | None, record: bool, max_steps: int | None,
              progress: Progress | None = None) -> SceneRun:
     """A batch through the fixed-step DEM kernel (`collide.dem`)."""
     from collide import dem
@@ -418,11 +425,12 @@ def _run_dem(scenes: list[Scene], model, state, requested: list, auto_used: list
     duration = np.array([np.nan if s.duration is None else s.duration for s in scenes])
     tail = np.array([np.nan if s.tail is None else s.tail for s in scenes])
     rest = np.array([np.nan if s.rest is None else s.rest for s in scenes])
+    t_c, _, _ = dem.contact_time(model, state)
+    max_steps = step_limit([s.duration for s in scenes], max_steps, _steps_per_contact(t_c / steps))
     result = simulate(model, state, integrator="dem", dt=steps, duration=duration, tail=tail, record=record,
                       max_steps=max_steps, rest=rest, progress=progress)
     check_finite(result, scenes)
     check_invariant(result)
-    t_c, _, _ = dem.contact_time(model, state)
     estimate = dem.predicted_error(t_c / steps)
     result.warnings.extend(balance_warnings(result, scenes, np.maximum(tols, estimate), auto_used))
     return SceneRun(list(scenes), result, dt_request, [float(x) for x in tols], estimate, auto_used,

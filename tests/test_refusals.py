@@ -267,6 +267,8 @@ def test_a_run_with_no_duration_is_refused_at_its_step_limit_and_max_steps_moves
 
     assert step_limit([None, 1.0], None) == OPEN_RUN_STEPS < MAX_STEPS_DEFAULT == step_limit([1.0, 2.0], None)
     assert step_limit([None], 7) == 7
+    # A fine step is the user's to pay for: 50 contacts' worth of it, up to the limit with a duration.
+    assert step_limit([None], None, 1e5) == 5_000_000 and step_limit([None], None, 1e7) == MAX_STEPS_DEFAULT
     from collide.scene import load_scene
 
     cradle = run_scene(load_scene("newtons-cradle"), record=False)
