@@ -94,9 +94,9 @@ from collide.colours import ENERGY_COLOURS, body_colour, body_colours
 from collide.engine import kernels as kn
 from collide.model import Model, State, compile_scenes
 from collide.output import OutputError, check_file, write_atomic
+from collide.results import ContactLog, RunResult, Trajectory
 from collide.run import SceneRun
 from collide.scene import SceneError, parse_scene
-from collide.stepper import ContactLog, RunResult, Trajectory
 
 APP_ID = "collide"
 FORMAT = "collide-recording"
