@@ -33,6 +33,7 @@ import rerun as rr
 
 from collide import batch as lib
 from collide import recording as rec
+from collide.recording import writer as rec_writer
 from collide.run import run_scene
 from collide.scene import load_scene
 
@@ -65,18 +66,18 @@ def bench_recording(dt: float, integrator: str, repeats: int, log_rows: int, fol
 
     # The same entities and rows, one rr.log per row: capture what the writer sends.
     captured: list[tuple[str, list, rr.TimeColumn]] = []
-    original = rec._Writer._send
+    original = rec_writer._Writer._send
 
-    def capture(self: rec._Writer, entity: str, columns: object, index: rr.TimeColumn | None = None) -> None:
+    def capture(self: rec_writer._Writer, entity: str, columns: object, index: rr.TimeColumn | None = None) -> None:
         cols = list(columns)
         captured.append((entity, cols, index or self.tc))
         original(self, entity, cols, index)
 
-    rec._Writer._send = capture
+    rec_writer._Writer._send = capture
     try:
         rec.write_recording(run, folder / "capture.rrd")
     finally:
-        rec._Writer._send = original
+        rec_writer._Writer._send = original
     per_row_times = []
     for _ in range(repeats):
         per_row_times.append(_per_row_log(captured, log_rows, folder / "per-row.rrd"))

@@ -155,7 +155,7 @@ def run(
       collide run my_scene.toml --dt auto --tol 1e-9 --no-record
     """
     from cli.common import compiled_for_large, progress_display
-    from collide.engine.hint import prefer_interpreted
+    from collide.hint import prefer_interpreted
     from collide.scene import load_scene
 
     loaded = load_scene(scene, set_ or [])

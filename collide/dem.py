@@ -19,12 +19,10 @@ from collide.engine import dem as dk
 from collide.engine import kernels as kn
 from collide.engine import tier
 from collide.model import KISSING, TABLE_ESTAR, TABLE_K, TABLE_KTR, TABLE_REST, Model, State, select_model
+from collide.results import ContactLog, RunResult, Trajectory
 from collide.stepper import (
-    ContactLog,
     Progress,
     RunError,
-    RunResult,
-    Trajectory,
     _pad3,
     approach_bound,
     run_members,

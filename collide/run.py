@@ -14,8 +14,9 @@ from collide.integrators import INTEGRATORS
 from collide.invariant import check_invariant
 from collide.limits import step_limit
 from collide.model import compile_scenes, reference_frequency, select_model, select_state
+from collide.results import RunResult
 from collide.scene import Scene, SceneError, dem_reason
-from collide.stepper import EDGE_TOL, Progress, RunError, RunResult, approach_bound, simulate
+from collide.stepper import EDGE_TOL, Progress, RunError, approach_bound, simulate
 
 
 @dataclass
@@ -427,8 +428,8 @@ def _run_dem(scenes: list[Scene], model, state, requested: list, auto_used: list
     rest = np.array([np.nan if s.rest is None else s.rest for s in scenes])
     t_c, _, _ = dem.contact_time(model, state)
     max_steps = step_limit([s.duration for s in scenes], max_steps, _steps_per_contact(t_c / steps))
-    result = simulate(model, state, integrator="dem", dt=steps, duration=duration, tail=tail, record=record,
-                      max_steps=max_steps, rest=rest, progress=progress)
+    result = dem.simulate_dem(model, state, dt=steps, duration=duration, tail=tail, rest=rest, record=record,
+                              max_steps=max_steps, progress=progress)
     check_finite(result, scenes)
     check_invariant(result)
     estimate = dem.predicted_error(t_c / steps)

@@ -30,7 +30,7 @@ from collide.scene import Scene, dem_reason, with_settings
 
 # collide.diagnostics and collide.run (the engine) are imported where runs are judged: the command
 # line imports this module (through collide.validate) before a run decides compiled or interpreted
-# kernels (collide.engine.hint).
+# kernels (collide.hint).
 
 LADDER_FACTOR = 100.0  # the tighter tolerance of the ladder (a given step: divided by 10)
 LADDER_STEP_FACTOR = 10.0

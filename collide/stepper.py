@@ -1,7 +1,8 @@
-"""Running scenes through the compiled engine (`collide.engine.kernels`) and what a run returns.
+"""Running scenes through the event engine (`collide.engine.kernels`).
 
 `simulate` packs a batch of runs into the kernels' tables, runs each member, and unpacks a
-`RunResult`: final states, counters, contact log and (when recording) a `Trajectory` per member.
+`RunResult` (`collide.results`): final states, counters, contact log and (when recording) a
+`Trajectory` per member. DEM runs go through `collide.dem` instead (`collide.run` chooses).
 The engine itself (windows, islands, closed-form free flight, event-located steps; the seed's
 fixed grid) is described in `collide/engine/kernels.py` and the README.
 """
@@ -15,8 +16,6 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass, field
-from functools import cached_property
 
 import numpy as np
 
@@ -33,9 +32,10 @@ from collide.model import (
     plane_of_motion,
     reference_frequency,
     select_model,
-    select_state,
     turned_quaternions,
 )
+from collide.results import ContactLog, RunResult
+from collide.trajectory import Trajectory
 
 EDGE_TOL = float(kn.EDGE_TOL)
 EDGE_BAND_SHARE = 0.5  # of eps: the widest a band's edge may count (see simulate)
@@ -82,164 +82,6 @@ def watch(progress: Progress | None, fp: np.ndarray, now: int, t_end: float, mem
     finally:
         done.set()
         thread.join()
-
-
-@dataclass
-class Trajectory:
-    """One run's motion, exactly where it is known, plus its contacts.
-
-    knots (K, kernels.NK): a body's state at a time (the ends of its steps, where free flight
-    starts and ends), with its acceleration just before and after; between two knots of a body
-    the motion is closed-form free flight (the earlier knot's K_FREE) or one integrator step,
-    rebuilt by a quintic Hermite (`diagnostics.sample`). records (R, kernels.NR): each engaged
-    contact at the end of each step (overlap, normal force, friction force on body i, mode).
-    intervals (I, 4): (i, j, start, end) of every contact phase; j = -1 - wall for walls.
-
-    `t`, `s`, `v`, `w`, `q`, `work`, `free` are the rows view: every body at every knot time,
-    (S, 1, ...), as older code and the recording's exact frames read it.
-    """
-
-    knots: np.ndarray
-    records: np.ndarray
-    intervals: np.ndarray
-    model: Model = field(repr=False)
-    # DEM runs: (F, 5) per recorded frame: t, work of damping, friction, rolling resistance (J,
-    # cumulative), energy held by tangential springs (J).
-    energy_parts: np.ndarray | None = field(default=None, repr=False)
-
-    @property
-    def knot_times(self) -> np.ndarray:
-        return np.unique(self.knots[:, kn.K_T])
-
-    @property
-    def n_steps(self) -> int:
-        return len(self.knot_times)
-
-    @cached_property
-    def _rows(self):
-        from collide.diagnostics import sample
-
-        times = self.knot_times
-        return times, sample(self.model, self, times)
-
-    @property
-    def t(self) -> np.ndarray:
-        # The knot times alone: asking for them must not sample every body at every knot
-        # (gas-box: 78 506 knot times x 1 000 bodies, gigabytes).
-        return self.knot_times[:, None]
-
-    @property
-    def s(self) -> np.ndarray:
-        return self._rows[1].s
-
-    @property
-    def v(self) -> np.ndarray:
-        return self._rows[1].v
-
-    @property
-    def w(self) -> np.ndarray:
-        return self._rows[1].w
-
-    @property
-    def q(self) -> np.ndarray:
-        return self._rows[1].q
-
-    @property
-    def work(self) -> np.ndarray:
-        return self._rows[1].work
-
-    @cached_property
-    def free(self) -> np.ndarray:
-        """(S, 1): the segment that ends at row k was free flight for every body."""
-        times = self.knot_times
-        stepped = np.zeros(len(times), bool)
-        knots = self.knots
-        for body in range(self.model.n_bodies):
-            mine = knots[knots[:, kn.K_BODY] == body]
-            steps = mine[:-1, kn.K_FREE] == 0.0
-            ends = np.searchsorted(times, mine[1:, kn.K_T])
-            starts = np.searchsorted(times, mine[:-1, kn.K_T])
-            for a, b in zip(starts[steps], ends[steps]):
-                stepped[a + 1:b + 1] = True
-        free = ~stepped
-        free[0] = True
-        return free[:, None]
-
-    def contacts_touched(self) -> np.ndarray:
-        """(C, 2) every contact that was ever engaged, in the order they began: (i, j) with
-        j = -1 - wall."""
-        if not len(self.intervals):
-            return np.zeros((0, 2), np.int64)
-        pairs = self.intervals[:, :2].astype(np.int64)
-        _, first = np.unique(pairs, axis=0, return_index=True)
-        return pairs[np.sort(first)]
-
-
-@dataclass
-class ContactLog:
-    """Per run (B,): first contact start, last contact end, time in contact (any contact
-    engaged), largest overlap, and the number of contacts that began."""
-
-    first_start: np.ndarray
-    last_end: np.ndarray
-    duration: np.ndarray
-    max_overlap: np.ndarray
-    count: np.ndarray
-    max_normal_force: np.ndarray | None = None  # N; NaN where not known (the seed's grid with walls)
-    # The longest single contact in collision times (pi / omega of its pair): a collision lasts
-    # about one, a contact that rests or rolls many. None where not known (DEM runs, recordings).
-    longest: np.ndarray | None = None
-
-
-@dataclass
-class RunResult:
-    """What a run produced: the seam between the physics and everything that shows it."""
-
-    model: Model
-    initial: State
-    final: State
-    integrator: str
-    dt: np.ndarray
-    steps: np.ndarray
-    jumps: np.ndarray
-    wall_time_s: float
-    contacts: ContactLog
-    trajectories: list[Trajectory] | None = None
-    warnings: list[str] = field(default_factory=list)
-    dt_min: np.ndarray | None = None  # (B,) the smallest step any island took
-    windows: np.ndarray | None = None  # (B,) windows of islands the run took
-    dissipation: np.ndarray | None = None  # (B, 3) DEM: J taken out by damping, friction, rolling
-    closed_steps: np.ndarray | None = None  # (B,) of the steps, intervals run in closed form (a sphere on a wall)
-    attempts: np.ndarray | None = None  # (B,) whole steps tried from a step's start (events cost more than one)
-    free_since: np.ndarray | None = None  # (B, N) when each body's last contact ended (0: none; the end: open)
-
-    @property
-    def batch_size(self) -> int:
-        return self.model.batch
-
-    @property
-    def trajectory(self) -> Trajectory | None:
-        """Member 0's trajectory (a batch of one's), or None when not recorded."""
-        return self.trajectories[0] if self.trajectories else None
-
-    def member(self, index: int) -> RunResult:
-        """Batch member `index` as a run of batch 1."""
-        def pick(x: np.ndarray | None) -> np.ndarray | None:
-            return None if x is None else x[index:index + 1]
-
-        log = ContactLog(*(pick(getattr(self.contacts, f)) for f in
-                           ("first_start", "last_end", "duration", "max_overlap", "count", "max_normal_force",
-                            "longest")))
-        trajectories = None
-        if self.trajectories is not None:
-            traj = self.trajectories[index]
-            trajectories = [Trajectory(traj.knots, traj.records, traj.intervals, select_model(self.model, index),
-                                       traj.energy_parts)]
-        return RunResult(select_model(self.model, index), select_state(self.initial, index),
-                         select_state(self.final, index), self.integrator, pick(self.dt), pick(self.steps),
-                         pick(self.jumps), self.wall_time_s, log, trajectories, list(self.warnings),
-                         pick(self.dt_min), pick(self.windows), pick(self.dissipation), pick(self.closed_steps),
-                         pick(self.attempts), pick(self.free_since))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -416,7 +258,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
              duration: np.ndarray | None = None, tail: np.ndarray | None = None,
              record: bool = True, max_steps: int = MAX_STEPS_DEFAULT,
              event_tol: np.ndarray | float = EDGE_TOL, auto: np.ndarray | None = None,
-             omega_h: np.ndarray | None = None, rest: np.ndarray | None = None,
+             omega_h: np.ndarray | None = None,
              progress: Progress | None = None, resolved: np.ndarray | float = 0.0) -> RunResult:
     """Run B scenes to their end. `duration` and `tail` are (B,) with NaN meaning 'not set'.
     `dt` (B,) is the step; where `auto` is set each island steps by omega_h over its own stiffest
@@ -425,16 +267,9 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     `resolved` (B,), relative to the same speed: the velocity error the run's steps leave (its
     tolerance); a run that ends by itself ends when nothing approaches faster than that."""
     b_count = model.batch
-    if integrator == "dem":
-        from collide.dem import simulate_dem
-
-        nan = np.full(b_count, np.nan)
-        return simulate_dem(model, initial, dt=np.broadcast_to(np.asarray(dt, dtype=float), (b_count,)).copy(),
-                            duration=nan if duration is None else np.asarray(duration, dtype=float),
-                            tail=nan if tail is None else np.asarray(tail, dtype=float),
-                            rest=nan if rest is None else np.asarray(rest, dtype=float), record=record,
-                            max_steps=max_steps, progress=progress)
     integ = INTEGRATORS[integrator]
+    if integrator == "dem":  # the fixed-step DEM kernel is its own engine
+        raise ValueError("the DEM integrator runs through collide.dem.simulate_dem (collide.run chooses it)")
     dt = np.broadcast_to(np.asarray(dt, dtype=float), (b_count,)).copy()
     auto = np.zeros(b_count, bool) if auto is None else np.broadcast_to(np.asarray(auto, bool), (b_count,))
     if omega_h is None:

@@ -31,7 +31,7 @@ from collide.scene_checks import Check, SceneReport, rigid_reason, scene_checks
 
 # collide.run (the engine) is imported by the functions that run scenes: the command line imports
 # this module to list its commands, before a run decides compiled or interpreted kernels
-# (collide.engine.hint).
+# (collide.hint).
 
 DEFAULT_TOL = 1e-4
 MAX_HALVINGS = 4

@@ -18,6 +18,8 @@ from pathlib import Path
 os.environ.setdefault("COLLIDE_JIT", "1")
 
 from collide import recording as rec  # noqa: E402
+from collide.recording import sandbox as rec_sandbox  # noqa: E402
+from collide.recording import writer as rec_writer  # noqa: E402
 from collide.run import run_scene  # noqa: E402
 from collide.scene import load_scene  # noqa: E402
 
@@ -38,7 +40,7 @@ def bench(name: str, sets: list[str], repeats: int, folder: Path) -> None:
     path = folder / f"{name}.rrd"
 
     def unsealed() -> None:
-        writer = rec._Writer(run, 1, rec.DEFAULT_FPS, rec.CONTACT_FRAMES)
+        writer = rec_writer._Writer(run, 1, rec.DEFAULT_FPS, rec.CONTACT_FRAMES)
         writer.seal = False
         writer.write(folder / "plain.rrd")  # frames and Rerun's writer: what collide did before
 
@@ -48,8 +50,8 @@ def bench(name: str, sets: list[str], repeats: int, folder: Path) -> None:
     print(f"  write: {before:.3f} s before, {after:.3f} s sealed and checked (+{after - before:.3f} s, "
           f"{100 * (after - before) / before:+.0f} %), {size:.1f} MB")
     trusted = timed(lambda: rec.read_recording(path, trusted=True), repeats)
-    rec._stop_idle_readers()
-    cold = timed(lambda: (rec._stop_idle_readers(), rec.read_recording(path)), 1)
+    rec_sandbox._stop_idle_readers()
+    cold = timed(lambda: (rec_sandbox._stop_idle_readers(), rec.read_recording(path)), 1)
     warm = timed(lambda: rec.read_recording(path), repeats)
     verify = timed(lambda: rec.verify_recording(path), repeats)
     print(f"  read: in process (trusted) {trusted:.3f} s; safe {warm:.3f} s with a warm reader, "

@@ -486,7 +486,7 @@ def test_batch_says_the_engine_loading_apart_from_the_runs(tmp_path: Path) -> No
     from collide.engine import tier
 
     if not COLLIDE.exists() or not tier.compiled_ready():
-        pytest.skip("needs the compiled engine (python -m collide.engine.warm) and the collide command")
+        pytest.skip("needs the compiled engine (python -m collide.warmup) and the collide command")
     env = {**os.environ, "COLLIDE_JIT": "1"}
     out = subprocess.run([str(COLLIDE), "batch", "demo-bonus", "--sweep", "contact.mu=0.1:0.3:20", "--summary",
                           "s.csv"], capture_output=True, text=True, cwd=tmp_path, timeout=300, env=env)

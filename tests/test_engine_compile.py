@@ -74,12 +74,12 @@ def test_a_live_compile_is_seen_with_its_progress_and_a_dead_one_is_not(tmp_path
 
 
 def test_a_command_that_needs_the_compiled_engine_waits_for_the_running_compile(tmp_path: Path) -> None:
-    """`python -m collide.engine.warm` (the test script's, `collide engine --compile`'s) takes the
+    """`python -m collide.warmup` (the test script's, `collide engine --compile`'s) takes the
     lock only when the compile that holds it ends: never a second compile beside it."""
     holder = _hold(tmp_path, 1.5)
     code = """
     import time
-    from collide.engine import warm
+    from collide import warmup as warm
     started = time.perf_counter()
     fd = warm._take_lock(None)
     print(time.perf_counter() - started)
@@ -93,7 +93,7 @@ def test_a_command_that_needs_the_compiled_engine_waits_for_the_running_compile(
 def _fail_compile(cache: Path) -> None:
     """A compile that fails as one did without scipy: its cause is recorded."""
     code = """
-    from collide.engine import warm
+    from collide import warmup as warm
     def broken():
         raise ImportError("scipy 0.16+ is required for linear algebra")
     warm.warm = broken

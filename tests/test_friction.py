@@ -161,7 +161,7 @@ def test_a_3d_pile_locates_every_event(seed, tol):
     from collide.engine import tier
 
     if not tier.compiled_ready():
-        pytest.skip("needs the compiled engine (python -m collide.engine.warm): 7 000 steps of 27 bodies")
+        pytest.skip("needs the compiled engine (python -m collide.warmup): 7 000 steps of 27 bodies")
     run = run_scene(falling_box(seed, tol), record=False, measure=False)
     assert not [w for w in run.result.warnings if "ran out of trials" in w], run.result.warnings
     assert int(run.result.steps[0]) > 1000  # the pile really was stepped

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from collide import recording as rec
+from collide.recording import writer as rec_writer
 from collide.run import check_finite, run_scene
 from collide.scene import MAX_MAGNITUDE, SceneError, load_scene
 from collide.stepper import RunError
@@ -149,7 +150,7 @@ def test_a_foreign_recording_with_collide_metadata_is_one_line(tmp_path: Path, m
 def test_a_long_free_flight_records_a_bounded_number_of_frames(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                               capsys: pytest.CaptureFixture) -> None:
     # demo-1d for 1e6 s would be 1.2e8 frames at 120 fps: the rate drops to fit the cap, and says so.
-    monkeypatch.setattr(rec, "MAX_FREE_FRAMES", 2000)
+    monkeypatch.setattr(rec_writer, "MAX_FREE_FRAMES", 2000)
     code, out, err = _main(["run", "demo-1d", "--set", "duration=100", "--out", "long.rrd"], monkeypatch, capsys,
                            tmp_path)
     assert (code, err) == (0, "")

@@ -13,6 +13,7 @@ import pytest
 from collide import diagnostics as dg
 from collide import recording as rec
 from collide.recording import RecordingError, entity_paths, read_recording, write_recording
+from collide.recording import writer as rec_writer
 from collide.run import run_scene, run_scenes
 from collide.scene import load_scene, parse_scene
 from collide.summary import run_summary
@@ -253,7 +254,7 @@ def test_write_is_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Non
     def boom(self: object) -> None:
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(rec._Writer, "_write_meta", boom)
+    monkeypatch.setattr(rec_writer._Writer, "_write_meta", boom)
     with pytest.raises(KeyboardInterrupt):
         write_recording(run, target)
     assert not target.exists()

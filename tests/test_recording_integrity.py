@@ -14,6 +14,8 @@ import rerun as rr
 from collide import recording as rec
 from collide.engine import kernels as kn
 from collide.recording import RecordingError, read_recording, write_recording
+from collide.recording import reader as rec_reader
+from collide.recording import writer as rec_writer
 from collide.run import run_scene
 from collide.scene import load_scene
 
@@ -43,8 +45,8 @@ def test_checksum_is_stored_and_matches(written: tuple) -> None:
     for table in ("knots", "records", "intervals"):
         np.testing.assert_array_equal(getattr(back.result.trajectory, table),
                                       getattr(run.result.trajectory, table))
-    chunks = rec._load_chunks(path)
-    meta = rec._meta(path, chunks)
+    chunks = rec_reader._load_chunks(path)
+    meta = rec_reader._meta(path, chunks)
     assert meta["format_version"] == 4 and len(meta["checksum"]) == 64
     assert meta["records"] > 0 and meta["intervals"] > 0  # the checksum covers non-empty tables
 
@@ -74,22 +76,22 @@ def test_format_2_without_checksum_is_read(written: tuple, tmp_path: Path,
     # Main's format 2 (the same tables, no checksum) is still read; with the version lowered but
     # a checksum present, the checksum is still checked.
     run, _ = written
-    monkeypatch.setattr(rec._Writer, "seal", False)  # no integrity record, as format 2 had none
-    monkeypatch.setattr(rec, "FORMAT_VERSION", 2)
+    monkeypatch.setattr(rec_writer._Writer, "seal", False)  # no integrity record, as format 2 had none
+    monkeypatch.setattr(rec_writer, "FORMAT_VERSION", 2)
     any_values = rr.AnyValues
-    monkeypatch.setattr(rec.rr, "AnyValues", lambda **values: any_values(
+    monkeypatch.setattr(rec_writer.rr, "AnyValues", lambda **values: any_values(
         **{k: v for k, v in values.items() if k != "checksum"}))
     path = write_recording(run, tmp_path / "v2.rrd")
     monkeypatch.undo()
-    assert "checksum" not in rec._meta(path, rec._load_chunks(path))
+    assert "checksum" not in rec_reader._meta(path, rec_reader._load_chunks(path))
     back = read_recording(path)
     np.testing.assert_array_equal(back.result.trajectory.knots, run.result.trajectory.knots)
     flipped = tmp_path / "v2-flipped.rrd"  # without a checksum a change goes unseen: why format 3 has one
     flipped.write_bytes(_flip_a_stored_position(run, path.read_bytes()))
     assert not np.array_equal(read_recording(flipped).result.trajectory.knots, run.result.trajectory.knots)
 
-    monkeypatch.setattr(rec._Writer, "seal", False)
-    monkeypatch.setattr(rec, "FORMAT_VERSION", 2)
+    monkeypatch.setattr(rec_writer._Writer, "seal", False)
+    monkeypatch.setattr(rec_writer, "FORMAT_VERSION", 2)
     path = write_recording(run, tmp_path / "v2-with-checksum.rrd")
     monkeypatch.undo()
     flipped.write_bytes(_flip_a_stored_position(run, path.read_bytes()))
@@ -117,8 +119,8 @@ def test_a_changed_setting_is_refused(written: tuple, tmp_path: Path, monkeypatc
         meta["dt"] = meta["dt"] * (1 + 1e-15)
         return value
 
-    monkeypatch.setattr(rec, "checksum", stale)
-    monkeypatch.setattr(rec._Writer, "seal", False)  # else the seal, over every byte, hides this check
+    monkeypatch.setattr(rec_writer, "checksum", stale)
+    monkeypatch.setattr(rec_writer._Writer, "seal", False)  # else the seal, over every byte, hides this check
     path = write_recording(run, tmp_path / "stale.rrd")
     monkeypatch.undo()
     with pytest.raises(RecordingError, match="checksum mismatch"):

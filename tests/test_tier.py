@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from collide.engine.hint import quick
+from collide.hint import quick
 from collide.scene import load_scene
 
 QUICK = ["demo-1d", "demo-2d-moving", "demo-2d-stationary", "demo-bonus", "textbook-1d", "textbook-glancing",
@@ -70,7 +70,7 @@ def test_the_summary_says_why_a_run_was_interpreted() -> None:
     from collide.engine import tier
 
     if not tier.compiled_ready():
-        pytest.skip("the compiled kernels are not built here (python -m collide.engine.warm)")
+        pytest.skip("the compiled kernels are not built here (python -m collide.warmup)")
     quick_run = _probe("run", "demo-bonus", "--no-record")
     forced = _probe("run", "demo-bonus", "--no-record", jit="0")
     assert "(interpreted kernels: quicker for a run this small; COLLIDE_JIT=1 compiles)" in quick_run.stdout
@@ -82,7 +82,7 @@ def test_a_run_that_is_not_quick_loads_the_compiled_kernels_when_ready() -> None
     from collide.engine import tier
 
     if not tier.compiled_ready():
-        pytest.skip("the compiled kernels are not built here (python -m collide.engine.warm)")
+        pytest.skip("the compiled kernels are not built here (python -m collide.warmup)")
     out = _probe("run", "demo-bonus", "--json", "--no-record", "--tol", "1e-12")
     assert out.returncode == 0, out.stderr
     assert out.stderr.strip().endswith("numba loaded")

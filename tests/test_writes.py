@@ -20,6 +20,9 @@ import pytest
 
 from collide import recording as rec
 from collide.recording import RecordingError, read_recording, verify_recording, write_recording
+from collide.recording import integrity as rec_integrity
+from collide.recording import reader as rec_reader
+from collide.recording import writer as rec_writer
 from collide.run import run_scene
 from collide.scene import load_scene
 
@@ -112,7 +115,7 @@ def test_writer_failing_inside_rerun_is_one_line(tmp_path: Path, bonus: object,
         path.write_bytes(b"RRF2" + bytes(300))
         raise RuntimeError("Failed to encode LogMsg: Failed to write: No space left on device (os error 28)")
 
-    monkeypatch.setattr(rec._Writer, "write", broken)
+    monkeypatch.setattr(rec_writer._Writer, "write", broken)
     with pytest.raises(OSError, match=r"could not write .*x\.rrd: no space left on device"):
         write_recording(bonus, tmp_path / "x.rrd")
     assert list(tmp_path.iterdir()) == []
@@ -120,7 +123,7 @@ def test_writer_failing_inside_rerun_is_one_line(tmp_path: Path, bonus: object,
     def silent(self: object, path: Path) -> None:  # a cut file, no exception
         path.write_bytes(b"RRF2" + bytes(300))
 
-    monkeypatch.setattr(rec._Writer, "write", silent)
+    monkeypatch.setattr(rec_writer._Writer, "write", silent)
     with pytest.raises(OSError, match=r"could not write .*x\.rrd: the file came out incomplete"):
         write_recording(bonus, tmp_path / "x.rrd")
     assert list(tmp_path.iterdir()) == []
@@ -272,14 +275,14 @@ def test_a_flipped_bit_anywhere_is_refused(tmp_path: Path, bonus: object) -> Non
 def test_the_seal_itself_is_covered(tmp_path: Path, bonus: object) -> None:
     path = write_recording(bonus, tmp_path / "bonus.rrd")
     data = path.read_bytes()
-    chunks = rec._load_chunks(path)
-    digest = rec._columns(chunks, rec.INTEGRITY)["sha256"][0].to_pylist()[0][0]
+    chunks = rec_reader._load_chunks(path)
+    digest = rec_reader._columns(chunks, rec.INTEGRITY)["sha256"][0].to_pylist()[0][0]
     at = data.index(digest.encode())
-    assert rec._unsealed_sha256(data, digest) == digest
+    assert rec_integrity._unsealed_sha256(data, digest) == digest
     for pos in (at, at + 31, at + 63, at - 1, at + 64, len(data) - 1):
         damaged = bytearray(data)
         damaged[pos] ^= 2
-        assert rec._unsealed_sha256(bytes(damaged), digest) != digest
+        assert rec_integrity._unsealed_sha256(bytes(damaged), digest) != digest
 
 
 def test_read_recording_survives_a_file_that_crashes_rerun() -> None:
@@ -293,7 +296,7 @@ def test_read_recording_survives_a_file_that_crashes_rerun() -> None:
 def test_a_recording_written_before_the_seal_is_read(tmp_path: Path, bonus: object,
                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     # Format 3 (main's: no integrity record) is read, its trajectory checksum still checked.
-    monkeypatch.setattr(rec._Writer, "seal", False)
+    monkeypatch.setattr(rec_writer._Writer, "seal", False)
     path = write_recording(bonus, tmp_path / f"old-{uuid.uuid4().hex[:4]}.rrd")
     monkeypatch.undo()
     assert rec.INTEGRITY not in rec.entity_paths(path)

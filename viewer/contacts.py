@@ -18,7 +18,7 @@ import numpy as np
 from collide import diagnostics as dg
 from collide.engine import kernels as kn
 from collide.model import Model
-from collide.stepper import Trajectory
+from collide.trajectory import Trajectory
 from viewer.sampling import Knots, segment_search
 
 SLICE = 1 << 16  # contact entries evaluated at once by `ContactIndex.overlaps`

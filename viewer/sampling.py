@@ -19,7 +19,7 @@ import numpy as np
 from collide import diagnostics as dg
 from collide.engine import kernels as kn
 from collide.model import Model, State, turned_quaternions
-from collide.stepper import Trajectory
+from collide.trajectory import Trajectory, _quintic
 
 CHUNK = 1 << 14  # (time, body) pairs evaluated at once: about 6 MB of gathered knot rows
 
@@ -135,7 +135,7 @@ class Knots:
             a0, a1 = k0[step], k1[step]
             hs = h[step][:, None]
             x = tau[step] / h[step]
-            basis, deriv = dg._quintic(x)
+            basis, deriv = _quintic(x)
             terms = (s0[step], hs * v0[step], hs * hs * a0[:, kn.K_AN:kn.K_AN + 3],
                      hs * hs * a1[:, kn.K_A:kn.K_A + 3], hs * a1[:, kn.K_V:kn.K_V + 3], a1[:, kn.K_S:kn.K_S + 3])
             pos[step] = sum(basis[i][:, None] * term for i, term in enumerate(terms))

@@ -22,7 +22,7 @@ hash of every source the kernels are built from and of the numba and Python vers
 The decorators themselves live in `collide.engine.jit`.
 
 A command that runs one small scene can ask for the interpreted kernels even when the compiled
-ones are ready (`collide.engine.hint`): loading numba and the compiled cache costs a process
+ones are ready (`collide.hint`): loading numba and the compiled cache costs a process
 more than such a run takes interpreted.
 """
 
@@ -47,7 +47,7 @@ from collide.errors import RunError
 
 _ENGINE = Path(__file__).parent
 _PACKAGE_ROOT = _ENGINE.parent.parent
-# Set in the process that compiles (collide.engine.warm): it must not wait for its own lock.
+# Set in the process that compiles (collide.warmup): it must not wait for its own lock.
 COMPILING_VARIABLE = "COLLIDE_COMPILING"
 LOCK_FD_VARIABLE = "COLLIDE_COMPILE_LOCK_FD"
 
@@ -252,7 +252,7 @@ def engine_state() -> EngineState:
 
 
 def start_compile(force: bool = False) -> bool:
-    """Compile the kernels in a detached process (`python -m collide.engine.warm`), unless one
+    """Compile the kernels in a detached process (`python -m collide.warmup`), unless one
     is running, they are ready, or the last compile failed (unless `force`). Returns whether it
     started one. The lock is taken here and handed to the child, so that no second compile can
     start between the two."""
@@ -273,7 +273,7 @@ def start_compile(force: bool = False) -> bool:
         env = dict(os.environ, COLLIDE_JIT="1", **{LOCK_FD_VARIABLE: str(fd)})
         env.pop(HINT_VARIABLE, None)
         with open(compile_log(), "w") as log:
-            subprocess.Popen([sys.executable, "-m", "collide.engine.warm"], stdout=log, stderr=subprocess.STDOUT,
+            subprocess.Popen([sys.executable, "-m", "collide.warmup"], stdout=log, stderr=subprocess.STDOUT,
                              stdin=subprocess.DEVNULL, env=env, start_new_session=True, pass_fds=(fd,))
         return True
     finally:
@@ -315,7 +315,7 @@ def require_compiled(report: Callable[[EngineState], None] | None = _report_to_s
 
 # ---------------------------------------------------------------- this process's choice
 
-# Set by a command for a run that is quicker interpreted (collide.engine.hint); read once and
+# Set by a command for a run that is quicker interpreted (collide.hint); read once and
 # removed, so that no child process (a background compile, a viewer) inherits it.
 _HINT = os.environ.pop(HINT_VARIABLE, "")
 _SELF_COMPILING = os.environ.pop(COMPILING_VARIABLE, "") == "1" or LOCK_FD_VARIABLE in os.environ

@@ -1,4 +1,4 @@
-"""Compile the engine's kernels into numba's on-disk cache: `python -m collide.engine.warm`.
+"""Compile the engine's kernels into numba's on-disk cache: `python -m collide.warmup`.
 
 Runs every entry point once on a tiny scene of each kind it can be called for, so that every
 signature a run uses is compiled; then marks the cache ready (`tier.compiled_ready`). The first

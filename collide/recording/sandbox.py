@@ -1,0 +1,248 @@
+"""Reading recordings from anywhere: `read_recording` and `verify_recording` read in a child
+process by default (`read_recording_safely`), so that a file that crashes, hangs or floods
+Rerun's Rust reader costs only that process; `trusted=True` reads here (`reader`).
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import os
+import pickle
+import select
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+from collide.recording.reader import read_trusted, verify_trusted
+from collide.recording.spec import RecordingError, _fail
+from collide.run import SceneRun
+
+SAFE_TIMEOUT_S = 60.0  # the reader process's limits (read_recording's defaults)
+SAFE_MEMORY_MB = 2048
+
+
+def read_recording(path: str | Path, *, trusted: bool = False, timeout_s: float = SAFE_TIMEOUT_S,
+                   memory_mb: int = SAFE_MEMORY_MB) -> SceneRun:
+    """Rebuild the run stored in a recording: scene, model, trajectory, final state and settings.
+
+    Raises `RecordingError` (a `ValueError`) naming the file, in one line, when it is not an
+    `.rrd`, is truncated or damaged (a changed byte: its checksum does not match), was not
+    written by collide, or crashes, hangs or floods Rerun's reader.
+
+    By default the file is read in a child process (`read_recording_safely`, with `timeout_s`
+    and `memory_mb`): Rerun's reader is Rust, and a damaged file can abort the process that
+    reads it. `trusted=True` reads in this process, about a second sooner (no reader process to
+    start) and without pickling the run back: for files this program has just written itself.
+    """
+    if not trusted:
+        return read_recording_safely(path, timeout_s=timeout_s, memory_mb=memory_mb)
+    return read_trusted(Path(path))
+
+
+def verify_recording(path: str | Path, *, trusted: bool = False, timeout_s: float = SAFE_TIMEOUT_S,
+                     memory_mb: int = SAFE_MEMORY_MB) -> None:
+    """Check a recording without rebuilding its run (cheaper than `read_recording`): it returns
+    only if `read_recording` would read the file, else raises the same `RecordingError`."""
+    path = Path(path)
+    if not trusted:
+        _safely(path, "verify", timeout_s, memory_mb)
+        return
+    verify_trusted(path)
+
+
+_POLL_S = 0.05
+_HEADER = struct.Struct("!Q")
+_IDLE_READERS = 2  # reader processes kept warm between reads
+
+
+def _send_message(stream: Any, obj: Any) -> None:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(_HEADER.pack(len(data)) + data)
+    stream.flush()
+
+
+def _serve_reads() -> None:
+    """The reader process: read (path, memory_mb) requests on stdin, answer on stdout.
+
+    Started by `read_recording_safely` as a fresh interpreter (never a fork of the caller, whose
+    threads or main script it must not inherit). Answers ("ok", SceneRun) or ("error", message);
+    a damaged file that aborts Rerun's Rust reader kills only this process.
+    """
+    import resource
+
+    inp, out = sys.stdin.buffer, sys.stdout.buffer
+    sys.stdout = sys.stderr  # nothing but answers on the answer channel
+    warnings.simplefilter("ignore")
+    while True:
+        header = inp.read(_HEADER.size)
+        if len(header) < _HEADER.size:
+            return
+        path, memory_mb, mode = pickle.loads(inp.read(_HEADER.unpack(header)[0]))
+        try:
+            # A backstop against one huge allocation between the parent's memory checks; a
+            # process with rerun loaded reserves about 3 GB of address space before it reads.
+            _, hard = resource.getrlimit(resource.RLIMIT_AS)
+            limit = (4096 + 2 * memory_mb) * 1024 * 1024
+            resource.setrlimit(resource.RLIMIT_AS, (limit if hard == resource.RLIM_INFINITY
+                                                    else min(limit, hard), hard))
+        except (ValueError, OSError):
+            pass
+        try:
+            message: tuple[str, Any] = ("ok", verify_trusted(Path(path)) if mode == "verify"
+                                        else read_trusted(Path(path)))
+        except RecordingError as exc:
+            message = ("error", str(exc))
+        except MemoryError:
+            message = ("error", f"{path}: reading it needs more than {memory_mb} MB of memory")
+        except Exception as exc:  # whatever a damaged file makes the reader raise
+            message = ("error", f"{path}: damaged or not a collide recording ({type(exc).__name__}: {exc})")
+        _send_message(out, message)
+
+
+class _Reader:
+    """One reader process and its pipes."""
+
+    def __init__(self) -> None:
+        code = "from collide.recording.sandbox import _serve_reads; _serve_reads()"
+        self.proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait()
+        for stream in (self.proc.stdin, self.proc.stdout):
+            with contextlib.suppress(OSError):
+                stream.close()
+
+    def rss_mb(self) -> float:
+        try:
+            with open(f"/proc/{self.proc.pid}/statm") as f:
+                return int(f.read().split()[1]) * (os.sysconf("SC_PAGE_SIZE") / 2**20)
+        except (OSError, ValueError, IndexError):
+            return 0.0
+
+    def read(self, path: Path, timeout_s: float, memory_mb: int, mode: str = "read") -> tuple[str, Any]:
+        """Send one request; ("ok", run), ("error", message) or ("failed", reason)."""
+        try:
+            _send_message(self.proc.stdin, (str(path), int(memory_mb), mode))
+        except OSError:
+            return "failed", self._died()
+        fd = self.proc.stdout.fileno()
+        deadline = time.monotonic() + timeout_s
+        # A bytearray grows in place: `bytes +=` copied everything read so far for every 64 kB
+        # the pipe gives (a 1 000-sphere recording: 10-70 s of copying, quadratic in its size).
+        data = bytearray()
+        need = _HEADER.size
+        length = None
+        while True:
+            ready, _, _ = select.select([fd], [], [], _POLL_S)
+            if ready:
+                chunk = os.read(fd, max(need - len(data), 1 << 16))
+                if not chunk:
+                    return "failed", self._died()
+                data += chunk
+                if length is None and len(data) >= _HEADER.size:
+                    length = _HEADER.unpack(bytes(data[:_HEADER.size]))[0]
+                    need = _HEADER.size + length
+                if length is not None and len(data) >= need:
+                    # Limits hold for reads quicker than one check too.
+                    if time.monotonic() > deadline:
+                        return "failed", f"reading it took longer than {timeout_s:g} s (stopped)"
+                    if self.rss_mb() > memory_mb:
+                        return "failed", f"reading it needs more than {memory_mb} MB of memory (stopped)"
+                    try:
+                        return pickle.loads(memoryview(data)[_HEADER.size:need])
+                    except Exception as exc:
+                        return "failed", f"its contents could not be passed back ({type(exc).__name__})"
+                continue
+            if time.monotonic() > deadline:
+                return "failed", f"reading it took longer than {timeout_s:g} s (stopped)"
+            if self.rss_mb() > memory_mb:
+                return "failed", f"reading it needs more than {memory_mb} MB of memory (stopped)"
+
+    def _died(self) -> str:
+        code = self.proc.wait()
+        if code < 0:
+            try:
+                how = f"killed by {signal.Signals(-code).name}"
+            except ValueError:
+                how = f"killed by signal {-code}"
+        else:
+            how = f"exit code {code}"
+        return f"damaged recording: Rerun's reader crashed on it ({how})"
+
+
+_idle: list[_Reader] = []
+_idle_lock = threading.Lock()
+
+
+def _take_reader() -> _Reader:
+    with _idle_lock:
+        while _idle:
+            reader = _idle.pop()
+            if reader.proc.poll() is None:
+                return reader
+            reader.stop()
+    return _Reader()
+
+
+def _give_back(reader: _Reader) -> None:
+    with _idle_lock:
+        if len(_idle) < _IDLE_READERS:
+            _idle.append(reader)
+            return
+    reader.stop()
+
+
+def read_recording_safely(path: str | Path, *, timeout_s: float = SAFE_TIMEOUT_S,
+                          memory_mb: int = SAFE_MEMORY_MB) -> SceneRun:
+    """`read_recording` in a child process (its default), for files from anywhere.
+
+    Rerun's reader is Rust: a damaged file can make it panic and abort the whole process, or
+    loop. Here a crash, a hang (longer than `timeout_s`) or a read that needs more than
+    `memory_mb` MB of memory costs only the child; each becomes a `RecordingError` with a
+    one-line message naming the file, and the caller carries on. Readers are fresh interpreters
+    (about a second to start), kept warm between reads; safe to call from several threads.
+    """
+    return _safely(Path(path), "read", timeout_s, memory_mb)
+
+
+def _safely(path: Path, mode: str, timeout_s: float, memory_mb: int) -> Any:
+    if not timeout_s > 0:
+        raise ValueError(f"timeout_s must be positive, got {timeout_s}")
+    if not memory_mb > 0:
+        raise ValueError(f"memory_mb must be positive, got {memory_mb}")
+    if not path.exists():
+        raise _fail(path, "no such file")
+    if not path.is_file():
+        raise _fail(path, "not a file")
+    reader = _take_reader()
+    kind, value = "failed", "the reader stopped"
+    try:
+        kind, value = reader.read(path.absolute(), timeout_s, memory_mb, mode)
+    finally:
+        if kind == "failed":
+            reader.stop()
+            _give_back(_Reader())  # warm up the next one while the caller reports this one
+        else:
+            _give_back(reader)
+    if kind == "ok":
+        return value
+    if kind == "error":
+        raise RecordingError(" ".join(str(value).split()))
+    raise _fail(path, " ".join(str(value).split()))
+
+
+@atexit.register
+def _stop_idle_readers() -> None:
+    with _idle_lock:
+        while _idle:
+            _idle.pop().stop()
