@@ -15,9 +15,10 @@ import time
 
 import numpy as np
 
-from collide.engine import dem as dk
 from collide.engine import kernels as kn
 from collide.engine import tier
+from collide.engine.dem import layout as dk
+from collide.engine.dem import loop as dem_loop
 from collide.model import KISSING, TABLE_ESTAR, TABLE_K, TABLE_KTR, TABLE_REST, Model, State, select_model
 from collide.results import ContactLog, RunResult, Trajectory
 from collide.stepper import (
@@ -153,7 +154,7 @@ def damping_ratio(restitution: np.ndarray, hertz: bool) -> np.ndarray:
 
 def kernel_tables(model: Model, b: int) -> tuple[np.ndarray, np.ndarray]:
     """Member b's pair and wall tables with restitution turned into the damping ratio, and the
-    tangential stiffness ratio's square root added (`collide.engine.dem`'s layout)."""
+    tangential stiffness ratio's square root added (`collide.engine.dem.layout`)."""
     pair, wall = model.pair_table[b].copy(), model.wall_table[b].copy()
     pair[..., TABLE_REST] = damping_ratio(pair[..., TABLE_REST], model.hertz)
     wall[..., TABLE_REST] = damping_ratio(wall[..., TABLE_REST], model.hertz)
@@ -212,7 +213,7 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
         members.append(((X, V, W, Q, _bodies(model, b), pair, wall, WP, grav, fl, fp), t_end))
     _load_compiled(*members[0][0])
     started = time.perf_counter()
-    outcomes = run_members(b_count, lambda b: dk.dem_run(*members[b][0]), progress,
+    outcomes = run_members(b_count, lambda b: dem_loop.dem_run(*members[b][0]), progress,
                            [(m[0][-1], int(dk.P_NOW), m[1]) for m in members])
     wall_time = time.perf_counter() - started
     body_tables = np.zeros((b_count, model.n_bodies, int(kn.NG)))
@@ -272,5 +273,5 @@ def _load_compiled(*args) -> None:
     import numba
 
     with tier.loading():
-        dk.dem_run.compile(tuple(numba.typeof(a) for a in args))
+        dem_loop.dem_run.compile(tuple(numba.typeof(a) for a in args))
     _LOADED.append(True)

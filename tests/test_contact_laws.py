@@ -299,7 +299,8 @@ def test_neighbour_lists_hold_every_pair_within_reach(dim, far):
     """The DEM neighbour search against every pair: spheres of unequal radii packed in a small
     region (a dense cell grid) and, with `far`, one of them 100 km away (the grid is hashed
     instead); keys ascending, each with its pair's (i, j)."""
-    from collide.engine.dem import B_R, DENSE_CELLS, NB, build_pairs
+    from collide.engine.dem.layout import B_R, NB
+    from collide.engine.dem.neighbours import DENSE_CELLS, build_pairs
 
     rng = np.random.default_rng(dim)
     for n in (1, 2, 40, 300):

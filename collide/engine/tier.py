@@ -58,7 +58,9 @@ class EngineUnavailable(RunError):
 
 # ---------------------------------------------------------------- what the cache depends on
 
-_IMPORT = re.compile(r"^from (collide(?:\.\w+)*) import ([\w, ]+)|^import (collide(?:\.\w+)+)", re.M)
+# (A parenthesised list of names, one a line, as ruff wraps a long import, is followed too.)
+_IMPORT = re.compile(r"^from (collide(?:\.\w+)*) import (?:\(([\w,\s]+)\)|([\w, ]+))|^import (collide(?:\.\w+)+)",
+                     re.M)
 
 
 def _module_file(name: str) -> Path | None:
@@ -73,7 +75,7 @@ def engine_sources() -> list[Path]:
     """Every file whose code or constants the compiled kernels hold: the engine's modules that
     define kernels, and what they import from collide, followed to the end. This file, which
     only chooses between compiled and interpreted, is not among them."""
-    pending = [p for p in sorted(_ENGINE.glob("*.py")) if re.search(r"^@jit", p.read_text(), re.M)]
+    pending = [p for p in sorted(_ENGINE.rglob("*.py")) if re.search(r"^@jit", p.read_text(), re.M)]
     found: dict[Path, None] = {}
     while pending:
         path = pending.pop()
@@ -83,7 +85,8 @@ def engine_sources() -> list[Path]:
             continue
         found[path] = None
         for match in _IMPORT.finditer(path.read_text()):
-            module, names, plain = match.groups()
+            module, wrapped, names, plain = match.groups()
+            names = wrapped or names
             targets = [plain] if plain else [module] + [f"{module}.{n.strip()}" for n in names.split(",")]
             pending.extend(f for f in map(_module_file, targets) if f is not None)
     return sorted(found)

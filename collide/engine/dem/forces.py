@@ -1,0 +1,126 @@
+"""The force pass of a step: every listed contact's forces (`contact.contact_force`), each
+contact's start and end (its history and interval), and the run's contact figures."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from collide.engine.dem.contact import contact_force
+from collide.engine.dem.geometry import wall_height
+from collide.engine.dem.layout import (
+    B_M,
+    B_R,
+    F_RECORD,
+    G_FIRST,
+    G_FORCE,
+    G_LAST,
+    G_OVERLAP,
+    H_IV,
+    H_KT,
+    H_ON,
+    H_XI,
+    S_CONTACTS,
+)
+from collide.engine.jit import jit, jit_inline
+
+
+@jit
+def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST, IV, niv,
+           REC, nrec, record_now, out):
+    """Forces and torques of every engaged contact (F, T, and by part PT) and the run's contact
+    figures, over the listed pairs (PI, PJ) and body-wall pairs (WL: rows k = i * walls + w, i, w); wtabs is
+    the wall table as (materials, 1, columns). IV and REC have room for every listed contact
+    (the caller grows them); out is scratch (4,). Returns (engaged, niv, nrec): no array is made
+    or returned here, which at a few bodies costs a step as much as its contacts."""
+    record = fl[F_RECORD]
+    g0, g1, g2 = grav[0], grav[1], grav[2]
+    # Whole-array fills: stored element by element with F's, they took twice as long.
+    T[:, :] = 0.0
+    PT[:, :] = 0.0
+    for a in range(n):
+        m = Bd[a, B_M]
+        F[a, 0], F[a, 1], F[a, 2] = m * g0, m * g1, m * g2
+    engaged = 0
+    deepest, strongest = FG[G_OVERLAP], FG[G_FORCE]
+    for k in range(PI.shape[0]):
+        i, j = PI[k], PJ[k]
+        dx = X[j, 0] - X[i, 0]
+        dy = X[j, 1] - X[i, 1]
+        dz = X[j, 2] - X[i, 2]
+        reach = Bd[i, B_R] + Bd[j, B_R]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 >= reach * reach:
+            if hist[k, H_ON] != 0.0:
+                _close(hist, k, IV, t, FG)
+            continue
+        dist = math.sqrt(d2)
+        inv = 1.0 / dist
+        delta = reach - dist
+        if hist[k, H_ON] == 0.0:
+            niv = _open(hist, k, IV, niv, i, j, t, FG, ST, record)
+        engaged += 1
+        fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j],
+                           hist, k, fl, dt, out)
+        deepest = max(deepest, delta)
+        strongest = max(strongest, fn)
+        if record_now:
+            _record(REC, nrec, t, i, j, delta, fn, out)
+            nrec += 1
+    for m in range(WL.shape[0]):
+        k, i, w = WL[m, 0], WL[m, 1], WL[m, 2]
+        delta = Bd[i, B_R] - wall_height(X, WP, i, w)
+        if delta <= 0.0:
+            if WH[k, H_ON] != 0.0:
+                _close(WH, k, IV, t, FG)
+            continue
+        if WH[k, H_ON] == 0.0:
+            niv = _open(WH, k, IV, niv, i, -1 - w, t, FG, ST, record)
+        engaged += 1
+        fn = contact_force(X, V, W, F, T, PT, Bd, i, -1 - w, -WP[w, 3], -WP[w, 4], -WP[w, 5], delta, wtabs, MAT[i], 0,
+                           WH, k, fl, dt, out)
+        deepest = max(deepest, delta)
+        strongest = max(strongest, fn)
+        if record_now:
+            _record(REC, nrec, t, i, -1 - w, delta, fn, out)
+            nrec += 1
+    FG[G_OVERLAP], FG[G_FORCE] = deepest, strongest
+    return engaged, niv, nrec
+
+
+@jit_inline
+def _open(hist, k, IV, niv, i, j, t, FG, ST, record):
+    """Start contact k's history (and its interval row, IV having room). Returns niv."""
+    hist[k, H_ON] = 1.0
+    for c in range(3):
+        hist[k, H_XI + c] = 0.0
+    hist[k, H_KT] = 0.0
+    ST[S_CONTACTS] += 1
+    if not FG[G_FIRST] <= t:
+        FG[G_FIRST] = t
+    hist[k, H_IV] = -1.0
+    if record:
+        IV[niv, 0], IV[niv, 1], IV[niv, 2], IV[niv, 3] = i, j, t, np.nan
+        hist[k, H_IV] = niv
+        niv += 1
+    return niv
+
+
+@jit_inline
+def _close(hist, k, IV, t, FG):
+    hist[k, H_ON] = 0.0
+    # A spring released stores nothing; what it held was given back as it unloaded.
+    for c in range(4):
+        hist[k, H_XI + c] = 0.0
+    FG[G_LAST] = t
+    row = np.int64(hist[k, H_IV])
+    if row >= 0:
+        IV[row, 3] = t
+    hist[k, H_IV] = -1.0
+
+
+@jit_inline
+def _record(REC, row, t, i, j, delta, fn, out):
+    REC[row, 0], REC[row, 1], REC[row, 2], REC[row, 3], REC[row, 4] = t, i, j, delta, fn
+    REC[row, 5], REC[row, 6], REC[row, 7], REC[row, 8] = out[0], out[1], out[2], out[3]

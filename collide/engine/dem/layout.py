@@ -1,0 +1,44 @@
+"""The DEM kernel's array layouts: columns of its tables, flags, figures and status codes.
+
+Plain numbers (numpy, never numba), so that the Python side (`collide.dem`) reads them without
+loading the compiled engine. Every int is an np.int64, as the kernels index with them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# Bodies: B (N, NB).
+B_IM, B_II, B_R, B_M, B_I, B_MAT = range(6)
+NB = 6
+# Contact tables (as collide.model, with the restitution column turned into the damping ratio
+# zeta and sqrt(k_t / k_n) added by `collide.dem.kernel_tables`): k, mu, eps, E*, zeta, rolling
+# friction, k_t / k_n, sqrt(k_t / k_n) (the tangential dashpot's factor: taken once a table, not
+# once a contact a step).
+T_K, T_MU, T_EPS, T_ESTAR, T_ZETA, T_ROLL, T_KTR, T_KTR_ROOT = range(8)
+# History per contact: tangential spring (3), its stiffness (for the energy it stores: read
+# only when recorded), open interval row, engaged.
+H_XI, H_KT, H_IV, H_ON = 0, 3, 4, 5
+NH = 6
+# The contact forces' parts, per body (N, NPT): damping force, friction force, rolling torque.
+# (Friction's torque is the rest of the torque: no other part has one.)
+PT_DAMP, PT_FRIC, PT_ROLL = 0, 3, 6
+NPT = 9
+# Flags and figures.
+F_DIM, F_SPIN, F_HERTZ, F_TSPRING, F_RECORD, F_MAXSTEPS = range(6)
+NFLAG = 6
+P_DT, P_TEND, P_REST, P_TAIL, P_FRAME, P_SKIN, P_NOW, P_NOW_STEPS = range(8)
+NPAR = 8  # the last two are written by the run: time reached and steps, read by a progress display
+# Outputs: stats (int) and figures (float).
+S_STEPS, S_STATUS, S_CONTACTS, S_BUILDS, S_PAIRS, S_JUMPS = range(6)
+NSTAT = 6
+G_FIRST, G_LAST, G_TOUCH, G_OVERLAP, G_FORCE, G_DAMP, G_FRIC, G_ROLL, G_STORED, G_STATUS_T = range(10)
+NFIG = 10
+OK, NONFINITE, MAXSTEPS = 0, 1, 4
+# Record layouts shared with the event engine (collide.engine.kernels): knots, records, intervals.
+NK, NR = 23, 9
+EP_T, EP_DAMP, EP_FRIC, EP_ROLL, EP_STORED = range(5)
+NEP = 5
+for _name, _value in list(globals().items()):
+    if _name.isupper() and type(_value) is int:
+        globals()[_name] = np.int64(_value)

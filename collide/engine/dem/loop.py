@@ -1,0 +1,242 @@
+"""The run loop: velocity Verlet steps (`verlet`) with the force pass (`forces`) between the
+kicks, neighbour lists rebuilt when a body has moved half the skin (`neighbours`), free flight in
+closed form where nothing touches (`flight`), frames and energy parts recorded (`records`), to
+the end: a duration, rest, or every contact over and none to come."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from collide.engine.dem.flight import fly, free_time, will_meet
+from collide.engine.dem.forces import forces
+from collide.engine.dem.layout import (
+    B_MAT,
+    F_DIM,
+    F_MAXSTEPS,
+    F_RECORD,
+    F_SPIN,
+    G_DAMP,
+    G_FIRST,
+    G_LAST,
+    G_STATUS_T,
+    G_STORED,
+    G_TOUCH,
+    H_IV,
+    MAXSTEPS,
+    NEP,
+    NFIG,
+    NH,
+    NK,
+    NONFINITE,
+    NPT,
+    NR,
+    NSTAT,
+    P_DT,
+    P_FRAME,
+    P_NOW,
+    P_NOW_STEPS,
+    P_REST,
+    P_SKIN,
+    P_TEND,
+    S_JUMPS,
+    S_PAIRS,
+    S_STATUS,
+    S_STEPS,
+    T_ROLL,
+)
+from collide.engine.dem.neighbours import rebuild
+from collide.engine.dem.records import energy_row, frame, stored, work_total
+from collide.engine.dem.verlet import drift, kick, kick_kick_drift, kinetic
+from collide.engine.jit import jit, jit_inline
+from collide.engine.kernels import grow
+
+
+@jit_inline
+def _at_end(t, t_end):
+    """Whether t is the end (to round-off)."""
+    return t >= t_end * (1.0 - 1e-12)
+
+
+@jit_inline
+def _step_length(t, dt, t_end):
+    """The step from t: dt, or what is left to the end; and whether it is the last."""
+    if _at_end(t + dt, t_end):
+        return t_end - t, True
+    return dt, False
+
+
+@jit
+def _outputs(n, nw):
+    """The run's stats and figures, and every body's and wall contact's arrays, as they start."""
+    ST = np.zeros(NSTAT, np.int64)
+    FG = np.zeros(NFIG)
+    FG[G_FIRST] = np.nan
+    FG[G_LAST] = np.nan
+    FG[G_STATUS_T] = np.nan
+    WH = np.zeros((n * nw, NH))
+    for k in range(WH.shape[0]):
+        WH[k, H_IV] = -1.0
+    return ST, FG, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, NPT)), np.zeros((n, 3)), WH
+
+
+@jit
+def _materials(Bd, n):
+    MAT = np.empty(n, np.int64)
+    for a in range(n):
+        MAT[a] = np.int64(Bd[a, B_MAT])
+    return MAT
+
+
+@jit
+def _any_rolling(tabs, wtabs, spin):
+    """Whether any contact has rolling resistance (the kick books it only then)."""
+    rolling = False
+    if spin:
+        for table in (tabs.reshape((-1, tabs.shape[-1])), wtabs):
+            for r in range(table.shape[0]):
+                rolling |= table[r, T_ROLL] > 0.0
+    return rolling
+
+
+@jit
+def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, keys, PI, PJ, hist, WL, ST, KN, nkn):
+    """Where nothing touches: fly in closed form as far as no contact can begin (free flight is
+    not stepped, as in the event engine), the neighbour lists made fresh for it. Returns
+    (whether the run is over, t, the lists, KN, nkn)."""
+    n, dim, planar, spin, record = X.shape[0], fl[F_DIM], fl[F_DIM] < 3, fl[F_SPIN], fl[F_RECORD]
+    dt, t_end, skin = fp[P_DT], fp[P_TEND], fp[P_SKIN]
+    # Nothing touches and nothing ever can (with no end set): the run is over, whether or not
+    # anything touched before (bodies moving apart from the start, with nothing ahead, stepped
+    # on until the step limit).
+    if not math.isfinite(t_end) and not will_meet(X, V, Bd, WP, grav, n):
+        return True, t, keys, PI, PJ, hist, WL, KN, nkn
+    keys, PI, PJ, hist, WL = rebuild(X, X0, Bd, WP, WH, n, dim, skin, keys, hist, ST)
+    tau = free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin)
+    if _at_end(t + tau, t_end):
+        tau = t_end - t
+    over = False
+    if tau > 2.0 * dt:
+        KN, nkn = fly(X, V, W, Qo, F, Bd, WK, grav, tau, t, n, spin, planar, record, KN, nkn)
+        t += tau
+        ST[S_JUMPS] += 1
+        over = _at_end(t, t_end) or (not math.isfinite(t_end) and ever and not will_meet(X, V, Bd, WP, grav, n))
+    return over, t, keys, PI, PJ, hist, WL, KN, nkn
+
+
+@jit
+def _finish(X, V, W, Qo, F, Bd, WK, hist, WH, t, record, ST, FG, KN, nkn):
+    """The run's totals into FG, and its last frame if not recorded yet. Returns (KN, nkn)."""
+    n = X.shape[0]
+    FG[G_STORED] = stored(hist, WH)
+    for c in range(3):
+        FG[G_DAMP + c] = work_total(WK, n, c)
+    if record and (nkn == 0 or KN[nkn - 1, 0] < t):
+        KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
+    return KN, nkn
+
+
+@jit
+def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
+    """Run to the end (duration, rest, or every contact over and none to come) at the fixed
+    step fp[P_DT]. X, V, W (N, 3) and Qo (N, 4) are updated in place; WK (N, 3) returns each
+    body's share of the work of damping, friction and rolling resistance. Returns (t, WK,
+    knots, records, intervals, energy parts, stats, figures)."""
+    n = X.shape[0]
+    dim, planar, spin = fl[F_DIM], fl[F_DIM] < 3, fl[F_SPIN]
+    dt, t_end, rest, skin = fp[P_DT], fp[P_TEND], fp[P_REST], fp[P_SKIN]
+    record = fl[F_RECORD]
+    ST, FG, F, T, PT, WK, WH = _outputs(n, WP.shape[0])
+    KN, REC, IV, EP = np.zeros((0, NK)), np.zeros((0, NR)), np.zeros((0, 4)), np.zeros((0, NEP))
+    nkn, nrec, niv, nep = 0, 0, 0, 0
+    MAT = _materials(Bd, n)
+    wt = wtabs.reshape((wtabs.shape[0], 1, wtabs.shape[1]))
+    rolling = _any_rolling(tabs, wtabs, spin)
+    X0 = X.copy()
+    keys, PI, PJ, hist, WL = rebuild(X, X0, Bd, WP, WH, n, dim, skin, np.zeros(0, np.int64), np.zeros((0, NH)), ST)
+    t = 0.0
+    scratch = np.zeros(4)
+    # IV and REC get room for every listed contact to open and be recorded before forces runs,
+    # so that no array is replaced inside its loops (that costs reference counting per contact);
+    # checked here, as a call returning the arrays costs as much at a few bodies.
+    most = PI.shape[0] + WL.shape[0]
+    if record:
+        IV = grow(IV, niv + most)
+        REC = grow(REC, nrec + most)
+    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl,
+                                0.0, t, n, FG, ST, IV, niv, REC, nrec, record != 0, scratch)
+    if record:
+        KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
+        EP = grow(EP, nep)
+        EP[nep, :] = 0.0  # nothing done yet (grow leaves new rows unset)
+        nep += 1
+    next_frame = fp[P_FRAME]
+    peak = kinetic(V, W, Bd, n)
+    ever = engaged > 0
+    steps = 0
+    last = False
+    fused = False  # this step's opening kick and drift done by the last step's `kick_kick_drift`
+    moved = 0.0
+    while not last:
+        if engaged == 0:
+            over, t, keys, PI, PJ, hist, WL, KN, nkn = _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t,
+                                                               ever, keys, PI, PJ, hist, WL, ST, KN, nkn)
+            if over:
+                break
+        h, last = _step_length(t, dt, t_end)
+        if h <= 0.0:
+            break
+        if not fused:
+            kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, False)
+            moved = drift(X, X0, V, W, Qo, h, n, spin, planar)
+        if 4.0 * moved > skin * skin:
+            keys, PI, PJ, hist, WL = rebuild(X, X0, Bd, WP, WH, n, dim, skin, keys, hist, ST)
+        t = t + h
+        steps += 1
+        record_now = record != 0 and (t >= next_frame or last)
+        most = PI.shape[0] + WL.shape[0]  # the lists may have been rebuilt
+        if record and niv + most >= IV.shape[0]:
+            IV = grow(IV, niv + most)
+        if record_now and nrec + most >= REC.shape[0]:
+            REC = grow(REC, nrec + most)
+        engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav,
+                                    fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now, scratch)
+        # The closing kick and, where nothing before the next step reads the velocities at this
+        # step's end (no frame to record, no free flight, no end or rest to test), the next
+        # step's opening kick and drift with it, in one pass over the bodies.
+        h_next, _ = _step_length(t, dt, t_end)  # as the next step will take it
+        fused = engaged != 0 and not last and not record_now and h_next > 0.0 and rest <= 0.0 and steps < fl[F_MAXSTEPS]
+        if fused:
+            kinetic_now, moved = kick_kick_drift(X, X0, V, W, Qo, F, T, PT, Bd, WK, 0.5 * h, 0.5 * h_next, h_next,
+                                                 n, rolling, spin, planar)
+        else:
+            kinetic_now = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, True)
+        if engaged:
+            FG[G_TOUCH] += h
+            ever = True
+        if not math.isfinite(kinetic_now):
+            ST[S_STATUS] = NONFINITE
+            FG[G_STATUS_T] = t
+            break
+        peak = max(peak, kinetic_now)
+        if record_now:
+            KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
+            EP, nep = energy_row(EP, nep, t, WK, hist, WH, n)
+            while next_frame <= t:
+                next_frame += fp[P_FRAME]
+        if steps & 255 == 0:
+            fp[P_NOW] = t
+            fp[P_NOW_STEPS] = steps
+        if steps >= fl[F_MAXSTEPS]:
+            ST[S_STATUS] = MAXSTEPS
+            FG[G_STATUS_T] = t
+            break
+        if rest > 0.0 and ever and kinetic_now < rest * peak:
+            break
+        if not math.isfinite(t_end) and ever and engaged == 0 and not will_meet(X, V, Bd, WP, grav, n):
+            break
+    ST[S_STEPS] = steps
+    ST[S_PAIRS] = keys.shape[0]
+    KN, nkn = _finish(X, V, W, Qo, F, Bd, WK, hist, WH, t, record, ST, FG, KN, nkn)
+    return t, WK, KN[:nkn], REC[:nrec], IV[:niv], EP[:nep], ST, FG

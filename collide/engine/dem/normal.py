@@ -1,0 +1,16 @@
+"""Normal force: linear (k delta, springs in series) or Hertz (4/3 E* sqrt(R*) delta^1.5): docs/design.md section 9."""
+
+from __future__ import annotations
+
+import math
+
+from collide.engine.jit import jit_inline
+
+
+@jit_inline
+def normal_elastic(hertz, k, estar, rstar, delta):
+    """Elastic normal force and stiffness dF/d delta: linear k delta, or Hertz 4/3 E* sqrt(R*) delta^1.5."""
+    if hertz:
+        root = math.sqrt(rstar * delta)
+        return 4.0 / 3.0 * estar * root * delta, 2.0 * estar * root
+    return k * delta, k
