@@ -196,7 +196,7 @@ def main() -> None:
         else:
             from viewer.session import Session
 
-            session = Session(app, ServerClient(app.server))  # type: ignore[arg-type]
+            session = Session(app.session_config(), ServerClient(app.server))  # type: ignore[arg-type]
             session.fit_camera = lambda *a, **k: None  # no camera without a browser
             for name in names:
                 results[name] = bench_scene(session, None, name, args.repeats)

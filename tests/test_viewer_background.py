@@ -47,7 +47,7 @@ def _headless_session(tmp_path) -> Iterator[object]:
 
     app = ViewerApp("demo-1d", port=0, recordings_dir=tmp_path)
     app.start()
-    session = Session(app, ServerClient(app.server))  # type: ignore[arg-type]
+    session = Session(app.session_config(), ServerClient(app.server))  # type: ignore[arg-type]
     session.fit_camera = lambda *a, **k: None  # no camera without a browser
     try:
         yield session
@@ -106,7 +106,7 @@ def test_a_slider_on_a_many_body_scene_runs_in_the_background_with_a_stop(tmp_pa
     """More than MANY_BODIES bodies: a moved slider waits for the slider to rest, then runs in
     the child process with a progress line and a Stop button; Stop keeps the last run on
     screen; a run let finish is drawn."""
-    from viewer.session import MANY_BODIES
+    from viewer.live import MANY_BODIES
 
     long, short = _pile(216, 2.0), _pile(216, 0.03)
     assert len(long.bodies) > MANY_BODIES
@@ -154,7 +154,7 @@ def test_a_slow_scene_with_a_quick_preview_previews_while_dragging(tmp_path):
     """break-3d on a loaded machine: its run took over LONG_RUN_S, so the final run goes to the
     background once the slider rests; its DEM preview (a sixth of the steps) is still drawn at
     once while dragging (it was skipped: every change waited for the background run)."""
-    from viewer.session import LONG_RUN_S
+    from viewer.live import LONG_RUN_S
 
     with _headless_session(tmp_path) as session:
         session.load_scene("break-3d")

@@ -251,7 +251,7 @@ def test_unreadable_recordings_show_a_message(page):
     page.set_input_files(upload, files=[{"name": "notes.txt", "mimeType": "text/plain", "buffer": b"hello"}])
     page.wait_for_function("() => document.body.innerText.includes('is not a .rrd recording')", timeout=20_000)
     assert session.view is good
-    assert not any(p.name.startswith(("junk", "notes", ".upload")) for p in session.app.recordings_dir.iterdir())
+    assert not any(p.name.startswith(("junk", "notes", ".upload")) for p in session.config.recordings_dir.iterdir())
 
 
 def test_upload_a_recording_and_save_a_run(page, recordings):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import BROWSER_MARKS
-from viewer.session import UPLOAD_TOAST_REMOVALS
+from viewer.file_actions import UPLOAD_TOAST_REMOVALS
 from viewer.testing import (
     canvas_box,
     canvas_shot,

@@ -524,7 +524,7 @@ def test_a_preview_never_costs_more_than_the_run(integrator, tol):
     less than that it cost more than the real run (issue 12, item 3: a 3D break took 41-54 s a
     slider change). Now a preview is used only when it costs less than half the run."""
     from collide.run import auto_dt
-    from viewer.session import STAGES, preview_settings
+    from viewer.live import STAGES, preview_settings
 
     scene = replace(_break_3d(tol), integrator=integrator)
 
@@ -827,8 +827,8 @@ def test_a_dem_scene_is_previewed_at_a_coarser_stable_step():
     """break-3d (DEM, 236 000 steps of 5 us: 270-480 ms a run) had no preview: a drag waited
     for every full run. Its preview takes 8 steps per contact time, within the step's
     stability limit, and shows the same break."""
+    from viewer.live import preview_settings
     from viewer.params import AUTO, for_viewing
-    from viewer.session import preview_settings
 
     scene = for_viewing(load_scene("break-3d"))
     preview = preview_settings(scene)

@@ -1,6 +1,6 @@
 """`collide view`: a viser web viewer for live parameter scrubbing and replaying recordings.
 
-Layers (only `app`, `session`, `scene3d` and `plots` import viser):
+Layers (the first ones never import viser):
 
 - `params`: which controls a scene needs, their safe ranges and clamping, building the scene.
 - `state`: `ViewRun`, what to draw at any time t (frames, plot series, residuals, paths).
@@ -9,5 +9,10 @@ Layers (only `app`, `session`, `scene3d` and `plots` import viser):
 - `files`: recordings folder, uploads, safe names.
 - `worker`: `LatestWorker`, one thread that always runs the newest request.
 - `scene3d`, `plots`: drawing into viser's scene and uPlot charts.
-- `session`: one browser tab (controls, timeline, worker, player); `app`: the server.
+- `config`: `SessionConfig`, what a tab needs from the app.
+- `panel` (the fixed controls), `messages` (the text lines in them), `param_controls` (the
+  Parameters folder), `playback` (time, Timeline, player thread), `camera` (the camera fit),
+  `live` (runs with changed parameters, previews, background runs), `ensemble_view`,
+  `file_actions` (those folders): the parts of a tab.
+- `session`: one browser tab, joining its parts; `tabs`: the tabs' life cycles; `app`: the server.
 """

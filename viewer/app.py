@@ -31,6 +31,7 @@ import viser
 from collide.run import SceneRun, run_scene
 from collide.scene import Scene, load_scene
 from viewer import files
+from viewer.config import SessionConfig
 from viewer.guard import guard_connections
 from viewer.params import for_viewing
 from viewer.reading import read_untrusted
@@ -178,10 +179,14 @@ class ViewerApp:
         in it)."""
         return self.tabs.sessions()
 
+    def session_config(self) -> SessionConfig:
+        """What each tab's session needs from the app (after `prepare`)."""
+        return SessionConfig(self.recordings_dir, self.max_upload_bytes, tuple(self.scene_choices), self.initial_cost)
+
     def _build_session(self, client: viser.ClientHandle, closed: Callable[[], bool]) -> Session:
         """A new tab's session, showing the initial scene or recording (on a set-up thread);
         the drawing is skipped once the tab has closed."""
-        session = Session(self, client)
+        session = Session(self.session_config(), client)
         if closed():
             return session
         if self.initial_recording is not None and self.initial_view is not None:
