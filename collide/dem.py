@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from collide.engine import dem as dk
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
 from collide.engine import tier
 from collide.model import KISSING, TABLE_ESTAR, TABLE_K, TABLE_KTR, TABLE_REST, Model, State, select_model
 from collide.stepper import (

@@ -91,7 +91,7 @@ from rerun.encodings import Vec3DBatch
 
 from collide import diagnostics as dg
 from collide.colours import ENERGY_COLOURS, body_colour, body_colours
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
 from collide.model import Model, State, compile_scenes
 from collide.output import OutputError, check_file, write_atomic
 from collide.run import SceneRun

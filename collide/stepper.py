@@ -20,8 +20,8 @@ from functools import cached_property
 
 import numpy as np
 
-from collide.engine import kernels as kn
-from collide.engine import tier
+from collide.engine import kernels, tier
+from collide.engine import layout as kn
 from collide.errors import RunError
 from collide.integrators import INTEGRATORS, Integrator
 from collide.limits import MAX_STEPS_DEFAULT
@@ -491,8 +491,8 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
 
     def run_member(b: int) -> tuple:
         if integ.events:
-            return kn.simulate(G[b], tables[b], walls[b], grav[b], weights, fl[b], fp[b])
-        return kn.seed_run(G[b], tables[b], WP, grav[b], fl[b], fp[b])
+            return kernels.simulate(G[b], tables[b], walls[b], grav[b], weights, fl[b], fp[b])
+        return kernels.seed_run(G[b], tables[b], WP, grav[b], fl[b], fp[b])
 
     started = time.perf_counter()
     outcomes = run_members(b_count, run_member, progress, [(fp[b], int(kn.FP_NOW), t_end[b]) for b in range(b_count)])
@@ -588,7 +588,7 @@ def _load_compiled(events: bool, *args) -> None:
         return
     import numba
 
-    kernel = kn.simulate if events else kn.seed_run
+    kernel = kernels.simulate if events else kernels.seed_run
     types = tuple(numba.typeof(a) for a in (args if events else (args[0], args[1], args[2], args[3], args[5],
                                                                   args[6])))
     with tier.loading():

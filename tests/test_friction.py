@@ -15,6 +15,7 @@ import pytest
 from collide import diagnostics as dg
 from collide.accuracy import outcome, speed_scale
 from collide.engine import kernels as kn
+from collide.engine import layout
 from collide.model import compile_scenes, reference_frequency
 from collide.run import run_scene
 from collide.scene import generic_turn, load_scene, parse_scene, turned_source
@@ -104,7 +105,7 @@ def test_a_3d_slides_event_value_is_continuous_as_its_slip_turns():
     eps, size, mu = 1e-6, 37e-6, 0.3  # a slip of 37 eps, as in the pile
     CI[0, kn.CI_MODE] = kn.SLIDE
     C[0, kn.C_MU], C[0, kn.C_EPS] = mu, eps
-    fl = np.zeros(int(kn.NFL), np.int64)
+    fl = np.zeros(int(layout.NFL), np.int64)
     fl[kn.FL_SPIN], fl[kn.FL_FRICTION], fl[kn.FL_PLANAR] = 1, 1, kn.NO
     E = np.zeros((2 * nc, 4))
     turns = np.linspace(0.0, np.pi, 721)
