@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from collide.engine import layout as kn
-from collide.engine.kernels import near_pairs
+from collide.engine.broad import near_pairs
 from collide.model import TABLE_ESTAR, Model, State, turned_quaternions
 from collide.stepper import RunResult, Trajectory
 

@@ -1,9 +1,9 @@
-"""Running scenes through the compiled engine (`collide.engine.kernels`) and what a run returns.
+"""Running scenes through the compiled engine (`collide.engine.event`) and what a run returns.
 
 `simulate` packs a batch of runs into the kernels' tables, runs each member, and unpacks a
 `RunResult`: final states, counters, contact log and (when recording) a `Trajectory` per member.
 The engine itself (windows, islands, closed-form free flight, event-located steps; the seed's
-fixed grid) is described in `collide/engine/kernels.py` and the README.
+fixed grid) is described in docs/engine.md and the README.
 """
 
 from __future__ import annotations
@@ -20,8 +20,9 @@ from functools import cached_property
 
 import numpy as np
 
-from collide.engine import kernels, tier
 from collide.engine import layout as kn
+from collide.engine import seed, tier
+from collide.engine.event import run as event_run
 from collide.errors import RunError
 from collide.integrators import INTEGRATORS, Integrator
 from collide.limits import MAX_STEPS_DEFAULT
@@ -88,10 +89,10 @@ def watch(progress: Progress | None, fp: np.ndarray, now: int, t_end: float, mem
 class Trajectory:
     """One run's motion, exactly where it is known, plus its contacts.
 
-    knots (K, kernels.NK): a body's state at a time (the ends of its steps, where free flight
+    knots (K, layout.NK): a body's state at a time (the ends of its steps, where free flight
     starts and ends), with its acceleration just before and after; between two knots of a body
     the motion is closed-form free flight (the earlier knot's K_FREE) or one integrator step,
-    rebuilt by a quintic Hermite (`diagnostics.sample`). records (R, kernels.NR): each engaged
+    rebuilt by a quintic Hermite (`diagnostics.sample`). records (R, layout.NR): each engaged
     contact at the end of each step (overlap, normal force, friction force on body i, mode).
     intervals (I, 4): (i, j, start, end) of every contact phase; j = -1 - wall for walls.
 
@@ -491,8 +492,8 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
 
     def run_member(b: int) -> tuple:
         if integ.events:
-            return kernels.simulate(G[b], tables[b], walls[b], grav[b], weights, fl[b], fp[b])
-        return kernels.seed_run(G[b], tables[b], WP, grav[b], fl[b], fp[b])
+            return event_run.simulate(G[b], tables[b], walls[b], grav[b], weights, fl[b], fp[b])
+        return seed.seed_run(G[b], tables[b], WP, grav[b], fl[b], fp[b])
 
     started = time.perf_counter()
     outcomes = run_members(b_count, run_member, progress, [(fp[b], int(kn.FP_NOW), t_end[b]) for b in range(b_count)])
@@ -588,7 +589,7 @@ def _load_compiled(events: bool, *args) -> None:
         return
     import numba
 
-    kernel = kernels.simulate if events else kernels.seed_run
+    kernel = event_run.simulate if events else seed.seed_run
     types = tuple(numba.typeof(a) for a in (args if events else (args[0], args[1], args[2], args[3], args[5],
                                                                   args[6])))
     with tier.loading():

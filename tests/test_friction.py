@@ -14,8 +14,9 @@ import pytest
 
 from collide import diagnostics as dg
 from collide.accuracy import outcome, speed_scale
-from collide.engine import kernels as kn
-from collide.engine import layout
+from collide.engine import layout as kn
+from collide.engine import numerics
+from collide.engine.event import contact, forces, modes
 from collide.model import compile_scenes, reference_frequency
 from collide.run import run_scene
 from collide.scene import generic_turn, load_scene, parse_scene, turned_source
@@ -50,23 +51,23 @@ def pressed_island(dim: int, seed: bool, wall: bool):
 
 
 def slips(X, C, CI, WP, nc, seed, spin=1, planar=False):
-    kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
-    return np.array([kn.slip(X, C, CI, c, kn.X_V, kn.X_W, spin, planar) for c in range(nc)])
+    contact.geometry(X, C, CI, nc, WP, seed, kn.YES)
+    return np.array([contact.slip(X, C, CI, c, kn.X_V, kn.X_W, spin, planar) for c in range(nc)])
 
 
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("wall", [False, True])
 def test_hold_rate_is_the_slip_rate_without_friction(dim, seed, wall):
-    """G (`kernels.slip_rate` under springs and gravity) is the tangential part of the slip's
+    """G (`contact.slip_rate` under springs and gravity) is the tangential part of the slip's
     rate of change along the frictionless motion: checked by a central difference."""
     X, C, CI, WP, nc, grav = pressed_island(dim, seed, wall)
     seed = np.int64(seed)
-    kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
-    kn.springs(X, C, CI, 2, nc, grav)
+    contact.geometry(X, C, CI, nc, WP, seed, kn.YES)
+    contact.springs(X, C, CI, 2, nc, grav)
     assert (C[:nc, kn.C_DELTA] > 0).all()  # really pressed: the springs act
     planar = dim == 2  # the plane's own arithmetic (its zero parts left out): the same numbers
-    rates = [np.array([kn.slip_rate(X, C, CI, c, kn.X_V, kn.X_W, kn.X_A, kn.X_L, np.int64(1), seed, np.int64(1),
+    rates = [np.array([contact.slip_rate(X, C, CI, c, kn.X_V, kn.X_W, kn.X_A, kn.X_L, np.int64(1), seed, np.int64(1),
                                     flat) for c in range(nc)]) for flat in {planar, False}]
     assert all(np.array_equal(r, rates[0]) for r in rates)
     rate = rates[0]
@@ -80,7 +81,7 @@ def test_hold_rate_is_the_slip_rate_without_friction(dim, seed, wall):
         ends.append(slips(Y, C.copy(), CI, WP, nc, seed, planar=planar))
         assert np.array_equal(ends[-1], slips(Y, C.copy(), CI, WP, nc, seed))
     numeric = (ends[0] - ends[1]) / (2 * h)
-    kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
+    contact.geometry(X, C, CI, nc, WP, seed, kn.YES)
     n = C[:nc, kn.C_N:kn.C_N + 3]
     tangential = numeric - np.sum(numeric * n, axis=1, keepdims=True) * n
     # Truncation h^2 |third derivative| and rounding 1e-16 |slip| / h: both below 1e-7 relative.
@@ -96,28 +97,28 @@ def test_a_3d_slides_event_value_is_continuous_as_its_slip_turns():
     its way, and -eps reversed, so a slip that reverses through the band still changes sign."""
     X, C, CI, WP, nc, grav = pressed_island(3, 0, False)
     seed = np.int64(0)
-    kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
-    kn.springs(X, C, CI, 2, nc, grav)
-    kn.set_basis(C, 0, False)
+    contact.geometry(X, C, CI, nc, WP, seed, kn.YES)
+    contact.springs(X, C, CI, 2, nc, grav)
+    contact.set_basis(C, 0, False)
     e1, e2 = C[0, kn.C_B:kn.C_B + 3], C[0, kn.C_B + 3:kn.C_B + 6]  # the tangent plane
     X[:, kn.X_W:kn.X_W + 3] = 0.0
     X[0, kn.X_V:kn.X_V + 3] = 0.0
     eps, size, mu = 1e-6, 37e-6, 0.3  # a slip of 37 eps, as in the pile
     CI[0, kn.CI_MODE] = kn.SLIDE
     C[0, kn.C_MU], C[0, kn.C_EPS] = mu, eps
-    fl = np.zeros(int(layout.NFL), np.int64)
+    fl = np.zeros(int(kn.NFL), np.int64)
     fl[kn.FL_SPIN], fl[kn.FL_FRICTION], fl[kn.FL_PLANAR] = 1, 1, kn.NO
     E = np.zeros((2 * nc, 4))
     turns = np.linspace(0.0, np.pi, 721)
     values, held = [], None
     for turn in turns:
         X[1, kn.X_V:kn.X_V + 3] = -size * (np.cos(turn) * e1 + np.sin(turn) * e2)
-        kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
-        slip = np.array(kn.slip(X, C, CI, 0, kn.X_V, kn.X_W, 1, False))
+        contact.geometry(X, C, CI, nc, WP, seed, kn.YES)
+        slip = np.array(contact.slip(X, C, CI, 0, kn.X_V, kn.X_W, 1, False))
         if held is None:
             held = slip / np.linalg.norm(slip)
         C[0, kn.C_HELD:kn.C_HELD + 3] = held
-        assert kn.mode_events(X, C, CI, E, 2, nc, kn.E_V0, kn.E_R0, np.zeros(3, np.int64), np.zeros((6, 6)),
+        assert modes.mode_events(X, C, CI, E, 2, nc, kn.E_V0, kn.E_R0, np.zeros(3, np.int64), np.zeros((6, 6)),
                               np.zeros(6), fl, 1.0, kn.YES, kn.NO)
         values.append(E[0, kn.E_V0])
     values = np.array(values)
@@ -187,14 +188,14 @@ def test_the_hold_system_is_solved_as_numpy_solves_it(symmetric):
         piv = np.zeros(48, np.int64)
         b = rng.normal(size=48)
         expected = np.linalg.solve(W, b[:m])
-        assert kn.factor(A, piv, m, symmetric)
-        kn.solve_factored(A, piv, b, m, symmetric)
+        assert numerics.factor(A, piv, m, symmetric)
+        numerics.solve_factored(A, piv, b, m, symmetric)
         # Condition numbers here are below 1e3: 1e-12 is a thousand times round-off.
         assert np.linalg.cond(W) < 1e3
         assert b[:m] == pytest.approx(expected, rel=1e-12, abs=1e-12 * np.abs(expected).max())
     A = np.zeros((4, 4))
     A[:2, :2] = [[1.0, 1.0], [1.0, 1.0]]  # two contacts that are one
-    assert not kn.factor(A, np.zeros(4, np.int64), 2, symmetric)
+    assert not numerics.factor(A, np.zeros(4, np.int64), 2, symmetric)
 
 
 def test_a_planar_coupling_block_is_the_general_one_in_the_plane():
@@ -216,15 +217,15 @@ def test_a_planar_coupling_block_is_the_general_one_in_the_plane():
             CI[c, kn.CI_I], CI[c, kn.CI_J] = i, j
             # The plane's tangent (z x n, unnormalised: n is a unit vector) is the general
             # basis' first to round-off.
-            kn.set_basis(C, c, True)
+            contact.set_basis(C, c, True)
             in_plane = C[c, kn.C_B:kn.C_B + 3].copy()
-            kn.set_basis(C, c, False)
+            contact.set_basis(C, c, False)
             assert np.abs(in_plane - C[c, kn.C_B:kn.C_B + 3]).max() <= 4e-16
         shared = ({*pairs[0]} & {*pairs[1]}).pop()
         for spin in (0, 1):
             planar, general = np.zeros((1, 1)), np.zeros((2, 2))
-            kn.couple_block(X, C, CI, 0, 1, shared, spin, 1, planar, 0, 0)
-            kn.couple_block(X, C, CI, 0, 1, shared, spin, 2, general, 0, 0)
+            forces.couple_block(X, C, CI, 0, 1, shared, spin, 1, planar, 0, 0)
+            forces.couple_block(X, C, CI, 0, 1, shared, spin, 2, general, 0, 0)
             assert planar[0, 0] == pytest.approx(general[0, 0], rel=1e-13, abs=1e-13 * np.abs(general).max())
 
 
@@ -249,7 +250,7 @@ def test_a_dip_bound_skips_only_cubics_that_do_not_dip():
     for _ in range(20000):
         e0, e1 = rng.uniform(1e-10, 1.0, 2) * 10.0 ** rng.integers(-6, 1)
         r0, r1 = rng.normal(size=2) * 40 * max(e0, e1)
-        got = kn.hermite_dip(e0, e1, r0, r1, -1e-9)
+        got = numerics.hermite_dip(e0, e1, r0, r1, -1e-9)
         assert got == sampled(e0, e1, r0, r1, -1e-9)
         answers.append(got)
     dips = np.isfinite(answers).sum()
@@ -518,17 +519,17 @@ def test_friction_events_in_the_plane_cost_few_step_attempts():
     Counted with the interpreted kernels, where `step` can be wrapped."""
     code = """
 import sys
-import collide.engine.kernels as kn
+import collide.engine.event.locate as locate
 from collide.run import run_scene
 from collide.scene import load_scene, parse_scene
 sys.path.insert(0, {tests!r})
 from test_friction import tilted_bonus
 count = {{"full": 0, "substep": 0}}
-step = kn.step
+step = locate.step
 def counted(*args):
     count["full" if len(args[6]) > 1 else "substep"] += 1
     return step(*args)
-kn.step = counted
+locate.step = counted
 from test_friction import turned_scene
 scenes = [load_scene("billiards-break", ["tol=1e-6", "contact.mu=" + mu]) for mu in ("0.1", "0")]
 turned = parse_scene(turned_scene("billiards-break", ("tol=1e-6",))[1])

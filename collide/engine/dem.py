@@ -32,8 +32,9 @@ import math
 
 import numpy as np
 
+from collide.engine.flight import turn
 from collide.engine.jit import jit, jit_inline
-from collide.engine.kernels import grow, turn
+from collide.engine.numerics import grow
 
 # Bodies: B (N, NB).
 B_IM, B_II, B_R, B_M, B_I, B_MAT = range(6)

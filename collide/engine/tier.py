@@ -73,7 +73,7 @@ def engine_sources() -> list[Path]:
     """Every file whose code or constants the compiled kernels hold: the engine's modules that
     define kernels, and what they import from collide, followed to the end. This file, which
     only chooses between compiled and interpreted, is not among them."""
-    pending = [p for p in sorted(_ENGINE.glob("*.py")) if re.search(r"^@jit", p.read_text(), re.M)]
+    pending = [p for p in sorted(_ENGINE.rglob("*.py")) if re.search(r"^@jit", p.read_text(), re.M)]
     found: dict[Path, None] = {}
     while pending:
         path = pending.pop()
