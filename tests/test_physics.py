@@ -10,7 +10,6 @@ import pytest
 
 from collide import diagnostics as dg
 from collide import stepper
-from collide.engine import flight, numerics
 from collide.engine import layout as kernels
 from collide.engine.event import run as event_run
 from collide.run import run_scene, run_scenes
@@ -561,48 +560,3 @@ def test_an_energy_balance_far_off_the_tolerance_is_a_warning():
     assert len(warned) == 1 and "energy balance is off" in warned[0]
 
 
-def test_engine_buffers_grow_to_any_row_asked_for():
-    """An island opening more contacts at once than a buffer's doubling gave room for wrote past
-    its end (a 64-sphere drop on a floor aborted the process): growth reaches the row asked for.
-    The rule is checked as Python source (`py_func` when compiled): the kernels call it inside
-    compiled code, and calling this helper's compiled dispatcher from Python, after a run has
-    loaded the kernels that use it from numba's cache, fails in numba's boxing ("'descr' is
-    NULL") on a freshly warmed cache."""
-    for kernel, dtype in ((numerics.grow, float), (numerics.grow_int, np.int64)):
-        grow = getattr(kernel, "py_func", kernel)
-        buf = np.arange(64, dtype=dtype).reshape(16, 4)
-        out = grow(buf, 500)
-        assert out.shape[0] > 500 and out.shape[1] == 4
-        assert (out[:16] == buf).all()
-
-
-def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
-    return np.concatenate([[math.cos(angle / 2)], math.sin(angle / 2) * axis / np.linalg.norm(axis)])
-
-
-@pytest.mark.parametrize("half", [1e-9, 1e-4, 0.00316, 0.00317, 0.0999, 0.1001, 0.7])
-def test_turn_is_the_rotation_about_the_spin(half):
-    """flight.turn takes small turns by series (to x^4 below a half angle of sqrt(1e-5), to x^8
-    below 0.1) and larger ones by sin and cos: on either side of each switch, and from an
-    arbitrary start, it is the rotation by |w| tau about w (a unit quaternion product) to
-    round-off."""
-    w = np.array([3.0, -4.0, 12.0])  # |w| = 13
-    tau = 2.0 * half / 13.0
-    start = _axis_angle(np.array([1.0, 2.0, -0.5]), 0.8)
-    q = start.copy()
-    flight.turn(q, w[0], w[1], w[2], tau, False)
-    r = _axis_angle(w, 13.0 * tau)
-    expected = np.array([r[0] * start[0] - r[1:] @ start[1:],
-                         *(r[0] * start[1:] + start[0] * r[1:] + np.cross(r[1:], start[1:]))])
-    assert np.abs(q - expected).max() < 4e-16
-    assert abs(np.linalg.norm(q) - 1.0) < 4e-16
-
-
-def test_many_small_turns_compose_to_one():
-    """A thousand DEM-sized turns (series) about one axis make the one turn (sin and cos)."""
-    w = np.array([0.3, 50.0, -7.0])
-    many, once = _axis_angle(np.array([0.0, 0.0, 1.0]), 0.3), _axis_angle(np.array([0.0, 0.0, 1.0]), 0.3)
-    for _ in range(1000):
-        flight.turn(many, w[0], w[1], w[2], 1e-5, False)
-    flight.turn(once, w[0], w[1], w[2], 1e-2, False)
-    assert np.abs(many - once).max() < 1e-13
