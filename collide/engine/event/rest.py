@@ -396,6 +396,167 @@ def rest_ready(X, C, CI, na, nc, nq, fl):
     return fl[FL_AUTO] and nq == 1 and na == 1 and nc == 1 and CI[0, CI_J] < 0 and not fl[FL_SEED]
 
 
+@jit_inline
+def rest_basis(n, planar, e1, e2):
+    """The wall's tangent basis e1, e2 = n x e1 (in the plane: e1 = n x z, e2 = -z)."""
+    if planar:
+        e1[0], e1[1] = n[1], -n[0]  # n x z: the in-plane tangent (e2 = -z)
+    else:
+        # n x the axis least along n.
+        a = 0 if abs(n[0]) <= min(abs(n[1]), abs(n[2])) else (1 if abs(n[1]) <= abs(n[2]) else 2)
+        e1[(a + 1) % 3], e1[(a + 2) % 3] = n[(a + 2) % 3], -n[(a + 1) % 3]
+        e1 /= math.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
+    e2[0], e2[1], e2[2] = n[1] * e1[2] - n[2] * e1[1], n[2] * e1[0] - n[0] * e1[2], n[0] * e1[1] - n[1] * e1[0]
+
+
+@jit_inline
+def rest_choose(G, XI, P, mode, decided, reached, lever, d_a, dd_a, v1, v2, w1, w2, m, ii, k):
+    """The friction mode at an interval's start (a fresh decision, or out of the plane a stuck
+    slip's hold direction again), with the slip put on the band's edge where the mode holds it
+    there. Returns (mode, decided, whether newly decided, turning)."""
+    chosen = False
+    u1, u2 = v1 + lever * w1, v2 + lever * w2
+    t1, t2 = P[RP_G] - dd_a * w1, P[RP_G + 1] - dd_a * w2
+    resp = 1.0 / m + lever * lever * ii
+    edge = mode == STICK
+    if decided:
+        # Out of the plane the hold force turns as the bob swings: the stuck slip follows
+        # its reverse, put there at each interval's start (as the stepped path's steps).
+        rate = math.hypot(t1, t2)
+        if rate > 0.0:
+            P[RP_H], P[RP_H + 1] = t1 / rate, t2 / rate
+    else:
+        # On the edge within what the state's round-off leaves (the normal velocity's
+        # share of a velocity turned into the contact's frame; the root's ticks), and
+        # by construction where a slide or the band just reached it (a turning slide's
+        # end is off by its second-order error: 2e-12 of its size was taken to slide on).
+        tol = 1e-12 * (math.hypot(v1, v2) + lever * math.hypot(w1, w2) + abs(dd_a))
+        if reached:
+            tol = math.inf
+        mode, P[RP_H], P[RP_H + 1], edge = rest_mode(u1, u2, t1, t2, P[RP_MU] * k * d_a, resp,
+                                                     P[RP_EPS], tol)
+        decided = chosen = True
+    if edge:
+        # The slip put on the edge along h by the friction impulse that does that (its
+        # work is friction's); in the plane h is the slip's own direction already.
+        j1 = (P[RP_EPS] * P[RP_H] - u1) / resp
+        j2 = (P[RP_EPS] * P[RP_H + 1] - u2) / resp
+        P[RP_V], P[RP_V + 1] = v1 + j1 / m, v2 + j2 / m
+        P[RP_TW], P[RP_TW + 1] = w1 + lever * ii * j1, w2 + lever * ii * j2
+        gain = 0.5 * m * (P[RP_V] ** 2 + P[RP_V + 1] ** 2 - v1 * v1 - v2 * v2)
+        if ii > 0.0:
+            gain += 0.5 / ii * (P[RP_TW] ** 2 + P[RP_TW + 1] ** 2 - w1 * w1 - w2 * w2)
+        share(G, XI, 1, -gain)
+    turning = mode == SLIDE and rest_turns(P)
+    return mode, decided, chosen, turning
+
+
+@jit_inline
+def rest_move(X, P, mode, h, om, r, n, e1, e2, w_n, d_a, d, spun, phases, phases_h, phases_n):
+    """The positions and the spin's turn over an interval of length h by Gauss-Legendre, and
+    friction's work per unit time (from its force and the slip, not from the energies: a check).
+    Returns (spent, phases_h, phases_n)."""
+    along1, along2, spent = 0.0, 0.0, 0.0
+    spun[:] = 0.0  # the mean spin in the plane
+    nodes, weights = (GL8_X, GL8_W) if mode == SLIDE else (GL_X, GL_W)
+    if h != phases_h or nodes.shape[0] != phases_n:
+        # The bob's phase at the quadrature nodes: the same for every interval of this length.
+        phases_h, phases_n = h, nodes.shape[0]
+        for q in range(phases_n):
+            phases[q, 0], phases[q, 1] = math.cos(om * (h * nodes[q])), math.sin(om * (h * nodes[q]))
+    for q in range(nodes.shape[0]):
+        dq, _, vq1, vq2, wq1, wq2, fq1, fq2 = rest_at_phase(P, mode, h * nodes[q], phases[q, 0], phases[q, 1])
+        along1 += weights[q] * vq1
+        along2 += weights[q] * vq2
+        for i in range(3):
+            spun[i] += weights[q] * rest_spin(n, e1, e2, 0.0, wq1, wq2, i)
+        spent -= weights[q] * (fq1 * (vq1 + (r - dq) * wq1) + fq2 * (vq2 + (r - dq) * wq2))
+    for i in range(3):
+        X[0, X_S + i] += n[i] * (d_a - d) + (e1[i] * along1 + e2[i] * along2) * h
+        spun[i] = (spun[i] + w_n * n[i]) * h
+    return spent, phases_h, phases_n
+
+
+@jit_inline
+def rest_turn(X, P, mode, h, n, e1, e2, w_n, spun, planar):
+    """The orientation turned by the interval's spin `spun`."""
+    if planar:
+        X[0, X_Q] += spun[2]
+    else:
+        if mode == STICK or mode == SLIDE:
+            # The spin's direction changes: fourth-order Magnus, the commutator of the
+            # spins at two Gauss points added to the mean's turn.
+            _, _, _, _, a1, a2, _, _ = rest_at(P, mode, h * GL2_X[0])
+            _, _, _, _, b1, b2, _, _ = rest_at(P, mode, h * GL2_X[1])
+            ax, ay, az = (rest_spin(n, e1, e2, w_n, a1, a2, 0), rest_spin(n, e1, e2, w_n, a1, a2, 1),
+                          rest_spin(n, e1, e2, w_n, a1, a2, 2))
+            bx, by, bz = (rest_spin(n, e1, e2, w_n, b1, b2, 0), rest_spin(n, e1, e2, w_n, b1, b2, 1),
+                          rest_spin(n, e1, e2, w_n, b1, b2, 2))
+            c = GL2_COMMUTATOR * h * h
+            spun[0] -= c * (ay * bz - az * by)
+            spun[1] -= c * (az * bx - ax * bz)
+            spun[2] -= c * (ax * by - ay * bx)
+        turn(X[0, X_Q:X_Q + 4], spun[0], spun[1], spun[2], 1.0, NO)
+
+
+@jit_inline
+def rest_forces(X, C, CI, P, WP, grav, FG, e1, e2, d_a, dd_a, d, dd, f1, f2, m, r, k, ii, mode, fric):
+    """An interval's end: the deepest overlap and force so far, the contact's geometry, spring and
+    friction there."""
+    # The deepest overlap (and force) of the interval: at its end, or inside where the bob turns.
+    deepest = max(d_a, d) if not (dd_a > 0.0 and dd < 0.0) else P[RP_DEQ] + math.hypot(P[RP_C], P[RP_S])
+    FG[F_MAX_OVERLAP] = max(FG[F_MAX_OVERLAP], deepest)
+    FG[F_MAX_FORCE] = max(FG[F_MAX_FORCE], k * deepest)
+    geometry(X, C, CI, 1, WP, NO, NO)
+    springs(X, C, CI, 1, 1, grav)
+    for i in range(3):
+        force = f1 * e1[i] + f2 * e2[i]
+        C[0, C_FF + i] = force
+        X[0, X_F + i] = force / m
+        X[0, X_L + i] = (r - d) * ii * (f2 * e1[i] - f1 * e2[i])  # (-l n) x F / I
+    CI[0, CI_MODE] = mode if fric else BAND
+
+
+@jit_inline
+def rest_cycles(G, XI, X, C, CI, P, WP, t, W, n, grav, spin, planar, fp, mode, which, whole, bob, ends, snap, lap,
+                snaps, marks, ring):
+    """Nothing here depends on the position along the wall or the orientation: once the state
+    recurs (the bob's phase, the velocities, the mode), the motion repeats (a ball resting,
+    rolling or sliding straight). A cycle is looked for between two events of the same kind, or
+    over a period of the bob without events, and repeated in one go (`rest_repeat`). Returns (t,
+    lap, ring)."""
+    depth = P[RP_DEQ] + math.hypot(P[RP_C], P[RP_S])
+    if which > 0:
+        # An event: the state may recur at a later one of the same kind (stuck and in the
+        # band in turn, twice a period, as a ball rolls in 3D).
+        lap = -1
+        for e in range(REST_RING):
+            if marks[e, 0] == mode and marks[e, 1] == which:
+                jumped = rest_repeat(G, XI, X, C, CI, WP, t, W, snaps[e], depth, bob, n, grav, spin, planar,
+                                     fp[FP_EVENT_TOL], REST_DRIFTING, 0.0, 0.0)
+                if jumped != t:
+                    t = jumped
+                    marks[:, 0] = -9
+                    break
+        e = ring % REST_RING
+        ring += 1
+        rest_snapshot(G, XI, X, C, t, snaps[e], 0.0)
+        marks[e, 0], marks[e, 1] = mode, which
+    elif whole and lap >= 0:
+        lap += 1
+        if lap == REST_SAMPLES:
+            # A period without events (stuck, sliding, in the band or no friction).
+            kind = REST_SLIDING if mode == SLIDE else (REST_DRIFTING if mode == STICK else REST_STILL)
+            t = rest_repeat(G, XI, X, C, CI, WP, t, W, snap, depth, bob, n, grav, spin, planar,
+                            fp[FP_EVENT_TOL], kind, ends[1, 0], math.hypot(P[RP_TW], P[RP_TW + 1]))
+            rest_snapshot(G, XI, X, C, t, snap, ends[1, 0])
+            lap = 0
+    else:
+        rest_snapshot(G, XI, X, C, t, snap, ends[1, 0])
+        lap = 0 if which < 0 else -1
+    return t, lap, ring
+
+
 @jit
 def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG):
     """Advance a sphere on a wall (see rest_ready) in closed form from t to W or to the contact's
@@ -407,14 +568,8 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
     w_k = -1 - CI[0, CI_J]
     n = WP[w_k, 3:6]  # out of the wall, towards the sphere
     e1 = np.zeros(3)
-    if planar:
-        e1[0], e1[1] = n[1], -n[0]  # n x z: the in-plane tangent (e2 = -z)
-    else:
-        # n x the axis least along n.
-        a = 0 if abs(n[0]) <= min(abs(n[1]), abs(n[2])) else (1 if abs(n[1]) <= abs(n[2]) else 2)
-        e1[(a + 1) % 3], e1[(a + 2) % 3] = n[(a + 2) % 3], -n[(a + 1) % 3]
-        e1 /= math.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
-    e2 = np.array([n[1] * e1[2] - n[2] * e1[1], n[2] * e1[0] - n[0] * e1[2], n[0] * e1[1] - n[1] * e1[0]])
+    e2 = np.zeros(3)
+    rest_basis(n, planar, e1, e2)
     m, r, k = X[0, X_M], X[0, X_R], C[0, C_K]
     ii = X[0, X_II] if spin else 0.0
     om = math.sqrt(k / m)
@@ -442,11 +597,8 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
     # A turning slide's error per interval, over the speeds: a thousandth of the tolerance (an
     # impact takes a few such intervals; a run with many is measured, as a stepped one).
     budget = max(4.0 * EPS64, REST_TURN_BUDGET * fp[FP_EVENT_TOL])
-    # Nothing here depends on the position along the wall or the orientation: once the state
-    # recurs (the bob's phase, the velocities, the mode), the motion repeats (a ball resting,
-    # rolling or sliding straight). A cycle is looked for between two events of the same kind, or over a period of
-    # the bob without events, and repeated in one go (`rest_repeat`). Not when recording, whose
-    # knots every interval gives.
+    # Cycles that recur are repeated in one go (`rest_cycles`); not when recording, whose knots
+    # every interval gives.
     snap = np.zeros(REST_SNAP)
     lap = -1  # whole intervals without events since `snap`; -1: none taken
     snaps = np.zeros((REST_RING, REST_SNAP))  # the state at the last few events, and their kinds
@@ -463,39 +615,9 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         P[RP_V], P[RP_V + 1], P[RP_TW], P[RP_TW + 1], P[RP_LINE] = v1, v2, w1, w2, 1.0
         lever = r - d_a
         if fric and (not decided or (mode == STICK and not planar)):
-            u1, u2 = v1 + lever * w1, v2 + lever * w2
-            t1, t2 = P[RP_G] - dd_a * w1, P[RP_G + 1] - dd_a * w2
-            resp = 1.0 / m + lever * lever * ii
-            edge = mode == STICK
-            if decided:
-                # Out of the plane the hold force turns as the bob swings: the stuck slip follows
-                # its reverse, put there at each interval's start (as the stepped path's steps).
-                rate = math.hypot(t1, t2)
-                if rate > 0.0:
-                    P[RP_H], P[RP_H + 1] = t1 / rate, t2 / rate
-            else:
-                # On the edge within what the state's round-off leaves (the normal velocity's
-                # share of a velocity turned into the contact's frame; the root's ticks), and
-                # by construction where a slide or the band just reached it (a turning slide's
-                # end is off by its second-order error: 2e-12 of its size was taken to slide on).
-                tol = 1e-12 * (math.hypot(v1, v2) + lever * math.hypot(w1, w2) + abs(dd_a))
-                if reached:
-                    tol = math.inf
-                mode, P[RP_H], P[RP_H + 1], edge = rest_mode(u1, u2, t1, t2, P[RP_MU] * k * d_a, resp,
-                                                             P[RP_EPS], tol)
-                decided = announce = True
-            if edge:
-                # The slip put on the edge along h by the friction impulse that does that (its
-                # work is friction's); in the plane h is the slip's own direction already.
-                j1 = (P[RP_EPS] * P[RP_H] - u1) / resp
-                j2 = (P[RP_EPS] * P[RP_H + 1] - u2) / resp
-                P[RP_V], P[RP_V + 1] = v1 + j1 / m, v2 + j2 / m
-                P[RP_TW], P[RP_TW + 1] = w1 + lever * ii * j1, w2 + lever * ii * j2
-                gain = 0.5 * m * (P[RP_V] ** 2 + P[RP_V + 1] ** 2 - v1 * v1 - v2 * v2)
-                if ii > 0.0:
-                    gain += 0.5 / ii * (P[RP_TW] ** 2 + P[RP_TW + 1] ** 2 - w1 * w1 - w2 * w2)
-                share(G, XI, 1, -gain)
-            turning = mode == SLIDE and rest_turns(P)
+            mode, decided, chosen, turning = rest_choose(G, XI, P, mode, decided, reached, lever, d_a, dd_a, v1, v2,
+                                                         w1, w2, m, ii, k)
+            announce = announce or chosen
         if announce and record:
             # The acceleration the mode starts with, after the last knot's (a jump there).
             _, _, _, _, _, _, f1, f2 = rest_at(P, mode, 0.0)
@@ -525,60 +647,15 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
         if quick > REST_STUCK_LIMIT:
             rest_put(X, P, dd_a, n, e1, e2, w_n)
             return t, KN, RC, False
-        # The positions, angle and friction's work over the interval by Gauss-Legendre (the work
-        # from its force and the slip, not from the energies: a check).
         d, dd, v1, v2, w1, w2, f1, f2 = rest_at(P, mode, h)
-        along1, along2, spent = 0.0, 0.0, 0.0
-        spun[:] = 0.0  # the mean spin in the plane
-        nodes, weights = (GL8_X, GL8_W) if mode == SLIDE else (GL_X, GL_W)
-        if h != phases_h or nodes.shape[0] != phases_n:
-            # The bob's phase at the quadrature nodes: the same for every interval of this length.
-            phases_h, phases_n = h, nodes.shape[0]
-            for q in range(phases_n):
-                phases[q, 0], phases[q, 1] = math.cos(om * (h * nodes[q])), math.sin(om * (h * nodes[q]))
-        for q in range(nodes.shape[0]):
-            dq, _, vq1, vq2, wq1, wq2, fq1, fq2 = rest_at_phase(P, mode, h * nodes[q], phases[q, 0], phases[q, 1])
-            along1 += weights[q] * vq1
-            along2 += weights[q] * vq2
-            for i in range(3):
-                spun[i] += weights[q] * rest_spin(n, e1, e2, 0.0, wq1, wq2, i)
-            spent -= weights[q] * (fq1 * (vq1 + (r - dq) * wq1) + fq2 * (vq2 + (r - dq) * wq2))
-        for i in range(3):
-            X[0, X_S + i] += n[i] * (d_a - d) + (e1[i] * along1 + e2[i] * along2) * h
-            spun[i] = (spun[i] + w_n * n[i]) * h
+        spent, phases_h, phases_n = rest_move(X, P, mode, h, om, r, n, e1, e2, w_n, d_a, d, spun, phases, phases_h,
+                                              phases_n)
         if spin:
-            if planar:
-                X[0, X_Q] += spun[2]
-            else:
-                if mode == STICK or mode == SLIDE:
-                    # The spin's direction changes: fourth-order Magnus, the commutator of the
-                    # spins at two Gauss points added to the mean's turn.
-                    _, _, _, _, a1, a2, _, _ = rest_at(P, mode, h * GL2_X[0])
-                    _, _, _, _, b1, b2, _, _ = rest_at(P, mode, h * GL2_X[1])
-                    ax, ay, az = (rest_spin(n, e1, e2, w_n, a1, a2, 0), rest_spin(n, e1, e2, w_n, a1, a2, 1),
-                                  rest_spin(n, e1, e2, w_n, a1, a2, 2))
-                    bx, by, bz = (rest_spin(n, e1, e2, w_n, b1, b2, 0), rest_spin(n, e1, e2, w_n, b1, b2, 1),
-                                  rest_spin(n, e1, e2, w_n, b1, b2, 2))
-                    c = GL2_COMMUTATOR * h * h
-                    spun[0] -= c * (ay * bz - az * by)
-                    spun[1] -= c * (az * bx - ax * bz)
-                    spun[2] -= c * (ax * by - ay * bx)
-                turn(X[0, X_Q:X_Q + 4], spun[0], spun[1], spun[2], 1.0, NO)
+            rest_turn(X, P, mode, h, n, e1, e2, w_n, spun, planar)
         P[RP_V], P[RP_V + 1], P[RP_TW], P[RP_TW + 1] = v1, v2, w1, w2
         rest_put(X, P, dd, n, e1, e2, w_n)
         t = landed
-        # The deepest overlap (and force) of the interval: at its end, or inside where the bob turns.
-        deepest = max(d_a, d) if not (dd_a > 0.0 and dd < 0.0) else P[RP_DEQ] + math.hypot(P[RP_C], P[RP_S])
-        FG[F_MAX_OVERLAP] = max(FG[F_MAX_OVERLAP], deepest)
-        FG[F_MAX_FORCE] = max(FG[F_MAX_FORCE], k * deepest)
-        geometry(X, C, CI, 1, WP, NO, NO)
-        springs(X, C, CI, 1, 1, grav)
-        for i in range(3):
-            force = f1 * e1[i] + f2 * e2[i]
-            C[0, C_FF + i] = force
-            X[0, X_F + i] = force / m
-            X[0, X_L + i] = (r - d) * ii * (f2 * e1[i] - f1 * e2[i])  # (-l n) x F / I
-        CI[0, CI_MODE] = mode if fric else BAND
+        rest_forces(X, C, CI, P, WP, grav, FG, e1, e2, d_a, dd_a, d, dd, f1, f2, m, r, k, ii, mode, fric)
         share(G, XI, 1, spent * h)
         ST[S_STEPS] += 1
         if not turning:
@@ -589,35 +666,8 @@ def rest_phase(G, GI, X, XI, C, CI, t, W, WP, grav, fl, fp, KN, RC, CNT, ST, FG)
             ST[S_STATUS] = MAXSTEPS
             break
         if not record and not turning:
-            depth = P[RP_DEQ] + math.hypot(P[RP_C], P[RP_S])
-            if which > 0:
-                # An event: the state may recur at a later one of the same kind (stuck and in the
-                # band in turn, twice a period, as a ball rolls in 3D).
-                lap = -1
-                for e in range(REST_RING):
-                    if marks[e, 0] == mode and marks[e, 1] == which:
-                        jumped = rest_repeat(G, XI, X, C, CI, WP, t, W, snaps[e], depth, bob, n, grav, spin, planar,
-                                             fp[FP_EVENT_TOL], REST_DRIFTING, 0.0, 0.0)
-                        if jumped != t:
-                            t = jumped
-                            marks[:, 0] = -9
-                            break
-                e = ring % REST_RING
-                ring += 1
-                rest_snapshot(G, XI, X, C, t, snaps[e], 0.0)
-                marks[e, 0], marks[e, 1] = mode, which
-            elif whole and lap >= 0:
-                lap += 1
-                if lap == REST_SAMPLES:
-                    # A period without events (stuck, sliding, in the band or no friction).
-                    kind = REST_SLIDING if mode == SLIDE else (REST_DRIFTING if mode == STICK else REST_STILL)
-                    t = rest_repeat(G, XI, X, C, CI, WP, t, W, snap, depth, bob, n, grav, spin, planar,
-                                    fp[FP_EVENT_TOL], kind, ends[1, 0], math.hypot(P[RP_TW], P[RP_TW + 1]))
-                    rest_snapshot(G, XI, X, C, t, snap, ends[1, 0])
-                    lap = 0
-            else:
-                rest_snapshot(G, XI, X, C, t, snap, ends[1, 0])
-                lap = 0 if which < 0 else -1
+            t, lap, ring = rest_cycles(G, XI, X, C, CI, P, WP, t, W, n, grav, spin, planar, fp, mode, which, whole,
+                                       bob, ends, snap, lap, snaps, marks, ring)
         if which == 0:
             return t, KN, RC, True
         if which > 0:

@@ -13,7 +13,7 @@ import numpy as np
 from collide.engine.broad import crossed, join, largest_set, near_pairs, root_of
 from collide.engine.event.island import run_island
 from collide.engine.flight import meets_again, next_contact, positions_at, speed_scales
-from collide.engine.jit import jit
+from collide.engine.jit import jit, jit_inline
 from collide.engine.layout import (
     CN_IVALS,
     CN_OPEN,
@@ -206,6 +206,132 @@ def lone_on_walls(cand, eng, n):
 
 
 @jit
+def jump(G, P, V, n, t, t_end, search, ticks, WP, grav, dim, fp, IV, CNT, ST, FG):
+    """Nothing touches at t: on in closed form to the next contact start, or the run ends (nothing
+    to record in free flight). Returns (t, t_end, search, ticks, whether the run stops here)."""
+    small = YES if n <= 64 else NO
+    scale = speed_scales(V, n, IV, CNT)
+    if (t_end == math.inf and small == YES and CNT[CN_IVALS] > 0 and fp[FP_END_SLOW] > 0.0
+            and not meets_again(G, P, V, n, t, WP, grav, IV, CNT, fp[FP_SLOW], fp[FP_END_SLOW],
+                                run_end(t, fp, IV, CNT) - t, scale)):
+        # What still approaches closes slower than the run resolves velocities (its
+        # tolerance): the step's error, not a contact to come (a Newton's cradle at k =
+        # 1e6, tol 1e-7, left its balls at 1e-8 m/s and met them again 11 hours later).
+        t = t_end = run_end(t, fp, IV, CNT)
+        ST[S_JUMPS] += 1
+        return t, t_end, search, ticks, True
+    if search == math.inf:
+        fastest = 0.0
+        for i in range(n):
+            fastest = max(fastest, math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2))
+        search = 4.0 * G[0, G_R] / fastest if fastest > 0 else 1.0
+    horizon = min(search, t_end - t)
+    tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, small, fp[FP_SLOW], scale)
+    if tau <= horizon or (small == YES and tau < math.inf):
+        if not min(t + tau, t_end) > t:
+            # A contact due closer than the clock resolves lands on its next tick (see
+            # run_island); one that still does not engage tick after tick (bodies far
+            # from the origin, where positions are coarse) is refused, never a hang.
+            ticks += 1
+            if ticks > STALL_LIMIT:
+                ST[S_STATUS] = STALL
+                FG[F_STATUS_T] = t
+                return t, t_end, search, ticks, True
+            t = np.nextafter(t, math.inf)
+            ST[S_JUMPS] += 1
+            return t, t_end, search, ticks, False
+        ticks = 0
+        t = min(t + tau, t_end)
+        ST[S_JUMPS] += 1
+        search = 2.0 * tau if tau > 0 else search
+        return t, t_end, search, ticks, False
+    ST[S_JUMPS] += 1
+    if t_end < math.inf:
+        t = min(t + horizon, t_end)
+        search *= 2.0
+        return t, t_end, search, ticks, False
+    tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, YES, fp[FP_SLOW], scale)
+    if tau < math.inf:
+        t += tau
+        return t, t_end, search, ticks, False
+    t = t_end = run_end(t, fp, IV, CNT)  # no contact ahead
+    return t, t_end, search, ticks, True
+
+
+@jit_inline
+def window_omega(G, eng, tables):
+    """The stiffest engaged contact's angular frequency."""
+    omega = 0.0
+    ptab, wtab = tables
+    for p in range(eng.shape[0]):
+        i, j = eng[p, 0], eng[p, 1]
+        mi = int(G[i, G_MAT])
+        k = ptab[mi, int(G[j, G_MAT]), TP_K] if j >= 0 else wtab[mi, TP_K]
+        omega = max(omega, math.sqrt(k * (G[i, G_IM] + (G[j, G_IM] if j >= 0 else 0.0))))
+    return omega
+
+
+@jit
+def clusters(pairs, n):
+    """Union-find parents of the bodies joined by `pairs` (walls, j < 0, join nothing)."""
+    parent = np.arange(n)
+    for k in range(pairs.shape[0]):
+        if pairs[k, 1] >= 0:
+            join(parent, pairs[k, 0], pairs[k, 1])
+    return parent
+
+
+@jit
+def run_islands(G, GI, cand, parent, n, t, horizon, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
+    """Every island of the window's candidates (bucketed by the island's root: a counting sort)
+    run from t to t + horizon. Returns the buffers."""
+    KN, RC, IV, OP = bufs
+    count = np.zeros(n + 1, np.int64)
+    for k in range(cand.shape[0]):
+        count[root_of(parent, cand[k, 0]) + 1] += 1
+    for i in range(n):
+        count[i + 1] += count[i]
+    fill = count.copy()
+    order = np.empty(cand.shape[0], np.int64)
+    for k in range(cand.shape[0]):
+        r = root_of(parent, cand[k, 0])
+        order[fill[r]] = k
+        fill[r] += 1
+    for r in range(n):
+        k0, k1 = count[r], count[r + 1]
+        if k1 == k0:
+            continue
+        Q = np.zeros((k1 - k0, 3), np.int64)
+        QF = np.zeros((k1 - k0, NQF))
+        for k in range(k0, k1):
+            i, j = cand[order[k], 0], cand[order[k], 1]
+            Q[k - k0, Q_I], Q[k - k0, Q_J] = i, j
+            QF[k - k0, QF_REACH] = G[i, G_R] + (G[j, G_R] if j >= 0 else 0.0)
+        KN, RC, IV, OP = run_island(G, GI, Q, QF, t, t + horizon, tables, WP, grav, weights, fl, fp,
+                                    (KN, RC, IV, OP), CNT, ST, FG)
+        if ST[S_STATUS] != OK:
+            break
+    return KN, RC, IV, OP
+
+
+@jit_inline
+def restore_window(G, GI, KN, IV, OP, CNT, saved_G, saved_GI, saved_CNT, saved_OP, saved_flags, n):
+    """Back to the window's start, to redo it."""
+    for i in range(n):
+        for d in range(NG):
+            G[i, d] = saved_G[i, d]
+        GI[i, 0], GI[i, 1] = saved_GI[i, 0], saved_GI[i, 1]
+    for d in range(4):
+        CNT[d] = saved_CNT[d]
+    for k in range(CNT[CN_OPEN]):
+        OP[k] = saved_OP[k]
+        IV[OP[k], V_END] = math.nan
+    for i in range(n):
+        if GI[i, GI_KNOT] >= 0:
+            KN[GI[i, GI_KNOT], K_FREE] = saved_flags[i]
+
+
+@jit
 def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     """Advance every body to the run's end (see the README's engine notes): jump to the next
     contact start while nothing touches; otherwise a window of islands. Returns the buffers and
@@ -226,62 +352,13 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
         positions_at(G, n, t, grav, P, V)
         eng = engaged_now(G, P, V, n, WP, grav, dim)
         if eng.shape[0] == 0:
-            small = YES if n <= 64 else NO
-            scale = speed_scales(V, n, IV, CNT)
-            if (t_end == math.inf and small == YES and CNT[CN_IVALS] > 0 and fp[FP_END_SLOW] > 0.0
-                    and not meets_again(G, P, V, n, t, WP, grav, IV, CNT, fp[FP_SLOW], fp[FP_END_SLOW],
-                                        run_end(t, fp, IV, CNT) - t, scale)):
-                # What still approaches closes slower than the run resolves velocities (its
-                # tolerance): the step's error, not a contact to come (a Newton's cradle at k =
-                # 1e6, tol 1e-7, left its balls at 1e-8 m/s and met them again 11 hours later).
-                t = t_end = run_end(t, fp, IV, CNT)
-                ST[S_JUMPS] += 1
+            t, t_end, search, ticks, stop = jump(G, P, V, n, t, t_end, search, ticks, WP, grav, dim, fp, IV, CNT, ST,
+                                                 FG)
+            if stop:
                 break
-            # Nothing touches: jump to the next contact start (nothing to record in free flight).
-            if search == math.inf:
-                fastest = 0.0
-                for i in range(n):
-                    fastest = max(fastest, math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2))
-                search = 4.0 * G[0, G_R] / fastest if fastest > 0 else 1.0
-            horizon = min(search, t_end - t)
-            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, small, fp[FP_SLOW], scale)
-            if tau <= horizon or (small == YES and tau < math.inf):
-                if not min(t + tau, t_end) > t:
-                    # A contact due closer than the clock resolves lands on its next tick (see
-                    # run_island); one that still does not engage tick after tick (bodies far
-                    # from the origin, where positions are coarse) is refused, never a hang.
-                    ticks += 1
-                    if ticks > STALL_LIMIT:
-                        ST[S_STATUS] = STALL
-                        FG[F_STATUS_T] = t
-                        break
-                    t = np.nextafter(t, math.inf)
-                    ST[S_JUMPS] += 1
-                    continue
-                ticks = 0
-                t = min(t + tau, t_end)
-                ST[S_JUMPS] += 1
-                search = 2.0 * tau if tau > 0 else search
-                continue
-            ST[S_JUMPS] += 1
-            if t_end < math.inf:
-                t = min(t + horizon, t_end)
-                search *= 2.0
-                continue
-            tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, YES, fp[FP_SLOW], scale)
-            if tau < math.inf:
-                t += tau
-                continue
-            t = t_end = run_end(t, fp, IV, CNT)  # no contact ahead
-            break
+            continue
         # A window: islands of the bodies that may meet within it.
-        omega = 0.0
-        ptab, wtab = tables
-        for p in range(eng.shape[0]):
-            i, j = eng[p, 0], eng[p, 1]
-            mi = int(G[i, G_MAT])
-            k = ptab[mi, int(G[j, G_MAT]), TP_K] if j >= 0 else wtab[mi, TP_K]
-            omega = max(omega, math.sqrt(k * (G[i, G_IM] + (G[j, G_IM] if j >= 0 else 0.0))))
+        omega = window_omega(G, eng, tables)
         step_est = fp[FP_OMEGA_H] / omega if fl[FL_AUTO] else fp[FP_DT]
         horizon = min(span * step_est, t_end - t)
         saved_G = G.copy()
@@ -294,21 +371,14 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 saved_flags[i] = KN[GI[i, GI_KNOT], K_FREE]
         # The largest cluster of touching bodies: islands much bigger than it mean the window
         # is long enough for free bodies to chain up, and every step would cost the chain.
-        parent = np.arange(n)
-        for p in range(eng.shape[0]):
-            if eng[p, 1] >= 0:
-                join(parent, eng[p, 0], eng[p, 1])
-        touching = largest_set(parent, n)
+        touching = largest_set(clusters(eng, n), n)
         retries = 0
         safety = WINDOW_SAFETY
         halved = False
         P0 = P.copy()
         while True:
             cand, margin = window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim)
-            parent = np.arange(n)
-            for k in range(cand.shape[0]):
-                if cand[k, 1] >= 0:
-                    join(parent, cand[k, 0], cand[k, 1])
+            parent = clusters(cand, n)
             if largest_set(parent, n) > max(ISLAND_SLACK * touching, 16) and horizon > 4.0 * step_est:
                 horizon *= 0.5
                 halved = True
@@ -325,32 +395,8 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 horizon = min(WINDOW_STEPS * step_est, t_end - t)
                 halved = True
                 continue
-            # Bucket the candidates by island (counting sort on the island's root).
-            count = np.zeros(n + 1, np.int64)
-            for k in range(cand.shape[0]):
-                count[root_of(parent, cand[k, 0]) + 1] += 1
-            for i in range(n):
-                count[i + 1] += count[i]
-            fill = count.copy()
-            order = np.empty(cand.shape[0], np.int64)
-            for k in range(cand.shape[0]):
-                r = root_of(parent, cand[k, 0])
-                order[fill[r]] = k
-                fill[r] += 1
-            for r in range(n):
-                k0, k1 = count[r], count[r + 1]
-                if k1 == k0:
-                    continue
-                Q = np.zeros((k1 - k0, 3), np.int64)
-                QF = np.zeros((k1 - k0, NQF))
-                for k in range(k0, k1):
-                    i, j = cand[order[k], 0], cand[order[k], 1]
-                    Q[k - k0, Q_I], Q[k - k0, Q_J] = i, j
-                    QF[k - k0, QF_REACH] = G[i, G_R] + (G[j, G_R] if j >= 0 else 0.0)
-                KN, RC, IV, OP = run_island(G, GI, Q, QF, t, t + horizon, tables, WP, grav, weights, fl, fp,
-                                            (KN, RC, IV, OP), CNT, ST, FG)
-                if ST[S_STATUS] != OK:
-                    break
+            KN, RC, IV, OP = run_islands(G, GI, cand, parent, n, t, horizon, tables, WP, grav, weights, fl, fp,
+                                         (KN, RC, IV, OP), CNT, ST, FG)
             if ST[S_STATUS] != OK or not missed_contact(G, P, V, n, t + horizon, cand, WP, grav, dim, P0, margin):
                 break
             # A contact between islands: a speed bound failed. Redo the window, shorter and safer.
@@ -360,18 +406,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 ST[S_STATUS] = STALL
                 FG[F_STATUS_T], FG[F_STATUS_A] = t, 1.0
                 break
-            for i in range(n):
-                for d in range(NG):
-                    G[i, d] = saved_G[i, d]
-                GI[i, 0], GI[i, 1] = saved_GI[i, 0], saved_GI[i, 1]
-            for d in range(4):
-                CNT[d] = saved_CNT[d]
-            for k in range(CNT[CN_OPEN]):
-                OP[k] = saved_OP[k]
-                IV[OP[k], V_END] = math.nan
-            for i in range(n):
-                if GI[i, GI_KNOT] >= 0:
-                    KN[GI[i, GI_KNOT], K_FREE] = saved_flags[i]
+            restore_window(G, GI, KN, IV, OP, CNT, saved_G, saved_GI, saved_CNT, saved_OP, saved_flags, n)
             horizon *= 0.25
             safety *= 2.0
             positions_at(G, n, t, grav, P, V)
