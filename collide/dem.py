@@ -1,7 +1,7 @@
 """Running scenes through the fixed-step DEM kernel (`collide.engine.dem`): the contact laws of
 docs/design.md section 9 (Hertz, restitution, tangential springs, rolling resistance, materials).
 
-The event engine (`collide.engine.kernels`) locates every contact start and end and every
+The event engine (`collide.engine.event`) locates every contact start and end and every
 friction mode change, which makes the report's law exact to the tolerance; a DEM step does not
 (contacts switch at steps, as in LIGGGHTS or YADE), so its error is set by the steps per contact
 time: `contact_time` estimates the shortest one from the fastest approach the scene allows, and
@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
 from collide.engine import tier
 from collide.engine.dem import layout as dk
 from collide.engine.dem import loop as dem_loop

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
+from collide.engine.broad import near_pairs
 from collide.model import TABLE_ESTAR, Model, State
 from collide.results import RunResult
 from collide.trajectory import Trajectory, body_knots, sample, settled
@@ -76,7 +77,7 @@ def contacts_near(model: Model, s: np.ndarray, margin: float = 0.0) -> np.ndarra
     for frame in flat:
         pos = np.zeros((model.n_bodies, 3))
         pos[:, :model.dim] = frame
-        pairs = kn.near_pairs(pos, radius, margin * radius + 1e-12 * radius, model.n_bodies, model.dim)
+        pairs = near_pairs(pos, radius, margin * radius + 1e-12 * radius, model.n_bodies, model.dim)
         found.update(map(tuple, pairs.tolist()))
     pairs = np.array(sorted(found), dtype=np.int64).reshape(-1, 2)
     walls = [(n, -1 - w) for w in range(model.n_walls) for n in range(model.n_bodies)]

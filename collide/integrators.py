@@ -1,7 +1,7 @@
 """The integrators: the report's update, and symmetric compositions of Verlet substeps.
 
 The compositions step the contact phase of each island in the compiled engine
-(`collide.engine.kernels.step`): a symmetric composition of velocity-Verlet (kick-drift-kick)
+(`collide.engine.event.substep.step`): a symmetric composition of velocity-Verlet (kick-drift-kick)
 substeps gamma h is second order and symplectic for one substep and of higher order for more,
 and every one of them applies forces as equal and opposite impulses, so linear and angular
 momentum are conserved to round-off whatever the step.

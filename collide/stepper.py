@@ -1,10 +1,10 @@
-"""Running scenes through the event engine (`collide.engine.kernels`).
+"""Running scenes through the compiled event engine (`collide.engine.event`).
 
 `simulate` packs a batch of runs into the kernels' tables, runs each member, and unpacks a
 `RunResult` (`collide.results`): final states, counters, contact log and (when recording) a
 `Trajectory` per member. DEM runs go through `collide.dem` instead (`collide.run` chooses).
 The engine itself (windows, islands, closed-form free flight, event-located steps; the seed's
-fixed grid) is described in `collide/engine/kernels.py` and the README.
+fixed grid) is described in docs/engine.md and the README.
 """
 
 from __future__ import annotations
@@ -19,8 +19,9 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from collide.engine import kernels as kn
-from collide.engine import tier
+from collide.engine import layout as kn
+from collide.engine import seed, tier
+from collide.engine.event import run as event_run
 from collide.errors import RunError
 from collide.integrators import INTEGRATORS, Integrator
 from collide.limits import MAX_STEPS_DEFAULT
@@ -326,8 +327,8 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
 
     def run_member(b: int) -> tuple:
         if integ.events:
-            return kn.simulate(G[b], tables[b], walls[b], grav[b], weights, fl[b], fp[b])
-        return kn.seed_run(G[b], tables[b], WP, grav[b], fl[b], fp[b])
+            return event_run.simulate(G[b], tables[b], walls[b], grav[b], weights, fl[b], fp[b])
+        return seed.seed_run(G[b], tables[b], WP, grav[b], fl[b], fp[b])
 
     started = time.perf_counter()
     outcomes = run_members(b_count, run_member, progress, [(fp[b], int(kn.FP_NOW), t_end[b]) for b in range(b_count)])
@@ -423,7 +424,7 @@ def _load_compiled(events: bool, *args) -> None:
         return
     import numba
 
-    kernel = kn.simulate if events else kn.seed_run
+    kernel = event_run.simulate if events else seed.seed_run
     types = tuple(numba.typeof(a) for a in (args if events else (args[0], args[1], args[2], args[3], args[5],
                                                                   args[6])))
     with tier.loading():

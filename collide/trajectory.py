@@ -8,7 +8,7 @@ from functools import cached_property
 
 import numpy as np
 
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
 from collide.model import Model, State, turned_quaternions
 
 
@@ -16,10 +16,10 @@ from collide.model import Model, State, turned_quaternions
 class Trajectory:
     """One run's motion, exactly where it is known, plus its contacts.
 
-    knots (K, kernels.NK): a body's state at a time (the ends of its steps, where free flight
+    knots (K, layout.NK): a body's state at a time (the ends of its steps, where free flight
     starts and ends), with its acceleration just before and after; between two knots of a body
     the motion is closed-form free flight (the earlier knot's K_FREE) or one integrator step,
-    rebuilt by a quintic Hermite (`sample`). records (R, kernels.NR): each engaged
+    rebuilt by a quintic Hermite (`sample`). records (R, layout.NR): each engaged
     contact at the end of each step (overlap, normal force, friction force on body i, mode).
     intervals (I, 4): (i, j, start, end) of every contact phase; j = -1 - wall for walls.
 

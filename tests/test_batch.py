@@ -385,7 +385,8 @@ _KILL_INSIDE_A_CHUNK = """
 import os, signal, sys
 from pathlib import Path
 from collide import batch as lib
-from collide.engine import kernels
+from collide.engine import seed
+from collide.engine.event import run
 
 started = 0
 
@@ -406,7 +407,7 @@ class Counted:  # a kernel that kills the process, as the OOM killer would, when
         return self.real(*args)
 
 
-kernels.simulate, kernels.seed_run = Counted(kernels.simulate), Counted(kernels.seed_run)
+run.simulate, seed.seed_run = Counted(run.simulate), Counted(seed.seed_run)
 plan = lib.plan_batch(["demo-1d"], sweeps=[lib.parse_sweep("body.ball1.velocity=0.5:1.5:12")])
 lib.run_batch(plan, dt=1e-4, summary=Path(sys.argv[1]))  # the default chunk of 1000 runs
 """

@@ -179,8 +179,9 @@ def test_the_cache_key_covers_what_the_kernels_import() -> None:
     from collide.engine import tier
 
     names = {p.relative_to(ROOT).as_posix() for p in tier.engine_sources()}
-    assert {"collide/engine/kernels.py", "collide/engine/dem/loop.py", "collide/engine/dem/contact.py",
-            "collide/engine/dem/layout.py", "collide/engine/jit.py", "collide/integrators.py"} <= names
+    assert {"collide/engine/event/run.py", "collide/engine/event/island.py", "collide/engine/layout.py",
+            "collide/engine/dem/loop.py", "collide/engine/dem/contact.py", "collide/engine/dem/layout.py",
+            "collide/engine/jit.py", "collide/integrators.py"} <= names
     # The choice of compiled or interpreted, and what it imports, never reach the machine code.
     assert not {"collide/engine/tier.py", "collide/scene.py"} & names
 

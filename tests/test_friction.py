@@ -1,5 +1,5 @@
-"""The friction modes' kinematics: the hold rate against a finite difference of the slip, and
-the order the compositions keep with friction, in the plane and out of it."""
+"""Friction in whole runs: events located, and the order the compositions keep with friction, in
+the plane and out of it (the hold rate against a finite difference of the slip: tests/engine)."""
 
 from __future__ import annotations
 
@@ -14,117 +14,10 @@ import pytest
 
 from collide import diagnostics as dg
 from collide.accuracy import outcome, speed_scale
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
 from collide.model import compile_scenes, reference_frequency
 from collide.run import run_scene
 from collide.scene import generic_turn, load_scene, parse_scene, turned_source
-
-
-def pressed_island(dim: int, seed: bool, wall: bool):
-    """Two spinning spheres pressed together (and the first onto a wall), as an island's tables."""
-    rng = np.random.default_rng(3)
-    X = np.zeros((2, int(kn.NX)))
-    X[0, kn.X_S:kn.X_S + 3] = [0.0, 0.031, 0.01]
-    X[1, kn.X_S:kn.X_S + 3] = [0.04, 0.0, 0.0]
-    X[:, kn.X_V:kn.X_V + 3] = rng.normal(size=(2, 3))
-    X[:, kn.X_W:kn.X_W + 3] = rng.normal(size=(2, 3)) * 5
-    if dim == 2:
-        X[:, kn.X_S + 2] = X[:, kn.X_V + 2] = 0.0
-        X[:, kn.X_W] = X[:, kn.X_W + 1] = 0.0
-    mass, radius = np.array([0.03, 0.02]), np.array([0.03, 0.025])
-    X[:, kn.X_M], X[:, kn.X_IM], X[:, kn.X_R] = mass, 1 / mass, radius
-    X[:, kn.X_I] = 0.4 * mass * radius**2
-    X[:, kn.X_II] = 1 / X[:, kn.X_I]
-    nc = 2 if wall else 1
-    C = np.zeros((nc, int(kn.NC)))
-    CI = np.zeros((nc, int(kn.NCI)), np.int64)
-    CI[0, :4] = [0, 1, 0, 1]
-    C[0, kn.C_K], C[0, kn.C_REACH] = 750.0, radius.sum()
-    WP = np.zeros((1, 6))
-    if wall:
-        WP[0] = [0.0, 0.0025, 0.0, 0.0, 1.0, 0.0]
-        CI[1, :4] = [0, -1, 0, -1]
-        C[1, kn.C_K], C[1, kn.C_REACH] = 1500.0, radius[0]
-    return X, C, CI, WP, nc, np.array([0.0, -9.81, 0.0])
-
-
-def slips(X, C, CI, WP, nc, seed, spin=1, planar=False):
-    kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
-    return np.array([kn.slip(X, C, CI, c, kn.X_V, kn.X_W, spin, planar) for c in range(nc)])
-
-
-@pytest.mark.parametrize("dim", [2, 3])
-@pytest.mark.parametrize("seed", [0, 1])
-@pytest.mark.parametrize("wall", [False, True])
-def test_hold_rate_is_the_slip_rate_without_friction(dim, seed, wall):
-    """G (`kernels.slip_rate` under springs and gravity) is the tangential part of the slip's
-    rate of change along the frictionless motion: checked by a central difference."""
-    X, C, CI, WP, nc, grav = pressed_island(dim, seed, wall)
-    seed = np.int64(seed)
-    kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
-    kn.springs(X, C, CI, 2, nc, grav)
-    assert (C[:nc, kn.C_DELTA] > 0).all()  # really pressed: the springs act
-    planar = dim == 2  # the plane's own arithmetic (its zero parts left out): the same numbers
-    rates = [np.array([kn.slip_rate(X, C, CI, c, kn.X_V, kn.X_W, kn.X_A, kn.X_L, np.int64(1), seed, np.int64(1),
-                                    flat) for c in range(nc)]) for flat in {planar, False}]
-    assert all(np.array_equal(r, rates[0]) for r in rates)
-    rate = rates[0]
-    acc = X[:, kn.X_A:kn.X_A + 3].copy()
-    h = 1e-6
-    ends = []
-    for sign in (1.0, -1.0):
-        Y = X.copy()
-        Y[:, kn.X_S:kn.X_S + 3] += sign * h * X[:, kn.X_V:kn.X_V + 3] + 0.5 * h * h * acc
-        Y[:, kn.X_V:kn.X_V + 3] += sign * h * acc
-        ends.append(slips(Y, C.copy(), CI, WP, nc, seed, planar=planar))
-        assert np.array_equal(ends[-1], slips(Y, C.copy(), CI, WP, nc, seed))
-    numeric = (ends[0] - ends[1]) / (2 * h)
-    kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
-    n = C[:nc, kn.C_N:kn.C_N + 3]
-    tangential = numeric - np.sum(numeric * n, axis=1, keepdims=True) * n
-    # Truncation h^2 |third derivative| and rounding 1e-16 |slip| / h: both below 1e-7 relative.
-    assert rate == pytest.approx(tangential, rel=1e-7, abs=1e-7 * np.abs(tangential).max())
-    assert np.abs(rate).max() > 1.0  # not vacuous
-
-
-def test_a_3d_slides_event_value_is_continuous_as_its_slip_turns():
-    """Out of the plane a slip near the band can turn half round without slowing to it (its way
-    slaved to the other forces). The slide's event value must not jump as it turns, or the root
-    search bisects the jump to the clock and gives up (40 trials: a pile of 27 spheres warned of
-    dozens of such steps). It is |slip| cos^2(turn / 2) - eps: |slip| - eps while the slip keeps
-    its way, and -eps reversed, so a slip that reverses through the band still changes sign."""
-    X, C, CI, WP, nc, grav = pressed_island(3, 0, False)
-    seed = np.int64(0)
-    kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
-    kn.springs(X, C, CI, 2, nc, grav)
-    kn.set_basis(C, 0, False)
-    e1, e2 = C[0, kn.C_B:kn.C_B + 3], C[0, kn.C_B + 3:kn.C_B + 6]  # the tangent plane
-    X[:, kn.X_W:kn.X_W + 3] = 0.0
-    X[0, kn.X_V:kn.X_V + 3] = 0.0
-    eps, size, mu = 1e-6, 37e-6, 0.3  # a slip of 37 eps, as in the pile
-    CI[0, kn.CI_MODE] = kn.SLIDE
-    C[0, kn.C_MU], C[0, kn.C_EPS] = mu, eps
-    fl = np.zeros(int(kn.NFL), np.int64)
-    fl[kn.FL_SPIN], fl[kn.FL_FRICTION], fl[kn.FL_PLANAR] = 1, 1, kn.NO
-    E = np.zeros((2 * nc, 4))
-    turns = np.linspace(0.0, np.pi, 721)
-    values, held = [], None
-    for turn in turns:
-        X[1, kn.X_V:kn.X_V + 3] = -size * (np.cos(turn) * e1 + np.sin(turn) * e2)
-        kn.geometry(X, C, CI, nc, WP, seed, kn.YES)
-        slip = np.array(kn.slip(X, C, CI, 0, kn.X_V, kn.X_W, 1, False))
-        if held is None:
-            held = slip / np.linalg.norm(slip)
-        C[0, kn.C_HELD:kn.C_HELD + 3] = held
-        assert kn.mode_events(X, C, CI, E, 2, nc, kn.E_V0, kn.E_R0, np.zeros(3, np.int64), np.zeros((6, 6)),
-                              np.zeros(6), fl, 1.0, kn.YES, kn.NO)
-        values.append(E[0, kn.E_V0])
-    values = np.array(values)
-    expected = np.linalg.norm(slip) * np.cos(turns / 2) ** 2 - eps
-    assert values == pytest.approx(expected, rel=1e-9, abs=1e-9 * size)
-    # Continuous: between neighbouring turns it moves by at most |slip| / 2 per radian.
-    assert np.abs(np.diff(values)).max() <= 0.5 * size * (turns[1] - turns[0]) * (1 + 1e-6)
-    assert values[0] > 0 > values[-1]  # and a reversal is below the band's edge
 
 
 def falling_box(seed: int, tol: float):
@@ -168,91 +61,6 @@ def test_a_3d_pile_locates_every_event(seed, tol):
     energy = float(dg.residuals(run.result).energy[0])
     assert energy <= 10 * tol, energy
 
-
-@pytest.mark.parametrize("symmetric", [True, False])
-def test_the_hold_system_is_solved_as_numpy_solves_it(symmetric):
-    """W f = b by `factor` and `solve_factored`: L D L^T where W is symmetric (positive definite,
-    as a stuck set's W is: J M^-1 J^T; from its lower triangle only, as `hold_matrix` builds it),
-    LU with row swaps where it is not (the seed's levers), against numpy's solve to round-off;
-    an exactly singular W is reported, not solved."""
-    rng = np.random.default_rng(3)
-    for m in (1, 4, 10, 16):
-        # Contacts coupled through shared bodies: a sparse J, each contact on bodies of its own.
-        J = rng.normal(size=(m, 3 * m)) * (rng.random((m, 3 * m)) < 0.2) + np.eye(m, 3 * m)
-        W = J @ J.T if symmetric else J @ J.T + 0.1 * rng.normal(size=(m, m))
-        A = np.zeros((48, 48))
-        # Symmetric: the upper triangle is never built, so it must never be read.
-        A[:m, :m] = np.where(np.tri(m, dtype=bool), W, np.nan) if symmetric else W
-        piv = np.zeros(48, np.int64)
-        b = rng.normal(size=48)
-        expected = np.linalg.solve(W, b[:m])
-        assert kn.factor(A, piv, m, symmetric)
-        kn.solve_factored(A, piv, b, m, symmetric)
-        # Condition numbers here are below 1e3: 1e-12 is a thousand times round-off.
-        assert np.linalg.cond(W) < 1e3
-        assert b[:m] == pytest.approx(expected, rel=1e-12, abs=1e-12 * np.abs(expected).max())
-    A = np.zeros((4, 4))
-    A[:2, :2] = [[1.0, 1.0], [1.0, 1.0]]  # two contacts that are one
-    assert not kn.factor(A, np.zeros(4, np.int64), 2, symmetric)
-
-
-def test_a_planar_coupling_block_is_the_general_one_in_the_plane():
-    """`couple_block`'s closed form in the plane (one tangent, z x n) equals the general sums'
-    entry for the first tangents of the same contacts: shared bodies of either side, with and
-    without spin, seed levers (slip arm apart from force arm) included. `set_basis`' plane
-    tangent is the general first tangent."""
-    rng = np.random.default_rng(5)
-    for trial in range(200):
-        X = np.zeros((3, int(kn.NX)))
-        X[:, kn.X_IM], X[:, kn.X_II] = rng.uniform(0.5, 5.0, 3), rng.uniform(10.0, 500.0, 3)
-        C = np.zeros((2, int(kn.NC)))
-        CI = np.zeros((2, int(kn.NCI)), np.int64)
-        pairs = [(0, 1), (1, 2)] if trial % 2 else [(0, 1), (2, 0)]
-        for c, (i, j) in enumerate(pairs):
-            angle = rng.uniform(0.0, 2 * np.pi)
-            C[c, kn.C_N:kn.C_N + 3] = np.cos(angle), np.sin(angle), 0.0
-            C[c, [kn.C_LIF, kn.C_LJF, kn.C_LIS, kn.C_LJS]] = rng.uniform(0.02, 0.05, 4)
-            CI[c, kn.CI_I], CI[c, kn.CI_J] = i, j
-            # The plane's tangent (z x n, unnormalised: n is a unit vector) is the general
-            # basis' first to round-off.
-            kn.set_basis(C, c, True)
-            in_plane = C[c, kn.C_B:kn.C_B + 3].copy()
-            kn.set_basis(C, c, False)
-            assert np.abs(in_plane - C[c, kn.C_B:kn.C_B + 3]).max() <= 4e-16
-        shared = ({*pairs[0]} & {*pairs[1]}).pop()
-        for spin in (0, 1):
-            planar, general = np.zeros((1, 1)), np.zeros((2, 2))
-            kn.couple_block(X, C, CI, 0, 1, shared, spin, 1, planar, 0, 0)
-            kn.couple_block(X, C, CI, 0, 1, shared, spin, 2, general, 0, 0)
-            assert planar[0, 0] == pytest.approx(general[0, 0], rel=1e-13, abs=1e-13 * np.abs(general).max())
-
-
-def test_a_dip_bound_skips_only_cubics_that_do_not_dip():
-    """`hermite_dip` skips its samples where a bound shows the cubic stays above the floor: over
-    random ends and rates (values near the floor, rates up to 40 times them), its answer is the
-    samples' own."""
-    rng = np.random.default_rng(11)
-
-    def sampled(e0, e1, r0, r1, floor):
-        if r0 >= 0.0 and r1 <= 0.0:
-            return math.inf
-        for i in range(1, int(kn.DIP_SAMPLES)):
-            u = i / kn.DIP_SAMPLES
-            p = ((2 * u**3 - 3 * u**2 + 1) * e0 + (u**3 - 2 * u**2 + u) * r0 + (3 * u**2 - 2 * u**3) * e1
-                 + (u**3 - u**2) * r1)
-            if p < floor:
-                return u
-        return math.inf
-
-    answers = []
-    for _ in range(20000):
-        e0, e1 = rng.uniform(1e-10, 1.0, 2) * 10.0 ** rng.integers(-6, 1)
-        r0, r1 = rng.normal(size=2) * 40 * max(e0, e1)
-        got = kn.hermite_dip(e0, e1, r0, r1, -1e-9)
-        assert got == sampled(e0, e1, r0, r1, -1e-9)
-        answers.append(got)
-    dips = np.isfinite(answers).sum()
-    assert 1000 < dips < 19000  # both kinds were tried
 
 
 def _order(scene, fractions=(0.4, 0.2)):
@@ -517,17 +325,17 @@ def test_friction_events_in_the_plane_cost_few_step_attempts():
     Counted with the interpreted kernels, where `step` can be wrapped."""
     code = """
 import sys
-import collide.engine.kernels as kn
+import collide.engine.event.locate as locate
 from collide.run import run_scene
 from collide.scene import load_scene, parse_scene
 sys.path.insert(0, {tests!r})
 from test_friction import tilted_bonus
 count = {{"full": 0, "substep": 0}}
-step = kn.step
+step = locate.step
 def counted(*args):
     count["full" if len(args[6]) > 1 else "substep"] += 1
     return step(*args)
-kn.step = counted
+locate.step = counted
 from test_friction import turned_scene
 scenes = [load_scene("billiards-break", ["tol=1e-6", "contact.mu=" + mu]) for mu in ("0.1", "0")]
 turned = parse_scene(turned_scene("billiards-break", ("tol=1e-6",))[1])

@@ -10,7 +10,8 @@ import pytest
 
 from collide import diagnostics as dg
 from collide import stepper
-from collide.engine import kernels
+from collide.engine import layout as kernels
+from collide.engine.event import run as event_run
 from collide.run import run_scene, run_scenes
 from collide.scene import builtin_names, load_scene, parse_scene
 
@@ -219,13 +220,13 @@ def test_frictionless_scene_computes_no_friction(monkeypatch):
     """Leave out what a scene does not need: the engine is told there is no friction and no spin
     (so it computes neither), and the results carry no angular state and 1D arrays."""
     seen = []
-    run_kernel = kernels.simulate
+    run_kernel = event_run.simulate
 
     def spy(G, tables, WP, grav, weights, fl, fp):
         seen.append((int(fl[kernels.FL_FRICTION]), int(fl[kernels.FL_SPIN])))
         return run_kernel(G, tables, WP, grav, weights, fl, fp)
 
-    monkeypatch.setattr(stepper.kn, "simulate", spy)
+    monkeypatch.setattr(stepper.event_run, "simulate", spy)
     r = run_scene(load_scene("demo-1d")).result
     assert seen == [(0, 0)]
     assert r.model.dim == 1 and r.final.s.shape == (1, 2, 1)
@@ -381,17 +382,21 @@ def test_an_asymmetric_break_meets_its_tolerance_with_short_trials_as_yoshida_st
 _FLIP_RUN = """
 import math
 import sys
-import collide.engine.kernels as K
-# Read at run time by the interpreted kernels, as are the wrapped functions below.
+import collide.engine.event.island as island
+import collide.engine.event.locate as locate
+import collide.engine.event.modes as modes
+import collide.engine.layout as K
+# Read at run time by the interpreted kernels (from the modules that use them), as are the wrapped
+# functions below.
 if sys.argv[1] == "no-flips":
-    K.FLIP_SHARE = 0.0
+    modes.FLIP_SHARE = 0.0
 if sys.argv[1] == "no-late":
-    K.LATE_SAFETY = math.inf
+    locate.LATE_SAFETY = math.inf
 from collide.accuracy import outcome
 from collide.run import run_scene
 from collide.scene import load_scene
 count = {"flips": 0, "trials": 0, "released": 0}
-decide, step = K.decide, K.step
+decide, step = island.decide, locate.step
 def counted_decide(X, C, CI, na, nc, *rest):
     count["flips"] += int((CI[:nc, K.CI_EDGE] == K.FLIP).sum())
     stuck = CI[:nc, K.CI_MODE] == K.STICK
@@ -401,7 +406,7 @@ def counted_decide(X, C, CI, na, nc, *rest):
 def counted_step(*args):
     count["trials"] += 1
     return step(*args)
-K.decide, K.step = counted_decide, counted_step
+island.decide, locate.step = counted_decide, counted_step
 r = run_scene(load_scene("billiards-break", ["body.cue.position.y=0.01"]), tol=1e-6, record=False, measure=False).result
 print(int(r.steps[0]), count["flips"], count["trials"], count["released"], *outcome(r))
 """
@@ -555,48 +560,3 @@ def test_an_energy_balance_far_off_the_tolerance_is_a_warning():
     assert len(warned) == 1 and "energy balance is off" in warned[0]
 
 
-def test_engine_buffers_grow_to_any_row_asked_for():
-    """An island opening more contacts at once than a buffer's doubling gave room for wrote past
-    its end (a 64-sphere drop on a floor aborted the process): growth reaches the row asked for.
-    The rule is checked as Python source (`py_func` when compiled): the kernels call it inside
-    compiled code, and calling this helper's compiled dispatcher from Python, after a run has
-    loaded the kernels that use it from numba's cache, fails in numba's boxing ("'descr' is
-    NULL") on a freshly warmed cache."""
-    for kernel, dtype in ((kernels.grow, float), (kernels.grow_int, np.int64)):
-        grow = getattr(kernel, "py_func", kernel)
-        buf = np.arange(64, dtype=dtype).reshape(16, 4)
-        out = grow(buf, 500)
-        assert out.shape[0] > 500 and out.shape[1] == 4
-        assert (out[:16] == buf).all()
-
-
-def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
-    return np.concatenate([[math.cos(angle / 2)], math.sin(angle / 2) * axis / np.linalg.norm(axis)])
-
-
-@pytest.mark.parametrize("half", [1e-9, 1e-4, 0.00316, 0.00317, 0.0999, 0.1001, 0.7])
-def test_turn_is_the_rotation_about_the_spin(half):
-    """kernels.turn takes small turns by series (to x^4 below a half angle of sqrt(1e-5), to x^8
-    below 0.1) and larger ones by sin and cos: on either side of each switch, and from an
-    arbitrary start, it is the rotation by |w| tau about w (a unit quaternion product) to
-    round-off."""
-    w = np.array([3.0, -4.0, 12.0])  # |w| = 13
-    tau = 2.0 * half / 13.0
-    start = _axis_angle(np.array([1.0, 2.0, -0.5]), 0.8)
-    q = start.copy()
-    kernels.turn(q, w[0], w[1], w[2], tau, False)
-    r = _axis_angle(w, 13.0 * tau)
-    expected = np.array([r[0] * start[0] - r[1:] @ start[1:],
-                         *(r[0] * start[1:] + start[0] * r[1:] + np.cross(r[1:], start[1:]))])
-    assert np.abs(q - expected).max() < 4e-16
-    assert abs(np.linalg.norm(q) - 1.0) < 4e-16
-
-
-def test_many_small_turns_compose_to_one():
-    """A thousand DEM-sized turns (series) about one axis make the one turn (sin and cos)."""
-    w = np.array([0.3, 50.0, -7.0])
-    many, once = _axis_angle(np.array([0.0, 0.0, 1.0]), 0.3), _axis_angle(np.array([0.0, 0.0, 1.0]), 0.3)
-    for _ in range(1000):
-        kernels.turn(many, w[0], w[1], w[2], 1e-5, False)
-    kernels.turn(once, w[0], w[1], w[2], 1e-2, False)
-    assert np.abs(many - once).max() < 1e-13

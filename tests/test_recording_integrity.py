@@ -12,7 +12,7 @@ import pytest
 import rerun as rr
 
 from collide import recording as rec
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
 from collide.recording import RecordingError, read_recording, write_recording
 from collide.recording import reader as rec_reader
 from collide.recording import writer as rec_writer

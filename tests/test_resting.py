@@ -1,4 +1,4 @@
-"""A sphere on a flat wall runs in closed form (`kernels.rest_phase`, dt auto): its overlap is a
+"""A sphere on a flat wall runs in closed form (`collide.engine.event.rest.rest_phase`, dt auto): its overlap is a
 harmonic oscillation whatever friction does, and each friction mode's slip and spin follow from it.
 Checked against the stepped path on the same scene (a given dt: kahan6 at 300 steps a period of
 the bob, whose own error is below 1e-10 of the speeds here: measured against 600 a period)."""
@@ -90,7 +90,7 @@ def test_a_ball_set_down_sliding_ends_rolling_at_five_sevenths():
 
 
 def _repeated_and_stepped(scene):
-    """The run unrecorded (a cycle that recurs is repeated in one go: kernels.rest_repeat) and
+    """The run unrecorded (a cycle that recurs is repeated in one go: rest.rest_repeat) and
     recorded (every interval stepped, for its knots)."""
     return (run_scene(scene, record=False, measure=False).result,
             run_scene(scene, record=True, measure=False).result)

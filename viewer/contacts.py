@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from collide import diagnostics as dg
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
 from collide.model import Model
 from collide.trajectory import Trajectory
 from viewer.sampling import Knots, segment_search

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from collide import diagnostics as dg
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
 from collide.model import Model, State, turned_quaternions
 from collide.trajectory import Trajectory, _quintic
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from collide import diagnostics as dg
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
 from collide.model import State
 from collide.run import SceneRun
 from viewer.contacts import SLICE, ContactIndex

@@ -10,7 +10,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from collide.colours import ENERGY_COLOURS, body_colour, body_colours
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
 from collide.recording.columns import _strips_column
 from collide.recording.frames import _frame_residuals, _pad3, _quaternion_xyzw, _rotate
 from collide.recording.spec import TIMELINE, collide_version

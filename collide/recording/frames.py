@@ -10,7 +10,7 @@ import numpy as np
 import rerun as rr
 
 from collide import diagnostics as dg
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
 from collide.model import Model, State
 from collide.results import Trajectory
 

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
 
 APP_ID = "collide"
 FORMAT = "collide-recording"

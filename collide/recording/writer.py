@@ -17,7 +17,7 @@ import numpy as np
 import rerun as rr
 
 from collide import diagnostics as dg
-from collide.engine import kernels as kn
+from collide.engine import layout as kn
 from collide.model import State
 from collide.output import OutputError, check_file, write_atomic
 from collide.recording.columns import _any_column

@@ -9,8 +9,8 @@ import math
 from collide.engine.dem.geometry import wall_height
 from collide.engine.dem.layout import B_R
 from collide.engine.dem.records import frame
+from collide.engine.flight import turn
 from collide.engine.jit import jit
-from collide.engine.kernels import turn
 
 
 @jit

@@ -35,7 +35,7 @@ NSTAT = 6
 G_FIRST, G_LAST, G_TOUCH, G_OVERLAP, G_FORCE, G_DAMP, G_FRIC, G_ROLL, G_STORED, G_STATUS_T = range(10)
 NFIG = 10
 OK, NONFINITE, MAXSTEPS = 0, 1, 4
-# Record layouts shared with the event engine (collide.engine.kernels): knots, records, intervals.
+# Record layouts shared with the event engine (collide.engine.layout): knots, records, intervals.
 NK, NR = 23, 9
 EP_T, EP_DAMP, EP_FRIC, EP_ROLL, EP_STORED = range(5)
 NEP = 5

@@ -50,7 +50,7 @@ from collide.engine.dem.neighbours import rebuild
 from collide.engine.dem.records import energy_row, frame, stored, work_total
 from collide.engine.dem.verlet import drift, kick, kick_kick_drift, kinetic
 from collide.engine.jit import jit, jit_inline
-from collide.engine.kernels import grow
+from collide.engine.numerics import grow
 
 
 @jit_inline

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collide.engine.dem.layout import B_IM, EP_DAMP, EP_STORED, EP_T, H_KT, H_XI
 from collide.engine.jit import jit, jit_inline
-from collide.engine.kernels import grow
+from collide.engine.numerics import grow
 
 
 @jit

@@ -6,8 +6,8 @@ the energy balance stays a check on the stepping."""
 from __future__ import annotations
 
 from collide.engine.dem.layout import B_I, B_II, B_IM, B_M, PT_DAMP, PT_FRIC, PT_ROLL
+from collide.engine.flight import turn
 from collide.engine.jit import jit, jit_inline
-from collide.engine.kernels import turn
 
 
 @jit_inline

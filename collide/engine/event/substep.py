@@ -1,0 +1,352 @@
+"""One step of an island: a symmetric composition of kick-drift-kick substeps (`step`). Slide and
+stick forces depend on the velocities, so a substep's closing kick is implicit (a fixed point,
+a few iterations: `kick`) and the next one's opening kick explicit: each substep is symmetric
+and the compositions keep their order in every mode, in 3D as in 2D.
+"""
+
+from __future__ import annotations
+
+import math
+
+from collide.engine.event.contact import geometry, set_basis, slip, springs
+from collide.engine.event.forces import friction, hold, repull
+from collide.engine.flight import turn
+from collide.engine.jit import jit_inline
+from collide.engine.layout import (
+    C_B,
+    C_DIST,
+    C_EPS,
+    C_HELD,
+    C_LIS,
+    C_LJS,
+    C_N,
+    CI_I,
+    CI_J,
+    CI_MODE,
+    CONTRACTION_SAFETY,
+    EPS64,
+    FIXED_POINT,
+    FL_FRICTION,
+    FL_PLANAR,
+    FL_SEED,
+    FL_SPIN,
+    NO,
+    SLIDE,
+    STICK,
+    X_A,
+    X_F,
+    X_F0,
+    X_FP,
+    X_HP,
+    X_I,
+    X_L,
+    X_L0,
+    X_LP,
+    X_M,
+    X_Q,
+    X_R,
+    X_S,
+    X_S0,
+    X_UA,
+    X_UL,
+    X_V,
+    X_V1,
+    X_VB,
+    X_W,
+    X_W1,
+    X_WB,
+    YES,
+)
+
+
+@jit_inline
+def take_velocities(X, na, vc, wc, spin, planar):
+    """Make the velocities in (vc, wc) the bodies' (X_V, X_W); returns the kinetic energy lost.
+    `planar`: only the parts in the plane (the velocities' x, y, the spins' z: the others are
+    zero and stay so), the same sums."""
+    moves, turns = (2, 2) if planar else (3, 0)
+    e = 0.0
+    for a in range(na):
+        for d in range(moves):
+            v, u = X[a, X_V + d], X[a, vc + d]
+            e += 0.5 * X[a, X_M] * (v * v - u * u)
+            X[a, X_V + d] = u
+        for d in range(turns, 3):
+            w, u = X[a, X_W + d], X[a, wc + d]
+            if spin:
+                e += 0.5 * X[a, X_I] * (w * w - u * u)
+            X[a, X_W + d] = u
+    return e
+
+
+@jit_inline
+def friction_kick(X, na, h, then, spin, planar):
+    """Add h times the friction accelerations (X_F, X_L) to the velocities and then, unless 0,
+    `then` times the others' (X_A); returns the kinetic energy the friction took: one pass over
+    the bodies where `take_velocities` of stored velocities made two. `planar`: as there."""
+    moves, turns = (2, 2) if planar else (3, 0)
+    e = 0.0
+    for a in range(na):
+        for d in range(moves):
+            v = X[a, X_V + d]
+            u = v + h * X[a, X_F + d]
+            e += 0.5 * X[a, X_M] * (v * v - u * u)
+            X[a, X_V + d] = u + then * X[a, X_A + d] if then != 0.0 else u
+        for d in range(turns, 3):
+            w = X[a, X_W + d]
+            u = w + h * X[a, X_L + d]
+            if spin:
+                e += 0.5 * X[a, X_I] * (w * w - u * u)
+            X[a, X_W + d] = u
+    return e
+
+
+@jit_inline
+def close_and_open(X, na, h, spin, planar):
+    """`take_velocities` of (X_V1, X_W1), then `friction_kick` over h with the springs' after it,
+    in one pass over the bodies; returns the kinetic energy each took. `planar`: as there."""
+    moves, turns = (2, 2) if planar else (3, 0)
+    closed, opened = 0.0, 0.0
+    for a in range(na):
+        m, i = 0.5 * X[a, X_M], 0.5 * X[a, X_I]
+        for d in range(moves):
+            v, u = X[a, X_V + d], X[a, X_V1 + d]
+            n = u + h * X[a, X_F + d]
+            closed += m * (v * v - u * u)
+            opened += m * (u * u - n * n)
+            X[a, X_V + d] = n + h * X[a, X_A + d]
+        for d in range(turns, 3):
+            w, u = X[a, X_W + d], X[a, X_W1 + d]
+            n = u + h * X[a, X_L + d]
+            if spin:
+                closed += i * (w * w - u * u)
+                opened += i * (u * u - n * n)
+            X[a, X_W + d] = n
+    return closed, opened
+
+
+@jit_inline
+def hold_pull(X, C, CI, nc):
+    """How fast the stuck contacts' hold forces follow the velocities, |dG/dv| (1/s): the frame
+    turning at the relative speed over the distance and with the spins, the arms with the spins.
+    Taken once a step: within one it changes by a share of the step's impulse, which
+    CONTRACTION_SAFETY covers (computed at each kick, it took three square roots per stuck
+    contact every time)."""
+    pull = 0.0
+    for c in range(nc):
+        if CI[c, CI_MODE] == STICK:
+            i, j = CI[c, CI_I], CI[c, CI_J]
+            rel, wi, wj = 0.0, 0.0, 0.0
+            for d in range(3):
+                u = X[i, X_V + d] - (X[j, X_V + d] if j >= 0 else 0.0)
+                rel += u * u
+                wi += X[i, X_W + d] ** 2
+                if j >= 0:
+                    wj += X[j, X_W + d] ** 2
+            wi, wj = math.sqrt(wi), math.sqrt(wj)
+            arm = C[c, C_DIST] if j >= 0 else C[c, C_LIS]
+            pull = max(pull, (math.sqrt(rel) + C[c, C_LIS] * wi + C[c, C_LJS] * wj) / arm + wi + wj)
+    return pull
+
+
+@jit_inline
+def kick_start(CI, nc, planar):
+    """How a step's closing kicks start, from its modes: (warm, one pass). Warm: from the last
+    kick's friction (C_FF and its accelerations), which differs from this one's by a substep's
+    change, a pass fewer than from none; not with a slide out of the plane, whose kick can have
+    two roots (see slide_direction): a start off the one the kick's own impulse defines can
+    settle on the other (measured: a random 3D scene stopped converging with the tolerance).
+    One pass: in the plane a slide's friction is mu F_n on the held side whatever the
+    velocities, so with nothing stuck one pass is the fixed point."""
+    warm, one_pass = True, planar
+    for c in range(nc):
+        if CI[c, CI_MODE] == STICK:
+            one_pass = False
+        elif CI[c, CI_MODE] == SLIDE and not planar:
+            warm = False
+    return warm, one_pass
+
+
+@jit_inline
+def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact, pull_rate, warm, one_pass):
+    """The kicks at one geometry between two Verlet substeps, on (X_V, X_W): the close of one
+    (springs over h_end, then friction at the end velocities: implicit) and the opening of the
+    next (friction at those velocities, then springs over h_start); either span may be 0 (a
+    step's first kick, h_end 0, opens with the friction already in X_F, X_L: see `step`).
+    `exact`: the change, relative to the fastest velocity, that the closing kick's fixed point may
+    leave undone; `pull_rate`: `hold_pull` at the step's start; `warm`, `one_pass`:
+    `kick_start` of the step's modes (they hold through a step). Returns (work dissipated, ok);
+    friction forces at the closing velocities stay in C_FF."""
+    spin = fl[FL_SPIN]
+    planar = fl[FL_PLANAR] == YES
+    work = 0.0
+    if h_end != 0.0:
+        if one_pass:
+            # Nothing depends on the velocities: the closing kick is explicit, in one pass.
+            for a in range(na):
+                for d in range(3):
+                    X[a, X_V + d] += h_end * X[a, X_A + d]
+            X[0, X_HP] = h_end
+            if not friction(X, C, CI, na, nc, X_V, X_W, stuck, A, b, fl, h_end, YES):
+                return work, False
+            work += friction_kick(X, na, h_end, 0.0, spin, planar)
+            if h_start != 0.0:
+                work += friction_kick(X, na, h_start, h_start, spin, planar)
+            return work, True
+        start = h_end if warm else 0.0
+        # The friction extrapolated along the step from the last two kicks' (same modes, a smooth
+        # function of time): the first pass starts closer to the fixed point.
+        lean = h_end / X[0, X_HP] if X[0, X_HP] != 0.0 and warm and planar else 0.0
+        for a in range(na):
+            for d in range(3):
+                X[a, X_V + d] += h_end * X[a, X_A + d]
+                f, l = X[a, X_F + d], X[a, X_L + d]
+                X[a, X_V1 + d] = X[a, X_V + d] + start * (f + lean * (f - X[a, X_FP + d]))
+                X[a, X_W1 + d] = X[a, X_W + d] + start * (l + lean * (l - X[a, X_LP + d]))
+                X[a, X_FP + d], X[a, X_LP + d] = f, l
+        X[0, X_HP] = h_end
+        # How fast the hold forces follow the velocities: a pass shrinks the change by about
+        # h |dG/dv| (see CONTRACTION_SAFETY); with it, one pass can be enough.
+        pull = CONTRACTION_SAFETY * abs(h_end) * pull_rate  # 0 unless warm (see step_events)
+        # In the plane the velocities' z parts and the spins' x, y parts are zero and stay so.
+        moves, turns = (2, 2) if planar else (3, 0)
+        last = math.inf
+        for it in range(FIXED_POINT):
+            if it > 0 and planar:
+                repull(X, C, CI, nc, stuck, A, b, fl, X_V1, X_W1)
+            # Each pass but a cold first takes each contact's own friction in V1 back out.
+            elif not friction(X, C, CI, na, nc, X_V1, X_W1, stuck, A, b, fl, h_end if warm or it > 0 else 0.0,
+                              YES if it == 0 else NO):
+                return work, False
+            change = 0.0
+            size = 0.0
+            for a in range(na):
+                for d in range(moves):
+                    nv = X[a, X_V + d] + h_end * X[a, X_F + d]
+                    change = max(change, abs(nv - X[a, X_V1 + d]))
+                    size = max(size, abs(nv))
+                    X[a, X_V1 + d] = nv
+                for d in range(turns, 3):
+                    nw = X[a, X_W + d] + h_end * X[a, X_L + d]
+                    change = max(change, abs(nw - X[a, X_W1 + d]) * X[a, X_R])
+                    size = max(size, abs(nw) * X[a, X_R])
+                    X[a, X_W1 + d] = nw
+            # Done when what is left is round-off or below `exact`: the change itself, or the next
+            # one as the last two passes of the same map predict it (a stuck contact's hold force
+            # follows the velocities as the contact frame turns, ratio about h v / dist: one pass
+            # fewer), or after a warm first pass, as its bound `pull` predicts it.
+            predicted = (it == 0 and warm and pull * change <= exact * size) or (
+                (it >= 1 if warm else it >= 2) and change < 0.5 * last and change * change <= exact * size * last)
+            if change <= 4.0 * EPS64 * size or predicted:
+                break
+            last = change
+        if h_start != 0.0:
+            closed, opened = close_and_open(X, na, h_start, spin, planar)
+            return work + closed + opened, True
+        work += take_velocities(X, na, X_V1, X_W1, spin, planar)
+    else:
+        X[0, X_HP] = 0.0  # a step's first kick: no kick before it at these modes
+    if h_start != 0.0:
+        work += friction_kick(X, na, h_start, h_start, spin, planar)
+    return work, True
+
+
+@jit_inline
+def settle(X, C, CI, na, nc, stuck, A, b, fl, fresh):
+    """Put stuck slips on the band's edge, at eps along their held direction (carried onto the
+    tangent plane), with the impulses that do exactly that, solved together. `fresh`: the hold
+    system is built here, else the one in A (and the tangent bases) from the last friction solve
+    at this geometry and these modes is used. Returns (work, ok)."""
+    spin, planar = fl[FL_SPIN], fl[FL_PLANAR] == YES
+    m = 0
+    for c in range(nc):
+        if CI[c, CI_MODE] == STICK:
+            stuck[m] = c
+            m += 1
+    if m == 0:
+        return 0.0, True
+    for k in range(m):
+        c = stuck[k]
+        if fresh:
+            set_basis(C, c, planar)
+        nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+        hx, hy, hz = C[c, C_HELD], C[c, C_HELD + 1], C[c, C_HELD + 2]
+        hn = hx * nx + hy * ny + hz * nz
+        hx, hy, hz = hx - hn * nx, hy - hn * ny, hz - hn * nz
+        hm = math.sqrt(hx * hx + hy * hy + hz * hz)
+        if hm > 0.0:
+            hm = C[c, C_EPS] / hm
+        sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, planar)
+        # A friction impulse changes the slip as its force changes the slip's rate: W J = s* - s.
+        dx, dy, dz = hm * hx - sx, hm * hy - sy, hm * hz - sz
+        if planar:
+            b[k] = dx * C[c, C_B] + dy * C[c, C_B + 1]
+        else:
+            b[2 * k] = dx * C[c, C_B] + dy * C[c, C_B + 1] + dz * C[c, C_B + 2]
+            b[2 * k + 1] = dx * C[c, C_B + 3] + dy * C[c, C_B + 4] + dz * C[c, C_B + 5]
+    for a in range(na):
+        for d in range(3):
+            X[a, X_UA + d] = 0.0
+            X[a, X_UL + d] = 0.0
+    if not hold(X, C, CI, stuck, m, A, b, spin, fl[FL_SEED], planar, fresh, X_UA, X_UL):
+        return 0.0, False
+    for a in range(na):
+        for d in range(3):
+            X[a, X_VB + d] = X[a, X_V + d] + X[a, X_UA + d]
+            X[a, X_WB + d] = X[a, X_W + d] + X[a, X_UL + d]
+    return take_velocities(X, na, X_VB, X_WB, spin, planar), True
+
+
+@jit_inline
+def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact, pull_rate, warm, one_pass):
+    """One step of h from the start state (X_S0..., its friction accelerations in X_F0, X_L0), or
+    with `restart` NO from the state now in (X_S...), its geometry in C and X_A and its friction
+    in (X_F, X_L) (a trial's end, whose mode values solved it there): a symmetric composition of
+    Verlet (kick-drift-kick) substeps gamma h (`weights`); the kicks between two substeps share
+    one geometry. Stuck slips go back on the band's edge only once the step is taken (`settle`,
+    by the event search): a trial's end is off it by the kicks' fixed-point tolerance. The end
+    state is left in (X_S...) with its geometry in C and its accelerations in X_A, X_F. `exact`,
+    `pull_rate`, `warm`, `one_pass`: the kicks' (see `kick`), the same for every trial of a
+    step. Returns (work, ok)."""
+    spin, fric, seed, planar = fl[FL_SPIN], fl[FL_FRICTION], fl[FL_SEED], fl[FL_PLANAR]
+    if restart:
+        for a in range(na):
+            for d in range(13):
+                X[a, X_S + d] = X[a, X_S0 + d]
+            for d in range(3 if fric else 0):
+                X[a, X_F + d], X[a, X_L + d] = X[a, X_F0 + d], X[a, X_L0 + d]
+        geometry(X, C, CI, nc, WP, seed, fric)
+        springs(X, C, CI, na, nc, grav)
+    n = weights.shape[0]
+    work = 0.0
+    ok = True
+    first = 0.5 * weights[0] * h
+    if fric:
+        work, ok = kick(X, C, CI, na, nc, 0.0, first, stuck, A, b, fl, exact, pull_rate, warm, one_pass)
+    else:
+        for a in range(na):
+            for d in range(3):
+                X[a, X_V + d] += first * X[a, X_A + d]
+    for k in range(n):
+        hk = weights[k] * h
+        for a in range(na):
+            for d in range(3):
+                X[a, X_S + d] += X[a, X_V + d] * hk
+            if spin:
+                turn(X[a, X_Q:X_Q + 4], X[a, X_W], X[a, X_W + 1], X[a, X_W + 2], hk, planar)
+        geometry(X, C, CI, nc, WP, seed, fric)
+        springs(X, C, CI, na, nc, grav)
+        close = 0.5 * hk
+        opening = 0.5 * weights[k + 1] * h if k + 1 < n else 0.0
+        if fric:
+            done, good = kick(X, C, CI, na, nc, close, opening, stuck, A, b, fl, exact, pull_rate, warm, one_pass)
+            work += done
+            ok = ok and good
+        else:
+            # Two adds, as with friction: a sweep mixing mu = 0 with mu > 0 matches single runs.
+            for a in range(na):
+                for d in range(3):
+                    X[a, X_V + d] += close * X[a, X_A + d]
+                    if opening != 0.0:
+                        X[a, X_V + d] += opening * X[a, X_A + d]
+    return work, ok
