@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 from collide.engine.event.contact import add_force, planar_velocity_terms, response, set_basis, slip, slip_rate
-from collide.engine.jit import jit_inline
+from collide.engine.jit import jit_call, jit_inline
 from collide.engine.layout import (
     C_B,
     C_EPS,
@@ -117,7 +117,7 @@ def hold_matrix(X, C, CI, stuck, m, A, piv, spin, rows, seed):
     return factor(A, piv, n, not seed)
 
 
-@jit_inline
+@jit_call
 def hold(X, C, CI, stuck, m, A, b, spin, seed, planar, fresh, fa, la):
     """Solve W f = b for the stuck contacts `stuck[:m]` (b in tangent coordinates, 2 per contact,
     and in the plane 1: the e1 = z x n one; see `hold_matrix`); with `fresh` W is built and
@@ -203,7 +203,7 @@ def slide_direction(X, C, CI, c, vc, wc, spin, span, planar):
     return sx - sn * nx, sy - sn * ny, sz - sn * nz
 
 
-@jit_inline
+@jit_call
 def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh):
     """Friction forces (C_FF, on body i) of every contact at the velocities in columns (vc, wc),
     by mode, and their accelerations (X_F, X_L); X_A holds everything else's. Stuck contacts'

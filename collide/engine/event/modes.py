@@ -11,7 +11,7 @@ import math
 from collide.engine.event.contact import response, slip, slip_rate
 from collide.engine.event.forces import friction
 from collide.engine.event.substep import settle
-from collide.engine.jit import jit_inline
+from collide.engine.jit import jit_call, jit_inline
 from collide.engine.layout import (
     BAND,
     C_EPS,
@@ -48,7 +48,7 @@ from collide.engine.layout import (
 )
 
 
-@jit_inline
+@jit_call
 def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh, known):
     """Friction mode event values (2C) into E[:, vcol] and their rates into E[:, rcol], in speed
     units over `scale`, at the state in X (geometry in C, X_A set). Slide: |slip| - eps; band:
@@ -127,7 +127,7 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh, 
     return True
 
 
-@jit_inline
+@jit_call
 def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     """Modes of the engaged contacts at this state (at a phase start and after every step).
 

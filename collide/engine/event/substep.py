@@ -11,7 +11,7 @@ import math
 from collide.engine.event.contact import geometry, set_basis, slip, springs
 from collide.engine.event.forces import friction, hold, repull
 from collide.engine.flight import turn
-from collide.engine.jit import jit_inline
+from collide.engine.jit import jit_call, jit_inline
 from collide.engine.layout import (
     C_B,
     C_DIST,
@@ -251,7 +251,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact, pull_rate, wa
     return work, True
 
 
-@jit_inline
+@jit_call
 def settle(X, C, CI, na, nc, stuck, A, b, fl, fresh):
     """Put stuck slips on the band's edge, at eps along their held direction (carried onto the
     tangent plane), with the impulses that do exactly that, solved together. `fresh`: the hold
@@ -297,7 +297,7 @@ def settle(X, C, CI, na, nc, stuck, A, b, fl, fresh):
     return take_velocities(X, na, X_VB, X_WB, spin, planar), True
 
 
-@jit_inline
+@jit_call
 def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact, pull_rate, warm, one_pass):
     """One step of h from the start state (X_S0..., its friction accelerations in X_F0, X_L0), or
     with `restart` NO from the state now in (X_S...), its geometry in C and X_A and its friction
