@@ -14,7 +14,7 @@ from collide.engine.event.locate import step_events, stiff_slide
 from collide.engine.event.modes import decide, flips, mode_events
 from collide.engine.event.rest import rest_phase, rest_ready
 from collide.engine.flight import bring, touch_time
-from collide.engine.jit import jit, jit_inline
+from collide.engine.jit import jit, jit_call, jit_inline
 from collide.engine.layout import (
     BAND,
     C_DELTA,
@@ -230,7 +230,7 @@ def energy_scale(X, C, na, nc, grav, spin):
     return e
 
 
-@jit_inline
+@jit_call
 def island_rows(Q, nq):
     """Rows enough for the island's bodies: two per pair, one per wall contact."""
     size = 0
@@ -239,7 +239,7 @@ def island_rows(Q, nq):
     return size
 
 
-@jit_inline
+@jit_call
 def engage(G, GI, X, Q, QF, nq, t, WP, grav):
     """Mark the candidates engaged at t (Q_ENG); returns how many are."""
     n_eng = 0
@@ -254,7 +254,7 @@ def engage(G, GI, X, Q, QF, nq, t, WP, grav):
     return n_eng
 
 
-@jit_inline
+@jit_call
 def fly_free(G, Q, nq, t, W, WP, grav, stalled, ST, FG):
     """Nothing engaged: on in closed form to the first touch. Returns (t, stalled, whether the
     island is done in this window: no touch before W, or a stall)."""
@@ -277,7 +277,7 @@ def fly_free(G, Q, nq, t, W, WP, grav, stalled, ST, FG):
     return t, stalled, False
 
 
-@jit_inline
+@jit_call
 def bring_engaged(G, Q, nq, t, grav, fl):
     """The bodies of the engaged contacts brought to t along their free flights."""
     for k in range(nq):
@@ -287,7 +287,7 @@ def bring_engaged(G, Q, nq, t, grav, fl):
                 bring(G, g, t, grav, fl)
 
 
-@jit_inline
+@jit_call
 def phase_settings(X, C, CI, na, nc, weights, fl, fp, scale):
     """A contact phase's step and event search settings, from its stiffest contact. Returns
     (omega, dt, max_turn, negligible, nudge, reach, briefs, exact)."""
@@ -339,7 +339,7 @@ def phase_knots(G, GI, X, XI, KN, CNT, na, t, grav):
     return KN
 
 
-@jit_inline
+@jit_call
 def start_modes(G, X, XI, C, CI, E, na, nc, stuck, A, b, WP, grav, fl, scale, carried, stepped):
     """The friction modes and their values at a step's start (`decide`, `mode_events`), or the
     last step's end values where it met no mode's edge. Returns False where the hold system is
@@ -373,7 +373,7 @@ def start_modes(G, X, XI, C, CI, E, na, nc, stuck, A, b, WP, grav, fl, scale, ca
     return True
 
 
-@jit_inline
+@jit_call
 def mark_start(G, GI, X, XI, Q, QF, KN, na, nq, t, WP, grav, fric, record):
     """The step's start state (X_S0...), its friction (X_F0, X_L0) and candidates' overlaps (QF_D0,
     QF_R0), which every trial starts from."""
@@ -392,7 +392,7 @@ def mark_start(G, GI, X, XI, Q, QF, KN, na, nq, t, WP, grav, fric, record):
         QF[k, QF_D0], QF[k, QF_R0] = overlap(G, GI, X, Q, QF, k, t, WP, grav)
 
 
-@jit_inline
+@jit_call
 def step_length(X, C, CI, nc, dt, omega, W, t, grown, turner, spin, fric, fl):
     """The step to try: dt, to the window's end, grown back from a turning-limited one, and cut
     in a stiff sliding layer. Returns (h_full, grown)."""
@@ -411,7 +411,7 @@ def step_length(X, C, CI, nc, dt, omega, W, t, grown, turner, spin, fric, fl):
     return h_full, grown
 
 
-@jit_inline
+@jit_call
 def mark_grazes(CI, E, nc):
     """A band value counted as just inside that this step landed at once, no further from its
     edge than it started (within MODE_TOL): a slip grazing the band's edge, heading in at first
@@ -424,7 +424,7 @@ def mark_grazes(CI, E, nc):
             CI[k % nc, CI_GRAZE] = YES
 
 
-@jit_inline
+@jit_call
 def check_state(X, C, na, nc, ST, FG, fl):
     """A step's end state: non-finite or past the step limit (ST[S_STATUS]); the largest overlap
     and normal force so far while it is fine."""
@@ -442,7 +442,7 @@ def check_state(X, C, na, nc, ST, FG, fl):
     return True
 
 
-@jit_inline
+@jit_call
 def engagement_changed(G, GI, X, Q, QF, nq, t, WP, grav):
     """Whether a candidate's engagement changed at t (a contact started or ended)."""
     changed = False
@@ -453,7 +453,7 @@ def engagement_changed(G, GI, X, Q, QF, nq, t, WP, grav):
     return changed
 
 
-@jit_inline
+@jit_call
 def carried_on(E, nc, fric, located, fl):
     """Every mode value clear of its edge at the step's end, by twice what decide counts as on it
     (its own closing trial evaluated them there, at these modes)."""
@@ -465,7 +465,7 @@ def carried_on(E, nc, fric, located, fl):
     return carried
 
 
-@jit_inline
+@jit_call
 def end_phase(G, GI, X, XI, Q, QF, KN, na, nq, t, WP, grav, record, changed):
     """The phase ends at t: the stepped bodies go back to base states there, and those whose
     every contact has ended fly freely from their last knot."""
@@ -487,7 +487,7 @@ def end_phase(G, GI, X, XI, Q, QF, KN, na, nq, t, WP, grav, record, changed):
                 KN[GI[g, GI_KNOT], K_FREE] = 1.0
 
 
-@jit_inline
+@jit_call
 def count_unlocated(ST, FG, t):
     """A step whose event search ran out of trials (it may have passed an event)."""
     if ST[S_UNLOCATED] == 0:
@@ -495,7 +495,7 @@ def count_unlocated(ST, FG, t):
     ST[S_UNLOCATED] += 1
 
 
-@jit_inline
+@jit_call
 def restart_late(X, Q, na, late):
     """Candidate `late` began pressing within the step: back to the step's start, engaged."""
     for a in range(na):
@@ -504,7 +504,7 @@ def restart_late(X, Q, na, late):
     Q[late, Q_ENG] = LATE
 
 
-@jit_inline
+@jit_call
 def clear_late(Q, nq):
     """A step taken: contacts found late are ordinary engaged ones again."""
     for k in range(nq):
@@ -512,7 +512,7 @@ def clear_late(Q, nq):
             Q[k, Q_ENG] = 1
 
 
-@jit_inline
+@jit_call
 def phase_checks(t, t_phase, idle, e_start, e_end, e_room, ST, FG):
     """A contact phase's end: a stall or an energy blow-up (ST[S_STATUS]). Returns the count of
     phases in a row that ended where they began."""

@@ -10,7 +10,7 @@ import math
 from collide.engine.event.contact import geometry, overlap, response, slip, slip_rate, springs
 from collide.engine.event.modes import flips, mode_events
 from collide.engine.event.substep import hold_pull, kick_start, settle, step
-from collide.engine.jit import jit, jit_inline
+from collide.engine.jit import jit, jit_call, jit_inline
 from collide.engine.layout import (
     AIM,
     C_EPS,
@@ -233,7 +233,7 @@ def turning_nudges(X, C, CI, na, nc, fl, nudge, reach, negligible, span, vc, wc,
     return nudge, reach
 
 
-@jit_inline
+@jit_call
 def first_trial(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
                 negligible, nudge, reach, briefs, exact, ST):
     """A step's first trial from its start: to just past the first event `foresee` sees coming, or
@@ -276,7 +276,7 @@ def first_trial(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     return h, work, ok, nudge, reach, pull_rate, warm, one_pass
 
 
-@jit_inline
+@jit_call
 def pressing_from_touching(G, GI, X, Q, QF, nq, t, h, WP, grav, tol):
     """A candidate touching at the step's start with no approach speed that presses at its end
     (it began with the step: a Newton's cradle), or -1."""
@@ -288,7 +288,7 @@ def pressing_from_touching(G, GI, X, Q, QF, nq, t, h, WP, grav, tol):
     return -1
 
 
-@jit_inline
+@jit_call
 def contact_aim(G, GI, X, Q, QF, nq, t, h, h_full, frac, WP, grav, tol, past, below, ahead, creep, aimed):
     """Where a trial ending at `frac` of the step aims next for the contacts' starts and ends: the
     first crossing of the cubics through the candidates' overlaps (from the step's start, or
@@ -356,7 +356,7 @@ def contact_aim(G, GI, X, Q, QF, nq, t, h, h_full, frac, WP, grav, tol, past, be
     return theta, crossing, short, past, below, ahead, creep
 
 
-@jit_inline
+@jit_call
 def first_mode_root(E, modes, passed, frac, h):
     """The mode value crossed in this trial whose root comes first, and how many crossed."""
     best = -1
@@ -379,7 +379,7 @@ def first_mode_root(E, modes, passed, frac, h):
     return best, crossed
 
 
-@jit_inline
+@jit_call
 def mode_landed(C, CI, E, nc, col, best, crossed, crossing, theta, frac, lo, f_lo, h, h_full, omega, scale, fl):
     """Whether the pending mode value `col` has landed at this trial's end."""
     f = E[col, E_V1]
@@ -402,7 +402,7 @@ def mode_landed(C, CI, E, nc, col, best, crossed, crossing, theta, frac, lo, f_l
     return flip or late_ok or (abs(f) <= MODE_TOL and (best < 0 or best == col))
 
 
-@jit_inline
+@jit_call
 def root_estimate(E, col, h, trial, fresh, frac, f, slope, lo, f_lo, hi, f_hi, s_lo, s_hi, ta, fa, tb, fb,
                   widths, bisecting):
     """The next aim at the pending mode value's root in its bracket [lo, hi]. Returns (estimate,
@@ -447,7 +447,7 @@ def root_estimate(E, col, h, trial, fresh, frac, f, slope, lo, f_lo, hi, f_hi, s
     return estimate, bisecting
 
 
-@jit_inline
+@jit_call
 def next_trial(X, C, CI, na, nc, h, h_next, weights, WP, grav, stuck, A, b, fl, exact, pull_rate, warm, one_pass,
                nudge, reach, negligible, briefs, work, ST):
     """The trial to h_next: nudged on from the last trial's end when close to it, else a step
@@ -474,7 +474,7 @@ def next_trial(X, C, CI, na, nc, h, h_next, weights, WP, grav, stuck, A, b, fl, 
     return work, ok
 
 
-@jit_inline
+@jit_call
 def open_bracket(E, col, clear, frac, h_full):
     """A new bracket [lo, hi] for mode value `col`, which crossed in this trial: from the clear
     trial's end, or the step's start. Returns (lo, f_lo, hi, f_hi, s_lo, s_hi, ta, fa, tb, fb)."""
@@ -486,7 +486,7 @@ def open_bracket(E, col, clear, frac, h_full):
     return lo, f_lo, hi, f_hi, s_lo, s_hi, ta, fa, tb, fb
 
 
-@jit_inline
+@jit_call
 def turn_limit(X, C, CI, nc, fl, h, negligible, max_turn, frac, theta, past, limited):
     """The step shortened where a sliding slip turned by more than `max_turn` in this trial.
     Returns (theta, past, limited)."""
@@ -504,7 +504,7 @@ def turn_limit(X, C, CI, nc, fl, h, negligible, max_turn, frac, theta, past, lim
     return theta, past, limited
 
 
-@jit_inline
+@jit_call
 def dip_and_clear(E, modes, frac, h_full, passed, passed_at, pending, best, dipped, clear, theta):
     """A trial's mode values that dip below zero inside it (the step shortened into the dip), and
     the longest clear trial (no value crossed nor dipped: its values and rates kept in E_VC,

@@ -11,7 +11,7 @@ import numpy as np
 
 from collide.engine.event.contact import geometry, springs
 from collide.engine.flight import turn
-from collide.engine.jit import jit, jit_inline
+from collide.engine.jit import jit, jit_call, jit_inline
 from collide.engine.layout import (
     BAND,
     C_DELTA,
@@ -396,7 +396,7 @@ def rest_ready(X, C, CI, na, nc, nq, fl):
     return fl[FL_AUTO] and nq == 1 and na == 1 and nc == 1 and CI[0, CI_J] < 0 and not fl[FL_SEED]
 
 
-@jit_inline
+@jit_call
 def rest_basis(n, planar, e1, e2):
     """The wall's tangent basis e1, e2 = n x e1 (in the plane: e1 = n x z, e2 = -z)."""
     if planar:
@@ -409,7 +409,7 @@ def rest_basis(n, planar, e1, e2):
     e2[0], e2[1], e2[2] = n[1] * e1[2] - n[2] * e1[1], n[2] * e1[0] - n[0] * e1[2], n[0] * e1[1] - n[1] * e1[0]
 
 
-@jit_inline
+@jit_call
 def rest_choose(G, XI, P, mode, decided, reached, lever, d_a, dd_a, v1, v2, w1, w2, m, ii, k):
     """The friction mode at an interval's start (a fresh decision, or out of the plane a stuck
     slip's hold direction again), with the slip put on the band's edge where the mode holds it
@@ -451,7 +451,7 @@ def rest_choose(G, XI, P, mode, decided, reached, lever, d_a, dd_a, v1, v2, w1, 
     return mode, decided, chosen, turning
 
 
-@jit_inline
+@jit_call
 def rest_move(X, P, mode, h, om, r, n, e1, e2, w_n, d_a, d, spun, phases, phases_h, phases_n):
     """The positions and the spin's turn over an interval of length h by Gauss-Legendre, and
     friction's work per unit time (from its force and the slip, not from the energies: a check).
@@ -477,7 +477,7 @@ def rest_move(X, P, mode, h, om, r, n, e1, e2, w_n, d_a, d, spun, phases, phases
     return spent, phases_h, phases_n
 
 
-@jit_inline
+@jit_call
 def rest_turn(X, P, mode, h, n, e1, e2, w_n, spun, planar):
     """The orientation turned by the interval's spin `spun`."""
     if planar:
@@ -499,7 +499,7 @@ def rest_turn(X, P, mode, h, n, e1, e2, w_n, spun, planar):
         turn(X[0, X_Q:X_Q + 4], spun[0], spun[1], spun[2], 1.0, NO)
 
 
-@jit_inline
+@jit_call
 def rest_forces(X, C, CI, P, WP, grav, FG, e1, e2, d_a, dd_a, d, dd, f1, f2, m, r, k, ii, mode, fric):
     """An interval's end: the deepest overlap and force so far, the contact's geometry, spring and
     friction there."""
@@ -517,7 +517,7 @@ def rest_forces(X, C, CI, P, WP, grav, FG, e1, e2, d_a, dd_a, d, dd, f1, f2, m, 
     CI[0, CI_MODE] = mode if fric else BAND
 
 
-@jit_inline
+@jit_call
 def rest_cycles(G, XI, X, C, CI, P, WP, t, W, n, grav, spin, planar, fp, mode, which, whole, bob, ends, snap, lap,
                 snaps, marks, ring):
     """Nothing here depends on the position along the wall or the orientation: once the state

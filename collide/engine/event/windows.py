@@ -13,7 +13,7 @@ import numpy as np
 from collide.engine.broad import crossed, join, largest_set, near_pairs, root_of
 from collide.engine.event.island import run_island
 from collide.engine.flight import meets_again, next_contact, positions_at, speed_scales
-from collide.engine.jit import jit, jit_inline
+from collide.engine.jit import jit, jit_call
 from collide.engine.layout import (
     CN_IVALS,
     CN_OPEN,
@@ -258,7 +258,7 @@ def jump(G, P, V, n, t, t_end, search, ticks, WP, grav, dim, fp, IV, CNT, ST, FG
     return t, t_end, search, ticks, True
 
 
-@jit_inline
+@jit_call
 def window_omega(G, eng, tables):
     """The stiffest engaged contact's angular frequency."""
     omega = 0.0
@@ -314,7 +314,7 @@ def run_islands(G, GI, cand, parent, n, t, horizon, tables, WP, grav, weights, f
     return KN, RC, IV, OP
 
 
-@jit_inline
+@jit_call
 def restore_window(G, GI, KN, IV, OP, CNT, saved_G, saved_GI, saved_CNT, saved_OP, saved_flags, n):
     """Back to the window's start, to redo it."""
     for i in range(n):
