@@ -24,10 +24,11 @@ from pathlib import Path
 # How a whole compile progresses, for the first compile on a machine (later ones measure by the
 # last compile there): pairs of functions compiled and the fraction of the compile's time, and
 # that time in seconds, as measured here.
-REFERENCE_CURVE = [[0, 0.0], [13, 0.0083], [32, 0.013], [51, 0.0206], [69, 0.0351], [88, 0.0773], [106, 0.1209],
-                   [125, 0.1479], [144, 0.2146], [162, 0.2514], [181, 0.3182], [200, 0.9007], [218, 0.9439],
-                   [237, 0.9784], [243, 1.0]]
-REFERENCE_SECONDS = 250.0  # on a quiet machine; three to five times that at a load of 10
+REFERENCE_CURVE = [[0, 0.0], [9, 0.0079], [25, 0.0126], [41, 0.019], [57, 0.0336], [73, 0.0411], [88, 0.0752],
+                   [104, 0.1017], [120, 0.1462], [136, 0.1744], [152, 0.2041], [168, 0.2773], [184, 0.3104],
+                   [200, 0.3922], [216, 0.4689], [232, 0.5219], [247, 0.6367], [263, 0.8424], [279, 0.8833],
+                   [295, 0.9301], [311, 1.0]]
+REFERENCE_SECONDS = 200.0  # on a quiet machine; three to five times that at a load of 10
 
 
 def warm() -> float:
