@@ -215,7 +215,10 @@ def seed_run(G, tables, WP, grav, fl, fp):
     t = 0.0
     t_end = fp[FP_TEND]
     in_contact = False
-    clamped = 0  # steps taken with a contact due within them that did not engage
+    # Steps taken with a contact due within them that did not engage count against the limit:
+    # far out in time the positions no longer resolve a step's approach (the cradle at tol 3e-4
+    # met its balls again at t = 1.5e5 s and stepped there without end).
+    clamped = 0
 
     while t < t_end * (1 - 1e-15) and ST[S_STATUS] == OK:
         fp[FP_NOW] = t
@@ -306,10 +309,7 @@ def seed_run(G, tables, WP, grav, fl, fp):
         tail = math.ceil(tail_after(fp[FP_TAIL], IV, CNT) / dt) * dt
         if (tau < math.inf and t_end == math.inf and CNT[CN_IVALS] > 0 and fp[FP_END_SLOW] > 0.0
                 and not meets_again(G, P, V, n, t, WP, grav, IV, CNT, fp[FP_SLOW], fp[FP_END_SLOW], tail, scale)):
-            # What still approaches closes slower than the run resolves velocities: the step's
-            # error, not a contact to come (the run ends as the event engine's does). The seed's
-            # cradle at tol 3e-4 met its balls again so late that a step no longer moved the clock.
-            tau = math.inf
+            tau = math.inf  # closes slower than the run resolves: the step's error (as `windows`)
         if tau == math.inf and t_end == math.inf:
             t_end = t + tail
         jump = min(math.floor(tau / dt) * dt if tau < math.inf else math.inf, t_end - t)
@@ -317,10 +317,7 @@ def seed_run(G, tables, WP, grav, fl, fp):
             jump = dt  # a contact begins within this step: take it with the spring clamped
             for i in range(n):
                 bring(G, i, t + dt, grav, fl)
-            # Steps of a contact that never engages count against the limit: far out in time the
-            # positions no longer resolve an approach of a step (the cradle at tol 3e-4 met its
-            # balls again at t = 1.5e5 s and stepped there without end).
-            clamped += 1
+            clamped += 1  # counted: far out in time a step's approach may not resolve (see above)
         if not t + jump > t or ST[S_STEPS] + clamped > fl[FL_MAXSTEPS]:
             ST[S_STATUS] = STALL
             FG[F_STATUS_T] = t
