@@ -508,8 +508,9 @@ def _check_status(model: Model, b: int, st: np.ndarray, fg: np.ndarray, dt: np.n
         raise RunError(f"energy grew from {fg[kn.F_STATUS_A]:.4g} J to {fg[kn.F_STATUS_B]:.4g} J during a contact "
                        f"at dt = {dt[b]:.3g} s: the step is unstable; the largest safe step is {safe:.3g} s")
     if status == kn.STALL:
-        raise RunError(f"the run stopped advancing at {at} (events closer than the clock resolves); report this "
-                       "scene, or try a looser --tol or a given --dt")
+        way = "give it a duration (--set duration=SECONDS)" if open_ended else "try a looser --tol or a given --dt"
+        raise RunError(f"the run stopped advancing at {at} (events closer than the clock resolves); {way}, or "
+                       "report this scene")
     if status == kn.MAXSTEPS:
         raise step_limit_error(int(st[kn.S_STEPS]), t, open_ended)
     if status == kn.SINGULAR:

@@ -301,3 +301,20 @@ def test_a_measurement_the_integrator_cannot_reach_leaves_the_run_answered(monke
     assert summary["error_method"] == "model"
     final = {b["name"]: b["velocity"] for b in summary["bodies"]}
     assert abs(final["ball5"] - 1.0) < 0.01  # the last ball leaves with the first one's speed
+
+
+def test_the_seed_update_never_steps_forever_far_out_in_time() -> None:
+    """The seed at tol 3e-4 leaves the cradle's balls closing again at a speed it does not resolve;
+    they meet again at t = 1.5e5 s, where positions no longer resolve one step's approach. The
+    run ends at once, answered or refused in one line, never looping (it stepped without end)."""
+    from collide.scene import load_scene
+
+    started = time.perf_counter()
+    try:
+        run = run_scene(load_scene("newtons-cradle"), integrator="seed", tol=3e-4, record=False)
+    except RunError as exc:
+        assert "duration" in str(exc) and "\n" not in str(exc)
+    else:
+        final = run.result.final.v[0][:, 0]
+        assert abs(final[-1] - 1.0) < 0.01 and np.all(np.abs(final[:-1]) < 0.01)
+    assert time.perf_counter() - started < 120  # a hang guard, not a speed test: the loop had no end

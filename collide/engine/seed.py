@@ -215,10 +215,10 @@ def seed_run(G, tables, WP, grav, fl, fp):
     t = 0.0
     t_end = fp[FP_TEND]
     in_contact = False
-    # Steps taken with a contact due within them that did not engage count against the limit:
-    # far out in time the positions no longer resolve a step's approach (the cradle at tol 3e-4
-    # met its balls again at t = 1.5e5 s and stepped there without end).
-    clamped = 0
+    # Free flights count against the step limit: far out in time the positions may no longer
+    # resolve a step's approach (the cradle at tol 3e-4 met its balls again at t = 1.5e5 s and
+    # flew there one step at a time without end).
+    flights = 0
 
     while t < t_end * (1 - 1e-15) and ST[S_STATUS] == OK:
         fp[FP_NOW] = t
@@ -317,8 +317,8 @@ def seed_run(G, tables, WP, grav, fl, fp):
             jump = dt  # a contact begins within this step: take it with the spring clamped
             for i in range(n):
                 bring(G, i, t + dt, grav, fl)
-            clamped += 1  # counted: far out in time a step's approach may not resolve (see above)
-        if not t + jump > t or ST[S_STEPS] + clamped > fl[FL_MAXSTEPS]:
+        flights += 1
+        if not t + jump > t or ST[S_STEPS] + flights > fl[FL_MAXSTEPS]:
             ST[S_STATUS] = STALL
             FG[F_STATUS_T] = t
             break
