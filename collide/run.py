@@ -364,6 +364,14 @@ def _outcome_distance(a: RunResult, b: RunResult, scene: Scene) -> float:
     return float(max(dv, dw) / speed)
 
 
+def _forecast_steps(candidate: SceneRun, scene: Scene, integ: str, finer_tol: float) -> float:
+    """The steps a run at `finer_tol` would take: the candidate's, times the ratio of the steps
+    (steps go as 1 / dt where contacts are stepped; free flights are jumped either way). A run
+    forecast past the step limit is not started only to be refused there, minutes later."""
+    finer_dt = float(auto_dt([scene], integ, np.array([finer_tol]))[0][0])
+    return float(candidate.result.steps[0]) * float(candidate.result.dt[0]) / finer_dt
+
+
 def _measured(run: SceneRun, integ: str, record: bool, max_steps: int) -> SceneRun:
     """The run's error measured against the same scene at a tenth of its tolerance; while that
     exceeds the tolerance, the tighter run becomes the candidate (the step choice must meet tol)."""
@@ -389,6 +397,12 @@ def _measured(run: SceneRun, integ: str, record: bool, max_steps: int) -> SceneR
                 finer_tol /= 10
                 same += 1
             if finer_tol < floor or budget < 1:
+                break
+            if _forecast_steps(candidate, scene, integ, finer_tol) > budget:
+                candidate.result.warnings.append(
+                    f"the error could not be measured: a run at --tol {finer_tol:.2g} would take about "
+                    f"{_forecast_steps(candidate, scene, integ, finer_tol):.2g} steps, more than the {budget:.2g} left "
+                    "of the step limit (--max-steps); the estimate is the model's")
                 break
             finer = run_scenes([scene], integrator=integ, tol=finer_tol, record=record, max_steps=budget,
                                measure=False)

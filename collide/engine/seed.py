@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from collide.engine.broad import near_pairs
-from collide.engine.flight import bring, meets_again, next_contact, positions_at, speed_scales, turn
+from collide.engine.flight import account_contacts, bring, meets_again, next_contact, positions_at, speed_scales, turn
 from collide.engine.jit import jit
 from collide.engine.layout import (
     CN_IVALS,
@@ -195,6 +195,7 @@ def seed_run(G, tables, WP, grav, fl, fp):
     RC = np.empty((64, NR))
     IV = np.empty((16, 4))
     CNT = np.zeros(4, np.int64)
+    parent, count, seen = np.arange(n), np.zeros(n), np.zeros(1, np.int64)  # account_contacts
     ST = np.zeros(NS, np.int64)
     FG = np.zeros(NF)
     FG[F_DT_MIN] = dt
@@ -304,11 +305,12 @@ def seed_run(G, tables, WP, grav, fl, fp):
                         KN[knot_of[i], K_AN + d] = grav[d]
         # Free flight: whole steps in closed form, up to the step in which a contact begins.
         positions_at(G, n, t, grav, P, V)
-        scale = speed_scales(V, n, IV, CNT)
+        account_contacts(IV, CNT, parent, count, seen)
+        scale = speed_scales(V, n, parent)
         tau = next_contact(G, P, V, n, t, WP, grav, dim, math.inf, YES, fp[FP_SLOW], scale)
-        tail = math.ceil(tail_after(fp[FP_TAIL], IV, CNT) / dt) * dt
+        tail = math.ceil(tail_after(fp[FP_TAIL], IV, CNT) / dt) * dt if t_end == math.inf else 0.0
         if (tau < math.inf and t_end == math.inf and CNT[CN_IVALS] > 0 and fp[FP_END_SLOW] > 0.0
-                and not meets_again(G, P, V, n, t, WP, grav, IV, CNT, fp[FP_SLOW], fp[FP_END_SLOW], tail, scale)):
+                and not meets_again(G, P, V, n, t, WP, grav, count, fp[FP_SLOW], fp[FP_END_SLOW], tail, scale)):
             tau = math.inf  # closes slower than the run resolves: the step's error (as `windows`)
         if tau == math.inf and t_end == math.inf:
             t_end = t + tail

@@ -12,7 +12,7 @@ import numpy as np
 
 from collide.engine.broad import crossed, join, largest_set, near_pairs, root_of
 from collide.engine.event.island import run_island
-from collide.engine.flight import meets_again, next_contact, positions_at, speed_scales
+from collide.engine.flight import account_contacts, meets_again, next_contact, positions_at, speed_scales
 from collide.engine.jit import jit, jit_call
 from collide.engine.layout import (
     CN_IVALS,
@@ -206,13 +206,16 @@ def lone_on_walls(cand, eng, n):
 
 
 @jit
-def jump(G, P, V, n, t, t_end, search, ticks, WP, grav, dim, fp, IV, CNT, ST, FG):
+def jump(G, P, V, n, t, t_end, search, ticks, WP, grav, dim, fp, IV, CNT, ST, FG, graph):
     """Nothing touches at t: on in closed form to the next contact start, or the run ends (nothing
-    to record in free flight). Returns (t, t_end, search, ticks, whether the run stops here)."""
+    to record in free flight). `graph`: who met whom so far (`account_contacts`). Returns (t,
+    t_end, search, ticks, whether the run stops here)."""
     small = YES if n <= 64 else NO
-    scale = speed_scales(V, n, IV, CNT)
+    parent, count, seen = graph
+    account_contacts(IV, CNT, parent, count, seen)
+    scale = speed_scales(V, n, parent)
     if (t_end == math.inf and small == YES and CNT[CN_IVALS] > 0 and fp[FP_END_SLOW] > 0.0
-            and not meets_again(G, P, V, n, t, WP, grav, IV, CNT, fp[FP_SLOW], fp[FP_END_SLOW],
+            and not meets_again(G, P, V, n, t, WP, grav, count, fp[FP_SLOW], fp[FP_END_SLOW],
                                 run_end(t, fp, IV, CNT) - t, scale)):
         # What still approaches closes slower than the run resolves velocities (its
         # tolerance): the step's error, not a contact to come (a Newton's cradle at k =
@@ -346,6 +349,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     search = math.inf
     span = float(WINDOW_STEPS)  # the next window's length, in steps of its stiffest contact
     ticks = 0  # jumps in a row to a contact due within the clock's resolution
+    graph = (np.arange(n), np.zeros(n), np.zeros(1, np.int64))
     while ST[S_STATUS] == OK and t < t_end:
         fp[FP_NOW] = t
         fp[FP_NOW_STEPS] = ST[S_STEPS]
@@ -353,7 +357,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
         eng = engaged_now(G, P, V, n, WP, grav, dim)
         if eng.shape[0] == 0:
             t, t_end, search, ticks, stop = jump(G, P, V, n, t, t_end, search, ticks, WP, grav, dim, fp, IV, CNT, ST,
-                                                 FG)
+                                                 FG, graph)
             if stop:
                 break
             continue
