@@ -146,7 +146,7 @@ def damping_ratio(restitution: np.ndarray, hertz: bool) -> np.ndarray:
     """The dashpot's zeta (gamma = 2 zeta sqrt(m* dF/d delta)) that gives this restitution:
     -ln e / sqrt(ln^2 e + pi^2) for the linear spring; for Hertz LIGGGHTS' and LAMMPS'
     coefficient 2 sqrt(5/6) beta sqrt(S_n m*), the same times sqrt(5/6), which gives e exactly
-    too when the force may pull at the end (tests/test_contact_laws.py)."""
+    too when the force may pull at the end (tests/engine/dem/test_damping.py)."""
     e = np.asarray(restitution, dtype=float)
     le = np.log(e)
     return -le / np.sqrt(le**2 + math.pi**2) * (math.sqrt(5.0 / 6.0) if hertz else 1.0)

@@ -3,20 +3,14 @@ error model does not cover the outcome, and the run measures its error instead (
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from collide import diagnostics as dg
-from collide.accuracy import outcome, speed_scale
 from collide.run import run_scene, run_scenes
 from collide.scene import load_scene, parse_scene
 from collide.summary import run_summary
 from tests.random_scenes import random_scene
-
-
-def _error(run, reference, scene) -> float:
-    return float(np.abs(outcome(run.result) - outcome(reference.result)).max() / speed_scale(scene))
+from tests.tolerance_ladders import _error
 
 
 def test_a_ball_bouncing_on_with_friction_keeps_the_order() -> None:
@@ -96,39 +90,3 @@ def test_random_frictional_scenes_are_within_their_estimate() -> None:
         error = _error(run, reference, scene)
         assert error <= 10 * float(run.error_estimate[0]), (index, error, run.error_estimate, run.error_method)
         assert dg.residuals(run.result).energy[0] < 1e-4
-
-
-def _tolerance_ladder(name: str, tols: tuple[float, ...]) -> list[float]:
-    """Outcome errors of runs at `tols` against one at 1e-11 (no measuring: the steps' own)."""
-    scene = load_scene(str(Path(__file__).parent / "data" / f"{name}.toml"))
-    reference = run_scene(scene, tol=1e-11, record=False, measure=False)
-    return [_error(run_scene(scene, tol=tol, record=False, measure=False), reference, scene) for tol in tols]
-
-
-def test_a_slip_touching_the_far_edge_within_a_step_is_caught():
-    """The slip crossed the band, stuck at its far edge for 30 us and came back within one step:
-    the mode values had the same sign at both ends, so the runs at 1e-7 and 1e-8 shared an error
-    of 8e-6 (and measured each other as agreeing). A cubic through each value and its rate finds
-    the dip: the error now falls with the tolerance."""
-    loose, tight = _tolerance_ladder("band-far-edge-touch", (1e-7, 1e-8))
-    assert tight < 1e-6
-    assert loose > 3 * tight
-
-
-def test_contacts_changing_modes_at_once_reach_consistent_modes():
-    """A ball against another and the floor: both contacts change at once, and the first left
-    sliding with its slip heading back into the band (value zero at the step's start, so the
-    crossing went unseen). The outcome moved by 6e-3 between tolerances down to 1e-9; with the
-    contact held again and re-judged, it converges."""
-    loose, tight = _tolerance_ladder("coupled-edge-change", (1e-8, 1e-9))
-    assert tight < 1e-4
-    assert loose > 3 * tight
-
-
-def test_a_slide_out_of_the_plane_keeps_its_kick_root():
-    """Six spinning spheres on a floor in 3D. An implicit kick started from the last kick's
-    friction instead of none settled, for a slide out of the plane, on the kick's other root:
-    runs at 1e-10 and 1e-11 then differed by 6.6e-6 (against 8e-10 before). Such kicks start
-    cold; the ladder must converge."""
-    tight, = _tolerance_ladder("warm-slide-3d", (1e-10,))
-    assert tight < 1e-7

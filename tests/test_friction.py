@@ -1,66 +1,21 @@
-"""Friction in whole runs: events located, and the order the compositions keep with friction, in
-the plane and out of it (the hold rate against a finite difference of the slip: tests/engine)."""
+"""Friction in whole runs: the order the compositions keep with friction, in the plane and out of
+it, and stiff impacts against the rigid answer (events located: tests/engine/event/test_locate.py;
+the hold rate against a finite difference of the slip: tests/engine/event/test_contact.py)."""
 
 from __future__ import annotations
 
 import math
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from collide import diagnostics as dg
 from collide.accuracy import outcome, speed_scale
 from collide.engine import layout as kn
 from collide.model import compile_scenes, reference_frequency
 from collide.run import run_scene
-from collide.scene import generic_turn, load_scene, parse_scene, turned_source
-
-
-def falling_box(seed: int, tol: float):
-    """27 spheres (r 2 cm, 0.1 kg, k 1e5 N/m, mu 0.3) from a jittered 3 x 3 x 3 lattice with random
-    velocities into an open box of five walls, 16 cm wide, under gravity for 0.5 s: a pile whose
-    contacts stick, slide and turn together, many at a time."""
-    rng = np.random.default_rng(seed)
-    bodies = []
-    for n, (i, j, k) in enumerate(np.ndindex(3, 3, 3)):
-        position = [0.03 + 0.05 * i + rng.uniform(-0.004, 0.004), 0.03 + 0.05 * j + rng.uniform(-0.004, 0.004),
-                    0.03 + 0.05 * k]
-        bodies.append({"name": f"s{n + 1}", "mass": 0.1, "radius": 0.02, "position": [float(x) for x in position],
-                       "velocity": [float(x) for x in rng.normal(0.0, 0.2, 3)]})
-    origin = [0.0, 0.0, 0.0]
-    walls = [(origin, [0.0, 0.0, 1.0]), (origin, [1.0, 0.0, 0.0]), ([0.16, 0.0, 0.0], [-1.0, 0.0, 0.0]),
-             (origin, [0.0, 1.0, 0.0]), ([0.0, 0.16, 0.0], [0.0, -1.0, 0.0])]
-    return parse_scene({"name": f"box27-{seed}", "dim": 3, "dt": "auto", "integrator": "kahan6", "tol": tol,
-                        "duration": 0.5, "gravity": [0.0, 0.0, -9.81], "contact": {"k": 1e5, "mu": 0.3, "eps": 1e-6},
-                        "body": bodies, "wall": [{"point": p, "normal": n} for p, n in walls]})
-
-
-@pytest.mark.parametrize(("seed", "tol"), [(1, 1e-2), (1, 1e-4), (1, 1e-5), (2, 1e-5), (0, 1e-7), (38, 1e-3)])
-def test_a_3d_pile_locates_every_event(seed, tol):
-    """Every step of a settling pile lands its events: before (2026-12-03) the runs at 1e-4 and
-    1e-5 warned of 34 and 41 steps that ran out of trials, where a stuck contact's hold force
-    jumps as a neighbour's slip passes zero (bisected with interpolation in between, two trials a
-    halving) or a slip turned past a right angle near the band; the run at 1e-2 of one, where a
-    trial ending just past such a jump looked for dips on cubics that spanned it and was sent far
-    back; lattice 2 at 1e-5 and lattice 0 at 1e-7 of one and two, where two jumping values took
-    turns, each bisected again from the step's start. Lattice 38 at 1e-3 stalled (2026-12-05) on a
-    slip grazing the band's edge, landed over and over in shorter steps (see GRAZE_SHARE). The
-    energy balance holds to ten times the tolerance (measured 6.4e-8 to 8.9e-6; the chaotic
-    outcome can only be compared with itself)."""
-    from collide.engine import tier
-
-    if not tier.compiled_ready():
-        pytest.skip("needs the compiled engine (python -m collide.warmup): 7 000 steps of 27 bodies")
-    run = run_scene(falling_box(seed, tol), record=False, measure=False)
-    assert not [w for w in run.result.warnings if "ran out of trials" in w], run.result.warnings
-    assert int(run.result.steps[0]) > 1000  # the pile really was stepped
-    energy = float(dg.residuals(run.result).energy[0])
-    assert energy <= 10 * tol, energy
-
+from collide.scene import load_scene, parse_scene, turned_source
+from tests.friction_scenes import _wall_impact, random_wall_frame, tilted_bonus, turned_scene
 
 
 def _order(scene, fractions=(0.4, 0.2)):
@@ -77,24 +32,6 @@ def test_friction_keeps_sixth_order():
     errors, order = _order(load_scene("demo-bonus"))
     assert errors[1] < 1e-8
     assert order > 5.0
-
-
-def tilted_bonus(**changes) -> dict:
-    """The bonus demo in 3D with the first ball thrown and both spinning out of the plane: the
-    slip turns as the contact goes on."""
-    raw = {"name": "tilted", "dim": 3, "contact": {"k": 1500.0, "mu": 0.5, "lever": "seed"},
-           "body": [{"name": "ball1", "mass": 0.0254, "radius": 0.03021, "position": [0.0, 0.01, 0.0],
-                     "velocity": [1.0, 0.0, 0.3], "spin": [2.0, -1.0, 3.0]},
-                    {"name": "ball2", "mass": 0.0254, "radius": 0.03021, "position": [0.5, 0.0, 0.0],
-                     "velocity": [-2.0, 0.0, 0.0], "spin": [-1.0, 4.0, -5.0]}]}
-    raw.update(changes)
-    return raw
-
-
-def turned_scene(name: str = "demo-bonus", overrides: tuple[str, ...] = ()) -> tuple[dict, dict, np.ndarray]:
-    """A built-in 2D scene and the same turned as a whole into a tilted plane (3D), with the turn."""
-    raw2 = load_scene(name, list(overrides)).source
-    return raw2, turned_source(raw2), generic_turn()
 
 
 def test_bonus_demo_in_any_plane_is_the_2d_run():
@@ -214,35 +151,6 @@ def test_a_slip_that_barely_yields_out_of_the_plane_meets_the_tolerance():
         assert np.abs(outcome(result) - reference).max() / speed_scale(scene) < bound * tol
 
 
-def test_stiff_friction_at_a_tight_tolerance_does_not_stall():
-    """At k = 1e12 N/m a stick-to-slide change came due closer than the clock resolves at
-    t = 0.147 s (2.8e-17 s): the step to it did not move the time, and the run stalled. Such an
-    event is taken as passed (by under 1e-15 s)."""
-    run = run_scene(load_scene("demo-bonus", ["contact.k=1e12"]), tol=1e-9, record=False)
-    assert int(run.result.steps[0]) < 60
-    # (At k = 1e12 the positions resolve the overlap to 2.3e-10: a tol of 1e-11 is refused.)
-    reference = run_scene(load_scene("demo-bonus", ["contact.k=1e12"]), tol=1e-10, record=False)
-    scene = load_scene("demo-bonus")
-    assert np.abs(outcome(run.result) - outcome(reference.result)).max() / speed_scale(scene) < 1e-8
-
-
-def _wall_impact(normal, velocity, spin, k: float, lever: str, dim: int, mu: float = 0.3) -> dict:
-    n = np.asarray(normal, float) / np.linalg.norm(normal)
-    point = np.full(dim, 1.0)
-    body = {"name": "b", "mass": 0.1, "radius": 0.05, "position": (point + n * 0.06).tolist(),
-            "velocity": list(velocity), "spin": spin if dim == 2 else list(spin)}
-    return {"name": "wall-impact", "dim": dim, "tol": 1e-8, "contact": {"k": k, "mu": mu, "lever": lever},
-            "body": [body], "wall": [{"point": point.tolist(), "normal": n.tolist()}]}
-
-
-def random_wall_frame(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """A wall's unit normal of random orientation and a random unit direction along it."""
-    n = rng.normal(size=3)
-    n /= np.linalg.norm(n)
-    along = np.cross(n, rng.normal(size=3))
-    return n, along / np.linalg.norm(along)
-
-
 def _rigid_error(raw: dict) -> tuple[float, int]:
     from collide.rigid import reference_speed, rigid_outcome
     scene = parse_scene(raw)
@@ -312,47 +220,3 @@ def test_a_run_knows_whether_it_stays_in_a_plane_of_any_orientation():
     assert not planar(bounce | {"body": [ball([0.0, 3.0, 1.0])]})
     # The bonus demo turned as a whole into a tilted plane.
     assert planar(turned_scene()[1])
-
-
-def test_friction_events_in_the_plane_cost_few_step_attempts():
-    """Each friction mode event of the billiards break re-steps its island until it lands: the
-    search must aim well. A slip crossing the band is aimed at through its far edge (the near
-    edge's value of |slip| rose and fell back: 11 trials for one event), and refinements close
-    to a trial's end are one Verlet substep from there. With these, 154 steps from a step's start
-    against 78 without friction (261 before). Out of the plane they are taken as far as the slips'
-    turning allows (`turning_nudges`): the tilted bonus demo tries 16 steps from a step's start
-    and 6 substeps (41 and none before 2026-12-05); in a tilted plane the planar path takes them.
-    Counted with the interpreted kernels, where `step` can be wrapped."""
-    code = """
-import sys
-import collide.engine.event.locate as locate
-from collide.run import run_scene
-from collide.scene import load_scene, parse_scene
-sys.path.insert(0, {tests!r})
-from test_friction import tilted_bonus
-count = {{"full": 0, "substep": 0}}
-step = locate.step
-def counted(*args):
-    count["full" if len(args[6]) > 1 else "substep"] += 1
-    return step(*args)
-locate.step = counted
-from test_friction import turned_scene
-scenes = [load_scene("billiards-break", ["tol=1e-6", "contact.mu=" + mu]) for mu in ("0.1", "0")]
-turned = parse_scene(turned_scene("billiards-break", ("tol=1e-6",))[1])
-for scene in scenes + [parse_scene(tilted_bonus(tol=1e-7)), turned]:
-    count.update(full=0, substep=0)
-    run_scene(scene, record=False, measure=False)
-    print(count["full"], count["substep"])
-"""
-    env = {**os.environ, "COLLIDE_JIT": "0"}
-    out = subprocess.run([sys.executable, "-c", code.format(tests=str(Path(__file__).parent))], env=env,
-                         capture_output=True, text=True, check=True)
-    (full, substeps), (full_without, _), (full_3d, substeps_3d), (full_tilted, substeps_tilted) = [
-        map(int, line.split()) for line in out.stdout.splitlines()]
-    assert full_without > 0 and full_3d > 0
-    assert full <= 2.2 * full_without
-    assert substeps > 0
-    # Half again the 16 counted, where 41 were tried without nudges out of the plane.
-    assert substeps_3d > 0 and full_3d <= 24
-    # In a tilted plane the break runs on the planar path too (turned into z = const).
-    assert substeps_tilted > 0 and full_tilted <= 1.1 * full

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -282,36 +281,6 @@ def test_newtons_cradle_builtin_hands_the_speed_to_the_last_ball():
     assert dg.residuals(r).energy[0] < 1e-6
 
 
-@pytest.mark.parametrize("k", [1e6, 5.5e6])
-def test_a_cradle_ends_when_what_still_approaches_is_the_steps_error(k: float) -> None:
-    """A cradle of touching balls leaves its first four at rest to the step's error (1e-8 m/s at
-    tol 1e-7, shrinking with it). Those velocities closed gaps 11 hours (k = 1e6) and a month
-    (k = 5.5e6) later, and the run went on to meet them. It ends after the wave, as at a tighter
-    tolerance, with the last ball at 1 m/s."""
-    scene = load_scene("newtons-cradle", [f"contact.k={k}"])
-    r = run_scene(scene, record=False).result
-    tight = run_scene(scene, tol=1e-10, record=False).result
-    assert float(r.final.t[0]) < 1.0
-    assert float(r.final.t[0]) == pytest.approx(float(tight.final.t[0]), rel=1e-3)
-    assert abs(float(r.final.v[0, -1, 0]) - 1.0) < 100 * scene.tol
-
-
-def test_free_flight_jumps_count_the_stretches_where_nothing_touches() -> None:
-    """`jumps` counts the contact-free stretches crossed in closed form, not the engine's windows:
-    two spheres meeting once cross two (the approach and the tail after they part); a ball between
-    two walls 1 m apart at 2 m/s, from the middle, meets them at 0.225 s and 0.675 s (plus a
-    contact's duration each) within 1 s, and crosses one stretch more than its contacts."""
-    r = run_scene(load_scene("demo-1d"), record=False, measure=False).result
-    assert int(r.contacts.count[0]) == 1
-    assert int(r.jumps[0]) == 2
-    raw = {"name": "box", "dim": 2, "duration": 1.0, "contact": {"k": 1e5},
-           "body": [{"name": "ball", "mass": 0.1, "radius": 0.05, "position": [0.5, 0.0], "velocity": [2.0, 0.0]}],
-           "wall": [{"point": [0.0, 0.0], "normal": [1.0, 0.0]}, {"point": [1.0, 0.0], "normal": [-1.0, 0.0]}]}
-    r = run_scene(parse_scene(raw), record=False, measure=False).result
-    assert int(r.contacts.count[0]) == 2
-    assert int(r.jumps[0]) == 3
-
-
 def test_gas_box_builtin_keeps_its_energy_and_stays_in_the_box():
     scene = load_scene("gas-box", ["duration=0.05"])
     r = run_scene(scene, record=False).result
@@ -362,145 +331,6 @@ def test_billiards_break_converges_and_keeps_the_racks_mirror_symmetry():
     v, w = r.final.v[0], r.final.w[0].reshape(len(scene.bodies), -1)[:, -1]
     assert np.abs(v[partner] * np.array([1.0, -1.0]) - v).max() / speed < 1e-8
     assert np.abs(-w[partner] - w).max() * scene.bodies[0].radius / speed < 1e-8
-
-
-def test_an_asymmetric_break_meets_its_tolerance_with_short_trials_as_yoshida_steps():
-    """The cue ball 1 cm off the rack's line: every friction mode changes at its own time (143
-    steps at tol 1e-6, 83 for the symmetric rack), many soon after a step's start, where a trial
-    from the start is one Yoshida step if its error there is at most a tenth of a whole kahan6
-    step's. The outcome at tol 1e-6 is within the tolerance of the run at 1e-9 (2.1e-7 of the
-    cue ball's speed; with every trial a Yoshida step, 2e-4)."""
-    scene = load_scene("billiards-break", ["body.cue.position.y=0.01"])
-    speed = 6.0
-    runs = {tol: run_scene(scene, tol=tol, record=False, measure=False).result for tol in (1e-6, 1e-9)}
-    outcome = {tol: np.concatenate([r.final.v[0].ravel(), r.final.w[0].ravel() * scene.bodies[0].radius])
-               for tol, r in runs.items()}
-    assert np.abs(outcome[1e-6] - outcome[1e-9]).max() / speed < 1e-6
-    assert dg.residuals(runs[1e-6]).energy[0] < 10 * 1e-6
-
-
-_FLIP_RUN = """
-import math
-import sys
-import collide.engine.event.island as island
-import collide.engine.event.locate as locate
-import collide.engine.event.modes as modes
-import collide.engine.layout as K
-# Read at run time by the interpreted kernels (from the modules that use them), as are the wrapped
-# functions below.
-if sys.argv[1] == "no-flips":
-    modes.FLIP_SHARE = 0.0
-if sys.argv[1] == "no-late":
-    locate.LATE_SAFETY = math.inf
-from collide.accuracy import outcome
-from collide.run import run_scene
-from collide.scene import load_scene
-count = {"flips": 0, "trials": 0, "released": 0}
-decide, step = island.decide, locate.step
-def counted_decide(X, C, CI, na, nc, *rest):
-    count["flips"] += int((CI[:nc, K.CI_EDGE] == K.FLIP).sum())
-    stuck = CI[:nc, K.CI_MODE] == K.STICK
-    result = decide(X, C, CI, na, nc, *rest)
-    count["released"] += int((stuck & (CI[:nc, K.CI_MODE] != K.STICK)).sum())
-    return result
-def counted_step(*args):
-    count["trials"] += 1
-    return step(*args)
-island.decide, locate.step = counted_decide, counted_step
-r = run_scene(load_scene("billiards-break", ["body.cue.position.y=0.01"]), tol=1e-6, record=False, measure=False).result
-print(int(r.steps[0]), count["flips"], count["trials"], count["released"], *outcome(r))
-"""
-
-
-@functools.cache
-def _flip_run(setting: str) -> tuple[int, int, int, int, np.ndarray]:
-    """The off-centre break at tol 1e-6 with the interpreted kernels: (steps, flips, step calls,
-    stuck contacts released, outcome). Cached: both tests below compare with the "on" run."""
-    import os
-    import subprocess
-    import sys
-
-    env = dict(os.environ, COLLIDE_JIT="0")
-    out = subprocess.run([sys.executable, "-c", _FLIP_RUN, setting], env=env, capture_output=True, text=True,
-                         check=True).stdout.split()
-    return int(out[0]), int(out[1]), int(out[2]), int(out[3]), np.array(out[4:], dtype=float)
-
-
-def _flip_runs(*settings: str) -> dict[str, tuple[int, int, int, int, np.ndarray]]:
-    return {setting: _flip_run(setting) for setting in settings}
-
-
-def _off_centre_scales() -> tuple[float, float]:
-    """The off-centre break's speed scale and event tolerance at tol 1e-6 (as `simulate` sets it)."""
-    from collide.accuracy import speed_scale
-
-    scene = load_scene("billiards-break", ["body.cue.position.y=0.01"])
-    speed = speed_scale(scene)
-    return speed, min(0.1 * 1e-6, stepper.EDGE_BAND_SHARE * scene.contact.eps / speed)
-
-
-def test_a_hold_force_through_zero_flips_the_slip_to_the_bands_other_edge():
-    """A stuck contact whose hold force comes to zero crosses the band (no friction there) to its
-    other edge, where it sticks again: two mode changes a fraction of a microsecond apart, each
-    ending the whole group's step. Where the crossing is that short (`flips`), it is taken as
-    the impulse that moves the slip across, in one decision. The off-centre break at tol 1e-6
-    flips 20 times, each within FLIP_SHARE / FLIP_SAFETY (1/8) of the event tolerance (8.3e-8 of
-    the cue ball's speed here: half the band): together at most 2.1e-7 (measured 4e-9) from
-    the run with both changes landed, in fewer steps (113 against 131). The interpreted kernels,
-    so that the gate can be switched off."""
-    runs = _flip_runs("on", "no-flips")
-    speed, event_tol = _off_centre_scales()
-    per_flip = kernels.FLIP_SHARE / kernels.FLIP_SAFETY * event_tol
-    flips = runs["on"][1]
-    assert flips > 0 and runs["no-flips"][1] == 0
-    assert runs["on"][0] < runs["no-flips"][0]
-    assert np.abs(runs["on"][4] - runs["no-flips"][4]).max() / speed <= flips * per_flip
-
-
-@pytest.mark.parametrize("offset", ["0", "0.01"])
-@pytest.mark.parametrize("eps", ["1e-5", "1e-4"])
-def test_flips_across_a_wide_band_keep_the_break_within_its_tolerance(eps, offset):
-    """A wider band takes longer to cross (T grows as sqrt(eps)), and in that time the contact
-    may end, another contact change its mode, or the hold force at the far edge pass mu F_n: a
-    flip then stands for friction that never acts. Taken wherever the crossing's own model
-    (the hold force's rate and curvature) said it was accurate (tried 2026-12-05), the break at
-    eps = 1e-4 missed its run at tol 1e-9 by up to 1.2e-5 of the cue ball's speed at tol 1e-6.
-    `flips`' bound grows as eps^1.5 and refuses them there; whatever gate comes next must keep
-    the break within its tolerance at band widths 10 and 100 times the scene's."""
-    from collide.accuracy import outcome, speed_scale
-
-    scene = load_scene("billiards-break", [f"contact.eps={eps}", f"body.cue.position.y={offset}"])
-    final = {tol: outcome(run_scene(scene, tol=tol, record=False, measure=False).result) for tol in (1e-6, 1e-9)}
-    assert np.abs(final[1e-6] - final[1e-9]).max() / speed_scale(scene) < 1e-6
-
-
-def test_a_stuck_contacts_mode_change_lands_late_within_the_tolerance_in_fewer_trials():
-    """A stuck contact's mode value (its margin to mu F_n, its hold force) has no closed-form
-    rate, and landing it within MODE_TOL took the search about three trials. Held past its
-    change for `late`, the friction errs by at most the value (as a force) over that time,
-    second order in `late`: a trial just past it is taken where that changes a slip by at most
-    MODE_TOL of the event tolerance (LATE_SAFETY over). The off-centre break then takes fewer
-    trials; its outcome moves by far less than the tolerance (each late landing errs by at most
-    MODE_TOL / LATE_SAFETY of the event tolerance; a landed change by MODE_TOL)."""
-    runs = _flip_runs("on", "no-late")
-    speed, event_tol = _off_centre_scales()
-    assert runs["on"][2] < runs["no-late"][2]
-    # Each release of a stuck contact may have been landed late: at most MODE_TOL / LATE_SAFETY each.
-    released = runs["on"][3]
-    assert released > 0
-    bound = released * kernels.MODE_TOL / kernels.EDGE_TOL / kernels.LATE_SAFETY * event_tol
-    assert np.abs(runs["on"][4] - runs["no-late"][4]).max() / speed <= bound
-
-
-@pytest.mark.parametrize("mu", ["0.1", "0"])
-def test_an_event_the_steps_start_foresees_costs_about_one_whole_step(mu):
-    """A contact's start or end, or a friction mode change, foreseen from the step's start (where
-    the parabola through each value, its rate and its rate of change reaches zero): the first
-    trial ends just past it, and the search lands on it with nudges from there. Most of the
-    break's steps end on an event; each took two or three whole steps (155 for 80 steps with
-    friction, 78 for 46 without), now about one."""
-    r = run_scene(load_scene("billiards-break", [f"contact.mu={mu}"]), tol=1e-6, record=False, measure=False).result
-    assert 0 < r.attempts[0] <= 1.4 * r.steps[0]
 
 
 @pytest.mark.parametrize("tol", [1e-3, 1e-4])
@@ -558,5 +388,3 @@ def test_an_energy_balance_far_off_the_tolerance_is_a_warning():
     assert not balance_warnings(r, [scene], np.array([scene.tol]), [True])
     warned = balance_warnings(r, [scene], np.array([residual / 1000]), [True])
     assert len(warned) == 1 and "energy balance is off" in warned[0]
-
-

@@ -289,7 +289,7 @@ def test_a_shortened_run_says_so_and_drops_what_needs_the_whole_run() -> None:
 def test_a_pile_cut_before_it_settles_is_not_at_rest() -> None:
     from collide import scene_checks as sc
     from collide.run import run_scene
-    from tests.test_contact_laws import _pile
+    from tests.dem_scenes import _pile
 
     raw = _pile(3, 3)
     settled = parse_scene(raw)

@@ -13,7 +13,7 @@ import pytest
 from collide import diagnostics as dg
 from collide.run import run_scene
 from collide.scene import parse_scene
-from tests.test_friction import _wall_impact, random_wall_frame
+from tests.friction_scenes import _wall_impact, random_wall_frame
 
 RADIUS, MASS = 0.05, 0.1
 
