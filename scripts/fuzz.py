@@ -1,7 +1,7 @@
 """The larger fuzz runs: random physical scenes held to the invariants (issue 53), or thousands of
 generated command lines and hundreds of damaged recordings (issue 14), with the counts printed.
 
-    python scripts/fuzz.py --count 5000 [--seed 53] [--found fuzz-found] [--cli-every 50]
+    python scripts/fuzz.py --count 5000 [--seed 53] [--first 0] [--found fuzz-found] [--cli-every 50]
     python scripts/fuzz.py [--cases 2000] [--recordings 200] [--seed 14]
 
 Scenes (`--count N`) come from tests/scene_fuzz.py (the generator of tests/test_scene_fuzz.py)
@@ -177,7 +177,7 @@ class Runner:
             self.child.join(5)
 
 
-def fuzz_scenes(seed: int, count: int, found: Path, cli_every: int, max_bodies: int) -> int:
+def fuzz_scenes(seed: int, count: int, found: Path, cli_every: int, max_bodies: int, first: int = 0) -> int:
     """Scene i of seed S is drawn from random.Random(S * 1_000_003 + i)."""
     import random
 
@@ -189,7 +189,7 @@ def fuzz_scenes(seed: int, count: int, found: Path, cli_every: int, max_bodies: 
     slowest, worst_energy = (0.0, -1), (0.0, -1)
     started = time.perf_counter()
     runner = Runner(seed, max_bodies, 1.5 * TIME_LIMIT_S)
-    for i in range(count):
+    for i in range(first, first + count):
         raw = random_raw(random.Random(seed * 1_000_003 + i), max_bodies)
         verdict = runner.run(i)
         slowest = max(slowest, (verdict.seconds, i))
@@ -215,9 +215,9 @@ def fuzz_scenes(seed: int, count: int, found: Path, cli_every: int, max_bodies: 
             path.write_text(dump_toml(raw))
             broken.append(f"{verdict.kind}: {verdict.message[:300]}\n    collide run {path}")
             print(f"  scene {i}: {broken[-1]}", file=sys.stderr, flush=True)
-        if (i + 1) % 100 == 0:
+        if (i + 1 - first) % 100 == 0:
             so_far = ", ".join(f"{what} {n}" for what, n in sorted(outcomes.items()))
-            print(f"  ... {i + 1} scenes in {time.perf_counter() - started:.0f} s: {so_far}", file=sys.stderr,
+            print(f"  ... {i + 1 - first} scenes in {time.perf_counter() - started:.0f} s: {so_far}", file=sys.stderr,
                   flush=True)
     runner.close()
     took = time.perf_counter() - started
@@ -235,6 +235,7 @@ def main() -> None:
     parser.add_argument("--found", type=Path, default=Path("fuzz-found"), help="where violating scenes go")
     parser.add_argument("--cli-every", type=int, default=50, help="run every n-th scene through the CLI too")
     parser.add_argument("--max-bodies", type=int, default=30)
+    parser.add_argument("--first", type=int, default=0, help="the first scene's number (replay a stretch of a seed)")
     parser.add_argument("--cases", type=int, default=None)
     parser.add_argument("--recordings", type=int, default=None)
     parser.add_argument("--seed", type=int, default=None)
@@ -245,7 +246,7 @@ def main() -> None:
     broken = 0
     if scenes:
         broken += fuzz_scenes(53 if args.seed is None else args.seed, args.count, args.found, args.cli_every,
-                              args.max_bodies)
+                              args.max_bodies, args.first)
     seed = 14 if args.seed is None else args.seed
     if cases:
         broken += fuzz_command_lines(seed, cases)
