@@ -95,7 +95,8 @@ def test_found_scenes(name: str) -> None:
     (exit 2), which the judge accepts: it must never exit 0. seed-3d-bounce-24-contacts-balance-off:
     the seed's first-order error over 24 bounces leaves the energy 4e-3 off where nothing
     dissipates, 20 times --tol, and the finer run that would measure it is beyond the seed:
-    refused (it exited 0 with the model's estimate)."""
+    refused (it exited 0 with the model's estimate). seed-2d-bounce-10-contacts-balance-off: the
+    same at tol 1.7e-4 over 10 bounces, 1.5e-3 off (8.4 times --tol): refused."""
     raw = tomllib.loads((FOUND / name).read_text())
     verdict, _ = run_in_process(raw)
     assert verdict.outcome != "violation", f"{verdict.kind}: {verdict.message}"
