@@ -46,9 +46,9 @@ class Table:
 def read_table(path: Path, dim: int, where: str = "bodies.file") -> Table:
     """Read and check a body table (values are checked here; materials by the caller)."""
     if path.suffix not in (".csv", ".npz"):
-        raise SceneError(f"{where}: {_shown(str(path))} is not a .csv or .npz file")
+        raise SceneError(f"{where}: '{path}' is not a .csv or .npz file")
     if not path.is_file():
-        raise SceneError(f"{where}: {_shown(str(path))} does not exist")
+        raise SceneError(f"{where}: '{path}' does not exist")
     raw = _read_npz(path, where) if path.suffix == ".npz" else _read_csv(path, where)
     allowed = columns(dim)
     unknown = sorted(set(raw) - set(allowed))
@@ -113,7 +113,7 @@ def _read_csv(path: Path, where: str) -> dict[str, list[str]]:
         with path.open(newline="") as handle:
             rows = list(csv.reader(handle))
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise SceneError(f"{where}: cannot read {_shown(str(path))}: {exc}") from None
+        raise SceneError(f"{where}: cannot read '{path}': {exc}") from None
     if not rows:
         raise SceneError(f"{where}: {path.name} is empty (it needs a header row)")
     header = [h.strip() for h in rows[0]]
@@ -134,7 +134,7 @@ def _read_npz(path: Path, where: str) -> dict[str, np.ndarray]:
         with np.load(path, allow_pickle=False) as data:
             raw = {k: data[k] for k in data.files}
     except (OSError, ValueError, EOFError) as exc:
-        raise SceneError(f"{where}: cannot read {_shown(str(path))}: {exc}") from None
+        raise SceneError(f"{where}: cannot read '{path}': {exc}") from None
     lengths = {k: v.shape for k, v in raw.items()}
     if any(len(s) != 1 for s in lengths.values()) or len({s[0] for s in lengths.values()}) > 1:
         raise SceneError(f"{where}: {path.name}: every array must be one column of the same length "
@@ -173,3 +173,25 @@ def state_arrays(names: list[str], radius: np.ndarray, mass: np.ndarray, inertia
     for k, c in enumerate(SPIN_COLUMNS[dim]):
         out[c] = spin.reshape(len(names), -1)[:, k]
     return out
+
+
+def write_state(path: Path, scene: object, pos: np.ndarray, vel: np.ndarray, spin: np.ndarray) -> Path:
+    """Write a scene's bodies at a state (positions, velocities, spins: (n, dim), (n, dim),
+    (n, spin components)) as a body table, `.csv` or `.npz`, whole or not at all."""
+    from collide.output import write_atomic, write_text_atomic
+
+    bodies = scene.bodies  # type: ignore[attr-defined]
+    n = len(bodies)
+    columns_ = ([b.name for b in bodies], np.array([b.radius for b in bodies]), np.array([b.mass for b in bodies]),
+                np.array([b.inertia for b in bodies]), [b.material for b in bodies],
+                np.asarray(pos, dtype=float).reshape(n, -1), np.asarray(vel, dtype=float).reshape(n, -1),
+                np.asarray(spin, dtype=float).reshape(n, -1))
+    if path.suffix == ".npz":
+        arrays = state_arrays(*columns_)
+
+        def produce(tmp: Path) -> None:
+            with tmp.open("wb") as handle:
+                np.savez(handle, **arrays)
+
+        return write_atomic(path, produce)
+    return write_text_atomic(path, state_text(*columns_))

@@ -34,9 +34,11 @@ MAX_FILL = 10_000_000  # spheres in one fill (memory: a few GB as bodies)
 # Random insertion gives up after this many candidates per sphere asked for: beyond it a packing
 # is near random sequential insertion's jamming limit (about 0.38 in 3D, 0.55 in 2D).
 ATTEMPTS_PER_SPHERE = 100
+MIN_ATTEMPTS = 1 << 18  # a few spheres may take many draws (several per sphere each round)
 STALLED_ROUNDS = 16  # rounds in a row that place nothing end it
 ROUNDS = 16  # a round draws for at most this share of the spheres (the largest left)
 ROUND_MIN = 1024
+ONE_SIZE = 1.25  # radii within this ratio are inserted in any order
 BATCH = 1 << 18  # spheres drawn in one round (memory)
 JAMMING = {1: 0.75, 2: 0.55, 3: 0.38}
 CUT_ROUNDS = 100  # draws of a cut distribution before refusing a cut that keeps almost nothing
@@ -371,7 +373,9 @@ def _random(radius: np.ndarray, region: Region, dim: int, where: str, rng: np.ra
     order = np.argsort(-radius, kind="stable")
     placed = _Placed(dim, float(radius.max()), obstacles)
     position = np.full((len(radius), dim), np.nan)
-    width = min(BATCH, max(ROUND_MIN, len(radius) // ROUNDS))
+    # Spheres of about one size need no order: all draw at once (far fewer rounds)
+    one_size = radius.max() <= ONE_SIZE * radius.min()
+    width = min(BATCH, len(radius) if one_size else max(ROUND_MIN, len(radius) // ROUNDS))
     tried, stalled, start = 0, 0, 0
     while start < len(order):
         window = order[start:start + width]
@@ -389,7 +393,7 @@ def _random(radius: np.ndarray, region: Region, dim: int, where: str, rng: np.ra
         position[batch[chosen]] = cand[chosen]
         placed.add(cand[chosen], r[chosen])
         stalled = 0 if len(chosen) else stalled + 1
-        if tried > ATTEMPTS_PER_SPHERE * len(radius) or stalled >= STALLED_ROUNDS:
+        if tried > max(ATTEMPTS_PER_SPHERE * len(radius), MIN_ATTEMPTS) or stalled >= STALLED_ROUNDS:
             done = int((~np.isnan(position[:, 0])).sum())
             raise SceneError(f"{where}: only {done} of {len(radius)} spheres fit without overlap in a random "
                              f"arrangement (random insertion jams near a packing fraction of "

@@ -511,7 +511,7 @@ def _parse_scene(raw: dict, default_name: str) -> Scene:
             raise SceneError(f"{where}.normal: must not be zero")
         walls.append(Wall(point, tuple(c / norm for c in normal)))
 
-    bodies = _more_bodies(raw, dim, by_name, domain, bodies, tuple(walls))
+    bodies, from_file = _more_bodies(raw, dim, by_name, domain, bodies, tuple(walls))
     scene = Scene(name=name, dim=dim, dt=dt, integrator=integrator, contact=contact,
                   bodies=tuple(bodies), walls=tuple(walls), materials=materials, pairs=pairs,
                   gravity=gravity, duration=duration, tail=tail, tol=tol, rest=rest,
@@ -533,7 +533,7 @@ def _parse_scene(raw: dict, default_name: str) -> Scene:
     if rest is not None and scene.integrator != "dem":
         raise SceneError("rest: ends a DEM run (integrator = 'dem') when it comes to rest; this scene's "
                          f"integrator is {_shown(scene.integrator)}")
-    _check_start(scene)
+    _check_start(scene, from_file)
     return scene
 
 
@@ -559,9 +559,9 @@ def _parse_domain(table: Any, dim: int) -> Domain | None:
 
 
 def _more_bodies(raw: dict, dim: int, materials: dict, domain: Domain | None, bodies: list[Body],
-                 walls: tuple[Wall, ...]) -> list[Body]:
+                 walls: tuple[Wall, ...]) -> tuple[list[Body], range]:
     """The [[body]] tables' bodies, then a [bodies] file's, then each [[fill]]'s (docs/design.md
-    section 10)."""
+    section 10); and where the file's are."""
     from collide.bodies_file import read_table
     from collide.fill import fill_bodies
     from collide.scene_bodies import bodies_from_fill, bodies_from_table
@@ -573,6 +573,7 @@ def _more_bodies(raw: dict, dim: int, materials: dict, domain: Domain | None, bo
         if not isinstance(path, str) or not path:
             raise SceneError(f"bodies.file: expected a file name, got {_shown(path)}")
         bodies = bodies + bodies_from_table(read_table(Path(path), dim), dim, materials, f"bodies.file ({path})")
+    from_file = range(len(raw.get("body", [])), len(bodies))
     fills = raw.get("fill", [])
     if not isinstance(fills, list):
         raise SceneError("fill: expected [[fill]] tables")
@@ -584,15 +585,20 @@ def _more_bodies(raw: dict, dim: int, materials: dict, domain: Domain | None, bo
         raise SceneError("body: a scene needs at least one body ([[body]], [[fill]] or [bodies] file)")
     if len(bodies) > len(raw.get("body", [])):
         check_names([b.name for b in bodies])
-    return bodies
+    return bodies, from_file
 
 
-def _check_start(scene: Scene) -> None:
-    """No overlaps at the start (docs/design.md section 3) and every body inside the domain."""
+def _check_start(scene: Scene, from_file: range) -> None:
+    """No overlaps at the start (docs/design.md section 3; a saved state's contacts in a DEM
+    scene excepted) and every body inside the domain."""
     n, dim = len(scene.bodies), scene.dim
     pos = np.array([b.position for b in scene.bodies], dtype=float).reshape(n, dim)
     radius = np.array([b.radius for b in scene.bodies], dtype=float)
-    check_start_overlap([b.name for b in scene.bodies], pos, radius, scene.walls)
+    in_contact = None
+    if scene.integrator == "dem" and len(from_file):
+        in_contact = np.zeros(n, dtype=bool)
+        in_contact[from_file.start:from_file.stop] = True
+    check_start_overlap([b.name for b in scene.bodies], pos, radius, scene.walls, in_contact)
     if scene.domain is not None:
         outside = ((pos < np.array(scene.domain.lower)) | (pos > np.array(scene.domain.upper))).any(axis=1)
         if outside.any():

@@ -211,28 +211,40 @@ def _assemble(tables: list, dim: int, names: list, radius: list, mass: list, mat
 # (rather than the first in body order): spheres that do not overlap have a bounded number of
 # neighbours, so only a scene piled on itself gets there.
 PAIRS_PER_BODY = 100
+# A saved state's bodies in a DEM scene may start pressed into each other and walls by up to this
+# share of the smaller radius: a settled pile rests in its contacts (DEM overlaps are well below it).
+CONTACT_SHARE = 0.1
 PAIR_FLOOR = 1 << 20
 
 
-def check_start_overlap(names: list[str], pos: np.ndarray, radius: np.ndarray, walls: tuple) -> None:
+def check_start_overlap(names: list[str], pos: np.ndarray, radius: np.ndarray, walls: tuple,
+                        in_contact: np.ndarray | None = None) -> None:
     """Spheres may touch at the start, never overlap (docs/design.md section 3): a pair overlaps
     when its gap is below -TOUCHING (r_i + r_j), a sphere and a wall when the sphere's height
     above the wall is below r (1 - TOUCHING). The first overlap in body order is named (for each
-    body, its pairs with later bodies, then the walls)."""
+    body, its pairs with later bodies, then the walls).
+
+    Bodies marked `in_contact` (a saved state's, in a DEM scene: a settled pile rests in its
+    contacts) may press into each other and into walls by up to CONTACT_SHARE of the smaller
+    radius."""
     if not len(names):
         return
-    pair = _first_pair_overlap(pos, radius)
-    wall = _first_wall_overlap(pos, radius, walls)
+    mask = np.zeros(len(names), dtype=bool) if in_contact is None else in_contact
+    pair = _first_pair_overlap(pos, radius, mask)
+    wall = _first_wall_overlap(pos, radius, walls, mask)
+    deeper = " (deeper than a saved state's contacts may start)" if mask.any() else ""
     if pair is not None and (wall is None or pair[0] <= wall[0]):
         i, j, gap = pair
-        raise SceneError(f"body.{names[i]}.position: overlaps body.{names[j]} at the start by {-gap:.3g} m")
+        raise SceneError(f"body.{names[i]}.position: overlaps body.{names[j]} at the start by {-gap:.3g} m"
+                         + (deeper if mask[i] and mask[j] else ""))
     if wall is not None:
         i, index, height = wall
         raise SceneError(f"body.{names[i]}.position: overlaps wall[{index}] at the start "
-                         f"(distance {height:.3g} m < radius {radius[i]:.3g} m)")
+                         f"(distance {height:.3g} m < radius {radius[i]:.3g} m)" + (deeper if mask[i] else ""))
 
 
-def _first_wall_overlap(pos: np.ndarray, radius: np.ndarray, walls: tuple) -> tuple[int, int, float] | None:
+def _first_wall_overlap(pos: np.ndarray, radius: np.ndarray, walls: tuple,
+                        mask: np.ndarray) -> tuple[int, int, float] | None:
     """(body, wall, height) of the first body in order below a wall; the height is summed in the
     order the one-body check sums it, so the verdict is the same to the last bit."""
     first = None
@@ -241,13 +253,13 @@ def _first_wall_overlap(pos: np.ndarray, radius: np.ndarray, walls: tuple) -> tu
         height = terms[:, 0].copy()
         for axis in range(1, terms.shape[1]):
             height = height + terms[:, axis]
-        below = np.flatnonzero(height < radius * (1 - TOUCHING))
+        below = np.flatnonzero(height < np.where(mask, radius * (1 - CONTACT_SHARE), radius * (1 - TOUCHING)))
         if len(below) and (first is None or below[0] < first[0]):
             first = (int(below[0]), index, float(height[below[0]]))
     return first
 
 
-def _first_pair_overlap(pos: np.ndarray, radius: np.ndarray) -> tuple[int, int, float] | None:
+def _first_pair_overlap(pos: np.ndarray, radius: np.ndarray, mask: np.ndarray) -> tuple[int, int, float] | None:
     """(i, j, gap) of the overlapping pair first in body order (i < j), or None."""
     best = None
     examined = 0
@@ -261,7 +273,7 @@ def _first_pair_overlap(pos: np.ndarray, radius: np.ndarray) -> tuple[int, int, 
                 keep = i < j if small is big else i != j
                 i, j = np.minimum(i[keep], j[keep]), np.maximum(i[keep], j[keep])
                 examined += len(i)
-                found = _overlapping(pos, radius, i, j)
+                found = _overlapping(pos, radius, i, j, mask)
                 if found is not None and (best is None or found[:2] < best[:2]):
                     best = found
                 if best is not None and examined > PAIRS_PER_BODY * len(pos) + PAIR_FLOOR:
@@ -270,7 +282,8 @@ def _first_pair_overlap(pos: np.ndarray, radius: np.ndarray) -> tuple[int, int, 
 
 
 
-def _overlapping(pos: np.ndarray, radius: np.ndarray, i: np.ndarray, j: np.ndarray) -> tuple[int, int, float] | None:
+def _overlapping(pos: np.ndarray, radius: np.ndarray, i: np.ndarray, j: np.ndarray,
+                 mask: np.ndarray) -> tuple[int, int, float] | None:
     """The first overlapping pair (by i, then j) among candidates, judged as `math.dist` judges:
     numpy's distance decides where it is clear by far more than its rounding, the rest is
     recomputed one pair at a time."""
@@ -279,7 +292,8 @@ def _overlapping(pos: np.ndarray, radius: np.ndarray, i: np.ndarray, j: np.ndarr
     d = np.sqrt(((pos[i] - pos[j]) ** 2).sum(axis=1))
     rsum = radius[i] + radius[j]
     gap = d - radius[i] - radius[j]
-    limit = -TOUCHING * rsum
+    contact = mask[i] & mask[j]
+    limit = np.where(contact, -CONTACT_SHARE * np.minimum(radius[i], radius[j]), -TOUCHING * rsum)
     band = 16 * np.finfo(float).eps * (d + rsum)
     sure = gap < limit - band
     unsure = np.flatnonzero(np.abs(gap - limit) <= band)
@@ -290,7 +304,7 @@ def _overlapping(pos: np.ndarray, radius: np.ndarray, i: np.ndarray, j: np.ndarr
     for k in unsure.tolist():
         a, b = int(i[k]), int(j[k])
         exact = math.dist(pos[a].tolist(), pos[b].tolist()) - float(radius[a]) - float(radius[b])
-        if exact < -TOUCHING * (float(radius[a]) + float(radius[b])):
+        if exact < float(limit[k]):
             hits.append((a, b))
     if not hits:
         return None

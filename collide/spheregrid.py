@@ -44,46 +44,43 @@ class Grid:
         dim = pos.shape[1]
         self.offsets = np.array(list(product((-1, 0, 1), repeat=dim)), dtype=np.int64)
         k = _cells(pos, origin, self.cell)
-        self.low = k.min(axis=0) if len(k) else np.zeros(dim, dtype=np.int64)
-        self.shape = (k.max(axis=0) - self.low + 1) if len(k) else np.ones(dim, dtype=np.int64)
-        # Cells indexed directly when they are not many more than the spheres (a sparse scene
-        # spread far: sorted hashes)
+        # Cells indexed directly (padded by 2, so a query's neighbours need no bounds check) when
+        # they are not many more than the spheres; a sparse scene spread far: sorted hashes.
+        self.low = (k.min(axis=0) if len(k) else np.zeros(dim, dtype=np.int64)) - 2
+        self.shape = ((k.max(axis=0) + 2) if len(k) else self.low + 4) - self.low + 1
         self.dense = float(np.prod(self.shape.astype(float))) <= max(DENSE_PER_SPHERE * len(k), DENSE_MIN)
         if self.dense:
-            ids = self._ids(k)
+            self.strides = np.cumprod(np.concatenate([self.shape[1:], [1]])[::-1])[::-1].astype(np.int64)
+            ids = (k - self.low) @ self.strides
             self.order = np.argsort(ids, kind="stable")
             self.start = np.zeros(int(np.prod(self.shape)) + 1, dtype=np.int64)
             np.cumsum(np.bincount(ids, minlength=len(self.start) - 1), out=self.start[1:])
+            self.steps = self.offsets @ self.strides
         else:
             keys = _hash(k)
             self.order = np.argsort(keys, kind="stable")
             self.keys = keys[self.order]
 
-    def _ids(self, k: np.ndarray) -> np.ndarray:
-        ids = k[:, 0] - self.low[0]
-        for axis in range(1, k.shape[1]):
-            ids = ids * self.shape[axis] + (k[:, axis] - self.low[axis])
-        return ids
-
-    def _range(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Where the spheres of cells k (n, dim) lie in `order`: [lo, hi)."""
+    def _ranges(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where the spheres of the cells next to cells k (n, dim) lie in `order`: [lo, hi),
+        one row per neighbour. A query beyond the padded grid is moved onto its edge: its true
+        neighbours hold no spheres, the edge's only add candidates."""
         if not self.dense:
-            h = _hash(k)
-            return np.searchsorted(self.keys, h, "left"), np.searchsorted(self.keys, h, "right")
-        inside = ((k >= self.low) & (k < self.low + self.shape)).all(axis=1)
-        ids = np.where(inside, self._ids(np.where(inside[:, None], k, self.low)), 0)
-        lo, hi = self.start[ids], self.start[ids + 1]
-        return lo, np.where(inside, hi, lo)
+            lo = np.empty((len(self.offsets), len(k)), dtype=np.int64)
+            hi = np.empty_like(lo)
+            for row, off in enumerate(self.offsets):
+                h = _hash(k + off)
+                lo[row], hi[row] = np.searchsorted(self.keys, h, "left"), np.searchsorted(self.keys, h, "right")
+            return lo, hi
+        inner = np.clip(k - self.low, 1, self.shape - 2) @ self.strides
+        ids = inner[None, :] + self.steps[:, None]
+        return self.start[ids], self.start[ids + 1]
 
     def candidates(self, q_pos: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """Chunks of (query index, stored index): every stored sphere in a cell next to each
         query's, a pair at most once per neighbouring cell."""
         for start in range(0, len(q_pos), QUERY_CHUNK):
-            k = _cells(q_pos[start:start + QUERY_CHUNK], self.origin, self.cell)
-            lo = np.empty((len(self.offsets), len(k)), dtype=np.int64)
-            hi = np.empty_like(lo)
-            for row, off in enumerate(self.offsets):
-                lo[row], hi[row] = self._range(k + off)
+            lo, hi = self._ranges(_cells(q_pos[start:start + QUERY_CHUNK], self.origin, self.cell))
             yield from self._expand(lo, hi, start)
 
     def _expand(self, lo: np.ndarray, hi: np.ndarray, start: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
