@@ -157,11 +157,12 @@ def run(
 
       collide run my_scene.toml --dt auto --tol 1e-9 --no-record
     """
-    from cli.common import compiled_for_large, progress_display
+    from cli.common import compiled_for_large, loading_display, progress_display
     from collide.hint import prefer_interpreted
     from collide.scene import load_scene
 
-    loaded = load_scene(scene, set_ or [])
+    with loading_display(scene) as show:
+        loaded = load_scene(scene, set_ or [], progress=show)
     step = parse_dt(dt)
     recording = None
     if not no_record:

@@ -39,7 +39,7 @@ STALLED_ROUNDS = 16  # rounds in a row that place nothing end it
 ROUNDS = 16  # a round draws for at most this share of the spheres (the largest left)
 ROUND_MIN = 1024
 ONE_SIZE = 1.25  # radii within this ratio are inserted in any order
-BATCH = 1 << 18  # spheres drawn in one round (memory)
+BATCH = 1 << 20  # spheres drawn for in one round (memory: about 100 MB)
 JAMMING = {1: 0.75, 2: 0.55, 3: 0.38}
 CUT_ROUNDS = 100  # draws of a cut distribution before refusing a cut that keeps almost nothing
 
@@ -233,7 +233,7 @@ def _radii(table: dict, where: str, dim: int, region: Region, rng: np.random.Gen
 
 
 def fill_bodies(table: Any, index: int, dim: int, materials: dict, domain: Any,
-                obstacles: tuple[np.ndarray, np.ndarray], walls: tuple) -> FillBodies:
+                obstacles: tuple[np.ndarray, np.ndarray], walls: tuple, progress: Any = None) -> FillBodies:
     """The spheres of one `[[fill]]` table, placed clear of `obstacles` (positions, radii of the
     bodies so far) and the walls."""
     where = f"fill[{index}]"
@@ -259,7 +259,7 @@ def fill_bodies(table: Any, index: int, dim: int, materials: dict, domain: Any,
     if arrangement == "lattice":
         position = _lattice(radius, region, dim, where)
     else:
-        position = _random(radius, region, dim, where, rng, obstacles, walls)
+        position = _random(radius, region, dim, where, rng, obstacles, walls, progress or (lambda *_: None))
     mass = 4.0 / 3.0 * math.pi * radius**3 * density
     if not (np.isfinite(mass).all() and mass.min() >= 1e-30 and mass.max() <= 1e30):
         raise SceneError(f"{where}.mass_density: gives masses out of range ({mass.min():.3g} to {mass.max():.3g} kg)")
@@ -365,7 +365,7 @@ def _clear_of_walls(pos: np.ndarray, rad: np.ndarray, walls: tuple) -> np.ndarra
 
 
 def _random(radius: np.ndarray, region: Region, dim: int, where: str, rng: np.random.Generator,
-            obstacles: tuple[np.ndarray, np.ndarray], walls: tuple) -> np.ndarray:
+            obstacles: tuple[np.ndarray, np.ndarray], walls: tuple, progress: Any) -> np.ndarray:
     """Random sequential insertion, largest first, a window of the order at a time: each round
     every sphere of the window not yet placed draws centres (several when few are left), its
     first clear draw is kept unless it overlaps a kept draw of a sphere earlier in the order;
@@ -376,14 +376,16 @@ def _random(radius: np.ndarray, region: Region, dim: int, where: str, rng: np.ra
     # Spheres of about one size need no order: all draw at once (far fewer rounds)
     one_size = radius.max() <= ONE_SIZE * radius.min()
     width = min(BATCH, len(radius) if one_size else max(ROUND_MIN, len(radius) // ROUNDS))
-    tried, stalled, start = 0, 0, 0
+    tried, stalled, start, placed_count, rate = 0, 0, 0, 0, 1.0
     while start < len(order):
         window = order[start:start + width]
         head = window[np.isnan(position[window, 0])]
         if not len(head):
             start += width
             continue
-        batch = np.repeat(head, max(1, min(64, 4 * ROUND_MIN // len(head))))
+        # draws per sphere: enough that most find a clear place at the last round's success rate
+        reps = max(math.ceil(2.0 / max(rate, 1.0 / 64)), 4 * ROUND_MIN // len(head), 1)
+        batch = np.repeat(head, min(64, reps, max(1, 4 * BATCH // len(head))))
         r = radius[batch]
         cand = _draw_centres(r, region, dim, rng)
         tried += len(batch)
@@ -393,8 +395,11 @@ def _random(radius: np.ndarray, region: Region, dim: int, where: str, rng: np.ra
         position[batch[chosen]] = cand[chosen]
         placed.add(cand[chosen], r[chosen])
         stalled = 0 if len(chosen) else stalled + 1
+        rate = len(chosen) / len(head)
+        placed_count += len(chosen)
+        progress(f"filling {where[5:]}", placed_count, len(radius))
         if tried > max(ATTEMPTS_PER_SPHERE * len(radius), MIN_ATTEMPTS) or stalled >= STALLED_ROUNDS:
-            done = int((~np.isnan(position[:, 0])).sum())
+            done = placed_count
             raise SceneError(f"{where}: only {done} of {len(radius)} spheres fit without overlap in a random "
                              f"arrangement (random insertion jams near a packing fraction of "
                              f"{JAMMING[dim]}); ask for fewer, a bigger region, or arrangement = 'lattice'")
@@ -402,12 +407,25 @@ def _random(radius: np.ndarray, region: Region, dim: int, where: str, rng: np.ra
 
 
 def _clear_of_each_other(pos: np.ndarray, rad: np.ndarray) -> np.ndarray:
-    """Which candidates (in order) overlap no earlier one."""
-    out = np.ones(len(pos), dtype=bool)
+    """Which candidates to keep, in order, each unless it overlaps an earlier kept one: the
+    greedy choice, made for all at once by rounds (a candidate is kept once every earlier one it
+    overlaps is dropped, dropped once one of them is kept)."""
+    keep = np.zeros(len(pos), dtype=bool)
     if not len(pos):
-        return out
+        return keep
     grid = Grid(pos, 2.0 * float(rad.max()), pos.min(axis=0))
+    first, later = [], []
     for q, o in grid.candidates(pos):
         hit = (o < q) & (((pos[q] - pos[o]) ** 2).sum(axis=1) < (rad[q] + rad[o]) ** 2)
-        out[q[hit]] = False
-    return out
+        first.append(o[hit])
+        later.append(q[hit])
+    a, b = np.concatenate(first), np.concatenate(later)
+    undecided = np.ones(len(pos), dtype=bool)
+    while undecided.any():
+        blocked = np.zeros(len(pos), dtype=bool)
+        blocked[b[undecided[a] | keep[a]]] = True
+        now = undecided & ~blocked
+        keep |= now
+        undecided &= ~now
+        undecided[b[keep[a]]] = False
+    return keep

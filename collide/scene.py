@@ -12,7 +12,7 @@ import gc
 import math
 import re
 import tomllib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from importlib import resources
@@ -292,13 +292,19 @@ def _no_gc() -> Iterator[None]:
             gc.enable()
 
 
-def load_scene(source: str | Path, overrides: list[str] | None = None) -> Scene:
-    """Load a built-in name or a `.toml` path, apply `key=value` overrides, validate."""
+Progress = Callable[[str, int, int], None]  # what the set-up is doing, how far of how much (0 of 0: unknown)
+
+
+def load_scene(source: str | Path, overrides: list[str] | None = None, progress: Progress | None = None) -> Scene:
+    """Load a built-in name or a `.toml` path, apply `key=value` overrides, validate. `progress`
+    hears how a long load goes (reading, each fill, the checks)."""
     with _no_gc():
+        if progress is not None:
+            progress("reading", 0, 0)
         raw, default_name = read_raw(source)
         raw = apply_overrides(raw, overrides or [])
         _resolve_bodies_file(raw, source)
-        return parse_scene(raw, default_name)
+        return parse_scene(raw, default_name, progress)
 
 
 def _resolve_bodies_file(raw: dict, source: str | Path) -> None:
@@ -448,13 +454,17 @@ _BODY_KEYS = SCENE_KEYS["body"]
 _WALL_KEYS = SCENE_KEYS["wall"]
 
 
-def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
+def parse_scene(raw: dict, default_name: str = "scene", progress: Progress | None = None) -> Scene:
     """Validate a raw TOML table into a `Scene`; raise `SceneError` naming the bad key."""
     with _no_gc():
-        return _parse_scene(raw, default_name)
+        return _parse_scene(raw, default_name, progress or _silent)
 
 
-def _parse_scene(raw: dict, default_name: str) -> Scene:
+def _silent(what: str, done: int, total: int) -> None:
+    pass
+
+
+def _parse_scene(raw: dict, default_name: str, progress: Progress) -> Scene:
     _check_keys(raw, _TOP_KEYS, "scene")
     _check_depth(raw, "scene")
     dim = raw.get("dim", 2)
@@ -492,6 +502,7 @@ def _parse_scene(raw: dict, default_name: str) -> Scene:
     bodies_raw = raw.get("body", [])
     if not isinstance(bodies_raw, list):
         raise SceneError("body: expected [[body]] tables")
+    progress(f"checking {len(bodies_raw):,} bodies", 0, 0)
     bodies = parse_bodies(bodies_raw, dim, by_name)
 
     walls = []
@@ -511,7 +522,7 @@ def _parse_scene(raw: dict, default_name: str) -> Scene:
             raise SceneError(f"{where}.normal: must not be zero")
         walls.append(Wall(point, tuple(c / norm for c in normal)))
 
-    bodies, from_file = _more_bodies(raw, dim, by_name, domain, bodies, tuple(walls))
+    bodies, from_file = _more_bodies(raw, dim, by_name, domain, bodies, tuple(walls), progress)
     scene = Scene(name=name, dim=dim, dt=dt, integrator=integrator, contact=contact,
                   bodies=tuple(bodies), walls=tuple(walls), materials=materials, pairs=pairs,
                   gravity=gravity, duration=duration, tail=tail, tol=tol, rest=rest,
@@ -533,6 +544,7 @@ def _parse_scene(raw: dict, default_name: str) -> Scene:
     if rest is not None and scene.integrator != "dem":
         raise SceneError("rest: ends a DEM run (integrator = 'dem') when it comes to rest; this scene's "
                          f"integrator is {_shown(scene.integrator)}")
+    progress(f"checking {len(scene.bodies):,} bodies for overlaps", 0, 0)
     _check_start(scene, from_file)
     return scene
 
@@ -559,7 +571,7 @@ def _parse_domain(table: Any, dim: int) -> Domain | None:
 
 
 def _more_bodies(raw: dict, dim: int, materials: dict, domain: Domain | None, bodies: list[Body],
-                 walls: tuple[Wall, ...]) -> tuple[list[Body], range]:
+                 walls: tuple[Wall, ...], progress: Progress) -> tuple[list[Body], range]:
     """The [[body]] tables' bodies, then a [bodies] file's, then each [[fill]]'s (docs/design.md
     section 10); and where the file's are."""
     from collide.bodies_file import read_table
@@ -572,6 +584,7 @@ def _more_bodies(raw: dict, dim: int, materials: dict, domain: Domain | None, bo
         path = table.get("file")
         if not isinstance(path, str) or not path:
             raise SceneError(f"bodies.file: expected a file name, got {_shown(path)}")
+        progress(f"reading {Path(path).name}", 0, 0)
         bodies = bodies + bodies_from_table(read_table(Path(path), dim), dim, materials, f"bodies.file ({path})")
     from_file = range(len(raw.get("body", [])), len(bodies))
     fills = raw.get("fill", [])
@@ -580,7 +593,8 @@ def _more_bodies(raw: dict, dim: int, materials: dict, domain: Domain | None, bo
     for index, fill in enumerate(fills):
         placed = (np.array([b.position for b in bodies], dtype=float).reshape(len(bodies), dim),
                   np.array([b.radius for b in bodies], dtype=float))
-        bodies = bodies + bodies_from_fill(fill_bodies(fill, index, dim, materials, domain, placed, walls), dim)
+        made = fill_bodies(fill, index, dim, materials, domain, placed, walls, progress)
+        bodies = bodies + bodies_from_fill(made, dim)
     if not bodies:
         raise SceneError("body: a scene needs at least one body ([[body]], [[fill]] or [bodies] file)")
     if len(bodies) > len(raw.get("body", [])):
