@@ -19,7 +19,16 @@ from typing import Any
 
 import numpy as np
 
-from collide.scene_values import SceneError, _check_keys, _number, _shown, _vector
+from collide.scene_values import (
+    MAX_MAGNITUDE,
+    MIN_POSITIVE,
+    NAME_PATTERN,
+    SceneError,
+    _check_keys,
+    _number,
+    _shown,
+    _vector,
+)
 from collide.spheregrid import Grid, size_classes
 
 FILL_KEYS = frozenset({"name", "region", "lower", "upper", "centre", "axis", "cylinder_radius", "height",
@@ -239,8 +248,6 @@ def fill_bodies(table: Any, index: int, dim: int, materials: dict, domain: Any,
     where = f"fill[{index}]"
     _check_keys(table, FILL_KEYS, where)
     name = table.get("name", "fill" if index == 0 else f"fill{index}_")
-    from collide.scene_values import NAME_PATTERN
-
     if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
         raise SceneError(f"{where}.name: expected a name of letters, digits, _ or -, got {_shown(name)}")
     where = f"fill.{name}"
@@ -261,8 +268,10 @@ def fill_bodies(table: Any, index: int, dim: int, materials: dict, domain: Any,
     else:
         position = _random(radius, region, dim, where, rng, obstacles, walls, progress or (lambda *_: None))
     mass = 4.0 / 3.0 * math.pi * radius**3 * density
-    if not (np.isfinite(mass).all() and mass.min() >= 1e-30 and mass.max() <= 1e30):
-        raise SceneError(f"{where}.mass_density: gives masses out of range ({mass.min():.3g} to {mass.max():.3g} kg)")
+    for what, values in (("radii", radius), ("masses", mass), ("moments of inertia", 0.4 * mass * radius**2)):
+        if not (values.min() >= MIN_POSITIVE and values.max() <= MAX_MAGNITUDE):
+            raise SceneError(f"{where}: gives {what} out of range ({values.min():.3g} to {values.max():.3g}; "
+                             f"each within {MIN_POSITIVE:.0e}..{MAX_MAGNITUDE:.0e})")
     return FillBodies(name, radius, mass, position, np.broadcast_to(velocity, position.shape).copy(), material)
 
 
