@@ -100,6 +100,33 @@ def progress_display(name: str):
             sys.stderr.flush()
 
 
+@contextmanager
+def loading_display(name: str):
+    """A line on stderr while a scene that takes more than PROGRESS_AFTER seconds loads (a large
+    fill or body table): what it is doing and how far. Shown as `progress_display` is."""
+    import time
+
+    wanted = os.environ.get("COLLIDE_PROGRESS", "").strip() == "1" or sys.stderr.isatty()
+    started, shown = time.perf_counter(), [False]
+
+    def show(what: str, done: int, total: int) -> None:
+        elapsed = time.perf_counter() - started
+        if elapsed < PROGRESS_AFTER:
+            return
+        part = f" {100 * done / total:.0f} % ({done:,} of {total:,})" if total else ""
+        sys.stderr.write(f"\rloading {name}: {what}{part}, {elapsed:.0f} s \033[K" if sys.stderr.isatty() else
+                         f"\rloading {name}: {what}{part}, {elapsed:.0f} s ")
+        sys.stderr.flush()
+        shown[0] = True
+
+    try:
+        yield show if wanted else None
+    finally:
+        if shown[0]:
+            sys.stderr.write("\r\033[K" if sys.stderr.isatty() else "\n")
+            sys.stderr.flush()
+
+
 LARGE_SCENE = 16  # bodies: above this, interpreted kernels would take minutes to hours
 
 

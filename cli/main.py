@@ -132,6 +132,9 @@ def run(
         help="'aligned' (every column at the row's time) or 'report' (the report program's own "
         "output: positions one step ahead, %f numbers)")] = "aligned",
     out: Annotated[Path | None, typer.Option(help="Recording file.", show_default="recordings/<scene>.rrd")] = None,
+    save_state: Annotated[Path | None, typer.Option(
+        "--save-state", help="Write the final state as a body table (.csv or .npz): the start of another "
+        "scene through [bodies] file = ...")] = None,
     no_record: Annotated[bool, typer.Option("--no-record", help="Do not write a recording.")] = False,
     stride: Annotated[int, typer.Option(help="Record every n-th contact step.", min=1)] = 1,
     spawn: Annotated[bool, typer.Option(help="Open the recording in the Rerun viewer.")] = False,
@@ -154,11 +157,12 @@ def run(
 
       collide run my_scene.toml --dt auto --tol 1e-9 --no-record
     """
-    from cli.common import compiled_for_large, progress_display
+    from cli.common import compiled_for_large, loading_display, progress_display
     from collide.hint import prefer_interpreted
     from collide.scene import load_scene
 
-    loaded = load_scene(scene, set_ or [])
+    with loading_display(scene) as show:
+        loaded = load_scene(scene, set_ or [], progress=show)
     step = parse_dt(dt)
     recording = None
     if not no_record:
@@ -166,7 +170,9 @@ def run(
 
         # The scene's name is the user's text: it names a file in recordings/, never a path elsewhere.
         recording = out if out is not None else Path("recordings") / f"{safe_name(loaded.name)}.rrd"
-    _check_outputs(recording, csv)
+    if save_state is not None and save_state.suffix not in (".csv", ".npz"):
+        raise UserError(f"--save-state: a .csv or .npz file, got '{save_state}'")
+    _check_outputs(recording, csv, save_state)
     # A few spheres meeting a few times run sooner interpreted than a process loads numba.
     prefer_interpreted(loaded, integrator, step, tol)
     compiled_for_large(len(loaded.bodies))
@@ -186,6 +192,11 @@ def run(
         from collide.output import write_text_atomic
 
         write_text_atomic(csv, report_csv(result, every, csv_layout))
+    if save_state is not None:
+        from collide.bodies_file import write_state
+
+        final = result.result.final
+        write_state(save_state, loaded, final.s[0], final.v[0], final.w[0])
     if recording is not None:
         from collide.recording import DEFAULT_FPS, last_write, write_recording
 
@@ -199,6 +210,8 @@ def run(
         print_summary(summary, recording, all_bodies)
         if csv is not None:
             typer.echo(f"  csv: {csv}")
+        if save_state is not None:
+            typer.echo(f"  state: {save_state}")
     if spawn and recording is not None:
         from cli.common import spawn_viewer
 

@@ -8,42 +8,39 @@ error always names the key the user typed.
 from __future__ import annotations
 
 import copy
+import gc
 import math
 import re
 import tomllib
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from collide.fill import FILL_KEYS
+from collide.scene_bodies import BODY_KEYS, check_names, check_start_overlap, parse_bodies
+from collide.scene_toml import FlatTables, loads_scene
+from collide.scene_values import (  # noqa: F401 (re-exported: the scene's API)
+    MAX_MAGNITUDE,
+    MIN_POSITIVE,
+    NAME_PATTERN,
+    TOUCHING,
+    Body,
+    SceneError,
+    _check_keys,
+    _number,
+    _shown,
+    _vector,
+)
+
 INTEGRATORS = ("seed", "verlet", "yoshida4", "kahan6", "dem")
 DEFAULT_INTEGRATOR = "kahan6"
 DEFAULT_TOL = 1e-6
-# Every number of a scene is at most this large in magnitude, and every positive quantity (mass,
-# radius, k, dt, ...) at least its inverse: the physics squares and multiplies them (energies,
-# angular momenta, k m, the residuals' norms), and products of a few such numbers must stay far
-# inside float64's 1.8e308.
-MAX_MAGNITUDE = 1e30
-MIN_POSITIVE = 1.0 / MAX_MAGNITUDE
 MAX_DEPTH = 8  # tables and arrays nested deeper than this are no scene (a scene needs 4)
-
-
-class SceneError(ValueError):
-    """A scene (file, built-in or override) is invalid. The message names the key."""
-
-
-@dataclass(frozen=True)
-class Body:
-    """One sphere. Vectors have length `dim`; `spin` has length 0 (1D), 1 (2D, about z) or 3."""
-
-    name: str
-    mass: float
-    radius: float
-    inertia: float
-    position: tuple[float, ...]
-    velocity: tuple[float, ...]
-    spin: tuple[float, ...]
-    material: str | None = None
 
 
 @dataclass(frozen=True)
@@ -113,6 +110,15 @@ class PairLaw:
 
 
 @dataclass(frozen=True)
+class Domain:
+    """The box a scene lives in (docs/design.md section 10): every body starts inside it, and a
+    box fill without corners fills it. Nothing holds bodies in it once they move (walls do)."""
+
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+
+
+@dataclass(frozen=True)
 class Scene:
     """A validated scene. `dt` is a float or the string "auto"."""
 
@@ -131,6 +137,7 @@ class Scene:
     tol: float = DEFAULT_TOL
     rest: float | None = None  # DEM: end when the kinetic energy falls below this part of its peak
     description: str = ""
+    domain: Domain | None = None
     source: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -247,7 +254,7 @@ def read_raw(source: str | Path) -> tuple[dict, str]:
 
 def _parse_toml(text: str, where: str) -> dict:
     try:
-        raw = tomllib.loads(text)
+        raw = loads_scene(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{where}: not valid TOML: {exc}") from None
     except RecursionError:  # tomllib recurses once per nested array or inline table
@@ -266,15 +273,52 @@ def _check_depth(value: Any, where: str) -> None:
         if depth > MAX_DEPTH:
             raise SceneError(f"{where}: arrays or tables nested more than {MAX_DEPTH} levels deep; "
                              "no scene key takes that")
+        if isinstance(item, FlatTables):
+            continue  # tables of numbers and flat arrays (collide.scene_toml): two levels below
         children = item.values() if isinstance(item, dict) else item if isinstance(item, list) else ()
         stack.extend((child, depth + 1) for child in children if isinstance(child, (dict, list)))
 
 
-def load_scene(source: str | Path, overrides: list[str] | None = None) -> Scene:
-    """Load a built-in name or a `.toml` path, apply `key=value` overrides, validate."""
-    raw, default_name = read_raw(source)
-    raw = apply_overrides(raw, overrides or [])
-    return parse_scene(raw, default_name)
+@contextmanager
+def _no_gc() -> Iterator[None]:
+    """Without the cyclic garbage collector: a large scene makes millions of objects, none in a
+    cycle, and each collection would walk them all (it would double the time of a large load)."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
+
+
+Progress = Callable[[str, int, int], None]  # what the set-up is doing, how far of how much (0 of 0: unknown)
+
+
+def load_scene(source: str | Path, overrides: list[str] | None = None, progress: Progress | None = None) -> Scene:
+    """Load a built-in name or a `.toml` path, apply `key=value` overrides, validate. `progress`
+    hears how a long load goes (reading, each fill, the checks)."""
+    with _no_gc():
+        if progress is not None:
+            progress("reading", 0, 0)
+        raw, default_name = read_raw(source)
+        raw = apply_overrides(raw, overrides or [])
+        _resolve_bodies_file(raw, source)
+        return parse_scene(raw, default_name, progress)
+
+
+def _resolve_bodies_file(raw: dict, source: str | Path) -> None:
+    """A `[bodies] file` is relative to the scene file (a built-in's: the built-ins' folder); the
+    scene keeps it as an absolute path, so its source (and a recording's copy) reads the same file
+    from anywhere."""
+    table = raw.get("bodies")
+    if not isinstance(table, dict) or not isinstance(table.get("file"), str) or not table["file"]:
+        return
+    path = Path(table["file"]).expanduser()
+    if not path.is_absolute():
+        base = Path(str(resources.files(_BUILTIN_PACKAGE))) if str(source) in builtin_names() \
+            else Path(source).resolve().parent
+        table["file"] = str(base / path)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -311,11 +355,24 @@ def split_override(item: str) -> tuple[str, str]:
 
 def apply_overrides(raw: dict, overrides: list[str]) -> dict:
     """Return a copy of `raw` with each `key=value` applied."""
-    raw = copy.deepcopy(raw)
+    raw = _copy_raw(raw)
     for item in overrides:
         key, text = split_override(item)
+        if key.startswith("body") and isinstance(raw.get("body"), FlatTables):
+            raw["body"] = list(raw["body"])  # no longer known flat: its depth is checked again
         set_path(raw, key, parse_value(text))
     return raw
+
+
+def _copy_raw(raw: dict) -> dict:
+    """A copy that `set_path` may change without touching `raw`: every table copied whole but the
+    bodies, each of which is copied one level deep (`set_path` replaces what it changes below)."""
+    out = {k: copy.deepcopy(v) for k, v in raw.items() if k != "body"}
+    if "body" in raw:
+        bodies = raw["body"]
+        out["body"] = type(bodies)(dict(b) if type(b) is dict else copy.deepcopy(b) for b in bodies) \
+            if isinstance(bodies, list) else copy.deepcopy(bodies)
+    return out
 
 
 def set_path(raw: dict, key: str, value: Any) -> None:
@@ -346,6 +403,7 @@ def set_path(raw: dict, key: str, value: Any) -> None:
     else:
         table, rest = raw, parts
     if len(rest) == 2 and rest[1] in _COMPONENTS and isinstance(table.get(rest[0]), list):
+        table[rest[0]] = list(table[rest[0]])
         _set_component(table[rest[0]], rest[1], value, key)
         return
     if len(rest) == 2 and rest[1] == "x" and isinstance(table.get(rest[0]), (int, float)) \
@@ -356,7 +414,7 @@ def set_path(raw: dict, key: str, value: Any) -> None:
         nxt = table.setdefault(part, {})
         if not isinstance(nxt, dict):
             raise SceneError(f"override key '{key}': '{part}' is not a table")
-        table = nxt
+        table[part] = table = dict(nxt)
     table[rest[-1]] = value
 
 
@@ -375,14 +433,18 @@ def _set_component(vector: list, component: str, value: Any, key: str) -> None:
 # these ("scene" is the top level; "body", "wall", "material" and "pair" are arrays of tables).
 SCENE_KEYS: dict[str, frozenset[str]] = {
     "scene": frozenset({"name", "description", "dim", "dt", "integrator", "duration", "tail", "tol",
-                        "gravity", "contact", "body", "wall", "material", "pair", "rest"}),
+                        "gravity", "contact", "body", "wall", "material", "pair", "rest", "domain", "fill",
+                        "bodies"}),
     "contact": frozenset({"model", "k", "mu", "eps", "lever", "youngs_modulus", "poisson_ratio", "restitution",
                           "tangential", "tangential_stiffness_ratio", "rolling_friction"}),
-    "body": frozenset({"name", "mass", "radius", "inertia", "position", "velocity", "spin", "material"}),
+    "body": BODY_KEYS,
     "wall": frozenset({"point", "normal"}),
     "material": frozenset({"name", "density", "youngs_modulus", "poisson_ratio", "mu", "restitution",
                            "rolling_friction"}),
     "pair": frozenset({"materials", "mu", "restitution", "rolling_friction"}),
+    "domain": frozenset({"lower", "upper", "periodic"}),
+    "fill": FILL_KEYS,
+    "bodies": frozenset({"file"}),
 }
 _TOP_KEYS = SCENE_KEYS["scene"]
 _CONTACT_KEYS = SCENE_KEYS["contact"]
@@ -392,57 +454,17 @@ _BODY_KEYS = SCENE_KEYS["body"]
 _WALL_KEYS = SCENE_KEYS["wall"]
 
 
-def _shown(value: Any) -> str:
-    """A value as an error message shows it (a 400-digit integer is not printed whole)."""
-    text = repr(value)
-    return text if len(text) <= 40 else f"{text[:12]}...{text[-6:]} ({len(text)} characters)"
-
-
-def _number(value: Any, key: str, *, positive: bool = False, nonneg: bool = False) -> float:
-    """A finite float within MAX_MAGNITUDE (and at least MIN_POSITIVE if positive)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f"{key}: expected a number, got {_shown(value)}")
-    try:
-        number = float(value)
-    except OverflowError:  # an integer beyond float64
-        number = math.inf
-    if math.isnan(number):
-        raise SceneError(f"{key}: must be finite, got {_shown(value)}")
-    if positive and number <= 0:
-        raise SceneError(f"{key}: must be positive, got {_shown(value)}")
-    if nonneg and number < 0:
-        raise SceneError(f"{key}: must not be negative, got {_shown(value)}")
-    if not abs(number) <= MAX_MAGNITUDE:
-        what = "must be finite" if isinstance(value, float) and math.isinf(value) else \
-            f"out of range (at most {MAX_MAGNITUDE:.0e} in magnitude, so that the physics can square and " \
-            "multiply it in float64)"
-        raise SceneError(f"{key}: {what}, got {_shown(value)}")
-    if positive and number < MIN_POSITIVE:
-        raise SceneError(f"{key}: too small (at least {MIN_POSITIVE:.0e}, so that the physics can divide by "
-                         f"it in float64), got {_shown(value)}")
-    return number
-
-
-def _vector(value: Any, key: str, length: int) -> tuple[float, ...]:
-    if length == 1 and not isinstance(value, list):
-        return (_number(value, key),)
-    if not isinstance(value, list):
-        raise SceneError(f"{key}: expected a list of {length} numbers, got {_shown(value)}")
-    if len(value) != length:
-        raise SceneError(f"{key}: expected {length} component(s), got {len(value)}")
-    return tuple(_number(v, f"{key}[{i}]") for i, v in enumerate(value))
-
-
-def _check_keys(table: Any, allowed: frozenset[str], where: str) -> None:
-    if not isinstance(table, dict):
-        raise SceneError(f"{where}: expected a table")
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        raise SceneError(f"{where}: unknown key {_shown(unknown[0])} (allowed: {', '.join(sorted(allowed))})")
-
-
-def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
+def parse_scene(raw: dict, default_name: str = "scene", progress: Progress | None = None) -> Scene:
     """Validate a raw TOML table into a `Scene`; raise `SceneError` naming the bad key."""
+    with _no_gc():
+        return _parse_scene(raw, default_name, progress or _silent)
+
+
+def _silent(what: str, done: int, total: int) -> None:
+    pass
+
+
+def _parse_scene(raw: dict, default_name: str, progress: Progress) -> Scene:
     _check_keys(raw, _TOP_KEYS, "scene")
     _check_depth(raw, "scene")
     dim = raw.get("dim", 2)
@@ -476,60 +498,12 @@ def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
     if rest is not None and rest >= 1.0:
         raise SceneError(f"rest: a fraction of the peak kinetic energy below 1, got {_shown(raw.get('rest'))}")
 
-    bodies_raw = raw.get("body")
-    if not isinstance(bodies_raw, list) or not bodies_raw:
-        raise SceneError("body: a scene needs at least one [[body]]")
-    spin_len = {1: 0, 2: 1, 3: 3}[dim]
-    bodies = []
-    for index, b in enumerate(bodies_raw):
-        where = f"body[{index}]"
-        _check_keys(b, _BODY_KEYS, where)
-        bname = b.get("name", f"ball{index + 1}")
-        if not isinstance(bname, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_\-]*", bname):
-            raise SceneError(f"{where}.name: expected a name of letters, digits, _ or -, got {_shown(bname)}")
-        where = f"body.{bname}"
-        for required in ("radius", "position"):
-            if required not in b:
-                raise SceneError(f"{where}.{required}: missing")
-        radius = _number(b["radius"], f"{where}.radius", positive=True)
-        material = b.get("material")
-        if material is not None and not isinstance(material, str):
-            raise SceneError(f"{where}.material: expected a material's name, got {_shown(material)}")
-        if material is not None and material not in by_name:
-            known = ", ".join(sorted(by_name)) or "none defined"
-            raise SceneError(f"{where}.material: unknown {_shown(material)} (materials: {known})")
-        if "mass" in b:
-            mass = _number(b["mass"], f"{where}.mass", positive=True)
-        elif material is not None and by_name[material].density is not None:
-            mass = _number(4.0 / 3.0 * math.pi * radius**3 * by_name[material].density, f"{where}.mass",
-                           positive=True)
-        else:
-            raise SceneError(f"{where}.mass: missing (give a mass, or a material with a density)")
-        inertia_raw = b.get("inertia", "solid")
-        if inertia_raw == "solid":
-            inertia = 0.4 * mass * radius**2
-        elif inertia_raw == "shell":
-            inertia = 2.0 / 3.0 * mass * radius**2
-        else:
-            if isinstance(inertia_raw, str):
-                raise SceneError(f"{where}.inertia: 'solid', 'shell' or a number, got {_shown(inertia_raw)}")
-            inertia = _number(inertia_raw, f"{where}.inertia", positive=True)
-        position = _vector(b["position"], f"{where}.position", dim)
-        velocity = _vector(b.get("velocity", [0.0] * dim if dim > 1 else 0.0), f"{where}.velocity", dim)
-        spin_raw = b.get("spin")
-        if spin_len == 0:
-            if spin_raw not in (None, 0, 0.0):
-                raise SceneError(f"{where}.spin: 1D scenes have no rotation")
-            spin: tuple[float, ...] = ()
-        elif spin_raw is None:
-            spin = (0.0,) * spin_len
-        else:
-            spin = _vector(spin_raw, f"{where}.spin", spin_len)
-        bodies.append(Body(bname, mass, radius, inertia, position, velocity, spin, material))
-    names = [b.name for b in bodies]
-    duplicate = next((n for n in names if names.count(n) > 1), None)
-    if duplicate:
-        raise SceneError(f"body.{duplicate}: the name is used twice")
+    domain = _parse_domain(raw.get("domain"), dim)
+    bodies_raw = raw.get("body", [])
+    if not isinstance(bodies_raw, list):
+        raise SceneError("body: expected [[body]] tables")
+    progress(f"checking {len(bodies_raw):,} bodies", 0, 0)
+    bodies = parse_bodies(bodies_raw, dim, by_name)
 
     walls = []
     walls_raw = raw.get("wall", [])
@@ -548,10 +522,11 @@ def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
             raise SceneError(f"{where}.normal: must not be zero")
         walls.append(Wall(point, tuple(c / norm for c in normal)))
 
+    bodies, from_file = _more_bodies(raw, dim, by_name, domain, bodies, tuple(walls), progress)
     scene = Scene(name=name, dim=dim, dt=dt, integrator=integrator, contact=contact,
                   bodies=tuple(bodies), walls=tuple(walls), materials=materials, pairs=pairs,
                   gravity=gravity, duration=duration, tail=tail, tol=tol, rest=rest,
-                  description=raw.get("description", ""), source=raw)
+                  description=raw.get("description", ""), domain=domain, source=raw)
     if scene.needs_dem:
         if "integrator" not in raw:
             scene = replace(scene, integrator="dem")
@@ -569,8 +544,82 @@ def parse_scene(raw: dict, default_name: str = "scene") -> Scene:
     if rest is not None and scene.integrator != "dem":
         raise SceneError("rest: ends a DEM run (integrator = 'dem') when it comes to rest; this scene's "
                          f"integrator is {_shown(scene.integrator)}")
-    _check_start_overlap(scene)
+    progress(f"checking {len(scene.bodies):,} bodies for overlaps", 0, 0)
+    _check_start(scene, from_file)
     return scene
+
+
+def _parse_domain(table: Any, dim: int) -> Domain | None:
+    if table is None:
+        return None
+    _check_keys(table, SCENE_KEYS["domain"], "domain")
+    periodic = table.get("periodic", [])
+    if not isinstance(periodic, list) or not all(a in ("x", "y", "z")[:dim] for a in periodic):
+        raise SceneError(f"domain.periodic: expected a list of axes among {', '.join(('x', 'y', 'z')[:dim])}, "
+                         f"got {_shown(periodic)}")
+    if periodic:
+        raise SceneError("domain.periodic: periodic boundaries are not built yet (leave periodic out, or [])")
+    for key in ("lower", "upper"):
+        if key not in table:
+            raise SceneError(f"domain.{key}: missing")
+    lower = _vector(table["lower"], "domain.lower", dim)
+    upper = _vector(table["upper"], "domain.upper", dim)
+    if not all(u > lo for lo, u in zip(lower, upper)):
+        raise SceneError(f"domain.upper: must exceed lower along every axis, got lower {list(lower)}, "
+                         f"upper {list(upper)}")
+    return Domain(lower, upper)
+
+
+def _more_bodies(raw: dict, dim: int, materials: dict, domain: Domain | None, bodies: list[Body],
+                 walls: tuple[Wall, ...], progress: Progress) -> tuple[list[Body], range]:
+    """The [[body]] tables' bodies, then a [bodies] file's, then each [[fill]]'s (docs/design.md
+    section 10); and where the file's are."""
+    from collide.bodies_file import read_table
+    from collide.fill import fill_bodies
+    from collide.scene_bodies import bodies_from_fill, bodies_from_table
+
+    table = raw.get("bodies")
+    if table is not None:
+        _check_keys(table, SCENE_KEYS["bodies"], "bodies")
+        path = table.get("file")
+        if not isinstance(path, str) or not path:
+            raise SceneError(f"bodies.file: expected a file name, got {_shown(path)}")
+        progress(f"reading {Path(path).name}", 0, 0)
+        bodies = bodies + bodies_from_table(read_table(Path(path), dim), dim, materials, f"bodies.file ({path})")
+    from_file = range(len(raw.get("body", [])), len(bodies))
+    fills = raw.get("fill", [])
+    if not isinstance(fills, list):
+        raise SceneError("fill: expected [[fill]] tables")
+    for index, fill in enumerate(fills):
+        placed = (np.array([b.position for b in bodies], dtype=float).reshape(len(bodies), dim),
+                  np.array([b.radius for b in bodies], dtype=float))
+        made = fill_bodies(fill, index, dim, materials, domain, placed, walls, progress)
+        bodies = bodies + bodies_from_fill(made, dim)
+    if not bodies:
+        raise SceneError("body: a scene needs at least one body ([[body]], [[fill]] or [bodies] file)")
+    if len(bodies) > len(raw.get("body", [])):
+        check_names([b.name for b in bodies])
+    return bodies, from_file
+
+
+def _check_start(scene: Scene, from_file: range) -> None:
+    """No overlaps at the start (docs/design.md section 3; a saved state's contacts in a DEM
+    scene excepted) and every body inside the domain."""
+    n, dim = len(scene.bodies), scene.dim
+    pos = np.array([b.position for b in scene.bodies], dtype=float).reshape(n, dim)
+    radius = np.array([b.radius for b in scene.bodies], dtype=float)
+    in_contact = None
+    if scene.integrator == "dem" and len(from_file):
+        in_contact = np.zeros(n, dtype=bool)
+        in_contact[from_file.start:from_file.stop] = True
+    check_start_overlap([b.name for b in scene.bodies], pos, radius, scene.walls, in_contact)
+    if scene.domain is not None:
+        outside = ((pos < np.array(scene.domain.lower)) | (pos > np.array(scene.domain.upper))).any(axis=1)
+        if outside.any():
+            body = scene.bodies[int(np.flatnonzero(outside)[0])]
+            raise SceneError(f"body.{body.name}.position: outside the domain at the start "
+                             f"({list(body.position)} not within {list(scene.domain.lower)} .. "
+                             f"{list(scene.domain.upper)})")
 
 
 def dem_reason(scene: Scene) -> str:
@@ -684,26 +733,6 @@ def _parse_pairs(tables: Any, materials: dict[str, Material]) -> tuple[PairLaw, 
                            _optional(table, "rolling_friction", where, nonneg)))
     return tuple(out)
 
-
-# Spheres whose overlap at the start is within this share of r_i + r_j (a radius on a wall) touch:
-# positions written in decimal place touching spheres a few ulps apart either way.
-TOUCHING = 1e-12
-
-
-def _check_start_overlap(scene: Scene) -> None:
-    """Spheres may touch at the start, never overlap (docs/design.md section 3)."""
-    bodies = scene.bodies
-    for i, a in enumerate(bodies):
-        for b in bodies[i + 1:]:
-            gap = math.dist(a.position, b.position) - a.radius - b.radius
-            if gap < -TOUCHING * (a.radius + b.radius):
-                raise SceneError(f"body.{a.name}.position: overlaps body.{b.name} at the start "
-                                 f"by {-gap:.3g} m")
-        for index, wall in enumerate(scene.walls):
-            height = sum((p - q) * n for p, q, n in zip(a.position, wall.point, wall.normal))
-            if height < a.radius * (1 - TOUCHING):
-                raise SceneError(f"body.{a.name}.position: overlaps wall[{index}] at the start "
-                                 f"(distance {height:.3g} m < radius {a.radius:.3g} m)")
 
 
 def generic_turn() -> Any:

@@ -311,7 +311,8 @@ def test_no_pointer_to_a_design_document_outside_the_repository() -> None:
 
 
 TABLES = {"Top level": "scene", "`[contact]`": "contact", "`[[body]]`": "body", "`[[wall]]`": "wall",
-          "`[[material]]`": "material", "`[[pair]]`": "pair"}
+          "`[[material]]`": "material", "`[[pair]]`": "pair", "`[domain]`": "domain", "`[[fill]]`": "fill",
+          "`[bodies]`": "bodies"}
 
 
 def documented_keys() -> dict[str, set[str]]:
@@ -351,6 +352,10 @@ def test_the_parser_refuses_what_the_reference_does_not_list() -> None:
         "wall": {"wall": [{"point": 1.0, "normal": -1.0, "colour": 1}]},
         "material": {"material": [{**material, "colour": 1}]},
         "pair": {"material": [material], "pair": [{"materials": ["m", "m"], "colour": 1}]},
+        "domain": {"domain": {"lower": -1.0, "upper": 1.0, "colour": 1}},
+        "fill": {"fill": [{"lower": 1.0, "upper": 2.0, "count": 2, "radius": 0.1, "mass_density": 1.0,
+                           "colour": 1}]},
+        "bodies": {"bodies": {"file": str(REPO / "tests" / "data" / "bodies-1d.csv"), "colour": 1}},
     }
     assert set(patches) == set(SCENE_KEYS)
     parse_scene(base)
