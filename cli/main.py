@@ -20,7 +20,7 @@ from cli.common import (
     fail,
     parse_dt,
 )
-from collide.limits import MAX_STEPS_DEFAULT, OPEN_RUN_STEPS
+from collide.limits import MAX_STEPS_DEFAULT, OPEN_RUN_STEPS, SEED_BODY_STEPS
 
 app = typer.Typer(
     name="collide",
@@ -143,7 +143,8 @@ def run(
         "lists a few and the spread of speeds).")] = False,
     max_steps: Annotated[int | None, typer.Option(
         "--max-steps", min=1, help="Refuse the run past this many steps.",
-        show_default=f"{MAX_STEPS_DEFAULT:.0e} with a duration, {OPEN_RUN_STEPS:.0e} without one")] = None,
+        show_default=f"{MAX_STEPS_DEFAULT:.0e} with a duration, {OPEN_RUN_STEPS:.0e} without one; the seed at "
+                     f"most {SEED_BODY_STEPS:.0e} body-steps")] = None,
 ) -> None:
     """Run one scene, print a summary and write a Rerun recording.
 

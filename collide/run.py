@@ -275,7 +275,8 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
             raise SceneError("body: a scene of one sphere and no walls has no contact to step; add a body or a wall")
         raise SceneError(f"dt: must be a positive number or 'auto', got {dt!r}")
     omega_h = np.where(auto_used, omega_h, dt_arr * omega)
-    max_steps = step_limit(durations, max_steps, _steps_per_contact(np.pi / np.where(omega_h > 0, omega_h, np.inf)))
+    max_steps = step_limit(durations, max_steps, _steps_per_contact(np.pi / np.where(omega_h > 0, omega_h, np.inf)),
+                           every_body=model.n_bodies if integ == "seed" else 0)
     # No step leaves the outcome finer than round-off, whatever the model says of a tiny one (nor
     # than the positions resolve of a stiff contact's overlap).
     estimate = np.maximum(predicted_error(integ, [error_regime(scene) for scene in scenes], omega_h),

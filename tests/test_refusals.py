@@ -257,6 +257,12 @@ def test_a_run_with_no_duration_is_refused_at_its_step_limit_and_max_steps_moves
     assert step_limit([None], 7) == 7
     # A fine step is the user's to pay for: 50 contacts' worth of it, up to the limit with a duration.
     assert step_limit([None], None, 1e5) == 5_000_000 and step_limit([None], None, 1e7) == MAX_STEPS_DEFAULT
+    # The seed updates every body at every step: its limit is also one of body-steps (a given limit wins).
+    from collide.limits import SEED_BODY_STEPS
+
+    assert step_limit([1.0], None, every_body=26) == SEED_BODY_STEPS // 26 < MAX_STEPS_DEFAULT
+    assert step_limit([1.0], None, every_body=2) == MAX_STEPS_DEFAULT
+    assert step_limit([None], None, every_body=10**6) == OPEN_RUN_STEPS and step_limit([1.0], 7, every_body=26) == 7
     from collide.scene import load_scene
 
     cradle = run_scene(load_scene("newtons-cradle"), record=False)
@@ -315,3 +321,17 @@ def test_a_measurement_forecast_past_the_step_limit_is_not_started(monkeypatch) 
     assert measuring == [] and tight.error_method == ["model"]
     assert any("would take about" in w and "left of the step limit" in w for w in tight.result.warnings)
 
+
+
+def test_the_seed_is_held_to_its_body_steps(monkeypatch) -> None:
+    """The seed's step limit counts every body it updates: with the body-step budget made small,
+    the five-ball cradle is refused at that budget over five, naming it (here before it starts:
+    one contact would take more steps than that)."""
+    import collide.limits as limits
+    from collide.scene import load_scene
+
+    monkeypatch.setattr(limits, "OPEN_RUN_STEPS", 10)
+    monkeypatch.setattr(limits, "SEED_BODY_STEPS", 5 * 40)
+    scene = load_scene("newtons-cradle")
+    with pytest.raises(RunError, match=r"\(limit 40\)"):
+        run_scene(scene, integrator="seed", tol=3e-4, record=False, dt=None)
