@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from collide import diagnostics as dg
+from collide.contact_forces import peak_normal_force
 from collide.engine import layout as kn
 from collide.model import State
 from collide.run import SceneRun
@@ -186,7 +187,9 @@ class ViewRun:
         self.residuals = {"energy": float(res.energy[0]), "momentum": float(res.momentum[0]),
                           "angular_momentum": float(res.angular_momentum[0])}
         tk, ck, overlap = engaged
-        self.max_normal_force = float(np.max(self._contacts.normal_force(ck, overlap), initial=0.0))
+        # The run's peak as the engine has it (the JSON summary's max_normal_force): the legend
+        # and the arrows' scale; no force drawn exceeds it.
+        self.max_normal_force = peak_normal_force(result, self._contacts.forces)
         touching = overlap > ROUND_OFF * float(self.radius.max())
         tk, ck = tk[touching], ck[touching]
         i, j = self._contacts.pairs[ck, 0], self._contacts.pairs[ck, 1]
