@@ -271,16 +271,22 @@ class SceneDrawer:
     def _show_walls(self, view: ViewRun, walls: list, lo: np.ndarray, hi: np.ndarray, extent: float,
                     r_max: float, planar: bool) -> None:
         boxes = []
+        middle = 0.5 * (lo + hi)
+        corners = np.array([[a[0], b[1], c[2]] for a in (lo, hi) for b in (lo, hi) for c in (lo, hi)])
         for point, normal in walls:
+            # A wall's face lies exactly on its plane (a floor under resting spheres, not a slab
+            # above them), centred under the bodies and wide enough for every path (drawn from
+            # the wall's own point, a floor ended short of the later bounces).
+            foot = middle - np.dot(middle - point, normal) * normal
+            along = corners - foot
+            along -= np.outer(along @ normal, normal)
+            span = 2.0 * float(np.max(np.linalg.norm(along, axis=-1))) + 2.0 * r_max
             if planar:
-                c, wxyz, dims = wall_box(point, normal, 1.6 * extent, 0.04 * r_max + 0.01 * extent, True, 2.4 * r_max)
+                c, wxyz, dims = wall_box(foot, normal, max(span, 1.6 * extent), 0.04 * r_max + 0.01 * extent, True,
+                                         2.4 * r_max)
             else:
-                # A wall's face lies exactly on its plane (a floor under resting spheres, not a
-                # slab above them), centred under the bodies and as wide as they spread.
-                thickness = 0.02 * extent
-                middle = 0.5 * (lo + hi)
-                foot = middle - np.dot(middle - point, normal) * normal
-                c, wxyz, dims = wall_box(foot, normal, 1.3 * extent, thickness, False, 1.3 * extent)
+                side = max(span, 1.3 * extent)
+                c, wxyz, dims = wall_box(foot, normal, side, 0.02 * extent, False, side)
             is_floor = self._floor is not None and np.allclose(point, self._floor[0]) and np.allclose(
                 normal, self._floor[1])
             boxes.append((np.concatenate((c, wxyz, dims)), is_floor))
