@@ -48,21 +48,20 @@ class RecordedForces:
         value = np.concatenate((rec[:, kn.R_FN] if len(rec) else np.zeros(0), np.zeros(len(iv_c) + int(ends.sum()))))
         order = np.lexsort((kind, t, contact))
         order = order[contact[order] >= 0]
-        self._n_contact = contact[order]
+        grouped = contact[order]
         self._n_t = np.ascontiguousarray(t[order])
         self._n_value = value[order]
         cs = np.arange(c)
-        self._n_start = np.searchsorted(self._n_contact, cs, side="left")
-        self._n_end = np.searchsorted(self._n_contact, cs, side="right")
+        self._n_start = np.searchsorted(grouped, cs, side="left")
+        self._n_end = np.searchsorted(grouped, cs, side="right")
         self.record_peak = float(np.max(np.abs(rec[:, kn.R_FN]), initial=0.0)) if len(rec) else 0.0
-        # Friction: the records alone.
+        # Friction: the records alone, in the same order (by contact, then time, then as recorded).
         self._f_t = None
         if friction and len(rec) and c:
-            order = np.lexsort((np.arange(len(rec)), rec[:, kn.R_T], rows_c))
-            order = order[rows_c[order] >= 0]
-            f_contact = rows_c[order]
-            self._f_t = np.ascontiguousarray(rec[order, kn.R_T])
-            self._f_force = rec[order, kn.R_FX:kn.R_FX + dim]
+            rows = order[order < len(rows_c)]
+            f_contact = rows_c[rows]
+            self._f_t = np.ascontiguousarray(rec[rows, kn.R_T])
+            self._f_force = rec[rows, kn.R_FX:kn.R_FX + dim]
             self._f_start = np.searchsorted(f_contact, cs, side="left")
             self._f_end = np.searchsorted(f_contact, cs, side="right")
 

@@ -236,6 +236,8 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
         finals.append((t, float(WK.sum()), float(fg[dk.G_STORED])))
         stats[b], figures[b] = st, fg
         if record:
+            # A phase's peak is recorded when the phase ends: records in time order again.
+            REC = REC[np.argsort(REC[:, kn.R_T], kind="stable")]
             traj = Trajectory(KN, REC, IV, select_model(model, b))
             traj.energy_parts = EP
             trajectories.append(traj)

@@ -319,8 +319,10 @@ class SceneDrawer:
         r_mm = float(view.radius.max()) * 1e3
         lines = []
         if self.options.forces and view.max_normal_force > 0 and (self.options.chains or not self.many):
-            what = "force chains: normal force between centres, thicker = stronger" if self.many else \
-                f"normal force: {view.max_normal_force:.3g} N peak = {2 * r_mm:.3g} mm arrow"
+            # The peak is the run's (the JSON summary's max_normal_force): no arrow is longer.
+            what = (f"force chains: normal force between centres, thicker = stronger, thickest "
+                    f"{view.max_normal_force:.4g} N peak") if self.many else \
+                f"normal force: {view.max_normal_force:.4g} N peak = {2 * r_mm:.3g} mm arrow"
             lines.append(f"<span style='color:#aa0014'>&#9632;</span> {what}")
             if view.max_friction_force > 0 and not self.many:
                 lines.append(f"<span style='color:#007828'>&#9632;</span> friction: {view.max_friction_force:.3g} N "
