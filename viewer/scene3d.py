@@ -278,15 +278,16 @@ class SceneDrawer:
             # above them), centred under the bodies and wide enough for every path (drawn from
             # the wall's own point, a floor ended short of the later bounces).
             foot = middle - np.dot(middle - point, normal) * normal
-            along = corners - foot
-            along -= np.outer(along @ normal, normal)
-            span = 2.0 * float(np.max(np.linalg.norm(along, axis=-1))) + 2.0 * r_max
+            # The box's own axes across the wall (its x is the normal): as far as the bounds reach.
+            wxyz = wall_box(foot, normal, 1.0, 1.0, planar, 1.0)[1]
+            axes = rotate(np.tile(wxyz, (2, 1)), np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]))
+            reach = 2.0 * np.max(np.abs((corners - foot) @ axes.T), axis=0) + 2.0 * r_max
             if planar:
-                c, wxyz, dims = wall_box(foot, normal, max(span, 1.6 * extent), 0.04 * r_max + 0.01 * extent, True,
-                                         2.4 * r_max)
+                c, wxyz, dims = wall_box(foot, normal, max(float(reach[0]), 1.6 * extent),
+                                         0.04 * r_max + 0.01 * extent, True, 2.4 * r_max)
             else:
-                side = max(span, 1.3 * extent)
-                c, wxyz, dims = wall_box(foot, normal, side, 0.02 * extent, False, side)
+                c, wxyz, dims = wall_box(foot, normal, 1.0, 0.02 * extent, False, 1.0)
+                dims = (dims[0], max(float(reach[0]), 1.3 * extent), max(float(reach[1]), 1.3 * extent))
             is_floor = self._floor is not None and np.allclose(point, self._floor[0]) and np.allclose(
                 normal, self._floor[1])
             boxes.append((np.concatenate((c, wxyz, dims)), is_floor))
