@@ -175,3 +175,22 @@ def test_walls_are_drawn_under_every_path():
         assert floor.position[0] + half >= x.max() + view.radius[0]
     finally:
         server.stop()
+
+
+@pytest.mark.parametrize("name", ["bounce", "break-3d", "demo-bonus"])
+def test_the_rerun_recordings_normal_force_plot_peaks_at_the_runs_max(name, tmp_path):
+    """The recording's per-contact normal-force plot (Scalars) reaches the run's
+    max_normal_force, Hertz collisions shorter than a frame included."""
+    from rerun.chunk import RrdReader
+
+    from collide.recording import write_recording
+
+    run = run_scene(load_scene(name))
+    path = write_recording(run, tmp_path / f"{name}.rrd")
+    top = 0.0
+    for chunk in RrdReader(path).stream():
+        if chunk.entity_path.startswith("/contacts/") and chunk.entity_path.endswith("/normal_force") \
+                and not chunk.is_static:
+            values = [row[0] for row in chunk.to_record_batch().column("Scalars:scalars").to_pylist()]
+            top = max(top, max(values, default=0.0))
+    assert top == pytest.approx(float(run.result.contacts.max_normal_force[0]), rel=1e-9)
