@@ -228,12 +228,16 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
             X += V * tail[b] + 0.5 * grav * tail[b] ** 2  # free flight after the last contact
             V += grav * tail[b]
             t += tail[b]
+            if record:
+                KN = _tail_knots(KN, t, X, V, grav)
         G = body_tables[b]
         G[:, kn.G_S:kn.G_S + 3], G[:, kn.G_V:kn.G_V + 3] = X, V
         G[:, kn.G_W:kn.G_W + 3], G[:, kn.G_Q:kn.G_Q + 4] = W, Q
         finals.append((t, float(WK.sum()), float(fg[dk.G_STORED])))
         stats[b], figures[b] = st, fg
         if record:
+            # A phase's peak is recorded when the phase ends: records in time order again.
+            REC = REC[np.argsort(REC[:, kn.R_T], kind="stable")]
             traj = Trajectory(KN, REC, IV, select_model(model, b))
             traj.energy_parts = EP
             trajectories.append(traj)
@@ -250,6 +254,28 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
                        windows=np.zeros(b_count, np.int64))
     result.dissipation = figures[:, [dk.G_DAMP, dk.G_FRIC, dk.G_ROLL]].copy()
     return result
+
+
+def _tail_knots(KN: np.ndarray, t: float, X: np.ndarray, V: np.ndarray, grav: np.ndarray) -> np.ndarray:
+    """The knots with the free flight after the last contact (the tail) recorded: every body's
+    last frame marked as followed by free flight, and a knot at the run's end t where X, V (N,
+    3) are (a trajectory that stopped at the last frame ended the view and the recording there,
+    short of the run). Spin and orientation are the frame's: the flight turns them in closed form."""
+    last = KN[KN[:, kn.K_T] == KN[:, kn.K_T].max()] if len(KN) else KN
+    if not len(last) or last[0, kn.K_T] >= t:
+        return KN
+    KN = KN.copy()
+    KN[KN[:, kn.K_T] == last[0, kn.K_T], kn.K_FREE] = 1.0
+    KN[KN[:, kn.K_T] == last[0, kn.K_T], kn.K_AN:kn.K_AN + 3] = grav
+    end = last.copy()
+    body = end[:, kn.K_BODY].astype(np.int64)
+    end[:, kn.K_T] = t
+    end[:, kn.K_FREE] = 1.0
+    end[:, kn.K_S:kn.K_S + 3] = X[body]
+    end[:, kn.K_V:kn.K_V + 3] = V[body]
+    end[:, kn.K_A:kn.K_A + 3] = grav
+    end[:, kn.K_AN:kn.K_AN + 3] = grav
+    return np.concatenate((KN, end))
 
 
 def _never_met(stats: np.ndarray, finals: list[tuple], duration: np.ndarray) -> list[str]:

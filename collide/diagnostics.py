@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from collide.engine import layout as kn
+from collide.contact_forces import RecordedForces
 from collide.engine.broad import near_pairs
 from collide.model import TABLE_ESTAR, Model, State
 from collide.results import RunResult
@@ -299,7 +299,8 @@ class ContactSeries:
     names (C); pairs (C, 2) (j = -1 - wall); overlap (T, 1, C) m; compression (T, 1, C, 2) m,
     how much each of the two spheres is compressed (the wall's column is 0); point (T, 1, C, D)
     m; normal_force (T, 1, C, D) N and friction_force (T, 1, C, D) N, both on the contact's
-    first body (friction held over a step: the force of the step that ends at or after t).
+    first body, as the engine recorded them (collide.contact_forces: the normal force straight
+    between records, friction held over a step: the force of the step that ends at or after t).
     """
 
     names: list[str]
@@ -335,21 +336,15 @@ def contact_series(model: Model, traj: Trajectory, times: np.ndarray | None = No
     compression = np.stack((first, np.where(pair, 0.5 * pressed, 0.0)), axis=-1)
     radius_i = model.radius[0, contacts[:, 0]]
     point = s[:, contacts[:, 0], :] + (radius_i - first)[..., None] * n
-    normal = -(stiffness(model, contacts)[0] * pressed)[..., None] * n
+    # The forces the engine recorded (collide.contact_forces), along the drawn normal.
+    forces = RecordedForces(traj, contacts, model.n_bodies, model.n_walls, d, bool(model.friction))
+    tk, ck = np.repeat(np.arange(n_t), c), np.tile(np.arange(c), n_t)
+    normal = -forces.normal(ck, times[tk]).reshape(n_t, c)[..., None] * n
     friction = None
     if model.friction:
-        friction = np.zeros((n_t, c, d))
-        rec = traj.records
-        for k, (i, j) in enumerate(contacts):
-            mine = rec[(rec[:, kn.R_I] == i) & (rec[:, kn.R_J] == j)]
-            if not len(mine):
-                continue
-            at = np.searchsorted(mine[:, kn.R_T], times, side="left")
-            valid = (at < len(mine)) & (overlap[:, k] >= -1e-9 * (radius_i[k]))
-            at = np.minimum(at, len(mine) - 1)
-            force = mine[at][:, kn.R_FX:kn.R_FX + d]
-            friction[:, k] = np.where(valid[:, None], force, 0.0)
-        friction = friction[:, None]
+        force, found = forces.friction(ck, times[tk])
+        valid = found.reshape(n_t, c) & (overlap >= -1e-9 * radius_i)
+        friction = np.where(valid[..., None], force.reshape(n_t, c, d), 0.0)[:, None]
     names = [model.contact_name(int(i), int(j)) for i, j in contacts]
     return ContactSeries(names, contacts, overlap[:, None], compression[:, None], point[:, None],
                          normal[:, None], friction)

@@ -118,6 +118,23 @@ def _quintic(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return basis, deriv
 
 
+def segment_search(values: np.ndarray, lo: np.ndarray, hi: np.ndarray, x: np.ndarray,
+                   side: str = "right") -> np.ndarray:
+    """np.searchsorted(values[lo:hi], x, side) + lo for many (lo, hi, x) at once (broadcast
+    together); values is sorted within each [lo, hi)."""
+    lo, hi, x = np.broadcast_arrays(np.asarray(lo, np.int64), np.asarray(hi, np.int64), np.asarray(x, float))
+    lo, hi = lo.copy(), hi.copy()
+    while True:
+        open_ = lo < hi
+        if not open_.any():
+            return lo
+        mid = (lo + hi) // 2
+        v = values[np.minimum(mid, len(values) - 1)]
+        right = (v <= x) if side == "right" else (v < x)
+        lo = np.where(open_ & right, mid + 1, lo)
+        hi = np.where(open_ & ~right, mid, hi)
+
+
 def body_knots(traj: Trajectory) -> list[np.ndarray]:
     """Each body's knots, in time order."""
     knots = traj.knots

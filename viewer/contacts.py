@@ -6,7 +6,9 @@ spheres has 7 700 contacts over the run, a settling pile 3 700 engaged at once, 
 400 times cost gigabytes and one frame seconds (issue 12). `ContactIndex` reads the run's contact
 intervals (when each contact was engaged) and records once, and `at(times, s)` evaluates the
 same quantities (overlap, compression, point, normal and friction force) only for the (time,
-contact) pairs whose interval holds the time: memory O(contacts engaged at those times).
+contact) pairs whose interval holds the time: memory O(contacts engaged at those times). The
+forces are the engine's own, from its records (`collide.contact_forces`); the geometry (overlap,
+normal, point) is the drawn bodies'.
 """
 
 from __future__ import annotations
@@ -15,11 +17,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from collide import diagnostics as dg
+from collide.contact_forces import RecordedForces
 from collide.engine import layout as kn
 from collide.model import Model
-from collide.trajectory import Trajectory
-from viewer.sampling import Knots, segment_search
+from collide.trajectory import Trajectory, segment_search
+from viewer.sampling import Knots
 
 SLICE = 1 << 16  # contact entries evaluated at once by `ContactIndex.overlaps`
 
@@ -59,14 +61,12 @@ class ContactIndex:
     def __init__(self, model: Model, traj: Trajectory, knots: Knots) -> None:
         self.model = model
         self.pairs = traj.contacts_touched()
-        c = len(self.pairs)
         self._names: list[str] | None = None
+        # The forces as the engine recorded them (never a law evaluated here).
+        self.forces = RecordedForces(traj, self.pairs, model.n_bodies, model.n_walls, model.dim,
+                                     bool(model.friction))
         iv = traj.intervals
-        self._width = model.n_bodies + model.n_walls + 1
-        keys = self._key(self.pairs[:, 0], self.pairs[:, 1])
-        self._key_order = np.argsort(keys)
-        self._sorted_keys = keys[self._key_order]
-        self.iv_contact = self._contact_of(iv[:, 0], iv[:, 1])
+        self.iv_contact = self.forces.contact_of(iv[:, 0], iv[:, 1])
         start = iv[:, kn.V_START].astype(float) if len(iv) else np.zeros(0)
         # A contact still engaged when the run ended has no end: it lasts to the end.
         end = np.where(np.isnan(iv[:, kn.V_END]), np.inf, iv[:, kn.V_END]) if len(iv) else np.zeros(0)
@@ -80,33 +80,7 @@ class ContactIndex:
         after = np.clip(segment_search(knots.t, lo, hi, end, "left"), lo, hi - 1)
         self.iv_start = np.minimum(start, knots.t[before]) if len(iv) else start
         self.iv_end = np.maximum(np.minimum(end, knots.t[hi - 1]), knots.t[after]) if len(iv) else end
-        self.stiffness = dg.stiffness(model, self.pairs)[0] if c else np.zeros(0)
-        self.radius_i = model.radius[0, self.pairs[:, 0]] if c else np.zeros(0)
-        # Records grouped by contact, in time order within each: friction at any time is a search.
-        rec = traj.records
-        if model.friction and len(rec) and c:
-            rk = self._contact_of(rec[:, kn.R_I], rec[:, kn.R_J])
-            order = np.lexsort((np.arange(len(rec)), rec[:, kn.R_T], rk))
-            order = order[rk[order] >= 0]
-            self.rec_contact = rk[order]
-            self.rec_t = np.ascontiguousarray(rec[order, kn.R_T])
-            self.rec_force = rec[order, kn.R_FX:kn.R_FX + model.dim]
-            cs = np.arange(c)
-            self.rec_start = np.searchsorted(self.rec_contact, cs, side="left")
-            self.rec_end = np.searchsorted(self.rec_contact, cs, side="right")
-        else:
-            self.rec_t = None
-
-    def _key(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-        return np.asarray(i, np.int64) * self._width + np.asarray(j, np.int64) + self.model.n_walls
-
-    def _contact_of(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-        """Index into `pairs` of each contact (i, j); -1 for one that never engaged."""
-        keys = self._key(i, j)
-        if not len(self._sorted_keys):
-            return np.full(len(keys), -1, np.int64)
-        at = np.minimum(np.searchsorted(self._sorted_keys, keys), len(self._sorted_keys) - 1)
-        return np.where(self._sorted_keys[at] == keys, self._key_order[at], -1)
+        self.radius_i = model.radius[0, self.pairs[:, 0]] if len(self.pairs) else np.zeros(0)
 
     @property
     def names(self) -> list[str]:
@@ -171,15 +145,10 @@ class ContactIndex:
         pressed = np.maximum(overlap, 0.0)
         return np.where(self.pairs[ck, 1] >= 0, 0.5 * pressed, pressed)
 
-    def normal_force(self, ck: np.ndarray, overlap: np.ndarray) -> np.ndarray:
-        """The normal force's size (N) at these overlaps."""
-        return self.stiffness[ck] * np.maximum(overlap, 0.0)
-
     def at(self, times: np.ndarray, s: np.ndarray) -> Engaged:
         """The contacts engaged at sorted `times` (T,), the bodies being at s (T, N, D) there."""
         tk, ck = self.engaged_pairs(times)
         model = self.model
-        d = model.dim
         i, j = self.pairs[ck, 0], self.pairs[ck, 1]
         n, overlap, pair = self._geometry(tk, ck, s)
         si = s[tk, i]
@@ -188,15 +157,11 @@ class ContactIndex:
         first = np.where(pair, 0.5 * pressed, pressed)
         compression = np.stack((first, np.where(pair, 0.5 * pressed, 0.0)), axis=-1)
         point = si + (self.radius_i[ck] - first)[:, None] * n
-        normal_force = -(self.stiffness[ck] * pressed)[:, None] * n
+        # The engine's normal force along the drawn normal, on body i.
+        normal_force = -self.forces.normal(ck, times[tk])[:, None] * n
         friction = None
         if model.friction:
-            friction = np.zeros((len(ck), d))
-            if self.rec_t is not None and len(ck):
-                # The record of the step that ends at or after t (as contact_series).
-                lo, hi = self.rec_start[ck], self.rec_end[ck]
-                at = segment_search(self.rec_t, lo, hi, times[tk], side="left")
-                valid = (at < hi) & (overlap >= -1e-9 * self.radius_i[ck])
-                rows = np.minimum(at, np.maximum(hi - 1, 0))
-                friction[valid] = self.rec_force[rows[valid]]
+            friction, found = self.forces.friction(ck, times[tk])
+            # Not once the spheres have parted (the record after a contact's end is another phase's).
+            friction[~(found & (overlap >= -1e-9 * self.radius_i[ck]))] = 0.0
         return Engaged(tk, ck, i, j, overlap, n, compression, point, normal_force, friction)

@@ -20,6 +20,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from collide.scene import INTEGRATORS, Scene, SceneError, parse_scene, set_path
 
 DT_CHOICES = tuple(m * 10.0**e for e in range(-8, -2) for m in (1.0, 2.0, 5.0))
@@ -495,9 +497,32 @@ def _free_name(scene: Scene) -> str:
     return f"ball{n}"
 
 
+def _first_meeting(scene: Scene) -> float | None:
+    """When two of the scene's balls first touch in free flight (s), or None if no two ever do.
+    Relative motion: gravity, the same for all, drops out."""
+    best = None
+    bodies = scene.bodies
+    for a in range(len(bodies)):
+        for b in range(a + 1, len(bodies)):
+            d = np.subtract(bodies[b].position, bodies[a].position)
+            u = np.subtract(bodies[b].velocity, bodies[a].velocity)
+            reach = bodies[a].radius + bodies[b].radius
+            uu, du = float(u @ u), float(d @ u)
+            disc = du * du - uu * (float(d @ d) - reach * reach)
+            if uu <= 0 or du >= 0 or disc < 0:
+                continue
+            t = (-du - math.sqrt(disc)) / uu
+            if t >= 0 and (best is None or t < best):
+                best = t
+    return best
+
+
 def add_ball(scene: Scene) -> Scene:
-    """The scene with one more ball like the last one, placed clear of the others behind the
-    leftmost ball and sent towards the others. Raises SceneError when it cannot be added."""
+    """The scene with one more ball like the last one, aimed to take part: it reaches the
+    balls' centre of mass when the first two of them meet (coming in across their line of
+    approach), from far enough out not to overlap any ball at the start; without a meeting, it is
+    placed behind the leftmost ball and sent towards the others. Raises SceneError when it
+    cannot be added."""
     if scene.dim != 2:
         raise SceneError("more balls: only for 2D scenes")
     if len(scene.bodies) >= MAX_BALLS:
@@ -505,25 +530,38 @@ def add_ball(scene: Scene) -> Scene:
     raw = copy.deepcopy(scene.source)
     template = scene.bodies[-1]
     r = template.radius
-    left = min(scene.bodies, key=lambda b: b.position[0] - b.radius)
     speed = max([math.hypot(*b.velocity) for b in scene.bodies] + [0.0]) or 1.0
-    n = len(scene.bodies)
-    # Staggered across the line of approach, so a new ball hits at an angle, not head-on.
-    offset = (0.6 if n % 2 else -0.6) * r
-    x = left.position[0] - left.radius - 3 * r
-    y = left.position[1] + offset
-    body = {"name": _free_name(scene), "mass": template.mass, "radius": r, "position": [x, y],
-            "velocity": [speed, 0.0]}
+    body = {"name": _free_name(scene), "mass": template.mass, "radius": r, "velocity": [speed, 0.0]}
     if template.spin and scene.has_spin:
         body["spin"] = 0.0
     raw.setdefault("body", []).append(body)
-    for _ in range(20):
+    meet = _first_meeting(scene)
+    if meet is None:
+        left = min(scene.bodies, key=lambda b: b.position[0] - b.radius)
+        n = len(scene.bodies)
+        # Staggered across the line of approach, so a new ball hits at an angle, not head-on.
+        start = np.array([left.position[0] - left.radius - 3 * r, left.position[1] + (0.6 if n % 2 else -0.6) * r])
+        places = [(start - [2 * r * k, 0.0], np.array([speed, 0.0])) for k in range(20)]
+    else:
+        mass = np.array([b.mass for b in scene.bodies])
+        com = mass @ np.array([b.position for b in scene.bodies]) / mass.sum()
+        v_com = mass @ np.array([b.velocity for b in scene.bodies]) / mass.sum()
+        fastest = max(scene.bodies, key=lambda b: math.hypot(*np.subtract(b.velocity, v_com)))
+        along = np.subtract(fastest.velocity, v_com)
+        along = along / np.linalg.norm(along) if np.linalg.norm(along) > 0 else np.array([1.0, 0.0])
+        across = np.array([-along[1], along[0]])
+        # Later arrivals start further out: the first place clear of every ball is taken.
+        places = []
+        for k in range(20):
+            t = meet + k * 2 * r / speed
+            places.append((com + v_com * t - across * speed * t, v_com + across * speed))
+    for position, velocity in places:
+        body["position"], body["velocity"] = [float(x) for x in position], [float(x) for x in velocity]
         try:
             return parse_scene(raw, scene.name)
         except SceneError as exc:
             if "overlaps" not in str(exc):
                 raise
-            body["position"] = [body["position"][0] - 2 * r, body["position"][1]]
     raise SceneError("more balls: no free place found for another ball")
 
 

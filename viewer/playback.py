@@ -162,12 +162,16 @@ class Player:
             self._messages.show_notice(str(exc), error=True)
             return False
         lo, hi = view.t0 * 1e3, view.t1 * 1e3
-        if not lo <= t_ms <= hi:
-            self._messages.show_notice(f"time (ms) = '{text.strip()}' is outside the run ({lo:.4g} to {hi:.4g} ms); "
-                                       "not applied", error=True)
+        # The box shows times rounded to its digits: the run's ends as shown are typed back
+        # within half a last digit of the exact ends, and taken as those ends.
+        digits = int(self._panel.time_slider.precision)
+        half = 0.5 * 10.0 ** -digits * (1 + 1e-9)  # and float round-off of the rounding
+        if not lo - half <= t_ms <= hi + half:
+            self._messages.show_notice(f"time (ms) = '{text.strip()}' is outside the run ({lo:.{digits}f} to "
+                                       f"{hi:.{digits}f} ms); not applied", error=True)
             return False
         self._messages.clear_notice()
-        self.seek(t_ms / 1e3, from_box=True)
+        self.seek(min(max(t_ms, lo), hi) / 1e3, from_box=True)
         return True
 
     def speed(self, view: ViewRun) -> float:

@@ -8,8 +8,8 @@ closed forms (free flight, the quintic Hermite inside a step, the spin's turn). 
 same `State` as `diagnostics.sample`, in bounded chunks of times, so memory stays O(bodies x
 times asked) however long the run.
 
-`segment_search` is the binary search: sorted runs of values (one run per body, or per
-contact's records), many queries at once.
+`segment_search` (collide.trajectory) is the binary search: sorted runs of values (one run per
+body, or per contact's records), many queries at once.
 """
 
 from __future__ import annotations
@@ -19,26 +19,9 @@ import numpy as np
 from collide import diagnostics as dg
 from collide.engine import layout as kn
 from collide.model import Model, State, turned_quaternions
-from collide.trajectory import Trajectory, _quintic
+from collide.trajectory import Trajectory, _quintic, segment_search
 
 CHUNK = 1 << 14  # (time, body) pairs evaluated at once: about 6 MB of gathered knot rows
-
-
-def segment_search(values: np.ndarray, lo: np.ndarray, hi: np.ndarray, x: np.ndarray,
-                   side: str = "right") -> np.ndarray:
-    """np.searchsorted(values[lo:hi], x, side) + lo for many (lo, hi, x) at once (broadcast
-    together); values is sorted within each [lo, hi)."""
-    lo, hi, x = np.broadcast_arrays(np.asarray(lo, np.int64), np.asarray(hi, np.int64), np.asarray(x, float))
-    lo, hi = lo.copy(), hi.copy()
-    while True:
-        open_ = lo < hi
-        if not open_.any():
-            return lo
-        mid = (lo + hi) // 2
-        v = values[np.minimum(mid, len(values) - 1)]
-        right = (v <= x) if side == "right" else (v < x)
-        lo = np.where(open_ & right, mid + 1, lo)
-        hi = np.where(open_ & ~right, mid, hi)
 
 
 class Knots:

@@ -271,16 +271,23 @@ class SceneDrawer:
     def _show_walls(self, view: ViewRun, walls: list, lo: np.ndarray, hi: np.ndarray, extent: float,
                     r_max: float, planar: bool) -> None:
         boxes = []
+        middle = 0.5 * (lo + hi)
+        corners = np.array([[a[0], b[1], c[2]] for a in (lo, hi) for b in (lo, hi) for c in (lo, hi)])
         for point, normal in walls:
+            # A wall's face lies exactly on its plane (a floor under resting spheres, not a slab
+            # above them), centred under the bodies and wide enough for every path (drawn from
+            # the wall's own point, a floor ended short of the later bounces).
+            foot = middle - np.dot(middle - point, normal) * normal
+            # The box's own axes across the wall (its x is the normal): as far as the bounds reach.
+            wxyz = wall_box(foot, normal, 1.0, 1.0, planar, 1.0)[1]
+            axes = rotate(np.tile(wxyz, (2, 1)), np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]))
+            reach = 2.0 * np.max(np.abs((corners - foot) @ axes.T), axis=0) + 2.0 * r_max
             if planar:
-                c, wxyz, dims = wall_box(point, normal, 1.6 * extent, 0.04 * r_max + 0.01 * extent, True, 2.4 * r_max)
+                c, wxyz, dims = wall_box(foot, normal, max(float(reach[0]), 1.6 * extent),
+                                         0.04 * r_max + 0.01 * extent, True, 2.4 * r_max)
             else:
-                # A wall's face lies exactly on its plane (a floor under resting spheres, not a
-                # slab above them), centred under the bodies and as wide as they spread.
-                thickness = 0.02 * extent
-                middle = 0.5 * (lo + hi)
-                foot = middle - np.dot(middle - point, normal) * normal
-                c, wxyz, dims = wall_box(foot, normal, 1.3 * extent, thickness, False, 1.3 * extent)
+                c, wxyz, dims = wall_box(foot, normal, 1.0, 0.02 * extent, False, 1.0)
+                dims = (dims[0], max(float(reach[0]), 1.3 * extent), max(float(reach[1]), 1.3 * extent))
             is_floor = self._floor is not None and np.allclose(point, self._floor[0]) and np.allclose(
                 normal, self._floor[1])
             boxes.append((np.concatenate((c, wxyz, dims)), is_floor))
@@ -313,8 +320,10 @@ class SceneDrawer:
         r_mm = float(view.radius.max()) * 1e3
         lines = []
         if self.options.forces and view.max_normal_force > 0 and (self.options.chains or not self.many):
-            what = "force chains: normal force between centres, thicker = stronger" if self.many else \
-                f"normal force: {view.max_normal_force:.3g} N peak = {2 * r_mm:.3g} mm arrow"
+            # The peak is the run's (the JSON summary's max_normal_force): no arrow is longer.
+            what = (f"force chains: normal force between centres, thicker = stronger, thickest "
+                    f"{view.max_normal_force:.4g} N peak") if self.many else \
+                f"normal force: {view.max_normal_force:.4g} N peak = {2 * r_mm:.3g} mm arrow"
             lines.append(f"<span style='color:#aa0014'>&#9632;</span> {what}")
             if view.max_friction_force > 0 and not self.many:
                 lines.append(f"<span style='color:#007828'>&#9632;</span> friction: {view.max_friction_force:.3g} N "

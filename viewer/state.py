@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from collide import diagnostics as dg
+from collide.contact_forces import peak_normal_force
 from collide.engine import layout as kn
 from collide.model import State
 from collide.run import SceneRun
@@ -176,8 +177,14 @@ class ViewRun:
         self.walls = [(embed3(np.asarray(w.point, float)), embed3(np.asarray(w.normal, float)))
                       for w in self.scene.walls]
         speed = np.linalg.norm(states.v[:, 0], axis=-1)
-        self.max_speed = float(np.max(speed, initial=0.0))
-        self.max_momentum = float(np.max(speed * self.mass, initial=0.0))
+        # The arrows' scales: the fastest on the plot grid or at any knot (free flight's speed
+        # is largest at its ends), so that no velocity arrow is longer than the legend says.
+        knots = self.traj.knots
+        at_knots = np.linalg.norm(knots[:, kn.K_V:kn.K_V + 3], axis=-1)
+        body = knots[:, kn.K_BODY].astype(np.int64)
+        self.max_speed = float(max(np.max(speed, initial=0.0), np.max(at_knots, initial=0.0)))
+        self.max_momentum = float(max(np.max(speed * self.mass, initial=0.0),
+                                      np.max(at_knots * self.mass[body], initial=0.0)))
         energy = 0.5 * self.mass * speed**2
         if states.w.shape[-1]:
             energy = energy + 0.5 * self.model.inertia[0] * np.sum(states.w[:, 0] ** 2, axis=-1)
@@ -186,7 +193,9 @@ class ViewRun:
         self.residuals = {"energy": float(res.energy[0]), "momentum": float(res.momentum[0]),
                           "angular_momentum": float(res.angular_momentum[0])}
         tk, ck, overlap = engaged
-        self.max_normal_force = float(np.max(self._contacts.normal_force(ck, overlap), initial=0.0))
+        # The run's peak as the engine has it (the JSON summary's max_normal_force): the legend
+        # and the arrows' scale; no force drawn exceeds it.
+        self.max_normal_force = peak_normal_force(result, self._contacts.forces)
         touching = overlap > ROUND_OFF * float(self.radius.max())
         tk, ck = tk[touching], ck[touching]
         i, j = self._contacts.pairs[ck, 0], self._contacts.pairs[ck, 1]
@@ -259,8 +268,11 @@ class ViewRun:
         velocities = embed3(st.v[0, 0])
         wxyz = orientation_wxyz(st.q[0, 0])
         e = self._contacts.at(times, st.s[:, 0])
-        # Spheres that touch only to round-off (an overlap of 1e-17 m) are not in contact.
-        e = e.select(e.overlap > ROUND_OFF * float(self.radius.max()))
+        # Spheres that touch only to round-off (an overlap of 1e-17 m) are not in contact; those
+        # the engine had pressing are, though the motion rebuilt between two DEM frames may
+        # have them apart (a collision shorter than a frame).
+        force = np.linalg.norm(e.normal_force, axis=-1)
+        e = e.select((e.overlap > ROUND_OFF * float(self.radius.max())) | (force > ROUND_OFF * self.max_normal_force))
         links = Links(e.i, np.where(e.j >= 0, e.j, -1), embed3(e.point), np.linalg.norm(e.normal_force, axis=-1))
         contacts = []
         if self.n_bodies <= CONTACT_LIST_BODIES:

@@ -77,7 +77,8 @@ def frame_times(traj: Trajectory, fps: float, stride: int, contact_frames: int,
     """Times of exact frames and of view frames for run 0 of a trajectory.
 
     Exact frames: every `stride`-th contact step (each contact's first and last step always),
-    and a steady `fps` inside free flight, where the closed form is exact. View frames add at
+    a steady `fps` inside free flight, where the closed form is exact, and any contact record
+    between the knots (the DEM kernel's peaks). View frames add at
     least `contact_frames` evenly spaced frames across each contact, interpolated between steps,
     so that a contact taken in a few long steps still animates smoothly. With `many` bodies the
     frames are a steady `fps` throughout (plus the start and end): every body's every step
@@ -102,6 +103,10 @@ def frame_times(traj: Trajectory, fps: float, stride: int, contact_frames: int,
     segment = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, max(len(t) - 2, 0))
     in_free = ~contact[segment] if len(contact) else np.ones(len(grid), bool)
     exact = np.union1d(np.union1d(t[idx], grid[in_free]), [t[0], t[-1]])
+    # The DEM kernel's records between its frames: each contact phase's peak (a collision can
+    # be shorter than a frame). Its plots and arrows show the peak there.
+    records = np.unique(traj.records[:, kn.R_T]) if len(traj.records) else np.zeros(0)
+    exact = np.union1d(exact, np.setdiff1d(records, t))
     dense = [np.linspace(t[a], t[b], contact_frames + 1) for a, b in zip(edges[::2], edges[1::2])]
     view = np.union1d(exact, np.concatenate(dense)) if dense else exact
     return exact, view

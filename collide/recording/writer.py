@@ -17,6 +17,7 @@ import numpy as np
 import rerun as rr
 
 from collide import diagnostics as dg
+from collide.contact_forces import peak_normal_force
 from collide.engine import layout as kn
 from collide.model import State
 from collide.output import OutputError, check_file, write_atomic
@@ -162,9 +163,12 @@ class _Writer(_Drawing):
         # A contact counts as pressed past the engine's touching tolerance: a tight rack turned
         # into a tilted plane touches with round-off overlaps (1e-17 m) that press nothing.
         self.pressed = float(kn.TOUCH_TOL) * 2.0 * float(self.model.radius.max())
+        # Force arrows: the run's largest normal force (the engine's, as the JSON summary's
+        # max_normal_force) is drawn as long as a sphere's diameter; the arrows are the recorded
+        # forces (collide.contact_forces), none above it.
         normal = self.exact.contacts.normal_force[:, 0]
-        peak = float(np.max(np.linalg.norm(normal, axis=-1))) if normal.size else 0.0
-        # Force arrows: the largest normal force is drawn as long as a sphere's diameter.
+        drawn = float(np.max(np.linalg.norm(normal, axis=-1))) if normal.size else 0.0
+        peak = max(peak_normal_force(self.result), drawn)
         self.force_scale = 2.0 * float(self.model.radius.mean()) / peak if peak > 0 else 1.0
         st = self.exact.state
         self.conserved = dg.conserved(self.model, st.t, st.s, st.v, st.w, st.work, self.exact.contacts.pairs)

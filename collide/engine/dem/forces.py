@@ -20,6 +20,7 @@ from collide.engine.dem.layout import (
     H_IV,
     H_KT,
     H_ON,
+    H_PEAK,
     H_XI,
     S_CONTACTS,
 )
@@ -53,7 +54,7 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
         d2 = dx * dx + dy * dy + dz * dz
         if d2 >= reach * reach:
             if hist[k, H_ON] != 0.0:
-                _close(hist, k, IV, t, FG)
+                nrec = _close(hist, k, IV, t, FG, REC, nrec, i, j)
             continue
         dist = math.sqrt(d2)
         inv = 1.0 / dist
@@ -65,6 +66,8 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
                            hist, k, fl, dt, out)
         deepest = max(deepest, delta)
         strongest = max(strongest, fn)
+        if record:
+            _peak(hist, k, t, delta, fn, out)
         if record_now:
             _record(REC, nrec, t, i, j, delta, fn, out)
             nrec += 1
@@ -73,7 +76,7 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
         delta = Bd[i, B_R] - wall_height(X, WP, i, w)
         if delta <= 0.0:
             if WH[k, H_ON] != 0.0:
-                _close(WH, k, IV, t, FG)
+                nrec = _close(WH, k, IV, t, FG, REC, nrec, i, -1 - w)
             continue
         if WH[k, H_ON] == 0.0:
             niv = _open(WH, k, IV, niv, i, -1 - w, t, FG, ST, record)
@@ -82,6 +85,8 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
                            WH, k, fl, dt, out)
         deepest = max(deepest, delta)
         strongest = max(strongest, fn)
+        if record:
+            _peak(WH, k, t, delta, fn, out)
         if record_now:
             _record(REC, nrec, t, i, -1 - w, delta, fn, out)
             nrec += 1
@@ -96,6 +101,7 @@ def _open(hist, k, IV, niv, i, j, t, FG, ST, record):
     for c in range(3):
         hist[k, H_XI + c] = 0.0
     hist[k, H_KT] = 0.0
+    hist[k, H_PEAK + 1] = -math.inf  # no force yet this phase
     ST[S_CONTACTS] += 1
     if not FG[G_FIRST] <= t:
         FG[G_FIRST] = t
@@ -108,7 +114,11 @@ def _open(hist, k, IV, niv, i, j, t, FG, ST, record):
 
 
 @jit_inline
-def _close(hist, k, IV, t, FG):
+def _close(hist, k, IV, t, FG, REC, nrec, i, j):
+    """End contact k's phase (its interval row, and its peak as a record: REC has room).
+    Returns nrec."""
+    if hist[k, H_IV] >= 0.0:
+        nrec = peak_record(hist, k, REC, nrec, i, j)
     hist[k, H_ON] = 0.0
     # A spring released stores nothing; what it held was given back as it unloaded.
     for c in range(4):
@@ -118,6 +128,28 @@ def _close(hist, k, IV, t, FG):
     if row >= 0:
         IV[row, 3] = t
     hist[k, H_IV] = -1.0
+    return nrec
+
+
+@jit_inline
+def _peak(hist, k, t, delta, fn, out):
+    """Keep the step's forces as contact k's peak if its normal force is the phase's largest."""
+    if fn > hist[k, H_PEAK + 1]:
+        hist[k, H_PEAK], hist[k, H_PEAK + 1], hist[k, H_PEAK + 2] = t, fn, delta
+        for c in range(4):
+            hist[k, H_PEAK + 3 + c] = out[c]
+
+
+@jit_inline
+def peak_record(hist, k, REC, nrec, i, j):
+    """Contact k's peak so far as record row nrec (REC has room), if it had a force. Returns nrec."""
+    if hist[k, H_PEAK + 1] == -math.inf:
+        return nrec
+    REC[nrec, 0], REC[nrec, 1], REC[nrec, 2] = hist[k, H_PEAK], i, j
+    REC[nrec, 3], REC[nrec, 4] = hist[k, H_PEAK + 2], hist[k, H_PEAK + 1]
+    for c in range(4):
+        REC[nrec, 5 + c] = hist[k, H_PEAK + 3 + c]
+    return nrec + 1
 
 
 @jit_inline

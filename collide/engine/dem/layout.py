@@ -17,9 +17,11 @@ NB = 6
 # once a contact a step).
 T_K, T_MU, T_EPS, T_ESTAR, T_ZETA, T_ROLL, T_KTR, T_KTR_ROOT = range(8)
 # History per contact: tangential spring (3), its stiffness (for the energy it stores: read
-# only when recorded), open interval row, engaged.
-H_XI, H_KT, H_IV, H_ON = 0, 3, 4, 5
-NH = 6
+# only when recorded), open interval row, engaged; when recorded, the phase's largest normal
+# force so far, as a record row (R_T .. R_MODE of collide.engine.layout, i and j left out: time,
+# overlap, normal force, friction force (3), mode), written when the phase ends.
+H_XI, H_KT, H_IV, H_ON, H_PEAK = 0, 3, 4, 5, 6
+NH = 13
 # The contact forces' parts, per body (N, NPT): damping force, friction force, rolling torque.
 # (Friction's torque is the rest of the torque: no other part has one.)
 PT_DAMP, PT_FRIC, PT_ROLL = 0, 3, 6

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from collide.engine.dem.flight import fly, free_time, will_meet
-from collide.engine.dem.forces import forces
+from collide.engine.dem.forces import forces, peak_record
 from collide.engine.dem.layout import (
     B_MAT,
     F_DIM,
@@ -24,6 +24,7 @@ from collide.engine.dem.layout import (
     G_STORED,
     G_TOUCH,
     H_IV,
+    H_ON,
     MAXSTEPS,
     NEP,
     NFIG,
@@ -126,15 +127,25 @@ def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, keys, PI, 
 
 
 @jit
-def _finish(X, V, W, Qo, F, Bd, WK, hist, WH, t, record, ST, FG, KN, nkn):
-    """The run's totals into FG, and its last frame if not recorded yet. Returns (KN, nkn)."""
+def _finish(X, V, W, Qo, F, Bd, WK, hist, WH, PI, PJ, WL, t, record, ST, FG, KN, nkn, REC, nrec):
+    """The run's totals into FG, its last frame if not recorded yet, and the peaks of the
+    contacts still engaged. Returns (KN, nkn, REC, nrec)."""
     n = X.shape[0]
     FG[G_STORED] = stored(hist, WH)
     for c in range(3):
         FG[G_DAMP + c] = work_total(WK, n, c)
     if record and (nkn == 0 or KN[nkn - 1, 0] < t):
         KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
-    return KN, nkn
+    if record:
+        REC = grow(REC, nrec + hist.shape[0] + WL.shape[0])
+        for k in range(hist.shape[0]):
+            if hist[k, H_ON] != 0.0:
+                nrec = peak_record(hist, k, REC, nrec, PI[k], PJ[k])
+        for m in range(WL.shape[0]):
+            k, i, w = WL[m, 0], WL[m, 1], WL[m, 2]
+            if WH[k, H_ON] != 0.0:
+                nrec = peak_record(WH, k, REC, nrec, i, -1 - w)
+    return KN, nkn, REC, nrec
 
 
 @jit
@@ -198,7 +209,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         most = PI.shape[0] + WL.shape[0]  # the lists may have been rebuilt
         if record and niv + most >= IV.shape[0]:
             IV = grow(IV, niv + most)
-        if record_now and nrec + most >= REC.shape[0]:
+        if record and nrec + most >= REC.shape[0]:  # a frame's records, or the peaks of phases that end
             REC = grow(REC, nrec + most)
         engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav,
                                     fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now, scratch)
@@ -238,5 +249,5 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             break
     ST[S_STEPS] = steps
     ST[S_PAIRS] = keys.shape[0]
-    KN, nkn = _finish(X, V, W, Qo, F, Bd, WK, hist, WH, t, record, ST, FG, KN, nkn)
+    KN, nkn, REC, nrec = _finish(X, V, W, Qo, F, Bd, WK, hist, WH, PI, PJ, WL, t, record, ST, FG, KN, nkn, REC, nrec)
     return t, WK, KN[:nkn], REC[:nrec], IV[:niv], EP[:nep], ST, FG
