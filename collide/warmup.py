@@ -24,11 +24,11 @@ from pathlib import Path
 # How a whole compile progresses, for the first compile on a machine (later ones measure by the
 # last compile there): pairs of functions compiled and the fraction of the compile's time, and
 # that time in seconds, as measured here.
-REFERENCE_CURVE = [[0, 0.0], [9, 0.0079], [25, 0.0126], [41, 0.019], [57, 0.0336], [73, 0.0411], [88, 0.0752],
-                   [104, 0.1017], [120, 0.1462], [136, 0.1744], [152, 0.2041], [168, 0.2773], [184, 0.3104],
-                   [200, 0.3922], [216, 0.4689], [232, 0.5219], [247, 0.6367], [263, 0.8424], [279, 0.8833],
-                   [295, 0.9301], [311, 1.0]]
-REFERENCE_SECONDS = 200.0  # on a quiet machine; three to five times that at a load of 10
+REFERENCE_CURVE = [[0, 0.0], [8, 0.0399], [21, 0.0437], [35, 0.0474], [48, 0.0523], [62, 0.0764], [75, 0.0818],
+                   [89, 0.1172], [102, 0.1402], [116, 0.179], [129, 0.2155], [143, 0.2453], [156, 0.3128],
+                   [170, 0.3889], [183, 0.4975], [197, 0.5893], [210, 0.6312], [224, 0.8533], [237, 0.8921],
+                   [251, 0.9344], [264, 1.0]]
+REFERENCE_SECONDS = 150.0  # on a quiet machine; three to five times that at a load of 10
 
 
 def warm() -> float:

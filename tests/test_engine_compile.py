@@ -208,3 +208,54 @@ def test_waiting_reports_a_running_compile_then_its_end(tmp_path: Path) -> None:
     assert time.perf_counter() - started >= 1.0
     assert "engine: compiling: about 25% (30 functions)" in out.stderr
     assert out.returncode == 1 and "interrupted" in out.stdout  # the holder never marked the cache ready
+
+
+KERNELS = """
+from collide.engine.jit import jit, jit_call
+
+
+@jit_call
+def weighted(x, k, flag):
+    return x * (k + 1) * (2.0 if flag else 1.0)
+
+
+@jit
+def total(x):
+    return weighted(x, 0, False) + weighted(x, 1, True) + weighted(x, 2, x > 0.0)
+"""
+
+LOAD_THEN_LINK = """
+from numba import njit
+from collide.engine.probe_kernels import total, weighted
+first = total(1.5)
+
+@njit
+def again(x):
+    return weighted(x, 3, False)
+
+print(first, again(1.5), sum(total.stats.cache_hits.values()), sum(weighted.stats.cache_hits.values()),
+      len(weighted.signatures))
+"""
+
+
+def test_a_kernel_loaded_from_the_cache_links_into_a_new_compile(tmp_path: Path) -> None:
+    """A callee is compiled once for its argument types, whatever constants its callers pass;
+    a kernel loaded from the cache (its bitcode parsed only when needed) is linked into a
+    kernel compiled later in the same process and gives the same numbers."""
+    copy = tmp_path / "src"
+    shutil.copytree(ROOT / "collide", copy / "collide", ignore=shutil.ignore_patterns("__pycache__"))
+    (copy / "collide" / "engine" / "probe_kernels.py").write_text(KERNELS)
+    env = _env(tmp_path / "cache", COLLIDE_JIT="1", COLLIDE_COMPILING="1", PYTHONPATH=str(copy))
+    runs = []
+    for _ in range(2):
+        out = _python(LOAD_THEN_LINK, env, cwd=tmp_path)
+        assert out.returncode == 0, out.stderr
+        runs.append(out.stdout.split())
+    x = 1.5
+    expected = x * 1 + x * 2 * 2.0 + x * 3 * 2.0
+    for total, again, *_, signatures in runs:
+        assert float(total) == expected and float(again) == x * 4
+        assert signatures == "1"
+    # Compiled in the first process; in the second, both loaded from the cache, the callee's
+    # bitcode parsed to link it into `again`.
+    assert runs[0][2:4] == ["0", "0"] and runs[1][2:4] == ["1", "1"]

@@ -3,16 +3,18 @@ compiled kernels (`collide.engine.tier` decides), or nothing, so the same code r
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 
 from collide.engine import tier
 
 
+@functools.cache
 def _skip_blas_probe() -> None:
-    """numba's target set-up, which loading a cached kernel needs, imports scipy.linalg (0.2 s of
-    CPU, a sixth of a compiled run's start) only to record whether BLAS is there for its matrix
-    products. The kernels use none. Record it from whether scipy is installed, as numba's probe
-    would; scipy.linalg is then imported only if something compiles a BLAS call."""
+    """numba's target set-up, which compiling needs, imports scipy.linalg (0.2 s of CPU) only to
+    record whether BLAS is there for its matrix products. The kernels use none. Record it from
+    whether scipy is installed, as numba's probe would; scipy.linalg is then imported only if
+    something compiles a BLAS call."""
     from numba.np import linalg
 
     probe = linalg.ensure_blas
@@ -29,28 +31,129 @@ def _skip_blas_probe() -> None:
     arraymath._HAVE_BLAS = importlib.util.find_spec("scipy") is not None
 
 
+def _set_up_target_to_compile_only() -> None:
+    """numba sets up its whole compiler target (imports and registers every lowering it has, 0.3 s
+    of CPU, a third of a compiled run's start) before it looks in its cache, although cached
+    machine code needs only numba's runtime. Loading from the cache starts the runtime only; the
+    compiler sets the target up by itself when something is compiled (without the BLAS probe)."""
+    from numba.core import caching, cpu
+    from numba.core.runtime import rtsys
+
+    def load_overload(self, sig, target_context):
+        rtsys.initialize(target_context)
+        with self._guard_against_spurious_io_errors():
+            return self._load_overload(sig, target_context)
+
+    set_up = cpu.CPUContext.load_additional_registries
+
+    def load_additional_registries(self) -> None:
+        _skip_blas_probe()
+        set_up(self)
+
+    caching.Cache.load_overload = load_overload
+    cpu.CPUContext.load_additional_registries = load_additional_registries
+
+
+def _parse_bitcode_when_linked() -> None:
+    """numba stores a cached kernel as machine code and as LLVM bitcode (for compiling it into a
+    kernel that calls it), and parses the bitcode when it loads the kernel, to list its symbols
+    (0.09 s of CPU for the event engine, a seventh of a compiled run's start). Only a compile
+    that links the loaded kernel into another needs it: parse it then; the entry point's
+    address is looked up in the loaded machine code."""
+    import llvmlite.binding as ll
+    from numba.core import codegen
+
+    library = codegen.JITCodeLibrary
+    unserialize = library._unserialize.__func__
+    for_linking = library._get_module_for_linking
+    pointer_to = library.get_pointer_to_function
+
+    def _unserialize(cls, owner, state):
+        name, kind, data = state
+        if kind != "object":
+            return unserialize(cls, owner, state)
+        object_code, bitcode = data
+        self = owner.create_library(name)
+        self.enable_object_caching()
+        self._set_compiled_object(object_code)
+        self._finalize_final_module()
+        self._unparsed_bitcode = bitcode
+        return self
+
+    def _get_module_for_linking(self):
+        bitcode = self.__dict__.pop("_unparsed_bitcode", None)
+        if bitcode is not None:
+            self._shared_module = ll.parse_bitcode(bitcode)
+            self._codegen._engine._load_defined_symbols(self._shared_module)
+        return for_linking(self)
+
+    def get_pointer_to_function(self, name):
+        if "_unparsed_bitcode" not in self.__dict__:
+            return pointer_to(self, name)
+        self._ensure_finalized()
+        return self._codegen._engine.get_function_address(name)
+
+    library._unserialize = classmethod(_unserialize)
+    library._get_module_for_linking = _get_module_for_linking
+    library.get_pointer_to_function = get_pointer_to_function
+
+
+def _one_signature(options: dict):
+    """numba's `njit` with `options`, whose kernels are compiled for the types of their arguments
+    only, never for the value of a constant one: numba types a constant argument in a call from
+    another kernel as that value (`Literal[int](0)`, `Literal[bool](False)`), and compiles the
+    callee again for each value and each mix of constant and variable arguments (52 extra
+    compiles, 15 s of the compile's 181 s of CPU, measured). The optimiser still folds a
+    constant into an inlined callee; a called one tests it at run time (kernel times unchanged,
+    measured)."""
+    from numba import njit
+    from numba.core import types
+
+    compile_for = njit(**options)
+
+    def decorate(function):
+        dispatcher = compile_for(function)
+        typed = dispatcher.get_call_template
+
+        def get_call_template(args, kws):
+            return typed(tuple(types.unliteral(a) for a in args), {k: types.unliteral(v) for k, v in kws.items()})
+
+        dispatcher.get_call_template = get_call_template
+        return dispatcher
+
+    return decorate
+
+
 if tier.COMPILED:
     from numba import config, njit
 
-    _skip_blas_probe()
+    _set_up_target_to_compile_only()
+    _parse_bitcode_when_linked()
 
     # The cache folder named after every kernel source (tier.cache_key): never a stale callee.
     config.CACHE_DIR = str(tier.cache_dir())
     # error_model="numpy": a division by zero gives inf or NaN (checked after each step) instead
     # of raising, which also keeps the compiled code smaller.
-    jit = njit(cache=True, error_model="numpy", nogil=True)
+    jit = _one_signature(dict(cache=True, error_model="numpy", nogil=True))
     # Pieces called per contact, per body or per substep, which allocate nothing (a contact
     # law's parts, a body's turn; the event engine's step with its kicks, friction solve,
     # geometry and mode values): inlined into the loops, and without reference counting
     # (`_nrt=False`, as numba's own sort and string helpers): a call each time, and the atomic
     # counts of each array passed, cost more than the physics (a quarter of the DEM step; the
     # event engine's steps 2-5 times, measured).
-    jit_inline = njit(cache=True, error_model="numpy", nogil=True, forceinline=True, _nrt=False)
+    jit_inline = _one_signature(dict(cache=True, error_model="numpy", nogil=True, forceinline=True, _nrt=False))
     # Large pieces of that kind called from several places (the event engine's step, friction
     # solve, hold, mode values, decision, settling): called, not copied into every call site,
     # which multiplied the machine code (the cache 32 MB) and the compile's time; still without
     # reference counting, which was most of the gain. Kernel times unchanged, measured.
-    jit_call = njit(cache=True, error_model="numpy", nogil=True, _nrt=False)
+    jit_call = _one_signature(dict(cache=True, error_model="numpy", nogil=True, _nrt=False))
+    # Stages with one caller (the event engine's windows, islands, the step's event location):
+    # their code is compiled inside the caller (numba's `inline="always"`), never on its own.
+    # numba compiles every kernel that another one calls into a library of its own, links into
+    # it the libraries of everything it calls, and optimises and compiles the whole again: a
+    # chain of called stages compiled the event engine's code once per level (LLVM spent 21 s
+    # of CPU less without the chain, numba's inliner 11 s more). Kernel times unchanged, measured.
+    jit_part = njit(cache=True, error_model="numpy", nogil=True, inline="always")
 else:
     def jit(function):
         """Interpreted: the kernel as plain Python."""
@@ -58,3 +161,4 @@ else:
 
     jit_inline = jit
     jit_call = jit
+    jit_part = jit

@@ -14,7 +14,7 @@ from collide.engine.event.locate import step_events, stiff_slide
 from collide.engine.event.modes import decide, flips, mode_events
 from collide.engine.event.rest import rest_phase, rest_ready
 from collide.engine.flight import bring, touch_time
-from collide.engine.jit import jit, jit_call, jit_inline
+from collide.engine.jit import jit, jit_call, jit_inline, jit_part
 from collide.engine.layout import (
     BAND,
     C_DELTA,
@@ -528,7 +528,7 @@ def phase_checks(t, t_phase, idle, e_start, e_end, e_room, ST, FG):
     return idle
 
 
-@jit
+@jit_part
 def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     """Advance the island of candidate contacts Q (N_Q, 3) from T to W: free flight in closed
     form while nothing is engaged, event-located steps of the bodies with engaged contacts while

@@ -10,7 +10,7 @@ import math
 from collide.engine.event.contact import geometry, overlap, response, slip, slip_rate, springs
 from collide.engine.event.modes import flips, mode_events
 from collide.engine.event.substep import hold_pull, kick_start, settle, step
-from collide.engine.jit import jit, jit_call, jit_inline
+from collide.engine.jit import jit_call, jit_inline, jit_part
 from collide.engine.layout import (
     AIM,
     C_EPS,
@@ -529,7 +529,7 @@ def dip_and_clear(E, modes, frac, h_full, passed, passed_at, pending, best, dipp
     return theta, dipped, clear
 
 
-@jit
+@jit_part
 def step_events(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale,
                 max_turn, negligible, nudge, reach, briefs, exact, ST, omega):
     """One step from the start state; where an event would happen inside it, shortened to land there,

@@ -13,7 +13,7 @@ import numpy as np
 from collide.engine.broad import crossed, join, largest_set, near_pairs, root_of
 from collide.engine.event.island import run_island
 from collide.engine.flight import account_contacts, meets_again, next_contact, positions_at, speed_scales
-from collide.engine.jit import jit, jit_call
+from collide.engine.jit import jit, jit_call, jit_part
 from collide.engine.layout import (
     CN_IVALS,
     CN_OPEN,
@@ -96,7 +96,7 @@ def engaged_now(G, P, V, n, WP, grav, dim):
     return out[:m]
 
 
-@jit
+@jit_part
 def window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim):
     """Contacts that may go on or start within the window: pairs and walls whose gap could close
     within `horizon`, each body's speed bounded by the energy its engaged cluster holds (spin
@@ -151,7 +151,7 @@ def window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim):
     return out[:m], margin
 
 
-@jit
+@jit_part
 def missed_contact(G, P, V, n, t, cand, WP, grav, dim, P0, margin):
     """Whether bodies (or a body and a wall) overlap at t without having been candidates, or
     went through each other since the window's start (positions P0)."""
@@ -205,7 +205,7 @@ def lone_on_walls(cand, eng, n):
     return True
 
 
-@jit
+@jit_part
 def jump(G, P, V, n, t, t_end, search, ticks, WP, grav, dim, fp, IV, CNT, ST, FG, graph):
     """Nothing touches at t: on in closed form to the next contact start, or the run ends (nothing
     to record in free flight). `graph`: who met whom so far (`account_contacts`). Returns (t,
@@ -284,7 +284,7 @@ def clusters(pairs, n):
     return parent
 
 
-@jit
+@jit_part
 def run_islands(G, GI, cand, parent, n, t, horizon, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     """Every island of the window's candidates (bucketed by the island's root: a counting sort)
     run from t to t + horizon. Returns the buffers."""
@@ -334,7 +334,7 @@ def restore_window(G, GI, KN, IV, OP, CNT, saved_G, saved_GI, saved_CNT, saved_O
             KN[GI[i, GI_KNOT], K_FREE] = saved_flags[i]
 
 
-@jit
+@jit_part
 def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     """Advance every body to the run's end (see the README's engine notes): jump to the next
     contact start while nothing touches; otherwise a window of islands. Returns the buffers and
