@@ -40,8 +40,10 @@ def bodies_csv(frames: Frames) -> str:
     spin = _spin_axes(frames.spin_dim)
     header = ["t", "body", *_AXES[:d], *(f"v{a}" for a in _AXES[:d]), *(f"w{_AXES[a]}" for a in spin)]
     t_count, n = frames.s.shape[:2]
-    numbers = np.concatenate((np.repeat(frames.times, n)[:, None], frames.s[:, :, :d].reshape(-1, d),
-                              frames.v[:, :, :d].reshape(-1, d), frames.w[:, :, spin].reshape(-1, len(spin))), axis=1)
+    rows = t_count * n
+    numbers = np.concatenate((np.repeat(frames.times, n)[:, None], frames.s[:, :, :d].reshape(rows, d),
+                              frames.v[:, :, :d].reshape(rows, d), frames.w[:, :, spin].reshape(rows, len(spin))),
+                             axis=1)
     names = np.tile(np.asarray(frames.names, dtype=object), t_count).astype(str)
     return _write(header, [names], numbers, 1)
 
