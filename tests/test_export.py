@@ -260,3 +260,22 @@ def test_cli_writes_and_refuses_usage(recorded: dict, tmp_path: Path) -> None:
         assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, (args, done.stderr)
     frames = [f"frame_0000{k}.vtp" for k in range(3)]
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["b", "b.pvd", *frames, "out"]
+
+
+@pytest.mark.parametrize("name", ["demo-bonus", "pair-3d"])
+def test_friction_is_the_contact_series_own(recorded: dict, name: str) -> None:
+    """The export's friction lookup (pressed contacts only) gives diagnostics.contact_series's forces."""
+    from collide import diagnostics as dg
+    from collide.export.frames import export_frames, export_times
+
+    run = recorded[name][2]
+    times = export_times(run)
+    frames = export_frames(run, times)
+    series = dg.contact_series(run.result.model, run.result.trajectory, times)
+    index = {tuple(p): c for c, p in enumerate(series.pairs.tolist())}
+    which = [index[tuple(p)] for p in frames.pairs.tolist()]
+    want = series.friction_force[frames.contact_frame, 0, which]
+    d = run.result.model.dim
+    assert len(want) > 0 and np.abs(want).max() > 0
+    np.testing.assert_array_equal(frames.friction[:, :d], want)
+    np.testing.assert_array_equal(frames.normal_force[:, :d], series.normal_force[frames.contact_frame, 0, which])

@@ -8,7 +8,7 @@ seconds still has frames (and rows in the contacts table). Vectors are padded to
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -80,14 +80,16 @@ def export_frames(run: SceneRun, times: np.ndarray) -> Frames:
     """Spheres and pressed contacts of a run at `times` (sorted)."""
     model, traj = run.result.model, run.result.trajectory
     st = dg.sample(model, traj, times, 0)
-    contacts = dg.contact_series(model, traj, times, st)
+    # Friction is looked up below for the pressed contacts only: contact_series's own lookup
+    # scans every record for every contact (20 s of a 1 000-sphere pile's export).
+    contacts = dg.contact_series(replace(model, friction=False), traj, times, st)
     # Pressed past the engine's touching tolerance, as the recording draws contacts.
     pressed = float(kn.TOUCH_TOL) * 2.0 * float(model.radius.max())
     on = contacts.overlap[:, 0] > pressed  # (T, C)
     frame, which = np.nonzero(on)
     friction = None
-    if contacts.friction_force is not None and run.scene.has_friction:
-        friction = pad3(contacts.friction_force[:, 0][frame, which])
+    if model.friction and run.scene.has_friction:
+        friction = pad3(_friction(traj.records, contacts.pairs, model, times[frame], which))
     return Frames(times=np.asarray(times, float), s=pad3(st.s[:, 0]), v=pad3(st.v[:, 0]), w=_spin3(st.w[:, 0]),
                   radius=model.radius[0].astype(float), names=tuple(model.body_names), dim=model.dim,
                   spin_dim=model.spin_dim, contact_frame=frame, pairs=contacts.pairs[which].reshape(-1, 2),
@@ -95,6 +97,33 @@ def export_frames(run: SceneRun, times: np.ndarray) -> Frames:
                   normal_force=pad3(contacts.normal_force[:, 0][frame, which]), friction=friction,
                   wall_point=pad3(model.wall_point.reshape(-1, model.dim)),
                   wall_normal=pad3(model.wall_normal.reshape(-1, model.dim)))
+
+
+def _friction(records: np.ndarray, pairs: np.ndarray, model, at: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """Friction force (K, D) on the first body of contact `which` (K,) at times `at` (K,), all
+    pressed then: the force of the contact's step that ends at or after the time, as
+    `diagnostics.contact_series` holds it (zero after its last record)."""
+    d, width = model.dim, model.n_bodies + model.n_walls
+    out = np.zeros((len(at), d))
+    if not len(records) or not len(at):
+        return out
+    keys = pairs[:, 0] * width + pairs[:, 1] + model.n_walls
+    record_keys = records[:, kn.R_I].astype(np.int64) * width + records[:, kn.R_J].astype(np.int64) + model.n_walls
+    order = np.lexsort((records[:, kn.R_T], record_keys))
+    records, record_keys = records[order], record_keys[order]
+    starts = np.searchsorted(record_keys, keys, side="left")
+    ends = np.searchsorted(record_keys, keys, side="right")
+    by_contact = np.argsort(which, kind="stable")
+    cuts = np.searchsorted(which[by_contact], np.arange(len(pairs) + 1))
+    for c in np.flatnonzero(np.diff(cuts)):
+        rows = by_contact[cuts[c]:cuts[c + 1]]
+        block = records[starts[c]:ends[c]]
+        if not len(block):
+            continue
+        k = np.searchsorted(block[:, kn.R_T], at[rows], side="left")
+        force = block[np.minimum(k, len(block) - 1), kn.R_FX:kn.R_FX + d]
+        out[rows] = np.where((k < len(block))[:, None], force, 0.0)
+    return out
 
 
 def _spin3(w: np.ndarray) -> np.ndarray:
