@@ -279,3 +279,21 @@ def test_friction_is_the_contact_series_own(recorded: dict, name: str) -> None:
     assert len(want) > 0 and np.abs(want).max() > 0
     np.testing.assert_array_equal(frames.friction[:, :d], want)
     np.testing.assert_array_equal(frames.normal_force[:, :d], series.normal_force[frames.contact_frame, 0, which])
+
+
+def test_download_bundles(recorded: dict) -> None:
+    """What the viewer sends: a zip of the VTK series or of both CSV tables, the TOML itself."""
+    import io
+    import zipfile
+
+    from collide.export import export_download
+
+    run = recorded["demo-bonus"][2]
+    name, data = export_download(run, "vtk", "bonus", max_frames=4)
+    names = zipfile.ZipFile(io.BytesIO(data)).namelist()
+    assert name == "bonus-vtk.zip" and sorted(names) == ["bonus.pvd", *(f"bonus/frame_0000{k}.vtp" for k in range(4))]
+    name, data = export_download(run, "csv", "bonus")
+    assert name == "bonus-csv.zip" and sorted(zipfile.ZipFile(io.BytesIO(data)).namelist()) == \
+        ["bonus-contacts.csv", "bonus.csv"]
+    name, data = export_download(run, "toml", "bonus")
+    assert name == "bonus.toml" and tomllib.loads(data.decode())["name"] == "demo-bonus"

@@ -13,6 +13,7 @@ final names. No CLI code here: `cli/export.py` is the command.
 
 from __future__ import annotations
 
+import io
 import shutil
 import tomllib
 from pathlib import Path
@@ -84,6 +85,25 @@ def export_run(run: SceneRun, fmt: str, out: Path, *, fps: float = DEFAULT_FPS, 
     return _write_vtk(frames, out, ascii)
 
 
+def export_download(run: SceneRun, fmt: str, stem: str, *, max_frames: int = MAX_FRAMES) -> tuple[str, bytes]:
+    """The export as one file to send to a browser: the `.mp4` or `.toml` itself, or a zip of the
+    VTK series (the `.pvd` and its folder) or of the two CSV tables. Returns (file name, bytes)."""
+    import tempfile
+    import zipfile
+
+    with tempfile.TemporaryDirectory(prefix="collide-export-") as tmp:
+        out = Path(tmp) / f"{stem}{SUFFIX[fmt]}"
+        written = export_run(run, fmt, out, max_frames=max_frames)
+        if fmt in ("mp4", "toml"):
+            return out.name, out.read_bytes()
+        files = [p for path in written for p in (sorted(path.iterdir()) if path.is_dir() else [path])]
+        buffer = io.BytesIO()
+        with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
+            for path in files:
+                archive.write(path, path.relative_to(tmp).as_posix())
+        return f"{stem}-{fmt}.zip", buffer.getvalue()
+
+
 def _write_video(frames: Frames, out: Path, title: str) -> Path:
     from collide.export.video import write_video
 
@@ -122,5 +142,5 @@ def _write_vtk(frames: Frames, out: Path, ascii: bool) -> list[Path]:
     return [write_text_atomic(out, collection(frames, folder.name)), folder]
 
 
-__all__ = ["FORMATS", "MAX_FRAMES", "SUFFIX", "contacts_path", "default_out", "export_run", "frames_folder", "outputs",
-           "scene_toml"]
+__all__ = ["FORMATS", "MAX_FRAMES", "SUFFIX", "contacts_path", "default_out", "export_download", "export_run",
+           "frames_folder", "outputs", "scene_toml"]
