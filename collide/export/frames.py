@@ -53,6 +53,7 @@ class Frames:
     friction: np.ndarray | None
     wall_point: np.ndarray
     wall_normal: np.ndarray
+    angle: np.ndarray | None = None  # (T, N) rad: 2D orientation (the video's spin markers)
 
     def contacts_at(self, frame: int) -> slice:
         """The rows of the contacts pressed at one frame (contacts are sorted by frame)."""
@@ -96,7 +97,8 @@ def export_frames(run: SceneRun, times: np.ndarray) -> Frames:
                   overlap=contacts.overlap[:, 0][frame, which], point=pad3(contacts.point[:, 0][frame, which]),
                   normal_force=pad3(contacts.normal_force[:, 0][frame, which]), friction=friction,
                   wall_point=pad3(model.wall_point.reshape(-1, model.dim)),
-                  wall_normal=pad3(model.wall_normal.reshape(-1, model.dim)))
+                  wall_normal=pad3(model.wall_normal.reshape(-1, model.dim)),
+                  angle=st.q[:, 0, :, 0] if model.orient_dim == 1 else None)
 
 
 def _friction(records: np.ndarray, pairs: np.ndarray, model, at: np.ndarray, which: np.ndarray) -> np.ndarray:

@@ -4,7 +4,7 @@ ffmpeg encodes them as H.264 in an MP4 that browsers and players play.
 ffmpeg comes from the `imageio-ffmpeg` wheel (`pip install 'collide[video]'`), which carries a
 static binary for the platform, or else from an `ffmpeg` on PATH. Frames are shown in order, one
 per video frame: the recording's frames are denser across contacts, so contacts play in slow
-motion; the label gives the simulated time.
+motion; the label gives the simulated time. 2D spheres carry a line that turns with their spin.
 """
 
 from __future__ import annotations
@@ -99,6 +99,11 @@ class _Painter:
                 self.ax.plot(seg[:, 0], seg[:, 1], color="0.3", lw=2)
             self.circles = [self.ax.add_patch(Circle(frames.s[0, b, :2], frames.radius[b], color=self.colours[b]))
                             for b in range(n)]
+            self.markers = None
+            if frames.angle is not None:  # centre-to-rim lines that turn with each sphere's spin
+                from matplotlib.collections import LineCollection
+
+                self.markers = self.ax.add_collection(LineCollection(self._spokes(0), colors="white", linewidths=1.5))
         self.ax.set_title(title)
         self.label = self.fig.text(0.02, 0.02, "", family="monospace")
 
@@ -110,6 +115,12 @@ class _Painter:
             self.ax.add_collection3d(Poly3DCollection([square], facecolor=(0.5, 0.5, 0.5, 0.25),
                                                       edgecolor="0.3"))
 
+    def _spokes(self, k: int) -> np.ndarray:
+        """(N, 2, 2) lines from each centre to its rim, at its orientation."""
+        s, angle, r = self.frames.s[k, :, :2], self.frames.angle[k], self.frames.radius
+        rim = s + r[:, None] * np.stack((np.cos(angle), np.sin(angle)), axis=1)
+        return np.stack((s, rim), axis=1)
+
     def draw(self, k: int) -> bytes:
         s = self.frames.s[k]
         if self.three:
@@ -117,6 +128,8 @@ class _Painter:
         else:
             for circle, centre in zip(self.circles, s):
                 circle.center = (centre[0], centre[1])
+            if self.markers is not None:
+                self.markers.set_segments(self._spokes(k))
         self.label.set_text(f"t = {self.frames.times[k]:.6f} s")
         self.canvas.draw()
         rgba = np.asarray(self.canvas.buffer_rgba())
