@@ -297,3 +297,29 @@ def test_download_bundles(recorded: dict) -> None:
         ["bonus-contacts.csv", "bonus.csv"]
     name, data = export_download(run, "toml", "bonus")
     assert name == "bonus.toml" and tomllib.loads(data.decode())["name"] == "demo-bonus"
+
+
+def test_viewer_download_buttons(recorded: dict) -> None:
+    """The viewer's VTK, CSV long, MP4 and TOML buttons send what `export_download` makes (no
+    browser: the download goes to a stand-in client)."""
+    import io
+    import zipfile
+
+    from viewer.file_actions import EXPORTS, FileActions
+    from viewer.state import ViewRun
+
+    sent, said = [], []
+    actions = FileActions.__new__(FileActions)
+    send = lambda self, name, data, **kw: sent.append((name, data))  # noqa: E731
+    actions._client = type("Client", (), {"send_file_download": send})()
+    actions._shown = lambda: (ViewRun(recorded["demo-bonus"][2]), 0.0)
+    actions._say = lambda message, error=False: said.append((message, error))
+    actions.downloads = []
+    formats = {"vtk": "demo-bonus-vtk.zip", "csv": "demo-bonus-csv.zip", "toml": "demo-bonus.toml"}
+    assert set(formats) < set(EXPORTS.values())
+    for fmt, name in formats.items():
+        assert actions.export_file(fmt) == name
+    assert [n for n, _ in sent] == list(formats.values()) and not any(error for _, error in said)
+    assert "demo-bonus.pvd" in zipfile.ZipFile(io.BytesIO(sent[0][1])).namelist()
+    actions._shown = lambda: (None, 0.0)
+    assert actions.export_file("toml") is None and said[-1] == ("No run to export.", True)
