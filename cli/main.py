@@ -247,7 +247,7 @@ def _register_optional() -> None:
     """Commands that live in their own modules."""
     import importlib
 
-    for module in ("cli.numerics", "cli.batch", "cli.accuracy", "cli.view", "cli.bench", "cli.engine"):
+    for module in ("cli.numerics", "cli.batch", "cli.accuracy", "cli.view", "cli.bench", "cli.engine", "cli.export"):
         try:
             mod = importlib.import_module(module)
         except ModuleNotFoundError as exc:

@@ -1,6 +1,6 @@
 """The Files and export folder: open a recording from recordings/ or an upload (read in a child
 process: a damaged file cannot take the server down), save the run shown, and download it as
-CSV or the 3D view as PNG."""
+CSV, as `collide export` writes it (VTK, long CSV, MP4, TOML), or the 3D view as PNG."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from pathlib import Path
 import viser
 from viser import _messages
 
+from collide.export import export_download
 from collide.recording import RecordingError, write_recording
 from collide.run import run_scene
 from collide.scene import SceneError
@@ -23,6 +24,10 @@ from viewer.panel import CHOOSE, Panel
 from viewer.reading import read_untrusted
 from viewer.state import ViewRun
 from viewer.uploads import UploadSink
+
+# The panel's download buttons that `collide export` makes, and their format.
+EXPORTS = {"VTK": "vtk", "CSV long": "csv", "MP4": "mp4", "TOML": "toml"}
+VIEWER_EXPORT_FRAMES = 600  # frames at most in a download (a video of 20 s; the CLI's --max-frames is 2 000)
 
 # s after an upload's outcome when viser's own "uploaded successfully" is removed again: a
 # loaded browser may show it seconds late.
@@ -189,10 +194,31 @@ class FileActions:
         return path
 
     def _on_export(self, event: viser.GuiEvent) -> None:
-        if self._panel.export_buttons.value == "CSV":
+        choice = self._panel.export_buttons.value
+        if choice == "CSV":
             self.export_csv()
+        elif choice in EXPORTS:
+            self.export_file(EXPORTS[choice])
         else:
             self.export_png()
+
+    def export_file(self, fmt: str) -> str | None:
+        """Send the run shown as `collide export --format fmt` writes it (a zip for VTK and the
+        long CSV's two tables) to the browser as a download."""
+        view, _ = self._shown()
+        if view is None or getattr(view, "run", None) is None:
+            self._say("No run to export.", error=True)
+            return None
+        try:
+            name, content = export_download(view.run, fmt, files.safe_stem(view.scene.name),
+                                            max_frames=VIEWER_EXPORT_FRAMES)
+        except (ValueError, RunError, OSError) as exc:
+            self._say(f"{fmt.upper()} not made: {one_line(exc)}", error=True)
+            return None
+        self._client.send_file_download(name, content, save_immediately=True)
+        self.downloads.append((name, len(content)))
+        self._say(f"Downloaded **{name}** ({len(content) / 1e6:.3g} MB).")
+        return name
 
     def export_csv(self) -> str | None:
         """Send the run's CSV (the `collide run --csv` columns) to the browser as a download."""

@@ -131,8 +131,9 @@ class Panel:
                                             hint=f"at most {config.max_upload_bytes // 2**20} MB")
         self.save_button = gui.add_button("Save this run (.rrd)", icon=viser.Icon.DEVICE_FLOPPY)
         self.export_buttons = gui.add_button_group(
-            "download", ["CSV", "PNG"],
-            hint="CSV: the run in the columns of `collide run --csv`; PNG: the 3D view as it is now")
+            "download", ["CSV", "PNG", "VTK", "CSV long", "MP4", "TOML"],
+            hint="CSV: the run in the columns of `collide run --csv`; PNG: the 3D view as it is now; "
+            "VTK, CSV long, MP4, TOML: as `collide export` writes them (docs/export.md; VTK and CSV long as a zip)")
         self.file_message = gui.add_markdown("")
 
     def _ensemble(self, gui: viser.GuiApi) -> None:
