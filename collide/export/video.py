@@ -1,7 +1,7 @@
 """A video of the run for a lecture: matplotlib draws each frame (spheres, walls, the time), and
 ffmpeg encodes them as H.264 in an MP4 that browsers and players play.
 
-ffmpeg comes from the `imageio-ffmpeg` wheel (`pip install 'collide[video]'`), which carries a
+ffmpeg comes from the `imageio-ffmpeg` wheel (a dependency), which carries a
 static binary for the platform, or else from an `ffmpeg` on PATH. Frames are shown in order, one
 per video frame: the recording's frames are denser across contacts, so contacts play in slow
 motion; the label gives the simulated time. 2D spheres carry a line that turns with their spin.
@@ -35,7 +35,7 @@ def ffmpeg_path() -> str:
         found = shutil.which("ffmpeg")
         if found:
             return found
-    raise VideoError("an MP4 needs ffmpeg: pip install 'collide[video]' (imageio-ffmpeg, which carries it), "
+    raise VideoError("an MP4 needs ffmpeg: pip install imageio-ffmpeg (a dependency of collide, which carries it), "
                      "or put an ffmpeg on PATH")
 
 
