@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from collide.engine import layout as kn
+from collide.engine import layout
 from collide.results import RunResult
 from collide.trajectory import Trajectory, segment_search
 
@@ -37,15 +37,17 @@ class RecordedForces:
         c = len(self.pairs)
         rec, iv = traj.records, traj.intervals
         # The normal force: each contact's records and a zero at each of its phases' ends.
-        rows_c = self.contact_of(rec[:, kn.R_I], rec[:, kn.R_J]) if len(rec) else np.zeros(0, np.int64)
-        iv_c = self.contact_of(iv[:, kn.V_I], iv[:, kn.V_J]) if len(iv) else np.zeros(0, np.int64)
-        ends = np.isfinite(iv[:, kn.V_END]) if len(iv) else np.zeros(0, bool)
+        rows_c = self.contact_of(rec[:, layout.R_I], rec[:, layout.R_J]) if len(rec) else np.zeros(0, np.int64)
+        iv_c = self.contact_of(iv[:, layout.V_I], iv[:, layout.V_J]) if len(iv) else np.zeros(0, np.int64)
+        ends = np.isfinite(iv[:, layout.V_END]) if len(iv) else np.zeros(0, bool)
         contact = np.concatenate((rows_c, iv_c, iv_c[ends]))
-        t = np.concatenate((rec[:, kn.R_T] if len(rec) else np.zeros(0), iv[:, kn.V_START] if len(iv) else np.zeros(0),
-                            iv[ends, kn.V_END] if len(iv) else np.zeros(0)))
+        t = np.concatenate((rec[:, layout.R_T] if len(rec) else np.zeros(0),
+                            iv[:, layout.V_START] if len(iv) else np.zeros(0),
+                            iv[ends, layout.V_END] if len(iv) else np.zeros(0)))
         # At one time: a phase's start before that time's record, its end after it.
         kind = np.concatenate((np.ones(len(rows_c)), np.zeros(len(iv_c)), np.full(int(ends.sum()), 2.0)))
-        value = np.concatenate((rec[:, kn.R_FN] if len(rec) else np.zeros(0), np.zeros(len(iv_c) + int(ends.sum()))))
+        value = np.concatenate((rec[:, layout.R_FN] if len(rec) else np.zeros(0),
+                                np.zeros(len(iv_c) + int(ends.sum()))))
         order = np.lexsort((kind, t, contact))
         order = order[contact[order] >= 0]
         grouped = contact[order]
@@ -54,14 +56,14 @@ class RecordedForces:
         cs = np.arange(c)
         self._n_start = np.searchsorted(grouped, cs, side="left")
         self._n_end = np.searchsorted(grouped, cs, side="right")
-        self.record_peak = float(np.max(np.abs(rec[:, kn.R_FN]), initial=0.0)) if len(rec) else 0.0
+        self.record_peak = float(np.max(np.abs(rec[:, layout.R_FN]), initial=0.0)) if len(rec) else 0.0
         # Friction: the records alone, in the same order (by contact, then time, then as recorded).
         self._f_t = None
         if friction and len(rec) and c:
             rows = order[order < len(rows_c)]
             f_contact = rows_c[rows]
-            self._f_t = np.ascontiguousarray(rec[rows, kn.R_T])
-            self._f_force = rec[rows, kn.R_FX:kn.R_FX + dim]
+            self._f_t = np.ascontiguousarray(rec[rows, layout.R_T])
+            self._f_force = rec[rows, layout.R_FX:layout.R_FX + dim]
             self._f_start = np.searchsorted(f_contact, cs, side="left")
             self._f_end = np.searchsorted(f_contact, cs, side="right")
 

@@ -15,8 +15,7 @@ import time
 
 import numpy as np
 
-from collide.engine import layout as kn
-from collide.engine import tier
+from collide.engine import layout, tier
 from collide.engine.dem import layout as dk
 from collide.engine.dem import loop as dem_loop
 from collide.model import KISSING, TABLE_ESTAR, TABLE_K, TABLE_KTR, TABLE_REST, Model, State, select_model
@@ -216,7 +215,7 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
     outcomes = run_members(b_count, lambda b: dem_loop.dem_run(*members[b][0]), progress,
                            [(m[0][-1], int(dk.P_NOW), m[1]) for m in members])
     wall_time = time.perf_counter() - started
-    body_tables = np.zeros((b_count, model.n_bodies, int(kn.NG)))
+    body_tables = np.zeros((b_count, model.n_bodies, int(layout.NG)))
     for b, (t, WK, KN, REC, IV, EP, st, fg) in enumerate(outcomes):
         (X, V, W, Q, _, _, _, _, grav, _, _), t_end = members[b]
         if st[dk.S_STATUS] == dk.NONFINITE:
@@ -231,13 +230,13 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
             if record:
                 KN = _tail_knots(KN, t, X, V, grav)
         G = body_tables[b]
-        G[:, kn.G_S:kn.G_S + 3], G[:, kn.G_V:kn.G_V + 3] = X, V
-        G[:, kn.G_W:kn.G_W + 3], G[:, kn.G_Q:kn.G_Q + 4] = W, Q
+        G[:, layout.G_S:layout.G_S + 3], G[:, layout.G_V:layout.G_V + 3] = X, V
+        G[:, layout.G_W:layout.G_W + 3], G[:, layout.G_Q:layout.G_Q + 4] = W, Q
         finals.append((t, float(WK.sum()), float(fg[dk.G_STORED])))
         stats[b], figures[b] = st, fg
         if record:
             # A phase's peak is recorded when the phase ends: records in time order again.
-            REC = REC[np.argsort(REC[:, kn.R_T], kind="stable")]
+            REC = REC[np.argsort(REC[:, layout.R_T], kind="stable")]
             traj = Trajectory(KN, REC, IV, select_model(model, b))
             traj.energy_parts = EP
             trajectories.append(traj)
@@ -261,20 +260,20 @@ def _tail_knots(KN: np.ndarray, t: float, X: np.ndarray, V: np.ndarray, grav: np
     last frame marked as followed by free flight, and a knot at the run's end t where X, V (N,
     3) are (a trajectory that stopped at the last frame ended the view and the recording there,
     short of the run). Spin and orientation are the frame's: the flight turns them in closed form."""
-    last = KN[KN[:, kn.K_T] == KN[:, kn.K_T].max()] if len(KN) else KN
-    if not len(last) or last[0, kn.K_T] >= t:
+    last = KN[KN[:, layout.K_T] == KN[:, layout.K_T].max()] if len(KN) else KN
+    if not len(last) or last[0, layout.K_T] >= t:
         return KN
     KN = KN.copy()
-    KN[KN[:, kn.K_T] == last[0, kn.K_T], kn.K_FREE] = 1.0
-    KN[KN[:, kn.K_T] == last[0, kn.K_T], kn.K_AN:kn.K_AN + 3] = grav
+    KN[KN[:, layout.K_T] == last[0, layout.K_T], layout.K_FREE] = 1.0
+    KN[KN[:, layout.K_T] == last[0, layout.K_T], layout.K_AN:layout.K_AN + 3] = grav
     end = last.copy()
-    body = end[:, kn.K_BODY].astype(np.int64)
-    end[:, kn.K_T] = t
-    end[:, kn.K_FREE] = 1.0
-    end[:, kn.K_S:kn.K_S + 3] = X[body]
-    end[:, kn.K_V:kn.K_V + 3] = V[body]
-    end[:, kn.K_A:kn.K_A + 3] = grav
-    end[:, kn.K_AN:kn.K_AN + 3] = grav
+    body = end[:, layout.K_BODY].astype(np.int64)
+    end[:, layout.K_T] = t
+    end[:, layout.K_FREE] = 1.0
+    end[:, layout.K_S:layout.K_S + 3] = X[body]
+    end[:, layout.K_V:layout.K_V + 3] = V[body]
+    end[:, layout.K_A:layout.K_A + 3] = grav
+    end[:, layout.K_AN:layout.K_AN + 3] = grav
     return np.concatenate((KN, end))
 
 

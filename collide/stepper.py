@@ -19,8 +19,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from collide.engine import layout as kn
-from collide.engine import seed, tier
+from collide.engine import layout, seed, tier
 from collide.engine.event import run as event_run
 from collide.errors import RunError
 from collide.integrators import INTEGRATORS, Integrator
@@ -38,7 +37,7 @@ from collide.model import (
 from collide.results import ContactLog, RunResult
 from collide.trajectory import Trajectory
 
-EDGE_TOL = float(kn.EDGE_TOL)
+EDGE_TOL = float(layout.EDGE_TOL)
 EDGE_BAND_SHARE = 0.5  # of eps: the widest a band's edge may count (see simulate)
 
 
@@ -174,22 +173,22 @@ def kernel_inputs(model: Model, state: State) -> tuple:
     """The batch's body tables G (B, N, NG), walls WP (N_W, 6) and gravity (B, 3), as the kernels
     take them (member b: G[b], its contact tables model.pair_table[b], model.wall_table[b])."""
     b_count, n = model.batch, model.n_bodies
-    G = np.zeros((b_count, n, int(kn.NG)))
-    G[..., kn.G_S:kn.G_S + 3] = _pad3(state.s)
-    G[..., kn.G_V:kn.G_V + 3] = _pad3(state.v)
+    G = np.zeros((b_count, n, int(layout.NG)))
+    G[..., layout.G_S:layout.G_S + 3] = _pad3(state.s)
+    G[..., layout.G_V:layout.G_V + 3] = _pad3(state.v)
     if model.spin_dim == 1:
-        G[..., kn.G_W + 2] = state.w[..., 0]
-        G[..., kn.G_Q] = state.q[..., 0]
+        G[..., layout.G_W + 2] = state.w[..., 0]
+        G[..., layout.G_Q] = state.q[..., 0]
     elif model.spin_dim == 3:
-        G[..., kn.G_W:kn.G_W + 3] = state.w
-        G[..., kn.G_Q:kn.G_Q + 4] = state.q
-    G[..., kn.G_TB] = state.t[:, None]
-    G[..., kn.G_IM] = model.inv_mass
-    G[..., kn.G_II] = model.inv_inertia if model.spin_dim else 0.0
-    G[..., kn.G_R] = model.radius
-    G[..., kn.G_M] = model.mass
-    G[..., kn.G_I] = model.inertia
-    G[..., kn.G_MAT] = model.material
+        G[..., layout.G_W:layout.G_W + 3] = state.w
+        G[..., layout.G_Q:layout.G_Q + 4] = state.q
+    G[..., layout.G_TB] = state.t[:, None]
+    G[..., layout.G_IM] = model.inv_mass
+    G[..., layout.G_II] = model.inv_inertia if model.spin_dim else 0.0
+    G[..., layout.G_R] = model.radius
+    G[..., layout.G_M] = model.mass
+    G[..., layout.G_I] = model.inertia
+    G[..., layout.G_MAT] = model.material
     WP = np.zeros((model.n_walls, 6))
     if model.n_walls:
         WP[:, :3] = _pad3(model.wall_point)
@@ -208,13 +207,13 @@ def into_plane(Gb: np.ndarray, WP: np.ndarray, gravity: np.ndarray, normal: np.n
         first = np.cross(normal, np.eye(3)[int(np.abs(normal).argmin())])
         first /= np.linalg.norm(first)
         turn = np.array([first, np.cross(normal, first), normal])
-    for col in (kn.G_S, kn.G_V, kn.G_W):
+    for col in (layout.G_S, layout.G_V, layout.G_W):
         Gb[:, col:col + 3] = Gb[:, col:col + 3] @ turn.T
-    Gb[:, kn.G_S + 2] = Gb[0, kn.G_S + 2]
-    Gb[:, kn.G_V + 2] = 0.0
-    Gb[:, kn.G_W:kn.G_W + 2] = 0.0
-    orientation = Gb[:, kn.G_Q:kn.G_Q + 4].copy()
-    Gb[:, kn.G_Q:kn.G_Q + 4] = 0.0
+    Gb[:, layout.G_S + 2] = Gb[0, layout.G_S + 2]
+    Gb[:, layout.G_V + 2] = 0.0
+    Gb[:, layout.G_W:layout.G_W + 2] = 0.0
+    orientation = Gb[:, layout.G_Q:layout.G_Q + 4].copy()
+    Gb[:, layout.G_Q:layout.G_Q + 4] = 0.0
     gravity[:] = turn @ gravity
     gravity[2] = 0.0
     walls = WP.copy()
@@ -228,28 +227,29 @@ def into_plane(Gb: np.ndarray, WP: np.ndarray, gravity: np.ndarray, normal: np.n
 def out_of_plane(Gb: np.ndarray, knots: np.ndarray, records: np.ndarray, turn: np.ndarray,
                  orientation: np.ndarray, spin_dim: int) -> None:
     """Undo `into_plane` on one member's final bodies, knots and contact records (in place)."""
-    for col in (kn.G_S, kn.G_V, kn.G_W):
+    for col in (layout.G_S, layout.G_V, layout.G_W):
         Gb[:, col:col + 3] = Gb[:, col:col + 3] @ turn
-    for col in (kn.K_S, kn.K_V, kn.K_W, kn.K_A, kn.K_AN):
+    for col in (layout.K_S, layout.K_V, layout.K_W, layout.K_A, layout.K_AN):
         knots[:, col:col + 3] = knots[:, col:col + 3] @ turn
-    records[:, kn.R_FX:kn.R_FZ + 1] = records[:, kn.R_FX:kn.R_FZ + 1] @ turn
+    records[:, layout.R_FX:layout.R_FZ + 1] = records[:, layout.R_FX:layout.R_FZ + 1] @ turn
     if spin_dim == 3:  # the angle turned about the plane's normal, onto each body's start
         axis = turn[2]
-        Gb[:, kn.G_Q:kn.G_Q + 4] = turned_quaternions(orientation, np.broadcast_to(axis, (len(Gb), 3)),
-                                                      Gb[:, kn.G_Q])
-        body = knots[:, kn.K_BODY].astype(np.int64)
-        knots[:, kn.K_Q:kn.K_Q + 4] = turned_quaternions(orientation[body], np.broadcast_to(axis, (len(knots), 3)),
-                                                         knots[:, kn.K_Q])
+        Gb[:, layout.G_Q:layout.G_Q + 4] = turned_quaternions(orientation, np.broadcast_to(axis, (len(Gb), 3)),
+                                                              Gb[:, layout.G_Q])
+        body = knots[:, layout.K_BODY].astype(np.int64)
+        knots[:, layout.K_Q:layout.K_Q + 4] = turned_quaternions(orientation[body],
+                                                                 np.broadcast_to(axis, (len(knots), 3)),
+                                                                 knots[:, layout.K_Q])
 
 
 def unpack_state(model: Model, G: np.ndarray) -> tuple:
     """s, v, w, q of the members from their final body tables G (B, N, NG)."""
     d = model.dim
-    s, v = G[..., kn.G_S:kn.G_S + d].copy(), G[..., kn.G_V:kn.G_V + d].copy()
+    s, v = G[..., layout.G_S:layout.G_S + d].copy(), G[..., layout.G_V:layout.G_V + d].copy()
     if model.spin_dim == 1:
-        w, q = G[..., kn.G_W + 2:kn.G_W + 3].copy(), G[..., kn.G_Q:kn.G_Q + 1].copy()
+        w, q = G[..., layout.G_W + 2:layout.G_W + 3].copy(), G[..., layout.G_Q:layout.G_Q + 1].copy()
     elif model.spin_dim == 3:
-        w, q = G[..., kn.G_W:kn.G_W + 3].copy(), G[..., kn.G_Q:kn.G_Q + 4].copy()
+        w, q = G[..., layout.G_W:layout.G_W + 3].copy(), G[..., layout.G_Q:layout.G_Q + 4].copy()
     else:
         w, q = np.zeros(G.shape[:2] + (0,)), np.zeros(G.shape[:2] + (0,))
     return s, v, w, q
@@ -288,8 +288,8 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
                                                 EDGE_BAND_SHARE * model.eps / speed))
     weights = np.asarray(integ.weights, dtype=float)
     trajectories = [] if record else None
-    stats = np.zeros((b_count, int(kn.NS)), np.int64)
-    figures = np.zeros((b_count, int(kn.NF)))
+    stats = np.zeros((b_count, int(layout.NS)), np.int64)
+    figures = np.zeros((b_count, int(layout.NF)))
     # The members' tables, built for the whole batch at once (per member they cost as much Python
     # as a small member's run).
     G, WP, grav = kernel_inputs(model, initial)
@@ -297,21 +297,22 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     friction = model.friction & (model.mu > 0) & (model.dim > 1)
     planes = [plane_of_motion(model, initial, b) if friction[b] and model.dim == 3 else None for b in range(b_count)]
     turns = friction & np.array([model.dim == 3 and plane is None for plane in planes])
-    fl = np.zeros((b_count, int(kn.NFL)), np.int64)
-    fl[:, kn.FL_SPIN], fl[:, kn.FL_FRICTION], fl[:, kn.FL_SEED] = spin, friction, model.seed_lever
-    fl[:, kn.FL_PLANAR], fl[:, kn.FL_RECORD], fl[:, kn.FL_AUTO] = model.dim < 3, record, auto & integ.events
-    fl[:, kn.FL_MAXSTEPS], fl[:, kn.FL_DIM], fl[:, kn.FL_TURNS] = max_steps, model.dim, turns
+    fl = np.zeros((b_count, int(layout.NFL)), np.int64)
+    fl[:, layout.FL_SPIN], fl[:, layout.FL_FRICTION], fl[:, layout.FL_SEED] = spin, friction, model.seed_lever
+    fl[:, layout.FL_PLANAR], fl[:, layout.FL_RECORD], fl[:, layout.FL_AUTO] = model.dim < 3, record, auto & integ.events
+    fl[:, layout.FL_MAXSTEPS], fl[:, layout.FL_DIM], fl[:, layout.FL_TURNS] = max_steps, model.dim, turns
     t_end = np.where(np.isfinite(duration), duration, np.inf)
-    fp = np.zeros((b_count, int(kn.NFP)))
-    fp[:, kn.FP_DT], fp[:, kn.FP_OMEGA_H], fp[:, kn.FP_TEND], fp[:, kn.FP_TAIL] = dt, omega_h, t_end, tail
-    fp[:, kn.FP_SCALE] = speed * event_tol / EDGE_TOL
-    fp[:, kn.FP_EVENT_TOL] = event_tol
+    fp = np.zeros((b_count, int(layout.NFP)))
+    fp[:, layout.FP_DT], fp[:, layout.FP_OMEGA_H] = dt, omega_h
+    fp[:, layout.FP_TEND], fp[:, layout.FP_TAIL] = t_end, tail
+    fp[:, layout.FP_SCALE] = speed * event_tol / EDGE_TOL
+    fp[:, layout.FP_EVENT_TOL] = event_tol
     # A pair closing at under 1e-9 of its own speeds closes by round-off, not an approach (a share
     # of the pair's own: of the fastest body's, or of a dead band 1e9 times the speeds, slow pairs
     # passed through each other unseen).
-    fp[:, kn.FP_SLOW] = 1e-9
+    fp[:, layout.FP_SLOW] = 1e-9
     fastest = np.sqrt((initial.v ** 2).sum(-1)).max(-1)
-    fp[:, kn.FP_END_SLOW] = np.where(np.asarray(resolved) > 1e-9, resolved, 0.0) * fastest
+    fp[:, layout.FP_END_SLOW] = np.where(np.asarray(resolved) > 1e-9, resolved, 0.0) * fastest
     # Contiguous already (stacked per scene); a strided view would compile the kernel anew.
     tables = [(np.ascontiguousarray(model.pair_table[b]), np.ascontiguousarray(model.wall_table[b]))
               for b in range(b_count)]
@@ -322,7 +323,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
             if plane is not None and integ.events}
     for b, (_, turned_walls, _) in flat.items():
         walls[b] = turned_walls
-        fl[b, kn.FL_PLANAR] = kn.YES
+        fl[b, layout.FL_PLANAR] = layout.YES
     _load_compiled(integ.events, G[0], tables[0], WP, grav[0], weights, fl[0], fp[0])  # loading is not simulating
 
     def run_member(b: int) -> tuple:
@@ -331,7 +332,8 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
         return seed.seed_run(G[b], tables[b], WP, grav[b], fl[b], fp[b])
 
     started = time.perf_counter()
-    outcomes = run_members(b_count, run_member, progress, [(fp[b], int(kn.FP_NOW), t_end[b]) for b in range(b_count)])
+    outcomes = run_members(b_count, run_member, progress,
+                           [(fp[b], int(layout.FP_NOW), t_end[b]) for b in range(b_count)])
     wall_time = time.perf_counter() - started
     t_final = np.zeros(b_count)
     ivals = []
@@ -346,27 +348,28 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
             trajectories.append(Trajectory(knots, recs, ival, select_model(model, b)))
     logs = contact_logs(ivals, t_final)
     free_since = last_contacts(ivals, t_final, model.n_bodies)
-    for b in np.flatnonzero(stats[:, kn.S_UNLOCATED]):
+    for b in np.flatnonzero(stats[:, layout.S_UNLOCATED]):
         member = f"run {b}: " if b_count > 1 else ""
-        count = int(stats[b, kn.S_UNLOCATED])
+        count = int(stats[b, layout.S_UNLOCATED])
         warnings.append(f"{member}{count} step(s) ran out of trials locating an event (first at t = "
-                        f"{figures[b, kn.F_UNLOCATED_T]:.6g} s) and may have passed it: the outcome can be off "
+                        f"{figures[b, layout.F_UNLOCATED_T]:.6g} s) and may have passed it: the outcome can be off "
                         "by more than its error estimate; try another --tol")
-    final = State(t_final, *unpack_state(model, G), initial.work + G[..., kn.G_WK].sum(-1))
+    final = State(t_final, *unpack_state(model, G), initial.work + G[..., layout.G_WK].sum(-1))
     if integ.events:
-        max_force = figures[:, kn.F_MAX_FORCE].copy()
+        max_force = figures[:, layout.F_MAX_FORCE].copy()
     elif not model.n_walls:  # the seed's grid: pairs only, each a spring k_pair delta
-        max_force = model.pair_table[:, 0, 0, 0] * figures[:, kn.F_MAX_OVERLAP]
+        max_force = model.pair_table[:, 0, 0, 0] * figures[:, layout.F_MAX_OVERLAP]
     else:
         max_force = np.full(b_count, np.nan)
-    log = ContactLog(logs[:, 0], logs[:, 1], logs[:, 2], figures[:, kn.F_MAX_OVERLAP].copy(),
-                     stats[:, kn.S_CONTACTS].copy(), max_force, longest_contacts(model, ivals, t_final))
-    dt_min = np.where(np.isfinite(figures[:, kn.F_DT_MIN]), figures[:, kn.F_DT_MIN], dt)
+    log = ContactLog(logs[:, 0], logs[:, 1], logs[:, 2], figures[:, layout.F_MAX_OVERLAP].copy(),
+                     stats[:, layout.S_CONTACTS].copy(), max_force, longest_contacts(model, ivals, t_final))
+    dt_min = np.where(np.isfinite(figures[:, layout.F_DT_MIN]), figures[:, layout.F_DT_MIN], dt)
     return RunResult(model=model, initial=initial, final=final, integrator=integrator, dt=dt,
-                     steps=stats[:, kn.S_STEPS].copy(), jumps=stats[:, kn.S_JUMPS].copy(),
+                     steps=stats[:, layout.S_STEPS].copy(), jumps=stats[:, layout.S_JUMPS].copy(),
                      wall_time_s=wall_time, contacts=log, trajectories=trajectories, warnings=warnings,
-                     dt_min=dt_min, windows=stats[:, kn.S_WINDOWS].copy(), closed_steps=stats[:, kn.S_REST].copy(),
-                     attempts=stats[:, kn.S_ATTEMPTS].copy(), free_since=free_since)
+                     dt_min=dt_min, windows=stats[:, layout.S_WINDOWS].copy(),
+                     closed_steps=stats[:, layout.S_REST].copy(),
+                     attempts=stats[:, layout.S_ATTEMPTS].copy(), free_since=free_since)
 
 
 def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Progress | None,
@@ -439,11 +442,11 @@ def contact_logs(ivals: list[np.ndarray], t_end: np.ndarray) -> np.ndarray:
     out[:, :2] = np.nan
     for b, iv in enumerate(ivals):
         if len(iv) == 1:  # a sweep's usual member: plain floats (numpy calls cost 10 us a member)
-            start, end = float(iv[0, kn.V_START]), float(iv[0, kn.V_END])
+            start, end = float(iv[0, layout.V_START]), float(iv[0, layout.V_END])
             end = float(t_end[b]) if math.isnan(end) else end
             out[b] = start, end, end - start
         elif len(iv):
-            start, end = iv[:, kn.V_START], np.where(np.isnan(iv[:, kn.V_END]), t_end[b], iv[:, kn.V_END])
+            start, end = iv[:, layout.V_START], np.where(np.isnan(iv[:, layout.V_END]), t_end[b], iv[:, layout.V_END])
             order = np.argsort(start, kind="stable")
             s, e = start[order], end[order]
             # Each interval adds what reaches past the ends of those that started before it.
@@ -460,11 +463,11 @@ def last_contacts(ivals: list[np.ndarray], t_end: np.ndarray, n: int) -> np.ndar
     out = np.zeros((len(ivals), n))
     for b, iv in enumerate(ivals):
         if len(iv):
-            end = np.where(np.isnan(iv[:, kn.V_END]), t_end[b], iv[:, kn.V_END])
-            anyone = iv[:, kn.V_I] < 0
+            end = np.where(np.isnan(iv[:, layout.V_END]), t_end[b], iv[:, layout.V_END])
+            anyone = iv[:, layout.V_I] < 0
             if anyone.any():
                 out[b] = end[anyone].max()
-            for col in (kn.V_I, kn.V_J):
+            for col in (layout.V_I, layout.V_J):
                 body = iv[:, col].astype(np.int64)
                 mine = body >= 0
                 np.maximum.at(out[b], body[mine], end[mine])
@@ -481,38 +484,38 @@ def longest_contacts(model: Model, ivals: list[np.ndarray], t_end: np.ndarray) -
         return out
     iv = np.concatenate(ivals)
     member = np.repeat(np.arange(len(ivals)), counts)
-    i, j = iv[:, kn.V_I].astype(np.int64), iv[:, kn.V_J].astype(np.int64)
+    i, j = iv[:, layout.V_I].astype(np.int64), iv[:, layout.V_J].astype(np.int64)
     wall = j < 0
     other = np.where(wall, i, j)
     mat_i, mat_j = model.material[member, i], model.material[member, other]
     m_i, m_j = model.mass[member, i], model.mass[member, other]
     k = np.where(wall, model.wall_table[member, mat_i, TABLE_K], model.pair_table[member, mat_i, mat_j, TABLE_K])
     reduced = np.where(wall, m_i, m_i * m_j / (m_i + m_j))
-    end = np.where(np.isnan(iv[:, kn.V_END]), t_end[member], iv[:, kn.V_END])
-    np.maximum.at(out, member, (end - iv[:, kn.V_START]) * np.sqrt(k / reduced) / math.pi)
+    end = np.where(np.isnan(iv[:, layout.V_END]), t_end[member], iv[:, layout.V_END])
+    np.maximum.at(out, member, (end - iv[:, layout.V_START]) * np.sqrt(k / reduced) / math.pi)
     return out
 
 
 def _check_status(model: Model, b: int, st: np.ndarray, fg: np.ndarray, dt: np.ndarray, integ: Integrator, *,
                   open_ended: bool, t: float) -> None:
     """Turn a kernel's status into a RunError naming the cause."""
-    status = int(st[kn.S_STATUS])
-    if status == kn.OK:
+    status = int(st[layout.S_STATUS])
+    if status == layout.OK:
         return
     safe = integ.stability / max_frequency(model)[b]
-    at = f"t = {fg[kn.F_STATUS_T]:.6g} s"
-    if status == kn.NONFINITE:
+    at = f"t = {fg[layout.F_STATUS_T]:.6g} s"
+    if status == layout.NONFINITE:
         raise RunError(f"non-finite numbers at {at}: the step is unstable; try a smaller dt "
                        f"(largest safe step {safe:.3g} s)")
-    if status == kn.ENERGY:
-        raise RunError(f"energy grew from {fg[kn.F_STATUS_A]:.4g} J to {fg[kn.F_STATUS_B]:.4g} J during a contact "
-                       f"at dt = {dt[b]:.3g} s: the step is unstable; the largest safe step is {safe:.3g} s")
-    if status == kn.STALL:
+    if status == layout.ENERGY:
+        raise RunError(f"energy grew from {fg[layout.F_STATUS_A]:.4g} J to {fg[layout.F_STATUS_B]:.4g} J during "
+                       f"a contact at dt = {dt[b]:.3g} s: the step is unstable; the largest safe step is {safe:.3g} s")
+    if status == layout.STALL:
         way = "give it a duration (--set duration=SECONDS)" if open_ended else "try a looser --tol or a given --dt"
         raise RunError(f"the run stopped advancing at {at} (events closer than the clock resolves); {way}, or "
                        "report this scene")
-    if status == kn.MAXSTEPS:
-        raise step_limit_error(int(st[kn.S_STEPS]), t, open_ended)
-    if status == kn.SINGULAR:
+    if status == layout.MAXSTEPS:
+        raise step_limit_error(int(st[layout.S_STEPS]), t, open_ended)
+    if status == layout.SINGULAR:
         raise RunError(f"the stuck contacts' friction could not be solved at {at} (a singular hold system)")
     raise RunError(f"the engine stopped with status {status} at {at}")

@@ -8,7 +8,7 @@ from functools import cached_property
 
 import numpy as np
 
-from collide.engine import layout as kn
+from collide.engine import layout
 from collide.model import Model, State, turned_quaternions
 
 
@@ -37,7 +37,7 @@ class Trajectory:
 
     @property
     def knot_times(self) -> np.ndarray:
-        return np.unique(self.knots[:, kn.K_T])
+        return np.unique(self.knots[:, layout.K_T])
 
     @property
     def n_steps(self) -> int:
@@ -81,10 +81,10 @@ class Trajectory:
         stepped = np.zeros(len(times), bool)
         knots = self.knots
         for body in range(self.model.n_bodies):
-            mine = knots[knots[:, kn.K_BODY] == body]
-            steps = mine[:-1, kn.K_FREE] == 0.0
-            ends = np.searchsorted(times, mine[1:, kn.K_T])
-            starts = np.searchsorted(times, mine[:-1, kn.K_T])
+            mine = knots[knots[:, layout.K_BODY] == body]
+            steps = mine[:-1, layout.K_FREE] == 0.0
+            ends = np.searchsorted(times, mine[1:, layout.K_T])
+            starts = np.searchsorted(times, mine[:-1, layout.K_T])
             for a, b in zip(starts[steps], ends[steps]):
                 stepped[a + 1:b + 1] = True
         free = ~stepped
@@ -138,9 +138,9 @@ def segment_search(values: np.ndarray, lo: np.ndarray, hi: np.ndarray, x: np.nda
 def body_knots(traj: Trajectory) -> list[np.ndarray]:
     """Each body's knots, in time order."""
     knots = traj.knots
-    order = np.lexsort((np.arange(len(knots)), knots[:, kn.K_T], knots[:, kn.K_BODY]))
+    order = np.lexsort((np.arange(len(knots)), knots[:, layout.K_T], knots[:, layout.K_BODY]))
     knots = knots[order]
-    cuts = np.searchsorted(knots[:, kn.K_BODY], np.arange(1, traj.model.n_bodies))
+    cuts = np.searchsorted(knots[:, layout.K_BODY], np.arange(1, traj.model.n_bodies))
     return np.split(knots, cuts)
 
 
@@ -152,9 +152,9 @@ def settled(traj: Trajectory, times: np.ndarray) -> np.ndarray:
     floor, 1.3e-5 against 2e-15)."""
     inside = np.zeros(len(times) + 1, np.int64)
     for knots in body_knots(traj):
-        stepped = knots[:-1, kn.K_FREE] == 0.0
-        np.add.at(inside, np.searchsorted(times, knots[:-1, kn.K_T][stepped], side="right"), 1)
-        np.add.at(inside, np.searchsorted(times, knots[1:, kn.K_T][stepped], side="left"), -1)
+        stepped = knots[:-1, layout.K_FREE] == 0.0
+        np.add.at(inside, np.searchsorted(times, knots[:-1, layout.K_T][stepped], side="right"), 1)
+        np.add.at(inside, np.searchsorted(times, knots[1:, layout.K_T][stepped], side="left"), -1)
     return np.cumsum(inside[:-1]) == 0
 
 
@@ -176,44 +176,44 @@ def sample(model: Model, traj: Trajectory, times: np.ndarray, member: int = 0) -
     work = np.zeros(n_t)
     g = np.zeros(3) if model.gravity is None else np.pad(model.gravity[member], (0, 3 - d))
     for body, knots in enumerate(body_knots(traj)):
-        kt = knots[:, kn.K_T]
+        kt = knots[:, layout.K_T]
         clipped = np.clip(times, kt[0], kt[-1])
         at = np.clip(np.searchsorted(kt, clipped, side="right") - 1, 0, max(len(kt) - 2, 0))
         k0 = knots[at]
-        tau = clipped - k0[:, kn.K_T]
-        s0, v0 = k0[:, kn.K_S:kn.K_S + 3], k0[:, kn.K_V:kn.K_V + 3]
+        tau = clipped - k0[:, layout.K_T]
+        s0, v0 = k0[:, layout.K_S:layout.K_S + 3], k0[:, layout.K_V:layout.K_V + 3]
         pos = s0 + v0 * tau[:, None] + 0.5 * g * tau[:, None] ** 2
         vel = v0 + g * tau[:, None]
-        spin = k0[:, kn.K_W:kn.K_W + 3].copy()
+        spin = k0[:, layout.K_W:layout.K_W + 3].copy()
         if qd == 4:
-            orient = turned_quaternions(k0[:, kn.K_Q:kn.K_Q + 4], spin, tau)
+            orient = turned_quaternions(k0[:, layout.K_Q:layout.K_Q + 4], spin, tau)
         else:
-            orient = k0[:, kn.K_Q:kn.K_Q + 4].copy()
+            orient = k0[:, layout.K_Q:layout.K_Q + 4].copy()
             orient[:, 0] += spin[:, 2] * tau
-        done = k0[:, kn.K_WORK].copy()
+        done = k0[:, layout.K_WORK].copy()
         if len(kt) > 1:
             k1 = knots[np.minimum(at + 1, len(kt) - 1)]
-            h = k1[:, kn.K_T] - k0[:, kn.K_T]
-            step = (k0[:, kn.K_FREE] == 0.0) & (h > 0)
+            h = k1[:, layout.K_T] - k0[:, layout.K_T]
+            step = (k0[:, layout.K_FREE] == 0.0) & (h > 0)
             if step.any():
                 hs = h[step][:, None]
                 x = tau[step] / h[step]
                 basis, deriv = _quintic(x)
-                terms = (s0[step], hs * v0[step], hs * hs * k0[step][:, kn.K_AN:kn.K_AN + 3],
-                         hs * hs * k1[step][:, kn.K_A:kn.K_A + 3], hs * k1[step][:, kn.K_V:kn.K_V + 3],
-                         k1[step][:, kn.K_S:kn.K_S + 3])
+                terms = (s0[step], hs * v0[step], hs * hs * k0[step][:, layout.K_AN:layout.K_AN + 3],
+                         hs * hs * k1[step][:, layout.K_A:layout.K_A + 3], hs * k1[step][:, layout.K_V:layout.K_V + 3],
+                         k1[step][:, layout.K_S:layout.K_S + 3])
                 pos[step] = sum(basis[i][:, None] * term for i, term in enumerate(terms))
                 vel[step] = sum(deriv[i][:, None] * term for i, term in enumerate(terms)) / hs
                 xb = x[:, None]
-                spin[step] = (1 - xb) * spin[step] + xb * k1[step][:, kn.K_W:kn.K_W + 3]
-                q0, q1 = k0[step][:, kn.K_Q:kn.K_Q + 4], k1[step][:, kn.K_Q:kn.K_Q + 4]
+                spin[step] = (1 - xb) * spin[step] + xb * k1[step][:, layout.K_W:layout.K_W + 3]
+                q0, q1 = k0[step][:, layout.K_Q:layout.K_Q + 4], k1[step][:, layout.K_Q:layout.K_Q + 4]
                 if qd == 4:
                     q1 = np.where(np.sum(q0 * q1, axis=-1)[:, None] < 0, -q1, q1)
                     lerp = (1 - xb) * q0 + xb * q1
                     orient[step] = lerp / np.linalg.norm(lerp, axis=1, keepdims=True)
                 else:
                     orient[step] = (1 - xb) * q0 + xb * q1
-                done[step] = (1 - x) * done[step] + x * k1[step][:, kn.K_WORK]
+                done[step] = (1 - x) * done[step] + x * k1[step][:, layout.K_WORK]
         s[:, body] = pos[:, :d]
         v[:, body] = vel[:, :d]
         if k == 1:

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from collide.accuracy import outcome, speed_scale
-from collide.engine import layout as kn
+from collide.engine import layout
 from collide.model import compile_scenes, reference_frequency
 from collide.run import run_scene
 from collide.scene import load_scene, parse_scene, turned_source
@@ -66,14 +66,14 @@ def test_a_run_in_a_tilted_plane_records_the_turned_2d_motion():
     # Orientation at the knots (between them 2D turns an angle, 3D a quaternion, by the spin
     # interpolated in the step: they differ by 5e-9): the 2D angle turned about the plane's
     # normal (turn's z column), from the start.
-    knots = np.unique(flat.trajectories[0].knots[:, kn.K_T])
+    knots = np.unique(flat.trajectories[0].knots[:, layout.K_T])
     angle = sample(flat.model, flat.trajectories[0], knots).q[:, 0, :, 0].ravel()
     q3 = sample(tilted.model, tilted.trajectories[0], knots).q[:, 0].reshape(-1, 4)
     expected = turned_quaternions(np.broadcast_to(q3[0], q3.shape), np.broadcast_to(turn[:, 2], q3[:, 1:].shape),
                                   angle)
     assert len(knots) > 10 and np.abs(q3 - expected).max() < 1e-12
-    friction2 = flat.trajectories[0].records[:, kn.R_FX:kn.R_FY + 1]
-    friction3 = tilted.trajectories[0].records[:, kn.R_FX:kn.R_FZ + 1] @ turn
+    friction2 = flat.trajectories[0].records[:, layout.R_FX:layout.R_FY + 1]
+    friction3 = tilted.trajectories[0].records[:, layout.R_FX:layout.R_FZ + 1] @ turn
     assert np.abs(friction3[:, :2] - friction2).max() < 1e-9 * np.abs(friction2).max()
     assert np.abs(friction3[:, 2]).max() < 1e-12 * np.abs(friction2).max()
 

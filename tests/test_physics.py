@@ -9,7 +9,7 @@ import pytest
 
 from collide import diagnostics as dg
 from collide import stepper
-from collide.engine import layout as kernels
+from collide.engine import layout
 from collide.engine.event import run as event_run
 from collide.run import run_scene, run_scenes
 from collide.scene import builtin_names, load_scene, parse_scene
@@ -202,10 +202,10 @@ def test_contact_log_is_the_union_of_the_contact_intervals():
         n = int(rng.integers(0, 6))
         ivals = np.zeros((n, 4))
         starts = rng.uniform(0.0, 1.5, n)
-        ivals[:, kernels.V_START], ivals[:, kernels.V_END] = starts, starts + rng.exponential(0.1, n)
-        ivals[rng.uniform(size=n) < 0.2, kernels.V_END] = np.nan
+        ivals[:, layout.V_START], ivals[:, layout.V_END] = starts, starts + rng.exponential(0.1, n)
+        ivals[rng.uniform(size=n) < 0.2, layout.V_END] = np.nan
         logs.append(ivals)
-        ends = np.where(np.isnan(ivals[:, kernels.V_END]), t_end, ivals[:, kernels.V_END])
+        ends = np.where(np.isnan(ivals[:, layout.V_END]), t_end, ivals[:, layout.V_END])
         grid = (np.arange(200_000) + 0.5) * (t_end / 200_000)
         covered = ((grid[:, None] >= starts) & (grid[:, None] < ends)).any(axis=1).mean() * t_end
         expected.append((starts.min() if n else np.nan, ends.max() if n else np.nan, covered))
@@ -222,7 +222,7 @@ def test_frictionless_scene_computes_no_friction(monkeypatch):
     run_kernel = event_run.simulate
 
     def spy(G, tables, WP, grav, weights, fl, fp):
-        seen.append((int(fl[kernels.FL_FRICTION]), int(fl[kernels.FL_SPIN])))
+        seen.append((int(fl[layout.FL_FRICTION]), int(fl[layout.FL_SPIN])))
         return run_kernel(G, tables, WP, grav, weights, fl, fp)
 
     monkeypatch.setattr(stepper.event_run, "simulate", spy)

@@ -12,7 +12,7 @@ import pytest
 import rerun as rr
 
 from collide import recording as rec
-from collide.engine import layout as kn
+from collide.engine import layout
 from collide.recording import RecordingError, read_recording, write_recording
 from collide.recording import reader as rec_reader
 from collide.recording import writer as rec_writer
@@ -30,7 +30,7 @@ def _flip_a_stored_position(run: object, data: bytes) -> bytes:
     """Flip the lowest bit of a trajectory position stored verbatim (an LZ4 literal) in the file:
     the file stays well-formed and the position changes by one unit in the last place."""
     traj = run.result.trajectory
-    values = traj.knots[:, kn.K_S:kn.K_S + traj.model.dim].reshape(-1)
+    values = traj.knots[:, layout.K_S:layout.K_S + traj.model.dim].reshape(-1)
     unique = [x for x in values if data.count(np.float64(x).tobytes()) == 1]
     assert unique, "no position stored verbatim"
     pos = data.index(np.float64(unique[len(unique) // 2]).tobytes())

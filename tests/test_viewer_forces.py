@@ -11,7 +11,7 @@ import pytest
 
 from collide import diagnostics as dg
 from collide.contact_forces import RecordedForces
-from collide.engine import layout as kn
+from collide.engine import layout
 from collide.run import run_scene
 from collide.scene import load_scene, parse_scene
 from viewer.params import add_ball, for_viewing
@@ -25,7 +25,7 @@ def _drawn(view: ViewRun, times: np.ndarray) -> np.ndarray:
 
 
 def _record_times(view: ViewRun) -> np.ndarray:
-    return np.unique(view.traj.records[:, kn.R_T])
+    return np.unique(view.traj.records[:, layout.R_T])
 
 
 @pytest.mark.parametrize("name", ["textbook-1d", "demo-bonus", "newtons-cradle", "textbook-glancing"])
@@ -43,10 +43,10 @@ def test_event_engine_legend_is_the_runs_peak_and_the_frames_reach_it(name):
     between = np.linspace(view.t0, view.t1, 301)
     assert _drawn(view, between).max(initial=0.0) <= peak * (1 + 1e-12)
     rec = view.traj.records
-    k = int(np.argmax(rec[:, kn.R_FN]))
-    pair = rec[k, [kn.R_I, kn.R_J]].astype(np.int64)[None]
+    k = int(np.argmax(rec[:, layout.R_FN]))
+    pair = rec[k, [layout.R_I, layout.R_J]].astype(np.int64)[None]
     stiff = float(dg.stiffness(view.model, pair)[0, 0])
-    assert rec[k, kn.R_FN] == pytest.approx(stiff * rec[k, kn.R_DELTA], rel=1e-12)
+    assert rec[k, layout.R_FN] == pytest.approx(stiff * rec[k, layout.R_DELTA], rel=1e-12)
 
 
 def _hertz_drop() -> object:
@@ -94,12 +94,12 @@ def test_recorded_forces_are_zero_outside_a_phase_and_straight_between_records()
     traj = run.result.trajectory
     pairs = traj.contacts_touched()
     forces = RecordedForces(traj, pairs, 2, 0, 1, False)
-    start, end = traj.intervals[0, kn.V_START], traj.intervals[0, kn.V_END]
+    start, end = traj.intervals[0, layout.V_START], traj.intervals[0, layout.V_END]
     rec = traj.records
     assert forces.normal(np.zeros(2, int), np.array([start - 1e-3, end + 1e-3])).tolist() == [0.0, 0.0]
-    mid = 0.5 * (rec[3, kn.R_T] + rec[4, kn.R_T])
+    mid = 0.5 * (rec[3, layout.R_T] + rec[4, layout.R_T])
     got = forces.normal(np.zeros(1, int), np.array([mid]))[0]
-    assert got == pytest.approx(0.5 * (rec[3, kn.R_FN] + rec[4, kn.R_FN]), rel=1e-12)
+    assert got == pytest.approx(0.5 * (rec[3, layout.R_FN] + rec[4, layout.R_FN]), rel=1e-12)
 
 
 def test_the_recordings_contact_series_draws_the_engines_forces():
@@ -107,10 +107,10 @@ def test_the_recordings_contact_series_draws_the_engines_forces():
     run = run_scene(load_scene("bounce"))
     traj = run.result.trajectory
     rec = traj.records
-    times = rec[:, kn.R_T]
+    times = rec[:, layout.R_T]
     series = dg.contact_series(run.result.model, traj, times)
     drawn = np.linalg.norm(series.normal_force[:, 0, 0], axis=-1)
-    assert np.allclose(drawn, np.abs(rec[:, kn.R_FN]), rtol=1e-12, atol=0)
+    assert np.allclose(drawn, np.abs(rec[:, layout.R_FN]), rtol=1e-12, atol=0)
 
 
 def test_textbook_1d_at_half_restitution_is_viewed_to_the_runs_end():
@@ -127,7 +127,7 @@ def test_textbook_1d_at_half_restitution_is_viewed_to_the_runs_end():
     assert np.allclose(end.positions[:, 0], final.s[0, :, 0], rtol=0, atol=1e-12)
     assert np.allclose(end.velocities[:, 0], final.v[0, :, 0], rtol=0, atol=1e-12)
     # Free flight from the kernel's last frame (closed form): the gap grows at the relative speed.
-    last = float(np.unique(view.traj.knots[:, kn.K_T])[-2])
+    last = float(np.unique(view.traj.knots[:, layout.K_T])[-2])
     assert last <= 1.01 * view.contact_windows[-1][1]
     gap = end.positions[1, 0] - end.positions[0, 0] - 2 * 0.05
     before = view.frame(last).positions
@@ -148,7 +148,7 @@ def test_added_balls_take_part(name):
         scene = add_ball(scene)
         iv = run_scene(for_viewing(scene)).result.trajectory.intervals
         new = len(scene.bodies) - 1
-        assert np.any((iv[:, kn.V_I] == new) | (iv[:, kn.V_J] == new)), f"{scene.bodies[-1].name} never touched"
+        assert np.any((iv[:, layout.V_I] == new) | (iv[:, layout.V_J] == new)), f"{scene.bodies[-1].name} never touched"
 
 
 def test_walls_are_drawn_under_every_path():

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from collide.contact_forces import RecordedForces
-from collide.engine import layout as kn
+from collide.engine import layout
 from collide.model import Model
 from collide.trajectory import Trajectory, segment_search
 from viewer.sampling import Knots
@@ -67,9 +67,9 @@ class ContactIndex:
                                      bool(model.friction))
         iv = traj.intervals
         self.iv_contact = self.forces.contact_of(iv[:, 0], iv[:, 1])
-        start = iv[:, kn.V_START].astype(float) if len(iv) else np.zeros(0)
+        start = iv[:, layout.V_START].astype(float) if len(iv) else np.zeros(0)
         # A contact still engaged when the run ended has no end: it lasts to the end.
-        end = np.where(np.isnan(iv[:, kn.V_END]), np.inf, iv[:, kn.V_END]) if len(iv) else np.zeros(0)
+        end = np.where(np.isnan(iv[:, layout.V_END]), np.inf, iv[:, layout.V_END]) if len(iv) else np.zeros(0)
         # Widened to body i's knots around them: between two knots the motion is rebuilt, and
         # the rebuilt spheres may touch a little before the engine saw them touch (DEM frames
         # are far apart). Whether they touch is then the overlap's to say. The event engine's

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from collide import diagnostics as dg
-from collide.engine import layout as kn
+from collide.engine import layout
 from collide.model import Model, State, turned_quaternions
 from collide.trajectory import Trajectory, _quintic, segment_search
 
@@ -33,13 +33,13 @@ class Knots:
         self.knots = knots
         # The order diagnostics.body_knots uses: by body, then time, then as recorded (an index,
         # not a sorted copy of the knots).
-        self.order = np.lexsort((np.arange(len(knots)), knots[:, kn.K_T], knots[:, kn.K_BODY]))
-        self.t = knots[self.order, kn.K_T]
-        body = knots[self.order, kn.K_BODY]
+        self.order = np.lexsort((np.arange(len(knots)), knots[:, layout.K_T], knots[:, layout.K_BODY]))
+        self.t = knots[self.order, layout.K_T]
+        body = knots[self.order, layout.K_BODY]
         bodies = np.arange(model.n_bodies)
         self.start = np.searchsorted(body, bodies, side="left")
         self.end = np.searchsorted(body, bodies, side="right")
-        self.steps = knots[self.order, kn.K_FREE] == 0.0  # the segment after the knot is a step
+        self.steps = knots[self.order, layout.K_FREE] == 0.0  # the segment after the knot is a step
 
     def stepped(self, times: np.ndarray) -> np.ndarray:
         """(S,) for sorted distinct times (the knot times): the segment that ends at times[k]
@@ -99,39 +99,40 @@ class Knots:
         shape = at.shape
         at, clipped = at.ravel(), clipped.ravel()
         k0 = self.knots[self.order[at]]
-        tau = clipped - k0[:, kn.K_T]
-        s0, v0 = k0[:, kn.K_S:kn.K_S + 3], k0[:, kn.K_V:kn.K_V + 3]
+        tau = clipped - k0[:, layout.K_T]
+        s0, v0 = k0[:, layout.K_S:layout.K_S + 3], k0[:, layout.K_V:layout.K_V + 3]
         pos = s0 + v0 * tau[:, None] + 0.5 * g * tau[:, None] ** 2
         vel = v0 + g * tau[:, None]
-        spin = k0[:, kn.K_W:kn.K_W + 3].copy()
+        spin = k0[:, layout.K_W:layout.K_W + 3].copy()
         if qd == 4:
-            orient = turned_quaternions(k0[:, kn.K_Q:kn.K_Q + 4], spin, tau)
+            orient = turned_quaternions(k0[:, layout.K_Q:layout.K_Q + 4], spin, tau)
         else:
-            orient = k0[:, kn.K_Q:kn.K_Q + 4].copy()
+            orient = k0[:, layout.K_Q:layout.K_Q + 4].copy()
             orient[:, 0] += spin[:, 2] * tau
-        done = k0[:, kn.K_WORK].copy()
+        done = k0[:, layout.K_WORK].copy()
         has_next = np.broadcast_to(end - start > 1, shape).ravel()
         k1 = self.knots[self.order[np.where(has_next, at + 1, at)]]
-        h = k1[:, kn.K_T] - k0[:, kn.K_T]
-        step = has_next & (k0[:, kn.K_FREE] == 0.0) & (h > 0)
+        h = k1[:, layout.K_T] - k0[:, layout.K_T]
+        step = has_next & (k0[:, layout.K_FREE] == 0.0) & (h > 0)
         if step.any():
             a0, a1 = k0[step], k1[step]
             hs = h[step][:, None]
             x = tau[step] / h[step]
             basis, deriv = _quintic(x)
-            terms = (s0[step], hs * v0[step], hs * hs * a0[:, kn.K_AN:kn.K_AN + 3],
-                     hs * hs * a1[:, kn.K_A:kn.K_A + 3], hs * a1[:, kn.K_V:kn.K_V + 3], a1[:, kn.K_S:kn.K_S + 3])
+            terms = (s0[step], hs * v0[step], hs * hs * a0[:, layout.K_AN:layout.K_AN + 3],
+                     hs * hs * a1[:, layout.K_A:layout.K_A + 3], hs * a1[:, layout.K_V:layout.K_V + 3],
+                     a1[:, layout.K_S:layout.K_S + 3])
             pos[step] = sum(basis[i][:, None] * term for i, term in enumerate(terms))
             vel[step] = sum(deriv[i][:, None] * term for i, term in enumerate(terms)) / hs
             xb = x[:, None]
-            spin[step] = (1 - xb) * spin[step] + xb * a1[:, kn.K_W:kn.K_W + 3]
-            q0, q1 = a0[:, kn.K_Q:kn.K_Q + 4], a1[:, kn.K_Q:kn.K_Q + 4]
+            spin[step] = (1 - xb) * spin[step] + xb * a1[:, layout.K_W:layout.K_W + 3]
+            q0, q1 = a0[:, layout.K_Q:layout.K_Q + 4], a1[:, layout.K_Q:layout.K_Q + 4]
             if qd == 4:
                 q1 = np.where(dg._dot(q0, q1)[:, None] < 0, -q1, q1)
                 lerp = (1 - xb) * q0 + xb * q1
                 orient[step] = lerp / np.linalg.norm(lerp, axis=1, keepdims=True)
             else:
                 orient[step] = (1 - xb) * q0 + xb * q1
-            done[step] = (1 - x) * done[step] + x * a1[:, kn.K_WORK]
+            done[step] = (1 - x) * done[step] + x * a1[:, layout.K_WORK]
         return (pos.reshape(*shape, 3), vel.reshape(*shape, 3), spin.reshape(*shape, 3),
                 orient.reshape(*shape, 4), done.reshape(shape))

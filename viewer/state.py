@@ -16,7 +16,7 @@ import numpy as np
 
 from collide import diagnostics as dg
 from collide.contact_forces import peak_normal_force
-from collide.engine import layout as kn
+from collide.engine import layout
 from collide.model import State
 from collide.run import SceneRun
 from viewer.contacts import SLICE, ContactIndex
@@ -180,8 +180,8 @@ class ViewRun:
         # The arrows' scales: the fastest on the plot grid or at any knot (free flight's speed
         # is largest at its ends), so that no velocity arrow is longer than the legend says.
         knots = self.traj.knots
-        at_knots = np.linalg.norm(knots[:, kn.K_V:kn.K_V + 3], axis=-1)
-        body = knots[:, kn.K_BODY].astype(np.int64)
+        at_knots = np.linalg.norm(knots[:, layout.K_V:layout.K_V + 3], axis=-1)
+        body = knots[:, layout.K_BODY].astype(np.int64)
         self.max_speed = float(max(np.max(speed, initial=0.0), np.max(at_knots, initial=0.0)))
         self.max_momentum = float(max(np.max(speed * self.mass, initial=0.0),
                                       np.max(at_knots * self.mass[body], initial=0.0)))
@@ -205,7 +205,7 @@ class ViewRun:
         self.max_links = int(np.bincount(tk, minlength=1).max(initial=0))  # contacts at once, at most
         records = self.traj.records
         if self.model.friction and len(records):
-            force = records[:, kn.R_FX:kn.R_FX + self.dim]
+            force = records[:, layout.R_FX:layout.R_FX + self.dim]
             self.max_friction_force = float(np.max(np.linalg.norm(force, axis=-1), initial=0.0))
         else:
             self.max_friction_force = 0.0

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from collide import diagnostics as dg
-from collide.engine import layout as kn
+from collide.engine import layout
 from collide.recording import CONTACT_FRAMES, DEFAULT_FPS, MANY_BODIES, MAX_FREE_FRAMES, frame_times
 from collide.run import SceneRun
 
@@ -67,7 +67,7 @@ def export_times(run: SceneRun, fps: float = DEFAULT_FPS, max_frames: int = MAX_
     traj = run.result.trajectory
     if traj is None:
         raise ValueError("the run holds no trajectory to export")
-    knots = traj.knots[:, kn.K_T]
+    knots = traj.knots[:, layout.K_T]
     span = float(knots.max() - knots.min()) if len(knots) else 0.0
     fps = min(fps, MAX_FREE_FRAMES / span) if span > 0 else fps
     many = run.result.model.n_bodies >= MANY_BODIES
@@ -85,7 +85,7 @@ def export_frames(run: SceneRun, times: np.ndarray) -> Frames:
     # scans every record for every contact (20 s of a 1 000-sphere pile's export).
     contacts = dg.contact_series(replace(model, friction=False), traj, times, st)
     # Pressed past the engine's touching tolerance, as the recording draws contacts.
-    pressed = float(kn.TOUCH_TOL) * 2.0 * float(model.radius.max())
+    pressed = float(layout.TOUCH_TOL) * 2.0 * float(model.radius.max())
     on = contacts.overlap[:, 0] > pressed  # (T, C)
     frame, which = np.nonzero(on)
     friction = None
@@ -110,8 +110,9 @@ def _friction(records: np.ndarray, pairs: np.ndarray, model, at: np.ndarray, whi
     if not len(records) or not len(at):
         return out
     keys = pairs[:, 0] * width + pairs[:, 1] + model.n_walls
-    record_keys = records[:, kn.R_I].astype(np.int64) * width + records[:, kn.R_J].astype(np.int64) + model.n_walls
-    order = np.lexsort((records[:, kn.R_T], record_keys))
+    record_keys = (records[:, layout.R_I].astype(np.int64) * width + records[:, layout.R_J].astype(np.int64)
+                   + model.n_walls)
+    order = np.lexsort((records[:, layout.R_T], record_keys))
     records, record_keys = records[order], record_keys[order]
     starts = np.searchsorted(record_keys, keys, side="left")
     ends = np.searchsorted(record_keys, keys, side="right")
@@ -122,8 +123,8 @@ def _friction(records: np.ndarray, pairs: np.ndarray, model, at: np.ndarray, whi
         block = records[starts[c]:ends[c]]
         if not len(block):
             continue
-        k = np.searchsorted(block[:, kn.R_T], at[rows], side="left")
-        force = block[np.minimum(k, len(block) - 1), kn.R_FX:kn.R_FX + d]
+        k = np.searchsorted(block[:, layout.R_T], at[rows], side="left")
+        force = block[np.minimum(k, len(block) - 1), layout.R_FX:layout.R_FX + d]
         out[rows] = np.where((k < len(block))[:, None], force, 0.0)
     return out
 

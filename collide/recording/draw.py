@@ -10,7 +10,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from collide.colours import ENERGY_COLOURS, body_colour, body_colours
-from collide.engine import layout as kn
+from collide.engine import layout
 from collide.recording.columns import _strips_column
 from collide.recording.frames import _frame_residuals, _pad3, _quaternion_xyzw, _rotate
 from collide.recording.spec import TIMELINE, collide_version
@@ -33,8 +33,8 @@ class _Drawing:
     def _extent(self) -> tuple[np.ndarray, float]:
         """Centre and size of the region the bodies sweep (3D), for the camera and the walls."""
         knots = self.traj.knots
-        s = _pad3(knots[:, kn.K_S:kn.K_S + self.model.dim])
-        r = self.model.radius[0][knots[:, kn.K_BODY].astype(int)][:, None]
+        s = _pad3(knots[:, layout.K_S:layout.K_S + self.model.dim])
+        r = self.model.radius[0][knots[:, layout.K_BODY].astype(int)][:, None]
         lo, hi = (s - r).min(axis=0), (s + r).max(axis=0)
         return 0.5 * (lo + hi), float(max(np.max(hi - lo), 4 * self.model.radius.max()))
 

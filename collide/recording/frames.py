@@ -10,7 +10,7 @@ import numpy as np
 import rerun as rr
 
 from collide import diagnostics as dg
-from collide.engine import layout as kn
+from collide.engine import layout
 from collide.model import Model, State
 from collide.results import Trajectory
 
@@ -85,7 +85,7 @@ def frame_times(traj: Trajectory, fps: float, stride: int, contact_frames: int,
     would be too many frames to send or draw.
     """
     if many:
-        knots = traj.knots[:, kn.K_T]
+        knots = traj.knots[:, layout.K_T]
         start, end = float(knots.min()), float(knots.max())
         grid = np.arange(start, end, 1.0 / fps)
         frames = np.union1d(grid, [start, end])
@@ -105,7 +105,7 @@ def frame_times(traj: Trajectory, fps: float, stride: int, contact_frames: int,
     exact = np.union1d(np.union1d(t[idx], grid[in_free]), [t[0], t[-1]])
     # The DEM kernel's records between its frames: each contact phase's peak (a collision can
     # be shorter than a frame). Its plots and arrows show the peak there.
-    records = np.unique(traj.records[:, kn.R_T]) if len(traj.records) else np.zeros(0)
+    records = np.unique(traj.records[:, layout.R_T]) if len(traj.records) else np.zeros(0)
     exact = np.union1d(exact, np.setdiff1d(records, t))
     dense = [np.linspace(t[a], t[b], contact_frames + 1) for a, b in zip(edges[::2], edges[1::2])]
     view = np.union1d(exact, np.concatenate(dense)) if dense else exact

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from collide.engine import layout as kn
+from collide.engine import layout
 
 APP_ID = "collide"
 FORMAT = "collide-recording"
@@ -40,7 +40,7 @@ def _fail(path: Path, reason: str) -> RecordingError:
 
 
 DISSIPATION_PARTS = ("damping", "friction", "rolling")  # RunResult.dissipation's columns
-_TABLES = (("knots", "/collide/knots", int(kn.NK)), ("records", "/collide/contact_records", int(kn.NR)),
+_TABLES = (("knots", "/collide/knots", int(layout.NK)), ("records", "/collide/contact_records", int(layout.NR)),
            ("intervals", "/collide/contact_intervals", 4))
 
 

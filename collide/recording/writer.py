@@ -18,7 +18,7 @@ import rerun as rr
 
 from collide import diagnostics as dg
 from collide.contact_forces import peak_normal_force
-from collide.engine import layout as kn
+from collide.engine import layout
 from collide.model import State
 from collide.output import OutputError, check_file, write_atomic
 from collide.recording.columns import _any_column
@@ -111,7 +111,7 @@ class _Writer(_Drawing):
         self.stride = stride
         # A long free flight at a steady fps would be millions of frames (demo-1d for 1e6 s:
         # 1.2e8): the frame rate drops so that the run holds at most MAX_FREE_FRAMES of them.
-        knots = self.traj.knots[:, kn.K_T]
+        knots = self.traj.knots[:, layout.K_T]
         span = float(knots.max() - knots.min()) if len(knots) else 0.0
         self.fps = min(fps, MAX_FREE_FRAMES / span) if span > 0 else fps
         self.contact_frames = contact_frames
@@ -162,7 +162,7 @@ class _Writer(_Drawing):
         self.many_contacts = len(self.touched) >= MANY_CONTACTS
         # A contact counts as pressed past the engine's touching tolerance: a tight rack turned
         # into a tilted plane touches with round-off overlaps (1e-17 m) that press nothing.
-        self.pressed = float(kn.TOUCH_TOL) * 2.0 * float(self.model.radius.max())
+        self.pressed = float(layout.TOUCH_TOL) * 2.0 * float(self.model.radius.max())
         # Force arrows: the run's largest normal force (the engine's, as the JSON summary's
         # max_normal_force) is drawn as long as a sphere's diameter; the arrows are the recorded
         # forces (collide.contact_forces), none above it.
@@ -237,9 +237,9 @@ class _Writer(_Drawing):
         """The trajectory exactly, float64, so that `read_recording` restores the run: knots,
         contact records and contact intervals, each with its row number (order on reading)."""
         traj = self.traj
-        for entity, table, time_col in (("/collide/knots", traj.knots, kn.K_T),
-                                         ("/collide/contact_records", traj.records, kn.R_T),
-                                         ("/collide/contact_intervals", traj.intervals, kn.V_START)):
+        for entity, table, time_col in (("/collide/knots", traj.knots, layout.K_T),
+                                         ("/collide/contact_records", traj.records, layout.R_T),
+                                         ("/collide/contact_intervals", traj.intervals, layout.V_START)):
             rows, width = table.shape
             if rows == 0:
                 continue

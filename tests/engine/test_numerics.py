@@ -8,8 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from collide.engine import layout as kn
-from collide.engine import numerics
+from collide.engine import layout, numerics
 
 
 @pytest.mark.parametrize("symmetric", [True, False])
@@ -48,8 +47,8 @@ def test_a_dip_bound_skips_only_cubics_that_do_not_dip():
     def sampled(e0, e1, r0, r1, floor):
         if r0 >= 0.0 and r1 <= 0.0:
             return math.inf
-        for i in range(1, int(kn.DIP_SAMPLES)):
-            u = i / kn.DIP_SAMPLES
+        for i in range(1, int(layout.DIP_SAMPLES)):
+            u = i / layout.DIP_SAMPLES
             p = ((2 * u**3 - 3 * u**2 + 1) * e0 + (u**3 - 2 * u**2 + u) * r0 + (3 * u**2 - 2 * u**3) * e1
                  + (u**3 - u**2) * r1)
             if p < floor:

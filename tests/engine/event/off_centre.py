@@ -17,7 +17,7 @@ import sys
 import collide.engine.event.island as island
 import collide.engine.event.locate as locate
 import collide.engine.event.modes as modes
-import collide.engine.layout as K
+from collide.engine import layout
 # Read at run time by the interpreted kernels (from the modules that use them), as are the wrapped
 # functions below.
 if sys.argv[1] == "no-flips":
@@ -30,10 +30,10 @@ from collide.scene import load_scene
 count = {"flips": 0, "trials": 0, "released": 0}
 decide, step = island.decide, locate.step
 def counted_decide(X, C, CI, na, nc, *rest):
-    count["flips"] += int((CI[:nc, K.CI_EDGE] == K.FLIP).sum())
-    stuck = CI[:nc, K.CI_MODE] == K.STICK
+    count["flips"] += int((CI[:nc, layout.CI_EDGE] == layout.FLIP).sum())
+    stuck = CI[:nc, layout.CI_MODE] == layout.STICK
     result = decide(X, C, CI, na, nc, *rest)
-    count["released"] += int((stuck & (CI[:nc, K.CI_MODE] != K.STICK)).sum())
+    count["released"] += int((stuck & (CI[:nc, layout.CI_MODE] != layout.STICK)).sum())
     return result
 def counted_step(*args):
     count["trials"] += 1

@@ -15,7 +15,7 @@ import pytest
 
 from collide import diagnostics as dg
 from collide.accuracy import outcome, speed_scale
-from collide.engine import layout as kernels
+from collide.engine import layout
 from collide.run import run_scene
 from collide.scene import load_scene, parse_scene
 from tests.engine.event.off_centre import _flip_runs, _off_centre_scales
@@ -36,7 +36,7 @@ def test_a_stuck_contacts_mode_change_lands_late_within_the_tolerance_in_fewer_t
     # Each release of a stuck contact may have been landed late: at most MODE_TOL / LATE_SAFETY each.
     released = runs["on"][3]
     assert released > 0
-    bound = released * kernels.MODE_TOL / kernels.EDGE_TOL / kernels.LATE_SAFETY * event_tol
+    bound = released * layout.MODE_TOL / layout.EDGE_TOL / layout.LATE_SAFETY * event_tol
     assert np.abs(runs["on"][4] - runs["no-late"][4]).max() / speed <= bound
 
 

@@ -7,8 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from collide.engine import layout as kernels
-from collide.engine import layout as kn
+from collide.engine import layout
 from collide.engine.event import contact, modes
 from collide.run import run_scene
 from collide.scene import load_scene
@@ -25,30 +24,30 @@ def test_a_3d_slides_event_value_is_continuous_as_its_slip_turns():
     its way, and -eps reversed, so a slip that reverses through the band still changes sign."""
     X, C, CI, WP, nc, grav = pressed_island(3, 0, False)
     seed = np.int64(0)
-    contact.geometry(X, C, CI, nc, WP, seed, kn.YES)
+    contact.geometry(X, C, CI, nc, WP, seed, layout.YES)
     contact.springs(X, C, CI, 2, nc, grav)
     contact.set_basis(C, 0, False)
-    e1, e2 = C[0, kn.C_B:kn.C_B + 3], C[0, kn.C_B + 3:kn.C_B + 6]  # the tangent plane
-    X[:, kn.X_W:kn.X_W + 3] = 0.0
-    X[0, kn.X_V:kn.X_V + 3] = 0.0
+    e1, e2 = C[0, layout.C_B:layout.C_B + 3], C[0, layout.C_B + 3:layout.C_B + 6]  # the tangent plane
+    X[:, layout.X_W:layout.X_W + 3] = 0.0
+    X[0, layout.X_V:layout.X_V + 3] = 0.0
     eps, size, mu = 1e-6, 37e-6, 0.3  # a slip of 37 eps, as in the pile
-    CI[0, kn.CI_MODE] = kn.SLIDE
-    C[0, kn.C_MU], C[0, kn.C_EPS] = mu, eps
-    fl = np.zeros(int(kn.NFL), np.int64)
-    fl[kn.FL_SPIN], fl[kn.FL_FRICTION], fl[kn.FL_PLANAR] = 1, 1, kn.NO
+    CI[0, layout.CI_MODE] = layout.SLIDE
+    C[0, layout.C_MU], C[0, layout.C_EPS] = mu, eps
+    fl = np.zeros(int(layout.NFL), np.int64)
+    fl[layout.FL_SPIN], fl[layout.FL_FRICTION], fl[layout.FL_PLANAR] = 1, 1, layout.NO
     E = np.zeros((2 * nc, 4))
     turns = np.linspace(0.0, np.pi, 721)
     values, held = [], None
     for turn in turns:
-        X[1, kn.X_V:kn.X_V + 3] = -size * (np.cos(turn) * e1 + np.sin(turn) * e2)
-        contact.geometry(X, C, CI, nc, WP, seed, kn.YES)
-        slip = np.array(contact.slip(X, C, CI, 0, kn.X_V, kn.X_W, 1, False))
+        X[1, layout.X_V:layout.X_V + 3] = -size * (np.cos(turn) * e1 + np.sin(turn) * e2)
+        contact.geometry(X, C, CI, nc, WP, seed, layout.YES)
+        slip = np.array(contact.slip(X, C, CI, 0, layout.X_V, layout.X_W, 1, False))
         if held is None:
             held = slip / np.linalg.norm(slip)
-        C[0, kn.C_HELD:kn.C_HELD + 3] = held
-        assert modes.mode_events(X, C, CI, E, 2, nc, kn.E_V0, kn.E_R0, np.zeros(3, np.int64), np.zeros((6, 6)),
-                              np.zeros(6), fl, 1.0, kn.YES, kn.NO)
-        values.append(E[0, kn.E_V0])
+        C[0, layout.C_HELD:layout.C_HELD + 3] = held
+        assert modes.mode_events(X, C, CI, E, 2, nc, layout.E_V0, layout.E_R0, np.zeros(3, np.int64), np.zeros((6, 6)),
+                              np.zeros(6), fl, 1.0, layout.YES, layout.NO)
+        values.append(E[0, layout.E_V0])
     values = np.array(values)
     expected = np.linalg.norm(slip) * np.cos(turns / 2) ** 2 - eps
     assert values == pytest.approx(expected, rel=1e-9, abs=1e-9 * size)
@@ -68,7 +67,7 @@ def test_a_hold_force_through_zero_flips_the_slip_to_the_bands_other_edge():
     so that the gate can be switched off."""
     runs = _flip_runs("on", "no-flips")
     speed, event_tol = _off_centre_scales()
-    per_flip = kernels.FLIP_SHARE / kernels.FLIP_SAFETY * event_tol
+    per_flip = layout.FLIP_SHARE / layout.FLIP_SAFETY * event_tol
     flips = runs["on"][1]
     assert flips > 0 and runs["no-flips"][1] == 0
     assert runs["on"][0] < runs["no-flips"][0]
