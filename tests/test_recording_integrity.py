@@ -153,3 +153,20 @@ def test_foreign_metadata_is_one_line(tmp_path: Path, meta: dict, words: str) ->
         read_recording(path)
     message = str(info.value)
     assert words in message and str(path) in message and "\n" not in message
+
+
+def test_a_run_without_warnings_recorded_after_one_with_them_reads_back(tmp_path) -> None:
+    """In one process, a recording whose run warned and then one whose run did not: the second's
+    settings hold no warnings at all (Rerun wrote a None it had seen as a list as an empty list,
+    outside the checksum, and the good file was refused as damaged)."""
+    from collide.run import run_scene
+    from collide.scene import load_scene
+
+    warned = run_scene(load_scene("newtons-cradle"), record=True, dt=1e-5)
+    assert warned.result.warnings
+    write_recording(warned, tmp_path / "warned.rrd")
+    quiet = run_scene(load_scene("demo-1d"), record=True)
+    assert not quiet.result.warnings
+    write_recording(quiet, tmp_path / "quiet.rrd")
+    assert read_recording(tmp_path / "warned.rrd").result.warnings == warned.result.warnings
+    assert read_recording(tmp_path / "quiet.rrd").result.warnings == []

@@ -262,8 +262,12 @@ class _Writer(_Drawing):
             "intervals": int(len(self.traj.intervals)), "dim": model.dim, "spin_dim": model.spin_dim,
             "n_bodies": model.n_bodies, "n_walls": model.n_walls, "friction": bool(self.friction),
             "stride": self.stride, "fps": float(self.fps), "contact_frames": self.contact_frames,
-            "force_scale": float(self.force_scale), "warnings": list(r.warnings) or None,
+            "force_scale": float(self.force_scale),
         }
+        if r.warnings:
+            # Left out when there are none: Rerun writes a None it has seen as a list before (in an
+            # earlier recording of this process) as an empty list, which the checksum did not cover.
+            meta["warnings"] = list(r.warnings)
         estimate = getattr(run, "error_estimate", None)
         if estimate is not None:
             meta["error_estimate"] = float(np.asarray(estimate).reshape(-1)[0])
