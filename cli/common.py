@@ -92,8 +92,15 @@ def progress_display(name: str):
         sys.stderr.flush()
         shown[0] = True
 
+    with _status_line(show if wanted else None, shown) as shown_line:
+        yield shown_line
+
+
+@contextmanager
+def _status_line(show, shown: list[bool]):
+    """Yields `show`; at the end clears the line it wrote on stderr (`shown[0]`: whether it did)."""
     try:
-        yield show if wanted else None
+        yield show
     finally:
         if shown[0]:
             sys.stderr.write("\r\033[K" if sys.stderr.isatty() else "\n")
@@ -119,12 +126,8 @@ def loading_display(name: str):
         sys.stderr.flush()
         shown[0] = True
 
-    try:
-        yield show if wanted else None
-    finally:
-        if shown[0]:
-            sys.stderr.write("\r\033[K" if sys.stderr.isatty() else "\n")
-            sys.stderr.flush()
+    with _status_line(show if wanted else None, shown) as shown_line:
+        yield shown_line
 
 
 LARGE_SCENE = 16  # bodies: above this, interpreted kernels would take minutes to hours

@@ -26,3 +26,21 @@ def browser(app):
         browser = launch(p)
         yield browser
         browser.close()  # before the server stops: an open connection makes stop() wait
+
+
+@pytest.fixture
+def measuring_runs(monkeypatch) -> list[float]:
+    """The tolerances of the runs a measured run starts to measure its error (collide.run's
+    tighter runs, `measure=False`), in order."""
+    import collide.run as run_module
+
+    tolerances: list[float] = []
+    real = run_module.run_scenes
+
+    def counting(scenes, **kwargs):
+        if kwargs.get("measure") is False:
+            tolerances.append(kwargs["tol"])
+        return real(scenes, **kwargs)
+
+    monkeypatch.setattr(run_module, "run_scenes", counting)
+    return tolerances

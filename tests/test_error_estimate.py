@@ -92,7 +92,7 @@ def test_random_frictional_scenes_are_within_their_estimate() -> None:
         assert dg.residuals(run.result).energy[0] < 1e-4
 
 
-def test_a_measurement_that_does_not_converge_stops_refining(monkeypatch) -> None:
+def test_a_measurement_that_does_not_converge_stops_refining(measuring_runs) -> None:
     """Twelve spheres bouncing elastically on a floor in 1D (fuzz seed 31, scene 1811) over 400 s:
     runs at tol and tol / 10 part by far more than tol, and so do runs at tol / 10 and tol / 100 —
     the outcome's own sensitivity, not a step error shrinking. Refining stops there (a third
@@ -101,21 +101,11 @@ def test_a_measurement_that_does_not_converge_stops_refining(monkeypatch) -> Non
     import dataclasses
     import random
 
-    import collide.run as run_module
     from tests.scene_fuzz import random_raw
 
-    measuring: list[float] = []
-    real = run_module.run_scenes
-
-    def counting(scenes, **kwargs):
-        if kwargs.get("measure") is False:
-            measuring.append(kwargs["tol"])
-        return real(scenes, **kwargs)
-
-    monkeypatch.setattr(run_module, "run_scenes", counting)
     scene = parse_scene(random_raw(random.Random(31 * 1_000_003 + 1811), 30))
     assert len(scene.bodies) == 12 and scene.dim == 1
-    run = run_module.run_scene(dataclasses.replace(scene, duration=400.0), record=False)
-    assert len(measuring) == 2, measuring
+    run = run_scene(dataclasses.replace(scene, duration=400.0), record=False)
+    assert len(measuring_runs) == 2, measuring_runs
     assert run.error_method == ["measured"] and float(run.error_estimate[0]) > 1.0
     assert any("exceeds --tol" in w and "100 times tighter" in w for w in run.result.warnings)

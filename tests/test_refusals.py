@@ -295,30 +295,20 @@ def test_a_measurement_the_integrator_cannot_reach_leaves_the_run_answered(monke
     assert abs(final["ball5"] - 1.0) < 0.01  # the last ball leaves with the first one's speed
 
 
-def test_a_measurement_forecast_past_the_step_limit_is_not_started(monkeypatch) -> None:
+def test_a_measurement_forecast_past_the_step_limit_is_not_started(measuring_runs) -> None:
     """The cradle's error is measured by a run at a tenth of its tolerance, which takes more
     steps than the cradle's own. With a step limit that leaves fewer than the forecast, the
     tighter run is not started (only to be refused at the limit, minutes later in a long run):
     the answer carries the model's estimate and says why; with room to spare it is measured."""
-    import collide.run as run_module
     from collide.scene import load_scene
 
-    measuring: list[float] = []
-    real = run_module.run_scenes
-
-    def counting(scenes, **kwargs):
-        if kwargs.get("measure") is False:
-            measuring.append(kwargs["tol"])
-        return real(scenes, **kwargs)
-
-    monkeypatch.setattr(run_module, "run_scenes", counting)
     cradle = load_scene("newtons-cradle")
-    measured = run_module.run_scene(cradle, record=False)
-    assert measured.error_method == ["measured"] and measuring
+    measured = run_scene(cradle, record=False)
+    assert measured.error_method == ["measured"] and measuring_runs
     steps = int(measured.result.steps[0])
-    measuring.clear()
-    tight = run_module.run_scene(cradle, record=False, max_steps=steps + 1)
-    assert measuring == [] and tight.error_method == ["model"]
+    measuring_runs.clear()
+    tight = run_scene(cradle, record=False, max_steps=steps + 1)
+    assert measuring_runs == [] and tight.error_method == ["model"]
     assert any("would take about" in w and "left of the step limit" in w for w in tight.result.warnings)
 
 
