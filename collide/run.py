@@ -403,11 +403,12 @@ def _measured(run: SceneRun, integ: str, record: bool, max_steps: int) -> SceneR
                 same += 1
             if finer_tol < floor or budget < 1:
                 break
-            if _forecast_steps(candidate, scene, integ, finer_tol) > budget:
+            forecast = _forecast_steps(candidate, scene, integ, finer_tol)
+            if forecast > budget:
                 candidate.result.warnings.append(
                     f"the error could not be measured: a run at --tol {finer_tol:.2g} would take about "
-                    f"{_forecast_steps(candidate, scene, integ, finer_tol):.2g} steps, more than the {budget:.2g} left "
-                    "of the step limit (--max-steps); the estimate is the model's")
+                    f"{forecast:.2g} steps, more than the {budget:.2g} left of the step limit (--max-steps); "
+                    "the estimate is the model's")
                 break
             finer = run_scenes([scene], integrator=integ, tol=finer_tol, record=record, max_steps=budget,
                                measure=False)
