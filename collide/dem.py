@@ -82,15 +82,17 @@ def predicted_error(steps_per_contact: np.ndarray) -> np.ndarray:
     return ERROR_CONSTANT / np.asarray(steps_per_contact, dtype=float) ** ERROR_ORDER
 
 
+TOL_FLOOR = float(predicted_error(np.array([MAX_STEPS_PER_CONTACT]))[0])  # the finest tol auto_dt reaches
+
+
 def auto_dt(model: Model, state: State, tol: np.ndarray) -> np.ndarray:
     """The step (B,) that meets tol by the error model, within MIN..MAX_STEPS_PER_CONTACT."""
     duration, _, _ = contact_time(model, state)
     needed = (ERROR_CONSTANT / np.asarray(tol, dtype=float)) ** (1.0 / ERROR_ORDER)
     if (needed > MAX_STEPS_PER_CONTACT).any():
         b = int(np.argmax(needed))
-        reach = float(predicted_error(np.array([MAX_STEPS_PER_CONTACT]))[0])
         raise RunError(f"--tol {float(np.asarray(tol).reshape(-1)[b]):.3g} would need {needed[b]:.3g} DEM steps per "
-                       f"contact (contacts switch at steps: first order); the DEM kernel reaches about {reach:.0e} "
+                       f"contact (contacts switch at steps: first order); the DEM kernel reaches about {TOL_FLOOR:.0e} "
                        f"at {MAX_STEPS_PER_CONTACT} steps per contact. Use a looser --tol or give a --dt")
     return duration / np.clip(needed, MIN_STEPS_PER_CONTACT, MAX_STEPS_PER_CONTACT)
 

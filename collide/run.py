@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from collide import diagnostics as dg
+from collide import measure as measure_mod
 from collide.integrators import INTEGRATORS
 from collide.invariant import check_invariant
 from collide.limits import step_limit
@@ -30,7 +31,7 @@ class SceneRun:
     error_estimate: np.ndarray | None = None  # (B,) predicted relative error of the outcome
     auto: list[bool] | None = None  # whether each member's step was chosen automatically
     # (B,) how error_estimate was found: "model" (the integrator's error model at this step) or
-    # "measured" (against the same run at a tenth of the tolerance; see MEASURED_ERROR).
+    # "measured" (against the same run at a tenth of the tolerance; see collide.measure).
     error_method: list[str] | None = None
 
     @property
@@ -62,32 +63,10 @@ MAX_AUTO_STEPS_PER_CONTACT = 1e5
 # An energy balance this many times the step's tolerance means the error estimate failed (a
 # frictionless gas of 1000 spheres over 5000 collisions stays within 10 times).
 BALANCE_SLACK = 100.0
-UNMEASURED_BALANCE = 3.0  # see _check_unmeasured_balance
 MAX_OMEGA_H = {"seed": 0.5, "verlet": 0.5, "yoshida4": 0.6, "kahan6": 1.0}
 # Below these the outcome's error is round-off, not the step (measured: kahan6 1.4e-13 at
 # omega dt = 0.03 on the bonus demo): a tighter --tol cannot be met and is refused.
 TOL_FLOOR = {"seed": 1e-9, "verlet": 1e-11, "yoshida4": 1e-12, "kahan6": 1e-12}
-# The error model covers one contact at a time. Where contacts follow one another (a ball
-# bouncing on, a rack, balls on a floor), each contact's error feeds the next and the outcome's
-# error can exceed the model's by 1e3, with friction or without (measured: random scenes of 2-6
-# balls with a floor, tol 1e-6; without friction 37 of 150 were beyond 10 times the model, the
-# worst 3 700 times). Such runs (more than one contact, at most this many bodies) are run again
-# at a tenth of the tolerance and the difference is their estimate; the tolerance is tightened
-# (up to MEASURE_REFINEMENTS times) until the measured error meets it.
-MEASURED_MAX_BODIES = 64
-# The model counts one collision's error. A contact that lasts many collision times (a ball
-# resting, rolling or sliding on a floor, bobbing on its spring) gathers the step's error over
-# every period: a ball rolling 0.5 s on a floor at k = 1e6 N/m (500 collision times) ended 2e-5
-# away from a run at a 1000 times tighter tolerance against the model's 1e-6, with or without
-# friction. Runs with a contact longer than this many collision times (a rack's longest in a
-# break: 3) are measured too; below it an error growing with the contact's length stays within
-# 10 times the model's.
-LASTING_CONTACT = 8.0
-MEASURE_REFINEMENTS = 3
-SAME_RUNS_LIMIT = 3  # tighter runs with the candidate's step, passed over in a measurement
-NOT_CONVERGING = 0.5  # see _measured
-
-
 def error_regime(scene: Scene) -> str:
     """Which error model applies to a scene: no friction, or friction."""
     return "friction" if scene.has_friction else "smooth"
@@ -238,7 +217,7 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     `max_steps` bounds each member's steps (by default `limits.step_limit`: fewer for a run with
     no duration); a measured run's tighter runs share it.
 
-    A single run whose error the model does not cover (see MEASURED_MAX_BODIES) has it measured
+    A single run whose error the model does not cover (collide.measure) has it measured
     (`measure`; `error_method` says which)."""
     names = {s.integrator for s in scenes} if integrator is None else {integrator}
     if len(names) != 1:
@@ -260,7 +239,8 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
         raise SceneError(f"integrator: '{integ}' runs the report's contact law only; {needs.name}'s "
                          f"({dem_reason(needs)}) runs with --integrator dem")
     if integ == "dem":
-        return _run_dem(scenes, model, state, requested, auto_used, tols, dt, record, max_steps, progress)
+        return _run_dem(scenes, model, state, requested, auto_used, tols, dt, record, max_steps, progress,
+                        measure)
     check_tol_floor(integ, tols)
     round_off = check_stiffness(scenes, model, state, tols)
     omega = reference_frequency(model)
@@ -305,28 +285,14 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     run = SceneRun(list(scenes), result, dt, [float(x) for x in tols], estimate, auto_used, ["model"] * len(scenes))
     if not measure:
         return run  # a measuring run: its caller judges it
-    if len(scenes) == 1 and _outside_model(run):
-        if run.auto[0] and len(scenes[0].bodies) <= MEASURED_MAX_BODIES:
-            run = _measured(run, integ, record, max_steps)
+    if len(scenes) == 1 and measure_mod.outside_model(run.result):
+        if run.auto[0] and len(scenes[0].bodies) <= measure_mod.MEASURED_MAX_BODIES:
+            run = measure_mod.measured(run, _event_rerun(scenes[0], integ, record), max_steps)
         else:
-            run.result.warnings.append(_unmeasured_warning(run))
+            run.result.warnings.append(measure_mod.unmeasured_warning(run))
     run.result.warnings.extend(balance_warnings(run.result, scenes, np.maximum(tols, run.error_estimate),
                                                 auto_used))
     return run
-
-
-def _check_unmeasured_balance(run: SceneRun, tol: float) -> None:
-    """Refuse a run outside the error model whose error could not be measured when its energy
-    balance says the model's estimate does not hold: a relative balance off by e moves the
-    velocities by about e / 2. A run whose estimate holds sits near twice the tolerance (the seed's
-    cradle: 2.1 times at every tol); past UNMEASURED_BALANCE times, the outcome is off by more than
-    half again what would be quoted (the seed at tol 2e-4, a ball bouncing 24 times: 4e-3; at tol
-    1.7e-4, 10 bounces: 1.5e-3, 8.4 times)."""
-    off = float(dg.residuals(run.result).energy[0])
-    if math.isfinite(off) and off > UNMEASURED_BALANCE * tol:
-        raise RunError(f"the energy balance is off by {off:.2g}, {off / tol:.0f} times --tol {tol:.2g}, and the "
-                       "error could not be measured: the "
-                       "estimate does not hold; give a smaller --dt, or use an integrator of higher order")
 
 
 def _steps_per_contact(steps: np.ndarray) -> float:
@@ -335,129 +301,29 @@ def _steps_per_contact(steps: np.ndarray) -> float:
     return float(finite.max()) if finite.size else 0.0
 
 
-def _outside_model(run: SceneRun) -> bool:
-    """Whether a single run's outcome is outside what the error model covers: contacts in a
-    chain, or one that lasts."""
-    closed, steps = run.result.closed_steps, int(run.result.steps[0])
-    if closed is not None and steps > 0 and int(closed[0]) == steps:
-        return False  # every contact ran in closed form: no step error to compound or gather
-    contacts = run.result.contacts
-    chained = int(contacts.count[0]) > 1
-    lasting = contacts.longest is not None and float(contacts.longest[0]) > LASTING_CONTACT
-    return chained or lasting
+def _event_rerun(scene: Scene, integ: str, record: bool) -> measure_mod.Rerun:
+    """How a measurement runs an event-engine scene again."""
+    return measure_mod.Rerun(
+        run=lambda tol, steps: run_scenes([scene], integrator=integ, tol=tol, record=record, max_steps=steps,
+                                          measure=False),
+        step=lambda tol: float(auto_dt([scene], integ, np.array([tol]))[0][0]),
+        floor=TOL_FLOOR[integ])
 
 
-def _unmeasured_warning(run: SceneRun) -> str:
-    """Why a run outside the model quotes it (a given dt, or too many bodies to run again), and
-    what it does not cover."""
-    n, count = len(run.scenes[0].bodies), int(run.result.contacts.count[0])
-    why = "a given dt" if not run.auto[0] else f"{n} bodies; runs of up to {MEASURED_MAX_BODIES} are"
-    what = f"{count} contacts in a chain compound it" if count > 1 else "a contact that lasts gathers it every period"
-    return (f"the error was not measured ({why}): {float(run.error_estimate[0]):.2g} is the model's estimate for "
-            f"one collision, and {what} (2-6 balls on a floor: up to 3 700 times; a 1000-sphere gas's final states "
-            "decorrelate); the balances (residuals) are the check")
+def _dem_rerun(scene: Scene, model, state, record: bool) -> measure_mod.Rerun:
+    """How a measurement runs a DEM scene again."""
+    from collide import dem
 
-
-def _outcome_distance(a: RunResult, b: RunResult, scene: Scene) -> float:
-    """Largest difference of final velocities and spins times radius, over the fastest initial
-    speed (the quantity --tol bounds)."""
-    radius = a.model.radius[0][:, None]
-    dv = np.abs(a.final.v[0] - b.final.v[0]).max(initial=0.0)
-    dw = np.abs((a.final.w[0] - b.final.w[0]) * radius).max(initial=0.0) if a.final.w.shape[-1] else 0.0
-    speed = max(max(float(np.linalg.norm(body.velocity)) for body in scene.bodies), 1e-300)
-    return float(max(dv, dw) / speed)
-
-
-def _forecast_steps(candidate: SceneRun, scene: Scene, integ: str, finer_tol: float) -> float:
-    """The steps a run at `finer_tol` would take: the candidate's, times the ratio of the steps
-    (steps go as 1 / dt where contacts are stepped; free flights are jumped either way). A run
-    forecast past the step limit is not started only to be refused there, minutes later."""
-    finer_dt = float(auto_dt([scene], integ, np.array([finer_tol]))[0][0])
-    return float(candidate.result.steps[0]) * float(candidate.result.dt[0]) / finer_dt
-
-
-def _measured(run: SceneRun, integ: str, record: bool, max_steps: int) -> SceneRun:
-    """The run's error measured against the same scene at a tenth of its tolerance; while that
-    exceeds the tolerance, the tighter run becomes the candidate (the step choice must meet tol)."""
-    scene, tol = run.scenes[0], float(run.tol[0])
-    floor = TOL_FLOOR[integ]
-    candidate, step_tol = run, tol
-    candidate_model = float(run.error_estimate[0])  # the model's estimate for the candidate
-    spent = run.result.wall_time_s
-    budget = max_steps - int(run.result.steps[0])  # the tighter runs share the run's step limit
-    same = refined = 0
-    previous = math.inf  # the last measured difference
-    while refined < MEASURE_REFINEMENTS:
-        finer_tol = step_tol / 10
-        # A tighter tolerance that keeps the candidate's step (at its ceiling, MAX_OMEGA_H or half
-        # the stability limit) measures the events' landing at most, not the step's error: passed
-        # over, unrun. Taken as the measurement, it quoted the model's 3e-5 for six balls on a
-        # floor whose outcome was 0.1 off (random scenes at tol 1e-3: 21 in 100 beyond 10 times the
-        # estimate without friction, 2-30 with).
-        try:
-            # A tighter tolerance the integrator cannot reach (the seed's first order) is refused
-            # by auto_dt as by the run: the run's answer stands, unmeasured.
-            while (same < SAME_RUNS_LIMIT and finer_tol >= floor
-                   and float(auto_dt([scene], integ, np.array([finer_tol]))[0][0]) == float(candidate.result.dt[0])):
-                finer_tol /= 10
-                same += 1
-            if finer_tol < floor or budget < 1:
-                break
-            forecast = _forecast_steps(candidate, scene, integ, finer_tol)
-            if forecast > budget:
-                candidate.result.warnings.append(
-                    f"the error could not be measured: a run at --tol {finer_tol:.2g} would take about "
-                    f"{forecast:.2g} steps, more than the {budget:.2g} left of the step limit (--max-steps); "
-                    "the estimate is the model's")
-                break
-            finer = run_scenes([scene], integrator=integ, tol=finer_tol, record=record, max_steps=budget,
-                               measure=False)
-        except RunError as exc:
-            candidate.result.warnings.append(f"the error could not be measured (a run at --tol {finer_tol:.2g}: "
-                                             f"{exc}); the estimate is the model's")
-            break
-        spent += finer.result.wall_time_s
-        budget -= int(finer.result.steps[0])
-        refined += 1
-        model_estimate = float(candidate_model)
-        candidate_model = float(finer.error_estimate[0])
-        error = max(_outcome_distance(candidate.result, finer.result, scene), model_estimate)
-        candidate.error_estimate = np.array([error])
-        candidate.error_method = ["measured"]
-        if error <= tol:
-            break
-        # A difference that did not halve with a step choice ten times tighter is not the step's
-        # error shrinking but the outcome's own sensitivity (contacts feeding one another without
-        # end: twelve spheres bouncing on a floor for two hours part by 300 times their start
-        # speed between any two step choices): a tighter run still would only repeat it.
-        converging = error <= NOT_CONVERGING * previous
-        previous = error
-        # The tighter run is the candidate. Unless measured in turn, its estimate is the last
-        # difference (the coarser run's error): pessimistic, since extrapolating a shrinking
-        # series of differences failed where a tighter step changes an event's outcome.
-        finer.error_estimate = np.array([max(error, float(finer.error_estimate[0]))])
-        finer.error_method = ["measured"]
-        candidate, step_tol = finer, finer_tol
-        if not converging:
-            break
-    if not refined:
-        _check_unmeasured_balance(candidate, tol)
-    # The user's tolerance stays what is reported; the steps are those of the run returned, the
-    # wall time that of every run it took.
-    candidate.tol = [tol]
-    candidate.result.wall_time_s = spent
-    if float(candidate.error_estimate[0]) > tol:
-        candidate.result.warnings.append(
-            f"the measured error {float(candidate.error_estimate[0]):.2g} exceeds --tol {tol:.2g} even at a "
-            f"{tol / step_tol:.0f} times tighter step choice (the outcome moves with the step more than one "
-            "contact's error: contacts that feed one another, or a friction mode that changes at another "
-            "time with each step); the estimate is measured, not modelled")
-    return candidate
+    return measure_mod.Rerun(
+        run=lambda tol, steps: run_scenes([scene], integrator="dem", tol=tol, record=record, max_steps=steps,
+                                          measure=False),
+        step=lambda tol: float(dem.auto_dt(model, state, np.array([tol]))[0]),
+        floor=dem.TOL_FLOOR)
 
 
 def _run_dem(scenes: list[Scene], model, state, requested: list, auto_used: list[bool], tols: np.ndarray,
              dt_request: float | str | None, record: bool, max_steps: int | None,
-             progress: Progress | None = None) -> SceneRun:
+             progress: Progress | None = None, measure: bool = True) -> SceneRun:
     """A batch through the fixed-step DEM kernel (`collide.dem`)."""
     from collide import dem
 
@@ -476,9 +342,22 @@ def _run_dem(scenes: list[Scene], model, state, requested: list, auto_used: list
     check_finite(result, scenes)
     check_invariant(result)
     estimate = dem.predicted_error(t_c / steps)
-    result.warnings.extend(balance_warnings(result, scenes, np.maximum(tols, estimate), auto_used))
-    return SceneRun(list(scenes), result, dt_request, [float(x) for x in tols], estimate, auto_used,
-                    ["model"] * len(scenes))
+    run = SceneRun(list(scenes), result, dt_request, [float(x) for x in tols], estimate, auto_used,
+                   ["model"] * len(scenes))
+    if not measure:  # a measuring run: its caller judges it
+        result.warnings.extend(balance_warnings(result, scenes, np.maximum(tols, estimate), auto_used))
+        return run
+    # DEM's model is one impact's error; a chain of contacts, or one lasting many contact times
+    # (t_c: the shortest the scene can produce), is measured as event runs are.
+    lasting = float(result.contacts.duration[0]) > measure_mod.LASTING_CONTACT * float(t_c[0])
+    if len(scenes) == 1 and measure_mod.outside_model(result, lasting):
+        if auto_used[0] and len(scenes[0].bodies) <= measure_mod.MEASURED_MAX_BODIES:
+            run = measure_mod.measured(run, _dem_rerun(scenes[0], model, state, record), max_steps)
+        else:
+            result.warnings.append(measure_mod.unmeasured_warning(run, engine="the DEM error model"))
+    run.result.warnings.extend(balance_warnings(run.result, scenes, np.maximum(tols, run.error_estimate),
+                                                auto_used))
+    return run
 
 
 def balance_warnings(result: RunResult, scenes: list[Scene], tols: np.ndarray, auto_used: list[bool]) -> list[str]:

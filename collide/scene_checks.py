@@ -39,7 +39,7 @@ LADDER_STEP_FACTOR = 10.0
 ROUNDOFF_PER_STEP = 4.0 * np.finfo(float).eps
 ROUNDOFF_FLOOR = 1e-13  # a run of a few steps: the residual's own sums are round-off of this size
 MIN_BOUNCES = 2  # apex ratios the bounce check needs
-LADDER_MAX_BODIES = 64  # as collide.run.MEASURED_MAX_BODIES: beyond it final states decorrelate
+LADDER_MAX_BODIES = 64  # as collide.measure.MEASURED_MAX_BODIES: beyond it final states decorrelate
 
 
 @dataclass
