@@ -12,7 +12,8 @@ What can go wrong, and what the user sees (one line each, `BatchError`):
 - the scheduler cannot be reached (a connect timeout, not a hang), or has no workers;
 - the client, scheduler and workers run different Dask, Python or collide versions;
 - the workers cannot import collide;
-- the scheduler goes away mid-batch (finished chunks are kept: `--resume` finishes the rest).
+- the scheduler goes away mid-batch, or is left without workers for a minute (finished chunks
+  are kept: `--resume` finishes the rest).
 
 A worker killed mid-task has its task retried elsewhere by the scheduler; a task that fails
 twice (an exception, or its worker dying twice) becomes rows carrying the error.
@@ -23,6 +24,7 @@ from __future__ import annotations
 import logging
 import os
 import re
+import time
 import uuid
 from collections import deque
 from collections.abc import Iterator
@@ -34,6 +36,11 @@ from collide.stepper import THREADS_VARIABLE
 
 CONNECT_TIMEOUT_S = 5.0  # an unreachable address fails within this, not after minutes
 WORKER_WAIT_S = 30.0  # a scheduler without workers: how long to wait for the first one
+# Mid-batch, a scheduler left without workers this long is given up (finished chunks are kept,
+# `--resume` runs the rest): Dask itself would wait for workers without end, and a LocalCluster
+# whose nannies failed to restart their workers (seen at load 13 on 2 cores) has none to come.
+WORKERLESS_S = 60.0
+POLL_S = 0.05  # how often a waiting batch looks for a finished chunk (chunks take seconds)
 RETRIES = 1  # a task that raised is run once more; the second failure becomes error rows
 # Versions that must agree between client, scheduler and workers (pickled tasks and results,
 # the wire protocol; collide itself, since workers compute the rows).
@@ -236,6 +243,38 @@ def version_mismatch(versions: dict) -> str:
     return ""
 
 
+def _finished(queue: Any, client: Any, address: str) -> Iterator[Any]:
+    """The queue's futures as they finish; a cluster left without workers for WORKERLESS_S is a
+    BatchError, not a wait without end."""
+    workerless_since: float | None = None
+    next_look = time.monotonic()
+    while not queue.is_empty():
+        if queue.has_ready():
+            workerless_since = None
+            yield next(queue)
+            continue
+        time.sleep(POLL_S)
+        now = time.monotonic()
+        if now < next_look:
+            continue
+        next_look = now + 1.0
+        if _has_workers(client):
+            workerless_since = None
+        elif workerless_since is None:
+            workerless_since = now
+        elif now - workerless_since > WORKERLESS_S:
+            raise BatchError(f"the Dask scheduler at {address} has had no workers for {WORKERLESS_S:g} s with "
+                             f"{queue.count()} chunk(s) unfinished; finished chunks are kept: start workers "
+                             "and run the batch again with --resume")
+
+
+def _has_workers(client: Any) -> bool:
+    try:
+        return bool(client.scheduler_info().get("workers"))
+    except Exception:  # noqa: BLE001 - a lost scheduler shows up on the futures
+        return True
+
+
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
@@ -295,7 +334,7 @@ class DaskExecutor:
 
         fill()
         try:
-            for future in queue:
+            for future in _finished(queue, client, address):
                 i, alone = live.pop(future)
                 if future.status == "error" and not alone and isinstance(_exception(future, address), KilledWorker):
                     suspects.append(i)

@@ -233,3 +233,30 @@ def test_the_in_process_batch_imports_no_dask(tmp_path: Path) -> None:
     done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=_env(), capture_output=True, text=True,
                           timeout=300)
     assert done.returncode == 0, done.stderr
+
+
+class _StalledQueue:
+    """A queue whose futures never finish."""
+
+    def is_empty(self) -> bool:
+        return False
+
+    def has_ready(self) -> bool:
+        return False
+
+    def count(self) -> int:
+        return 3
+
+
+class _Workerless:
+    def scheduler_info(self) -> dict:
+        return {"workers": {}}
+
+
+def test_a_cluster_left_without_workers_is_one_line_not_a_wait_without_end(monkeypatch) -> None:
+    from collide import distributed as dist
+
+    monkeypatch.setattr(dist, "WORKERLESS_S", 0.5)
+    with pytest.raises(lib.BatchError, match=r"has had no workers for 0.5 s with 3 chunk\(s\) unfinished; finished "
+                       r"chunks are kept: .* --resume$"):
+        next(dist._finished(_StalledQueue(), _Workerless(), "tcp://127.0.0.1:8786"))
