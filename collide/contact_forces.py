@@ -56,6 +56,12 @@ class RecordedForces:
         cs = np.arange(c)
         self._n_start = np.searchsorted(grouped, cs, side="left")
         self._n_end = np.searchsorted(grouped, cs, side="right")
+        # Whether each contact's last phase is still open at the run's end (its last entry is not
+        # a phase's end): its last records hold from there on.
+        kinds = kind[order]
+        self._open = np.zeros(c, bool)
+        has = self._n_end > self._n_start
+        self._open[has] = kinds[self._n_end[has] - 1] != 2.0
         self.record_peak = float(np.max(np.abs(rec[:, layout.R_FN]), initial=0.0)) if len(rec) else 0.0
         # Friction: the records alone, in the same order (by contact, then time, then as recorded).
         self._f_t = None
@@ -104,14 +110,16 @@ class RecordedForces:
 
     def friction(self, ck: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The friction force (E, D) N on body i of contacts ck at times (E,): the record of the
-        step that ends at or after each time; and whether there is one (E,)."""
+        step that ends at or after each time (past the last, in a phase still open at the run's
+        end, the last); and whether there is one (E,)."""
         ck = np.asarray(ck, np.int64)
         force = np.zeros((len(ck), self.dim))
         if self._f_t is None or not len(ck):
             return force, np.zeros(len(ck), bool)
         lo, hi = self._f_start[ck], self._f_end[ck]
         at = segment_search(self._f_t, lo, hi, np.asarray(times, float), side="left")
-        found = at < hi
+        # Past the last record of a phase that never ended (the run's end), that record holds.
+        found = (at < hi) | ((at == hi) & (hi > lo) & self._open[ck])
         rows = np.minimum(at, np.maximum(hi - 1, 0))
         force[found] = self._f_force[rows[found]]
         return force, found
