@@ -59,6 +59,10 @@ PROGRESS_PERIOD = 0.25
 # At most this many threads step a batch's members (default: every core the process may use);
 # a Dask worker sets 1, its cluster being shaped to the cores already.
 THREADS_VARIABLE = "COLLIDE_THREADS"
+# Set to a file name: the process appends one JSON line to it when its first kernel step starts,
+# with the process's CPU time so far (benchmarks/bench_startup.py measures start-up with it).
+STARTUP_PROBE_VARIABLE = "COLLIDE_STARTUP_PROBE"
+_STARTUP_PROBE = [os.environ.get(STARTUP_PROBE_VARIABLE, "")]
 
 
 @contextmanager
@@ -385,6 +389,8 @@ def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Prog
     if cap.isdigit() and int(cap) > 0:
         cores = min(cores, int(cap))
     threads = min(cores, b_count) if progress is None and tier.COMPILED else 1
+    if _STARTUP_PROBE[0]:
+        _probe_startup()
     if threads < 2:
         outcomes = []
         for b in range(b_count):
@@ -400,6 +406,16 @@ def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Prog
 
     list(_pool(threads).map(run_share, range(threads)))
     return outcomes
+
+
+def _probe_startup() -> None:
+    """Record the process's CPU time (user + sys) at its first kernel step, once."""
+    import json
+
+    path, _STARTUP_PROBE[0] = _STARTUP_PROBE[0], ""
+    line = {"cpu": time.process_time(), "compiled": tier.COMPILED, "load_wall": tier.load_seconds()}
+    with open(path, "a") as probe:
+        probe.write(json.dumps(line) + "\n")
 
 
 _POOLS: dict[int, tuple[int, ThreadPoolExecutor]] = {}
