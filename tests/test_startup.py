@@ -101,3 +101,21 @@ def _outcome(runtime, value, param, ctx) -> tuple:
     except Exception as exc:  # typer's own error, compared as type and message
         return "error", type(exc).__name__, str(exc)
     return "value", type(result), repr(result)
+
+
+def test_a_module_loaded_when_used_works_as_if_imported():
+    """collide.engine.tier defers numba's unused imports: such a module stays unloaded until
+    something uses it, and then works as imported."""
+    code = """
+import sys
+from collide.engine.tier import _load_when_used
+assert "colorsys" not in sys.modules
+_load_when_used("colorsys")
+module = sys.modules["colorsys"]
+assert type(module).__name__ == "_LazyModule"
+from colorsys import rgb_to_hsv
+assert rgb_to_hsv(1.0, 0.0, 0.0) == (0.0, 1.0, 1.0) and type(module).__name__ == "module"
+"""
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                          env=dict(os.environ, COLLIDE_JIT="0"))
+    assert done.returncode == 0, done.stderr
