@@ -98,6 +98,20 @@ print("PHASES " + json.dumps({"marks": marks, "phases": phases, "imports": own_c
 """
 
 
+def bytecode(tree: Path) -> str:
+    """How many of the tree's collide and cli modules have an up-to-date bytecode cache (without
+    one, where PYTHONDONTWRITEBYTECODE is set, every process compiles them from source;
+    `python -m collide.warmup` writes it)."""
+    import importlib.util
+
+    sources = [p for package in ("collide", "cli") for p in (tree / package).rglob("*.py")]
+    fresh = 0
+    for source in sources:
+        cached = Path(importlib.util.cache_from_source(str(source)))
+        fresh += cached.exists() and cached.read_bytes()[8:12] == int(source.stat().st_mtime).to_bytes(4, "little")
+    return f"bytecode cached for {fresh} of {len(sources)} modules"
+
+
 def load_average() -> str:
     return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
@@ -204,7 +218,7 @@ def main() -> None:
     cpu = alternated(trees, args.runs)
     for tree, values in cpu.items():
         print(f"  {tree}: median {statistics.median(values):.3f} s (min {min(values):.3f}, max {max(values):.3f})"
-              f"{'' if statistics.median(values) <= BAR else f'  over the bar of {BAR} s'}")
+              f"{'' if statistics.median(values) <= BAR else f'  over the bar of {BAR} s'}; {bytecode(tree)}")
     print(f"load average after: {load_average()}")
     for tree in trees:
         packages, phases = breakdown(tree, args.breakdown_runs)
