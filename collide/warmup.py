@@ -172,7 +172,8 @@ def _take_lock(report) -> int | None:
 def write_bytecode() -> None:
     """Write Python's bytecode cache of collide's own packages, as pip does when it installs
     one: an editable install where Python does not write it (PYTHONDONTWRITEBYTECODE) compiled
-    their source again in every process, a fifth of a compiled run's start (docs/performance.md).
+    their source again in every process, about 0.1 s of CPU of a compiled run's start
+    (docs/performance.md).
     A file Python finds out of date is compiled from source as before; one that cannot be
     written costs only that time."""
     import compileall
