@@ -3,10 +3,12 @@
 The bar (issue 50): a process that runs a compiled scene (`collide run billiards-break
 --no-record`) spends at most 0.6 s of CPU before its first step. Each run is the real command in
 a fresh process; COLLIDE_STARTUP_PROBE makes the engine write the process's CPU time when its
-first kernel step starts (`collide.stepper`). With --baseline DIR (another checkout of collide,
-e.g. `git worktree add /work/wt/startup-base <commit>`, compiled there with `python -m
-collide.warmup`) the runs alternate between the two trees, so that the machine's load falls on
-both alike; medians are printed with the load average before and after.
+first kernel step starts (`collide.stepper`). With --baseline DIR (another checkout of collide
+that has the probe, e.g. `git worktree add --detach ../startup-base <commit>`) the runs alternate
+between the two trees, so that the machine's load falls on both alike; medians are printed with
+the load average before and after. Both trees run on this script's Python (PYTHONPATH=tree), so
+the baseline needs no environment of its own, only its compiled kernels: `cd DIR &&
+PYTHONPATH=DIR /path/to/.venv/bin/python -m collide.warmup`.
 
 Then a breakdown of each tree's start (medians of a few runs of a driver that calls the CLI's
 `main()` as the `collide` script does, with `-X importtime`): the imports by top-level package
