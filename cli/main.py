@@ -11,6 +11,7 @@ from typing import Annotated, Any
 import typer
 from typer import Abort, TyperException
 
+from cli.coercion import skip_needless_conversion
 from cli.common import (
     DtOption,
     IntegratorOption,
@@ -22,7 +23,8 @@ from cli.common import (
 )
 from collide.limits import MAX_STEPS_DEFAULT, OPEN_RUN_STEPS, SEED_BODY_STEPS
 
-app = typer.Typer(
+skip_needless_conversion()
+_app = typer.Typer(
     name="collide",
     help="Collisions of spheres with springs, Coulomb friction and spin: run scenes, record them "
     "to Rerun, batch and sweep them, validate against textbooks, and view them live.",
@@ -116,7 +118,7 @@ def print_summary(summary: dict[str, Any], recording: Path | None, every_body: b
         typer.echo(f"  recording: {recording}")
 
 
-@app.command()
+@_app.command()
 def run(
     scene: Annotated[str, typer.Argument(help="A built-in scene name (see `collide scenes`) or a .toml file.")],
     set_: SetOption = None,
@@ -219,7 +221,7 @@ def run(
         spawn_viewer(recording)
 
 
-@app.command()
+@_app.command()
 def scenes(
     show: Annotated[
         str | None, typer.Option(help="Print this built-in scene's TOML (copy it to start your own).")
@@ -243,18 +245,29 @@ def scenes(
         typer.echo(f"{name:<20} {scene.description}")
 
 
+# Commands main.py defines itself; the others live in their own modules (OPTIONAL), imported only
+# when the command line may need them: they import much (validation, fitting, the viewer) that
+# `collide run` does not use.
+OWN_COMMANDS = ("run", "scenes")
+OPTIONAL = ("cli.numerics", "cli.batch", "cli.accuracy", "cli.view", "cli.bench", "cli.engine", "cli.export")
+_registered = [False]
+
+
 def _register_optional() -> None:
-    """Commands that live in their own modules."""
+    """Commands that live in their own modules (once)."""
     import importlib
 
-    for module in ("cli.numerics", "cli.batch", "cli.accuracy", "cli.view", "cli.bench", "cli.engine", "cli.export"):
+    if _registered[0]:
+        return
+    _registered[0] = True
+    for module in OPTIONAL:
         try:
             mod = importlib.import_module(module)
         except ModuleNotFoundError as exc:
             if exc.name != module:
                 raise
             continue
-        mod.register(app)
+        mod.register(_app)
     _one_line_summaries()
 
 
@@ -262,13 +275,26 @@ def _one_line_summaries() -> None:
     """Each command's line in `collide --help` is its docstring's first paragraph as one
     sentence: typer keeps the docstring's line breaks there (issue 12: sentences broken in the
     command list); a command's own --help reflows them."""
-    for info in app.registered_commands:
+    for info in _app.registered_commands:
         if info.short_help is None and info.help is None and info.callback is not None:
             doc = inspect.getdoc(info.callback) or ""
             info.short_help = " ".join(doc.split("\n\n")[0].split())
 
 
-_register_optional()
+def command_app(args: list[str]) -> typer.Typer:
+    """The app for this command line: every command, unless its first word names one of main.py's
+    own (nothing else is then looked up: not the command list, not another command's help)."""
+    if not args or args[0] not in OWN_COMMANDS:
+        _register_optional()
+    return _app
+
+
+def __getattr__(name: str) -> typer.Typer:
+    """`cli.main.app`: the app with every command (for callers that invoke it themselves)."""
+    if name == "app":
+        _register_optional()
+        return _app
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def main() -> None:
@@ -281,6 +307,7 @@ def main() -> None:
     disk) is one line naming it and the cause, exit 1.
     """
     import os
+    import sys
     import warnings
 
     # Rerun's Rust log lines (a write error it also reports to us) are not for the terminal:
@@ -293,7 +320,7 @@ def main() -> None:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error", RuntimeWarning)
-            code = app(standalone_mode=False)
+            code = command_app(sys.argv[1:])(standalone_mode=False)
     except TyperException as exc:  # usage errors: unknown option, bad option value, missing argument
         if type(exc).__name__ == "NoArgsIsHelpError":
             exc.show()  # `collide` alone: the help text, as before

@@ -14,12 +14,12 @@ import os
 import threading
 import time
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from collide.engine import layout, seed, tier
+from collide.engine import layout, tier
 from collide.engine.event import run as event_run
 from collide.errors import RunError
 from collide.integrators import INTEGRATORS, Integrator
@@ -36,6 +36,9 @@ from collide.model import (
 )
 from collide.results import ContactLog, RunResult
 from collide.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from concurrent.futures import ThreadPoolExecutor
 
 EDGE_TOL = float(layout.EDGE_TOL)
 EDGE_BAND_SHARE = 0.5  # of eps: the widest a band's edge may count (see simulate)
@@ -59,6 +62,10 @@ PROGRESS_PERIOD = 0.25
 # At most this many threads step a batch's members (default: every core the process may use);
 # a Dask worker sets 1, its cluster being shaped to the cores already.
 THREADS_VARIABLE = "COLLIDE_THREADS"
+# Set to a file name: the process appends one JSON line to it when its first kernel step starts,
+# with the process's CPU time so far (benchmarks/bench_startup.py measures start-up with it).
+STARTUP_PROBE_VARIABLE = "COLLIDE_STARTUP_PROBE"
+_STARTUP_PROBE = [os.environ.get(STARTUP_PROBE_VARIABLE, "")]
 
 
 @contextmanager
@@ -325,6 +332,8 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
         walls[b] = turned_walls
         fl[b, layout.FL_PLANAR] = layout.YES
     _load_compiled(integ.events, G[0], tables[0], WP, grav[0], weights, fl[0], fp[0])  # loading is not simulating
+    if not integ.events:
+        from collide.engine import seed  # the seed's kernels: imported by the runs that use them
 
     def run_member(b: int) -> tuple:
         if integ.events:
@@ -385,6 +394,8 @@ def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Prog
     if cap.isdigit() and int(cap) > 0:
         cores = min(cores, int(cap))
     threads = min(cores, b_count) if progress is None and tier.COMPILED else 1
+    if _STARTUP_PROBE[0]:
+        _probe_startup()
     if threads < 2:
         outcomes = []
         for b in range(b_count):
@@ -402,6 +413,16 @@ def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Prog
     return outcomes
 
 
+def _probe_startup() -> None:
+    """Record the process's CPU time (user + sys) at its first kernel step, once."""
+    import json
+
+    path, _STARTUP_PROBE[0] = _STARTUP_PROBE[0], ""
+    line = {"cpu": time.process_time(), "compiled": tier.COMPILED, "load_wall": tier.load_seconds()}
+    with open(path, "a") as probe:
+        probe.write(json.dumps(line) + "\n")
+
+
 _POOLS: dict[int, tuple[int, ThreadPoolExecutor]] = {}
 _POOLS_LOCK = threading.Lock()
 
@@ -410,6 +431,8 @@ def _pool(threads: int) -> ThreadPoolExecutor:
     """A process's pool of `threads` threads, kept for its later batches (starting two threads
     cost a batch of ten small runs as much as running them). A forked child makes its own: the
     parent's threads are not in it."""
+    from concurrent.futures import ThreadPoolExecutor  # a batch's: a single run needs no pool
+
     with _POOLS_LOCK:
         entry = _POOLS.get(threads)
         if entry is None or entry[0] != os.getpid():
@@ -426,6 +449,8 @@ def _load_compiled(events: bool, *args) -> None:
     if events in _LOADED or not tier.COMPILED:
         return
     import numba
+
+    from collide.engine import seed
 
     kernel = event_run.simulate if events else seed.seed_run
     types = tuple(numba.typeof(a) for a in (args if events else (args[0], args[1], args[2], args[3], args[5],

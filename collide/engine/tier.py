@@ -358,6 +358,36 @@ def _choose() -> tuple[bool, bool]:
 
 COMPILED, BACKGROUND = _choose()
 
+# numba imports importlib.metadata (with email, socket and more) when it is imported, to find its
+# extensions when its compiler is set up; a process that loads cached kernels never sets it up.
+# The module is loaded when first used instead (importlib's LazyLoader; numba takes it by
+# `from importlib import metadata`, which does not load it): 0.03 s of a compiled run's start.
+NUMBA_UNUSED = ("importlib.metadata",)
+
+
+def _load_when_used(name: str) -> None:
+    """Put `name` in sys.modules as a module that loads itself at its first attribute access."""
+    if name in sys.modules:
+        return
+    try:
+        spec = importlib.util.find_spec(name)
+    except (ImportError, ValueError):
+        return
+    if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
+        return
+    spec.loader = importlib.util.LazyLoader(spec.loader)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    parent, _, child = name.rpartition(".")
+    if parent:
+        setattr(sys.modules[parent], child, module)
+
+
+if COMPILED and not _SELF_COMPILING:
+    for _name in NUMBA_UNUSED:
+        _load_when_used(_name)
+
 # Seconds this process spent loading compiled kernels from numba's cache (once per kernel): a
 # batch reports its runs' cost apart from this one-time cost.
 _loading = [0.0]
