@@ -178,7 +178,7 @@ def test_a_settled_sphere_is_held_up_by_its_contacts(pile):
     """At rest, a sphere's recorded contact forces sum to minus its weight (force balance), and
     the report lists exactly its contacts of the frame. (At the last full frame the engine
     recorded: at the run's very end it records only some contacts' forces.)"""
-    t = float(np.unique(pile.traj.records[:, layout.R_T])[-2])
+    t = float(_full_frames(pile)[-1])
     frame = pile.frame(t)
     links = frame.contact_links()
     counts = links.counts(pile.n_bodies)
@@ -200,12 +200,22 @@ def _records_at(view: ViewRun, t: float) -> np.ndarray:
     return rec[rec[:, layout.R_T] == t]
 
 
+def _full_frames(view: ViewRun) -> np.ndarray:
+    """The recorded times at which the engine recorded every engaged contact's forces (a frame;
+    other record times hold single contacts' peaks, and the run's last time only some)."""
+    times, counts = np.unique(view.traj.records[:, layout.R_T], return_counts=True)
+    iv = view.traj.intervals
+    end = np.where(np.isnan(iv[:, layout.V_END]), np.inf, iv[:, layout.V_END])
+    engaged = ((iv[:, layout.V_START][None] <= times[:, None]) & (times[:, None] < end[None])).sum(axis=1)
+    return times[counts == engaged]
+
+
 def test_histograms_are_numpys_counts_of_the_recorded_states(pile):
     """At a recorded frame: speeds binned as numpy bins the sampled velocities; contacts per
     sphere as the spheres' overlaps count them; normal forces as numpy bins the engine's records
     at that time (the clip plane's hidden spheres and their contacts left out)."""
-    rec_t = np.unique(pile.traj.records[:, layout.R_T])
-    for t in (float(rec_t[len(rec_t) // 3]), float(rec_t[-2])):
+    frames = _full_frames(pile)
+    for t in (float(frames[len(frames) // 3]), float(frames[-1])):
         frame = pile.frame(t)
         hidden = frame.positions[:, 0] > float(np.median(frame.positions[:, 0]))
         speed, count, force = frame_histograms(frame, hidden)
