@@ -235,3 +235,19 @@ def test_histograms_are_numpys_counts_of_the_recorded_states(pile):
         assert np.array_equal(force.counts, want) and force.total == keep.sum() > 0
         x, y = force.outline()
         assert len(x) == len(y) and y.max() == force.counts.max()
+
+
+def test_a_sphere_of_a_run_given_as_frames_reads_from_its_frame():
+    """A replayed frames run (no engine records): the pick reads the frame's own values."""
+    from viewer.frames import settling_pile
+    from viewer.picking import frame_report, report_markdown
+
+    run = settling_pile(40, duration=0.2)
+    frame = run.frame(run.t1)
+    links = frame.contact_links()
+    k = int(np.argmax(links.counts(run.n_bodies)))
+    report = frame_report(run, frame, k)
+    assert len(report.contacts) == links.counts(run.n_bodies)[k] > 0
+    assert report.position == pytest.approx(frame.positions[k])
+    text = report_markdown(report)
+    assert f"**{run.names[k]}** (body {k})" in text and "nan" not in text

@@ -19,7 +19,7 @@ import viser
 
 from viewer.clip import AXES, KEEP
 from viewer.histograms import Histograms, frame_histograms
-from viewer.picking import pick_sphere, report_markdown, sphere_report
+from viewer.picking import frame_report, pick_sphere, report_markdown, sphere_report
 from viewer.scene3d import SceneDrawer
 from viewer.state import Frame, ViewRun
 
@@ -167,7 +167,12 @@ class Inspector:
             " (the clip plane hides the rest)" if shown < view.n_bodies else "")
         self.histograms.show(frame_histograms(frame, hidden), note)
         k = self.look.picked
-        self.picked.content = report_markdown(sphere_report(view, frame.t, k)) if k is not None else HINT
+        if k is None:
+            self.picked.content = HINT
+            return
+        # A run given as frames has no engine records behind it: the frame's own values.
+        report = sphere_report(view, frame.t, k) if isinstance(view, ViewRun) else frame_report(view, frame, k)
+        self.picked.content = report_markdown(report)
 
     def _new_view(self, view: ViewRun) -> None:
         """A new run: the pick kept if it names a body of it, the plane's slider over it."""

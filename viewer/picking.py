@@ -10,11 +10,12 @@ state from the run's samples, its contacts and their forces from the engine's re
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from viewer.geometry import embed3
-from viewer.state import ROUND_OFF, ViewRun
+from viewer.state import ROUND_OFF, Frame, ViewRun
 
 
 def pick_sphere(origin: np.ndarray, direction: np.ndarray, centres: np.ndarray, radii: np.ndarray,
@@ -105,6 +106,21 @@ def sphere_report(view: ViewRun, t: float, k: int) -> SphereReport:
                         float(view.mass[k] * np.linalg.norm(gravity)))
 
 
+def frame_report(view: Any, frame: Frame, k: int) -> SphereReport:
+    """Body k's values from a replayed frame alone (a run given as frames: no engine records
+    behind it, so its contacts' normal forces as the frames give them, no friction or spin)."""
+    links = frame.contact_links()
+    mine = (links.i == k) | (links.j == k)
+    rows = []
+    for i, j, force in zip(links.i[mine], links.j[mine], links.force[mine]):
+        other = int(j if i == k else i)
+        rows.append(ContactRow(view.names[other] if other >= 0 else "wall", float("nan"), float(force), None))
+    rows.sort(key=lambda r: -r.normal)
+    velocity = frame.velocities[k] if frame.velocities is not None else np.zeros(3)
+    return SphereReport(k, view.names[k], frame.t, frame.positions[k], velocity, np.zeros(0), float(view.radius[k]),
+                        float(view.mass[k]), rows, np.full(3, np.nan), 0.0)
+
+
 def _vec(x: np.ndarray, scale: float = 1.0, digits: int = 4) -> str:
     return "(" + ", ".join(f"{v * scale:.{digits}g}" for v in np.ravel(x)) + ")"
 
@@ -121,8 +137,9 @@ def report_markdown(r: SphereReport, max_rows: int = 12) -> str:
         lines.append(f"| spin (rad/s) | {_vec(r.spin)} |")
     lines += [f"| radius (mm) | {r.radius * 1e3:.4g} |",
               f"| mass (g) | {r.mass * 1e3:.4g} |",
-              f"| contacts | {len(r.contacts)} |",
-              f"| sum of contact forces (N) | {_vec(r.net_contact_force)} |"]
+              f"| contacts | {len(r.contacts)} |"]
+    if np.all(np.isfinite(r.net_contact_force)):
+        lines.append(f"| sum of contact forces (N) | {_vec(r.net_contact_force)} |")
     if r.weight > 0:
         lines.append(f"| its weight m g (N) | {r.weight:.4g} |")
     if r.contacts:
@@ -130,7 +147,8 @@ def report_markdown(r: SphereReport, max_rows: int = 12) -> str:
         lines += ["", "| contact with | overlap (µm) | F_n (N) |" + (" abs F_t (N) |" if tangential else ""),
                   "|---|--:|--:|" + ("--:|" if tangential else "")]
         for c in r.contacts[:max_rows]:
-            row = f"| {c.other} | {c.overlap * 1e6:.3g} | {c.normal:.4g} |"
+            overlap = f"{c.overlap * 1e6:.3g}" if np.isfinite(c.overlap) else "–"
+            row = f"| {c.other} | {overlap} | {c.normal:.4g} |"
             if tangential:
                 row += f" {c.tangential:.4g} |"
             lines.append(row)
