@@ -17,6 +17,7 @@ import numpy as np
 import viser
 
 from viewer.clip import links_shown
+from viewer.plots import display_scale
 from viewer.state import Frame
 
 BINS = 20
@@ -79,6 +80,7 @@ class Histograms:
         self.gui = gui
         self.container = container
         self._handles: dict[str, viser.GuiUplotHandle] = {}
+        self._units: dict[str, str] = {}
         with container:
             self.note = gui.add_markdown("", order=-1)
 
@@ -86,14 +88,22 @@ class Histograms:
         self.note.content = note
         for order, h in enumerate(histograms):
             x, y = h.outline()
-            scales = {"x": {"time": False, "auto": False, "range": [float(h.edges[0]), float(h.edges[-1])]},
+            # uPlot's tick labels keep three decimals: values brought into [1, 1000) first.
+            factor, unit = display_scale({"x": h.edges}, h.unit) if h.unit else (1.0, "")
+            x = x * factor
+            scales = {"x": {"time": False, "auto": False,
+                            "range": [float(h.edges[0]) * factor, float(h.edges[-1]) * factor]},
                       "y": {"auto": False, "range": [0.0, max(1.0, 1.1 * float(h.counts.max(initial=0)))]}}
             title = self._title(h)
             handle = self._handles.get(h.title)
             if handle is not None:
                 handle.data = (x, y)
                 handle.scales = scales
-                handle.title = title
+                if handle.title != title:
+                    handle.title = title
+                if self._units.get(h.title) != unit:
+                    handle.axes = self._axes(h, unit)
+                    self._units[h.title] = unit
                 continue
             colour = COLOURS.get(h.title, "#4285f4")
             series = ({"label": h.unit or "contacts"},
@@ -102,9 +112,13 @@ class Histograms:
             with self.container:
                 self._handles[h.title] = self.gui.add_uplot(
                     (x, y), series, title=title, height=HEIGHT, scales=scales,
-                    axes=({"label": f"{h.title} ({h.unit})" if h.unit else h.title, "size": 36, "labelSize": 14},
-                          {"size": 46}),
+                    axes=self._axes(h, unit),
                     legend={"show": False}, cursor={"show": True, "x": True, "y": False}, order=order)
+                self._units[h.title] = unit
+
+    @staticmethod
+    def _axes(h: Histogram, unit: str) -> tuple:
+        return ({"label": f"{h.title} ({unit})" if unit else h.title, "size": 36, "labelSize": 14}, {"size": 46})
 
     @staticmethod
     def _title(h: Histogram) -> str:
