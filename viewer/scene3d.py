@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import viser
 
+from viewer.clip import BodyLook, links_shown
 from viewer.colours import body_colours, colour_map, darker, legend_html, lighter
 from viewer.geometry import (
     compressed_sphere,
@@ -176,6 +177,9 @@ class SceneDrawer:
         self.frame: Frame | None = None
         self.eye: np.ndarray | None = None  # the camera's position, for the overlays
         self.lift: Lift | None = None
+        self.look = BodyLook()  # the clip plane and the picked sphere (viewer.clip)
+        self._hidden = np.zeros(0, bool)
+        self._clipped = False
 
     # ------------------------------------------------------------------------------------------
     # Fixed parts of a run
@@ -494,6 +498,7 @@ class SceneDrawer:
             return
         self.frame = frame
         self.lift = self._lift_for(frame)
+        self._hidden = self.look.hidden(frame.positions)
         if self.many:
             self._show_batch(frame)
         else:
@@ -507,6 +512,27 @@ class SceneDrawer:
             for i, past in enumerate(self._past):
                 path = np.concatenate((view.paths[i][:k], frame.positions[i][None]), axis=0)
                 past.points = _segments(path).astype(np.float32)
+        self._apply_clip(frame)
+        self.look.frame_shown(frame)
+
+    def _apply_clip(self, frame: Frame) -> None:
+        """Hide the bodies the clip plane hides (`self._hidden`), whichever way they are drawn:
+        one node each, or instances of one mesh (scaled to nothing), with their shadows."""
+        hidden, view = self._hidden, self.view
+        if self._bodies:
+            for body, off in zip(self._bodies, hidden):
+                if body["frame"].visible == bool(off):
+                    body["frame"].visible = not off
+        shown = (~hidden).astype(np.float32)
+        was, self._clipped = self._clipped, bool(hidden.any())
+        if self._clipped or was:  # once nothing is hidden, the full sizes are sent back once
+            for key, size in (("spheres", 1.0), ("dots", 0.22)):
+                batch = self._batch.get(key)
+                if batch is not None:
+                    batch.batched_scales = (size * view.radius * shown).astype(np.float32)
+        shadows = self._batch.get("shadows")
+        if shadows is not None and self.options.shadows and hidden.any():
+            shadows.batched_scales = (np.asarray(shadows.batched_scales, np.float32) * shown).astype(np.float32)
 
     def _lift_for(self, frame: Frame) -> Lift | None:
         """How the overlays are placed for this frame and eye (see the module docstring): onto
@@ -527,6 +553,12 @@ class SceneDrawer:
         return Lift(eye, max(0.3, 1.0 - 2.5 * r / distance))
 
     def _frame_colours(self, frame: Frame) -> np.ndarray:
+        if self.look.picked is not None:
+            links = frame.contact_links()
+            return self.look.colours(self._base_colours(frame), links.i, links.j)
+        return self._base_colours(frame)
+
+    def _base_colours(self, frame: Frame) -> np.ndarray:
         mode = self.options.colour_by
         view = self.view
         if mode == "body" or view is None:
@@ -641,6 +673,7 @@ class SceneDrawer:
         view = self.view
         links = frame.contact_links()
         strong = links.force > 1e-9 * max(view.max_normal_force, 1e-300)
+        strong &= links_shown(links.i, links.j, self._hidden)
         i, j, point, force = links.i[strong], links.j[strong], links.point[strong], links.force[strong]
         start = frame.positions[i]
         end = np.where((j >= 0)[:, None], frame.positions[np.maximum(j, 0)], point)
@@ -689,6 +722,8 @@ class SceneDrawer:
         in the plane of the centres."""
         tails_n, vec_n, tails_f, vec_f, points = [], [], [], [], []
         for c in frame.contacts:
+            if not self.look.contact_shown(self._hidden, c.i, c.j):
+                continue
             p = c.point
             points.append(p)
             fn = c.normal_force * self._force_scale

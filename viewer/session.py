@@ -33,6 +33,7 @@ from viewer.config import SessionConfig
 from viewer.ensemble_view import EnsembleView
 from viewer.file_actions import FileActions
 from viewer.frames import FramesRun
+from viewer.inside import Inspector
 from viewer.live import LiveRuns, Preview, Request
 from viewer.messages import Messages, one_line
 from viewer.panel import Panel, Typing
@@ -140,6 +141,7 @@ class Session:
         self.live = LiveRuns(self, self.messages, panel.stop_button, self._closed, config.initial_cost,
                              name=f"collide-sim-{client.client_id}")
         self.ensemble = EnsembleView(panel, self.drawer, self._lock, self.request_run)
+        self.inside = Inspector(client, panel.plot_panel, self.drawer, self._lock)  # clip, pick, histograms
         self._wire()
         self.player.start()
 
