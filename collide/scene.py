@@ -534,6 +534,12 @@ def _parse_scene(raw: dict, default_name: str, progress: Progress) -> Scene:
             raise SceneError(f"integrator: {_shown(integrator)} runs the report's contact law only; this scene's "
                              f"({dem_reason(scene)}) runs with integrator = 'dem'")
     if scene.contact.model == "hertz":
+        rest = [contact.restitution] + [m.restitution for m in materials] + [q.restitution for q in pairs]
+        if any(e == 0.0 for e in rest):
+            # The Hertz dashpot's zeta is matched to e > 0; the linear law's e -> 0 limit is the
+            # critically damped contact that leaves two bodies moving together.
+            raise SceneError("restitution = 0 (perfectly inelastic) is answered with the linear spring only: "
+                             "use model = 'linear' or a restitution above 0")
         for body in scene.bodies:
             if body.material is None and contact.youngs_modulus is None:
                 raise SceneError(f"contact.youngs_modulus: missing for model = 'hertz' (body.{body.name} has no "
@@ -643,7 +649,9 @@ def _choice(table: dict, key: str, where: str, options: tuple[str, ...]) -> str:
 
 
 def _restitution(value: Any, key: str) -> float:
-    e = _number(value, key, positive=True)
+    # 0 is perfectly inelastic ("sticky"): a critically damped dashpot (collide.dem.damping_ratio);
+    # what such a scene needs is checked with the rest of the scene (`_check_sticky`).
+    e = _number(value, key, nonneg=True)
     if e > 1.0:
         raise SceneError(f"{key}: a restitution is at most 1 (1 = no damping), got {_shown(value)}")
     return e
