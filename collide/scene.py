@@ -533,13 +533,8 @@ def _parse_scene(raw: dict, default_name: str, progress: Progress) -> Scene:
         elif integrator != "dem":
             raise SceneError(f"integrator: {_shown(integrator)} runs the report's contact law only; this scene's "
                              f"({dem_reason(scene)}) runs with integrator = 'dem'")
+    _check_sticky(scene)
     if scene.contact.model == "hertz":
-        rest = [contact.restitution] + [m.restitution for m in materials] + [q.restitution for q in pairs]
-        if any(e == 0.0 for e in rest):
-            # The Hertz dashpot's zeta is matched to e > 0; the linear law's e -> 0 limit is the
-            # critically damped contact that leaves two bodies moving together.
-            raise SceneError("restitution = 0 (perfectly inelastic) is answered with the linear spring only: "
-                             "use model = 'linear' or a restitution above 0")
         for body in scene.bodies:
             if body.material is None and contact.youngs_modulus is None:
                 raise SceneError(f"contact.youngs_modulus: missing for model = 'hertz' (body.{body.name} has no "
@@ -606,6 +601,22 @@ def _more_bodies(raw: dict, dim: int, materials: dict, domain: Domain | None, bo
     if len(bodies) > len(raw.get("body", [])):
         check_names([b.name for b in bodies])
     return bodies, from_file
+
+
+def _check_sticky(scene: Scene) -> None:
+    """Restitution 0 (perfectly inelastic) is the linear law's critically damped contact: the
+    bodies end moving together while their overlap only decays, so the contact never ends by
+    itself and the run needs a duration (or rest). The Hertz dashpot is matched to e > 0 only."""
+    rest = [scene.contact.restitution] + [m.restitution for m in scene.materials] + \
+        [q.restitution for q in scene.pairs]
+    if not any(e == 0.0 for e in rest):
+        return
+    if scene.contact.model != "linear":
+        raise SceneError("restitution = 0 (perfectly inelastic) is answered with the linear spring only: "
+                         "use model = 'linear' or a restitution above 0")
+    if scene.duration is None and scene.rest is None:
+        raise SceneError("restitution = 0 (perfectly inelastic): the bodies stay in contact (critically damped, "
+                         "the overlap only decays), so the run would not end by itself; give it a duration")
 
 
 def _check_start(scene: Scene, from_file: range) -> None:

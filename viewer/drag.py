@@ -13,7 +13,7 @@ goes back to where it was.
 from __future__ import annotations
 
 import threading
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import viser
@@ -22,9 +22,6 @@ from collide.scene import SceneError
 from viewer.messages import one_line
 from viewer.params import Controls, build_scene, format_value
 from viewer.state import ViewRun
-
-if TYPE_CHECKING:
-    from viewer.session import Session
 
 PLANES = {"xy": (True, True, False), "xz": (True, False, True), "yz": (False, True, True)}
 VELOCITY_SNAP = 0.01  # m/s
@@ -57,7 +54,8 @@ class _Ball:
 class DragSetup:
     """The handles and the Drag to set up folder of one tab."""
 
-    def __init__(self, session: Session) -> None:
+    def __init__(self, session: Any) -> None:
+        # `session`: the tab's viewer.session.Session (its parts: params, panel, player, messages)
         self._session = session
         gui = session.client.gui
         with gui.add_folder("Drag to set up", order=3.5):

@@ -110,7 +110,7 @@ def momentum_svg(view: ViewRun, before: Moment, now: Moment) -> str:
     dim = view.dim
     p_scale = momentum_scale(view, [before, now])
     half = SVG_W / 2
-    scale = 0.42 * half / p_scale
+    scale = 0.8 * half / p_scale  # a chain is at most sum |p| long: it fits its panel
     parts = [f"<svg xmlns='http://www.w3.org/2000/svg' width='{SVG_W}' height='{SVG_H}' "
              f"style='background:#fff;font:11px sans-serif'>"]
     for k, (label, m) in enumerate((("before (t = 0)", before), (f"now ({m_ms(now.t)} ms)", now))):
@@ -121,7 +121,8 @@ def momentum_svg(view: ViewRun, before: Moment, now: Moment) -> str:
         parts.append(f"<text x='{half * k + 6}' y='14'>{html.escape(label)}</text>")
         parts += _chain(m, view.names, (x0, y0), scale, dim)
         total = " ".join(f"{c:.4g}" for c in m.total_momentum)
-        parts.append(f"<text x='{half * k + 6}' y='{SVG_H - 8}'>total ({total}) kg m/s</text>")
+        parts.append(f"<text x='{half * k + 6}' y='{SVG_H - 22}'>total (dashed), kg m/s:</text>"
+                     f"<text x='{half * k + 6}' y='{SVG_H - 8}'>({total})</text>")
     parts.append(f"<line x1='{half}' y1='4' x2='{half}' y2='{SVG_H - 4}' stroke='#ccc'/></svg>")
     return "".join(parts)
 
@@ -243,7 +244,26 @@ def with_restitution(scene: Scene, e: float) -> Scene:
         raw["integrator"] = "dem"
         raw["dt"] = "auto"
         raw["tol"] = max(float(raw.get("tol", 1e-3)), 1e-3)
+    if e == 0.0 and scene.duration is None and scene.rest is None:
+        raw["duration"] = sticky_duration(scene)  # the contact never ends by itself
     return parse_scene(raw, scene.name)
+
+
+STICKY_CONTACT_TIMES = 15  # after the first contact: the relative velocity is down by (1 + 47) e^-47
+
+
+def sticky_duration(scene: Scene) -> float:
+    """How long to run a perfectly inelastic scene: until STICKY_CONTACT_TIMES contact times
+    after the first meeting (the critically damped relative velocity then below 1e-18 of its
+    start), then as long again as the approach took, to see the bodies move on together."""
+    from collide.dem import contact_time
+    from collide.model import compile_scenes
+    from viewer.params import approach_time
+
+    model, state = compile_scenes([scene])
+    t_c = float(contact_time(model, state)[0][0])
+    approach = approach_time(scene) or 0.0
+    return 2.0 * approach + STICKY_CONTACT_TIMES * t_c
 
 
 def common_velocity(masses: np.ndarray, velocities: np.ndarray) -> np.ndarray:

@@ -6,7 +6,7 @@ perfectly inelastic, the values as CSV) and the Momentum & energy tab beside Plo
 from __future__ import annotations
 
 import copy
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import viser
 
@@ -17,9 +17,6 @@ from viewer.messages import one_line
 from viewer.params import build_scene
 from viewer.state import ViewRun
 
-if TYPE_CHECKING:
-    from viewer.session import Session
-
 MOTION = {"line (1D)": 1, "plane (2D)": 2}
 STICKY = "perfectly inelastic (e = 0)"
 
@@ -27,7 +24,8 @@ STICKY = "perfectly inelastic (e = 0)"
 class LessonView:
     """The Lesson folder and the Momentum & energy tab of one tab."""
 
-    def __init__(self, session: Session) -> None:
+    def __init__(self, session: Any) -> None:
+        # `session`: the tab's viewer.session.Session (its parts: params, panel, player, messages)
         self._session = session
         gui = session.client.gui
         with gui.add_folder("Lesson", order=3.6):
@@ -45,7 +43,7 @@ class LessonView:
         self.sticky.on_update(self._on_sticky)
         self.export_button.on_click(lambda _e: self.export_csv())
         self._before: tuple[Any, Any] = (None, None)  # (view, its start's Moment)
-        self._settings: tuple[str, Any, float] | None = None  # the run settings before e = 0
+        self._settings: tuple[str, Any, float, Any] | None = None  # run settings, duration before e = 0
 
     # -- drawing (under the session's lock) ------------------------------------------------------
 
@@ -109,14 +107,16 @@ class LessonView:
         before), and run."""
         def change(scene: Scene) -> Scene:
             if on:
-                self._settings = (scene.integrator, scene.dt, scene.tol)
+                self._settings = (scene.integrator, scene.dt, scene.tol, scene.source.get("duration"))
                 return with_restitution(scene, 0.0)
-            out = with_restitution(scene, 1.0)
-            if self._settings is not None and self._settings[0] != "dem":
-                raw = copy.deepcopy(out.source)
-                raw["integrator"], raw["dt"], raw["tol"] = self._settings
-                out = parse_scene(raw, scene.name)
-            return out
+            raw = copy.deepcopy(with_restitution(scene, 1.0).source)
+            if self._settings is not None:
+                integrator, dt, tol, duration = self._settings
+                if integrator != "dem":
+                    raw["integrator"], raw["dt"], raw["tol"] = integrator, dt, tol
+                if duration is None:
+                    raw.pop("duration", None)  # the one e = 0 needed
+            return parse_scene(raw, scene.name)
 
         return self._switch(change, STICKY if on else "elastic")
 
