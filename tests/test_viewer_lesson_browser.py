@@ -194,5 +194,30 @@ def test_line_switch_and_perfectly_inelastic(page):
     scale = float(np.max(np.abs(initial - common)))  # the relative speed the dashpot takes away
     np.testing.assert_allclose(final, common, rtol=0, atol=1e-9 * scale)
     session.seek(view.t1)
+    page.mouse.move(5, 5)  # no tooltip over the panel
     settle(page)
     page.screenshot(path=str(SHOTS / "viewer-lesson-sticky.png"))
+
+
+def test_3d_drag_in_the_chosen_plane(page):
+    from collide.scene import parse_scene
+
+    session = page.session
+    raw = {"dim": 3, "contact": {"k": 1500.0, "mu": 0.0},
+           "body": [{"name": "a", "mass": 0.03, "radius": 0.03, "position": [0.0, 0.0, 0.0], "velocity": [1.0, 0, 0]},
+                    {"name": "b", "mass": 0.03, "radius": 0.03, "position": [0.2, 0.0, 0.01], "velocity": [0, 0, 0]}]}
+    drawn = session.runs_drawn
+    session.load_scene(parse_scene(raw, "two-3d"))
+    _settled(page, drawn)
+    drag = session.drag
+    assert drag.plane.visible
+    drawn = session.runs_drawn
+    choose(page, drag.plane, "xz")
+    wait_until(lambda: drag._made_for[1] == "xz", 30, "the handles in the xz plane")
+    ball = drag._balls["a"]
+    assert tuple(ball.ball.active_axes) == (True, False, True)
+    assert tuple(ball.tip.active_axes) == (True, False, True)
+    assert drag.move_ball("a", np.array([-0.01, 0.05, 0.02]))  # y is off the plane: kept
+    _settled(page, drawn)
+    s, _ = _run_start(session)
+    np.testing.assert_allclose(s[0], [-0.01, 0.0, 0.02], rtol=0, atol=1e-15)

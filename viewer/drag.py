@@ -183,7 +183,8 @@ class DragSetup:
             return False
         controls = self._session.params.controls
         step = position_snap(controls) if self.snap.value and controls is not None else 0.0
-        target = snapped(position, step) if step else np.asarray(position, float)
+        target = self._in_plane(position, ball.good_position)
+        target = snapped(target, step) if step else target
         ok = self._apply(name, "position", target)
         if end:
             self._dragging = None
@@ -197,7 +198,7 @@ class DragSetup:
         ball = self._balls.get(name)
         if ball is None:
             return False
-        velocity = np.asarray(tip, float) / self._arrow_scale
+        velocity = self._in_plane(tip, ball.good_tip) / self._arrow_scale
         if self.snap.value:
             velocity = snapped(velocity, VELOCITY_SNAP)
         target = velocity * self._arrow_scale
@@ -209,6 +210,12 @@ class DragSetup:
         if ok:
             ball.good_tip = target
         return ok
+
+    def _in_plane(self, moved: np.ndarray, before: np.ndarray) -> np.ndarray:
+        """`moved` with the components off the drag plane kept as `before` (the handle's axes
+        allow no other motion; a call from elsewhere gets the same rule)."""
+        axes = np.array(self._axes(self._made_for[1]) if self._made_for[1] else (True, True, True))
+        return np.where(axes, np.asarray(moved, float), before)
 
     def _apply(self, name: str, what: str, vector: np.ndarray) -> bool:
         """The parameters with a ball's position or velocity (SI) set, if the scene takes them;
