@@ -26,6 +26,7 @@ from viewer.state import ViewRun
 PLANES = {"xy": (True, True, False), "xz": (True, False, True), "yz": (False, True, True)}
 VELOCITY_SNAP = 0.01  # m/s
 ROOT = "/setup"
+MAX_DRAG_BODIES = 12  # beyond this many (a pile, a gas) no handles: the Parameters folder sets them
 
 
 def snapped(x: np.ndarray, step: float) -> np.ndarray:
@@ -81,7 +82,8 @@ class DragSetup:
         """Place the handles for the scene shown (called under the session's lock after a run is
         drawn): made anew for new controls or another plane, moved to the values otherwise."""
         controls = self._session.params.controls
-        if controls is None or not self.enabled.value or not isinstance(view, ViewRun):
+        if (controls is None or not self.enabled.value or not isinstance(view, ViewRun)
+                or len(controls.scene.bodies) > MAX_DRAG_BODIES):
             self._clear()
             return
         dim = controls.scene.dim

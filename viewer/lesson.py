@@ -24,6 +24,7 @@ from viewer.colours import body_colour, hex_colour
 from viewer.state import ViewRun
 
 SVG_W, SVG_H = 300, 190
+MAX_CHAIN = 12  # bodies whose momenta are drawn tip to tail; beyond, the total only
 
 
 @dataclass
@@ -89,10 +90,11 @@ def _arrow(x0: float, y0: float, x1: float, y1: float, colour: str, width: float
 
 def _chain(m: Moment, names: list[str], origin: tuple[float, float], scale: float, dim: int) -> list[str]:
     """Each body's momentum tip to tail from `origin`, then the total from the first tail to
-    the last tip (dashed black). 1D: stacked a little below one another to stay apart."""
+    the last tip (dashed black). 1D: stacked a little below one another to stay apart. Above
+    MAX_CHAIN bodies, the total only."""
     out = []
     x, y = origin
-    for i, p in enumerate(m.momentum):
+    for i, p in enumerate(m.momentum if len(names) <= MAX_CHAIN else []):
         dx = float(p[0]) * scale
         dy = -float(p[1]) * scale if dim > 1 else 0.0
         out.append(_arrow(x, y, x + dx, y + dy, _hex(i)))
