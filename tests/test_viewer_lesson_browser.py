@@ -82,7 +82,9 @@ def _settled(page, drawn: int) -> None:
 def test_drag_ball_and_arrow_change_the_run(page):
     session = page.session
     drag = session.drag
-    session.seek(session.view.t0)
+    click(page, drag.start_button)  # "Set up (go to t = 0)": the handles show
+    wait_until(lambda: session.t == session.view.t0 and all(b.ball.visible for b in drag._balls.values()), 30,
+               "the handles at t = 0")
     settle(page)
     before_s, before_v = _run_start(session)
     ball = drag._balls["ball1"]
@@ -167,6 +169,7 @@ def test_momentum_diagram_totals_agree_to_the_residual(page):
     # ...and what the tab shows are those totals, at the time shown.
     session.seek(view.t1)
     settle(page)
+    assert not any(b.ball.visible for b in session.drag._balls.values())  # the handles: at t = 0 only
     page.get_by_role("tab", name="Momentum & energy").click()
     text = wait_for_text(page, "before (t = 0)", "energy at")
     total = " ".join(f"{c:.4g}" for c in before.total_momentum)

@@ -2,12 +2,12 @@
 handle on the tip of its start velocity arrow aims it. A drag sets the same parameters as the
 sliders (`body.NAME.position`, `body.NAME.velocity`) and re-runs as a slider does.
 
-The handles are viser transform controls (gizmos) at the start of the run: grabbing one shows
-t = 0, where the balls are. They move along x only in 1D, in the xy plane in 2D, and in the
-plane chosen in the folder in 3D. "snap to grid" rounds positions to 1 mm (1 cm in scenes drawn
-in metres) and velocities to 0.01 m/s. A position where the ball would overlap another (or
-anything else the scene cannot start from) is refused at once with the reason, and the ball
-goes back to where it was.
+The handles are viser transform controls (gizmos) at the start of the run, shown when the time
+shown is the start ("Set up (go to t = 0)" goes there; a drag keeps them). They move along x only
+in 1D, in the xy plane in 2D, and in the plane chosen in the folder in 3D. "snap to grid" rounds
+positions to 1 mm (1 cm in scenes drawn in metres) and velocities to 0.01 m/s. A position where
+the ball would overlap another (or anything else the scene cannot start from) is refused at once
+with the reason, and the ball goes back to where it was.
 """
 
 from __future__ import annotations
@@ -68,12 +68,16 @@ class DragSetup:
             self.snap = gui.add_checkbox("snap to grid", initial_value=False,
                                          hint="positions to 1 mm (1 cm in scenes in metres), velocities to "
                                               "0.01 m/s")
+            self.start_button = gui.add_button("Set up (go to t = 0)", icon=viser.Icon.PLAYER_SKIP_BACK,
+                                               hint="the handles show at the start of the run")
+        self.start_button.on_click(lambda _e: self._start())
         self.enabled.on_update(self._on_option)
         self.plane.on_update(self._on_option)
         self._balls: dict[str, _Ball] = {}
         self._made_for: tuple[Controls | None, str] = (None, "")
         self._arrow_scale = 1.0  # s: the start velocity arrow's length per m/s (fixed per scene)
         self._dragging: str | None = None
+        self._visible: bool | None = None  # the handles show at the run's start only (where the balls are)
         self._drag_lock = threading.Lock()  # one drag change applied at a time
 
     # -- the handles ------------------------------------------------------------------------------
@@ -94,6 +98,18 @@ class DragSetup:
         for ball in self._balls.values():
             if ball.name != self._dragging:
                 self._place(ball)
+        self._visible = None  # new or moved handles: their visibility is sent again
+        self.at_time(view, self._session.player.t)
+
+    def at_time(self, view: Any, t: float) -> None:
+        """Show the handles when the time shown is the run's start (or a drag is going on)."""
+        if not isinstance(view, ViewRun):
+            return
+        visible = self._dragging is not None or t <= view.t0 + 1e-9 * max(view.duration, 1e-300)
+        if visible != self._visible:
+            for ball in self._balls.values():
+                ball.ball.visible = visible
+            self._visible = visible
 
     def _axes(self, plane: str) -> tuple[bool, bool, bool]:
         return (True, False, False) if plane == "x" else PLANES[plane]
@@ -127,6 +143,7 @@ class DragSetup:
             ball.ball.remove()  # its children (the tip, the arrow) go with it
         self._balls = {}
         self._made_for = (None, "")
+        self._visible = None
 
     def _vector(self, name: str, what: str) -> np.ndarray:
         """A ball's start position or velocity (SI, 3D) from the parameters' values."""

@@ -144,7 +144,7 @@ class Session:
         self.ensemble = EnsembleView(panel, self.drawer, self._lock, self.request_run)
         self.drag = DragSetup(self)  # drag to set up (viewer.drag)
         self.lesson = LessonView(self)  # momentum diagram, energy bars, lesson switches
-        self.player.values_hooks.append(self.lesson.at_time)
+        self.player.values_hooks += [self.lesson.at_time, self.drag.at_time]
         self._wire()
         self.player.start()
 
