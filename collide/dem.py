@@ -149,8 +149,9 @@ def damping_ratio(restitution: np.ndarray, hertz: bool) -> np.ndarray:
     coefficient 2 sqrt(5/6) beta sqrt(S_n m*), the same times sqrt(5/6), which gives e exactly
     too when the force may pull at the end (tests/engine/dem/test_damping.py)."""
     e = np.asarray(restitution, dtype=float)
-    le = np.log(e)
-    return -le / np.sqrt(le**2 + math.pi**2) * (math.sqrt(5.0 / 6.0) if hertz else 1.0)
+    le = np.log(np.where(e > 0, e, 1.0))
+    zeta = np.where(e > 0, -le / np.sqrt(le**2 + math.pi**2), 1.0)  # e -> 0: critically damped
+    return zeta * (math.sqrt(5.0 / 6.0) if hertz else 1.0)
 
 
 def kernel_tables(model: Model, b: int) -> tuple[np.ndarray, np.ndarray]:

@@ -533,6 +533,7 @@ def _parse_scene(raw: dict, default_name: str, progress: Progress) -> Scene:
         elif integrator != "dem":
             raise SceneError(f"integrator: {_shown(integrator)} runs the report's contact law only; this scene's "
                              f"({dem_reason(scene)}) runs with integrator = 'dem'")
+    _check_sticky(scene)
     if scene.contact.model == "hertz":
         for body in scene.bodies:
             if body.material is None and contact.youngs_modulus is None:
@@ -602,6 +603,22 @@ def _more_bodies(raw: dict, dim: int, materials: dict, domain: Domain | None, bo
     return bodies, from_file
 
 
+def _check_sticky(scene: Scene) -> None:
+    """Restitution 0 (perfectly inelastic) is the linear law's critically damped contact: the
+    bodies end moving together while their overlap only decays, so the contact never ends by
+    itself and the run needs a duration (or rest). The Hertz dashpot is matched to e > 0 only."""
+    rest = [scene.contact.restitution] + [m.restitution for m in scene.materials] + \
+        [q.restitution for q in scene.pairs]
+    if not any(e == 0.0 for e in rest):
+        return
+    if scene.contact.model != "linear":
+        raise SceneError("restitution = 0 (perfectly inelastic) is answered with the linear spring only: "
+                         "use model = 'linear' or a restitution above 0")
+    if scene.duration is None and scene.rest is None:
+        raise SceneError("restitution = 0 (perfectly inelastic): the bodies stay in contact (critically damped, "
+                         "the overlap only decays), so the run would not end by itself; give it a duration")
+
+
 def _check_start(scene: Scene, from_file: range) -> None:
     """No overlaps at the start (docs/design.md section 3; a saved state's contacts in a DEM
     scene excepted) and every body inside the domain."""
@@ -643,7 +660,9 @@ def _choice(table: dict, key: str, where: str, options: tuple[str, ...]) -> str:
 
 
 def _restitution(value: Any, key: str) -> float:
-    e = _number(value, key, positive=True)
+    # 0 is perfectly inelastic ("sticky"): a critically damped dashpot (collide.dem.damping_ratio);
+    # what such a scene needs is checked with the rest of the scene (`_check_sticky`).
+    e = _number(value, key, nonneg=True)
     if e > 1.0:
         raise SceneError(f"{key}: a restitution is at most 1 (1 = no damping), got {_shown(value)}")
     return e

@@ -221,10 +221,10 @@ CONTACT_PARAMS: tuple[ContactParam, ...] = (
                  "friction dead band: slip below it feels no friction", nonneg=True),
     # The elasticity slider (docs/design.md section 9), for every scene: below 1 the run goes to the
     # DEM kernel (`build_scene`), which has the dashpot. Below 0.05 a contact is nearly plastic
-    # and the dashpot's step limit makes runs slow.
+    # and lasts long: the slider starts there unless the scene is perfectly inelastic (0).
     ContactParam("restitution", "restitution", "", lambda s: hasattr(s.contact, "restitution"),
-                 lambda x: (0.05, 1.0, 0.01), "coefficient of restitution: 1 elastic, smaller loses energy",
-                 positive=True),
+                 lambda x: (0.0 if x < 0.05 else 0.05, 1.0, 0.01),
+                 "coefficient of restitution: 1 elastic, smaller loses energy, 0 perfectly inelastic", nonneg=True),
 )
 
 

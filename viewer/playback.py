@@ -59,6 +59,7 @@ class Player:
         self._messages = messages
         self._failed = failed  # shows a playback error in the status
         self.view: ViewRun | None = None
+        self.values_hooks: list[Callable[[ViewRun, float], None]] = []  # also shown with the values
         self.t = 0.0
         self.playing = False
         self.fps = FPS  # frames a second the player sends while playing
@@ -243,6 +244,8 @@ class Player:
         view = self.view
         if view is not None:
             self._panel.values_table.content = values_markdown(view, self.t)
+            for hook in self.values_hooks:
+                hook(view, self.t)
 
     def redraw_soon(self) -> None:
         """Redraw the frame shortly (the camera moved: the overlays follow it); the player does

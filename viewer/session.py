@@ -30,10 +30,12 @@ from collide.run import SceneRun
 from collide.scene import Scene, SceneError, load_scene
 from viewer.camera import CameraFit
 from viewer.config import SessionConfig
+from viewer.drag import DragSetup
 from viewer.ensemble_view import EnsembleView
 from viewer.file_actions import FileActions
 from viewer.frames import FramesRun
 from viewer.inside import Inspector
+from viewer.lesson_view import LessonView
 from viewer.live import LiveRuns, Preview, Request
 from viewer.messages import Messages, one_line
 from viewer.panel import Panel, Typing
@@ -142,6 +144,9 @@ class Session:
                              name=f"collide-sim-{client.client_id}")
         self.ensemble = EnsembleView(panel, self.drawer, self._lock, self.request_run)
         self.inside = Inspector(client, panel.plot_panel, self.drawer, self._lock)  # clip, pick, histograms
+        self.drag = DragSetup(self)  # drag to set up (viewer.drag)
+        self.lesson = LessonView(self)  # momentum diagram, energy bars, lesson switches
+        self.player.values_hooks += [self.lesson.at_time, self.drag.at_time]
         self._wire()
         self.player.start()
 
@@ -375,9 +380,11 @@ class Session:
                 panel.show_shadows.visible = self.drawer._floor is not None
                 player.draw_frame(cursor=False)
                 self._show_status()
+                self.lesson.show(view)
                 player.show_values()
                 panel.legend.content = self.drawer.legend()
                 panel.colour_legend.content = self.drawer.colour_legend()
+                self.drag.show(view)
             self.client.flush()
             self.runs_drawn += 1
             if stamp:
