@@ -369,10 +369,17 @@ class SceneDrawer:
 
     def set_options(self, **changes) -> None:
         """Change what is shown; redraws the current frame."""
+        changed = {key for key, value in changes.items() if getattr(self.options, key) != value}
         for key, value in changes.items():
             setattr(self.options, key, value)
         if "colour_by" in changes:
             self._colour_range = self._range_for(self.options.colour_by)
+        if changed <= {"colour_by"}:
+            # A colour mode is the spheres' colours only: one message of N colours, nothing moved
+            # (a thousand spheres' positions, shadows and chains sent again cost seconds).
+            if changed and self.frame is not None and self.view is not None:
+                self._recolour(self.frame)
+            return
         if "shadows" in changes or "chains" in changes:
             self._opacity = {}
         if not self.options.forces:
@@ -384,6 +391,20 @@ class SceneDrawer:
             self._remove_com()
         if self.frame is not None:
             self.show_frame(self.frame)
+
+    def _recolour(self, frame: Frame) -> None:
+        """The spheres in the colours of the current mode at `frame`, and nothing else sent."""
+        colours = self._frame_colours(frame)
+        if np.array_equal(colours, self._colours):
+            return
+        self._colours = colours
+        if self.many:
+            spheres = self._batch.get("spheres")
+            if spheres is not None:
+                spheres.batched_colors = colours
+            return
+        for body, colour in zip(self._bodies, colours):
+            body["sphere"].color = tuple(int(c) for c in colour)
 
     # ------------------------------------------------------------------------------------------
     # Bodies
