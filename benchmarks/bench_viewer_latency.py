@@ -54,7 +54,7 @@ from viewer.app import ViewerApp  # noqa: E402
 from viewer.frames import settling_pile  # noqa: E402
 from viewer.reading import read_untrusted  # noqa: E402
 from viewer.state import ViewRun  # noqa: E402
-from viewer.testing import CHROMIUM, ServerClient, launch  # noqa: E402
+from viewer.testing import CHROMIUM, ServerClient, launch, screenshot_dir  # noqa: E402
 
 DEFAULT_REPLAY = Path("recordings/gas-box.rrd")
 PLOT_SUM_JS = """() => {
@@ -208,6 +208,8 @@ def first_frames(app, session, page, repeats: int) -> dict[str, list[float]]:
             shown(page, f"{name} · ", "simulated in")
             out.setdefault(f"{name} run", []).append(time.perf_counter() - t0)
             session.worker.wait_idle(600)
+        # What the page shows once the run is in (build/screenshots/bench-<scene>.png).
+        page.screenshot(path=str(screenshot_dir() / f"bench-{name}.png"))
     return out
 
 
