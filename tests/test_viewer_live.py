@@ -41,6 +41,7 @@ def test_start_frames_are_the_scene_where_it_starts():
     scene = load_scene("pile")
     start = start_frames(scene)
     assert isinstance(start, StartFrames) and start.n_bodies == len(scene.bodies) == 1000
+    assert start.scene is scene and start.preview and start.run is None  # nothing to save or export yet
     assert start.t0 == start.t1 == 0.0
     frame = start.frame(0.0)
     assert np.array_equal(frame.positions, np.array([b.position for b in scene.bodies]))

@@ -170,7 +170,11 @@ class FramesRun:
 
 
 class StartFrames(FramesRun):
-    """A scene at its start, one frame: what a scene of many bodies shows while its run goes."""
+    """A scene at its start, one frame: what a scene of many bodies shows while its run goes (a
+    preview: `scene` is the scene, `run` None until the run is in)."""
+
+    preview = True
+    preview_note = "its start: the run follows"
 
     def status_lines(self) -> list[str]:
         return [f"{self.n_bodies} bodies at the start (t = {self.t0:.4g} s): the run goes in the background "
@@ -185,9 +189,11 @@ def start_frames(scene: Scene) -> StartFrames:
     walls = [(embed3(np.asarray(w.point, float)), embed3(np.asarray(w.normal, float))) for w in scene.walls]
     gravity = None if model.gravity is None else embed3(model.gravity[0])
     wxyz = orientation_wxyz(state.q[0])[None] if model.orient_dim else None
-    return StartFrames(scene.name, model.dim, list(model.body_names), model.radius[0].astype(float),
+    start = StartFrames(scene.name, model.dim, list(model.body_names), model.radius[0].astype(float),
                       model.mass[0].astype(float), np.array([float(state.t[0])]), embed3(state.s[0])[None],
                       embed3(state.v[0])[None], wxyz, walls=walls, gravity=gravity, origin="the start of the run")
+    start.scene = scene
+    return start
 
 
 def settling_pile(n: int = 1000, *, seed: int = 0, duration: float = 2.0, fps: float = 60.0,
