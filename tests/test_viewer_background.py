@@ -134,6 +134,7 @@ def test_a_slider_on_a_many_body_scene_runs_in_the_background_with_a_stop(tmp_pa
         wait_until(lambda: session.runs_drawn == 5, 60, "the new run drawn")
         assert session.worker.wait_idle(30)
         assert session.view.scene.contact.mu == pytest.approx(0.4) and session.progress.content == ""
+        assert session.runner.pid is None  # its process is not kept with the tab after a run of many bodies
 
 
 def test_a_slider_the_materials_override_is_disabled_with_the_reason(tmp_path):

@@ -26,7 +26,7 @@ from collide.run import SceneRun, auto_dt, run_scene
 from collide.scene import Scene, SceneError
 from collide.stepper import RunError
 from viewer.background import BackgroundRunner, RunStopped
-from viewer.frames import start_frames
+from viewer.frames import StartFrames, start_frames
 from viewer.guard import FAILURES
 from viewer.messages import Messages, one_line
 from viewer.params import AUTO, Controls, Settings, build_scene
@@ -151,8 +151,10 @@ class LiveRuns:
         self._stop_run.set()
 
     def warm_for(self, view: ViewRun) -> None:
-        """Start the child process now if the next run will go to it."""
-        if view.n_bodies > MANY_BODIES or (self.full_cost or 0.0) > LONG_RUN_S:
+        """Start the child process now if the next run will go to it: a long run's, or, with
+        many bodies, while their start is shown (the run follows once the slider rests; after
+        a run of many bodies the child is not kept, see `_job`)."""
+        if isinstance(view, StartFrames) or (view.n_bodies <= MANY_BODIES and (self.full_cost or 0.0) > LONG_RUN_S):
             self.runner.warm()
 
     def close(self) -> None:
@@ -205,6 +207,10 @@ class LiveRuns:
                 run = self._run_in_background(scene)
                 if run is None:
                     return False
+                if len(scene.bodies) > MANY_BODIES:
+                    # Not kept for the next run: its kernels and working memory (about 240 MB
+                    # after a pile) would stay with the tab; the next run starts a fresh one.
+                    self.runner.close()
             else:
                 run = run_scene(scene, record=True)
             t_run = lap()
