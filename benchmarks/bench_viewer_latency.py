@@ -54,7 +54,7 @@ from viewer.app import ViewerApp  # noqa: E402
 from viewer.frames import settling_pile  # noqa: E402
 from viewer.reading import read_untrusted  # noqa: E402
 from viewer.state import ViewRun  # noqa: E402
-from viewer.testing import CHROMIUM, ServerClient, launch  # noqa: E402
+from viewer.testing import CHROMIUM, ServerClient, launch, screenshot_dir  # noqa: E402
 
 DEFAULT_REPLAY = Path("recordings/gas-box.rrd")
 PLOT_SUM_JS = """() => {
@@ -150,6 +150,183 @@ def bench_replay(session, seconds: float) -> list[tuple[float, float, float, flo
     return rows
 
 
+# -- many bodies: first frames, colour modes, slider changes, memory, recordings ----------------
+
+MANY_SCENES = ("demo-bonus", "break-3d", "gas-box", "pile")
+COLOURS_JS = """() => {
+    const node = window.__viserSceneTree?.getState()['/bodies/spheres'];
+    const c = node?.message?.props?.batched_colors;
+    if (!c) return null;
+    let h = c.length; for (let i = 0; i < c.length; i++) h = (Math.imul(h, 31) + c[i]) >>> 0;
+    return h;
+}"""
+FRAME_JS = ("() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame("
+            "() => setTimeout(() => r(1), 0))))")
+
+
+def shown(page, *texts: str, timeout: float = 600.0) -> None:
+    """Wait until the page's text holds every one of `texts`, then for a frame drawn after."""
+    page.wait_for_function("(texts) => texts.every(t => document.body.innerText.includes(t))", arg=list(texts),
+                           timeout=timeout * 1e3, polling=50)
+    page.evaluate(FRAME_JS)
+
+
+def rss_mb(pid: int | None = None) -> float:
+    """Resident memory of the server and its Python children (its run and reader processes; not
+    Playwright's driver and browser, which this benchmark starts too), MB."""
+    import psutil
+
+    proc = psutil.Process(pid)
+    total = proc.memory_info().rss
+    for child in proc.children(recursive=True):
+        try:
+            if child.exe() == proc.exe():
+                total += child.memory_info().rss
+        except psutil.Error:
+            pass
+    return total / 1e6
+
+
+def first_frames(app, session, page, repeats: int) -> dict[str, list[float]]:
+    """Scene picked (what the picker calls) -> the page shows its first frame (its start for
+    many bodies, else its run), s; and -> the page shows its own run."""
+    labels = {c.source: c.label for c in app.scene_choices}
+    out: dict[str, list[float]] = {}
+    for name in MANY_SCENES:
+        for _ in range(repeats):
+            session.load_scene("demo-1d", label=labels["demo-1d"])  # another scene between repeats
+            shown(page, "demo-1d · 1D", "simulated in")
+            session.worker.wait_idle(60)
+            print(f"  first frame of {name}...", file=sys.stderr, flush=True)
+            t0 = time.perf_counter()
+            session.load_scene(name, label=labels[name])
+            page.wait_for_function("(name) => { const t = document.body.innerText; return t.includes(name + ' · ') "
+                                   "&& (t.includes('at the start') || t.includes('simulated in')); }", arg=name,
+                                   timeout=600_000, polling=50)
+            page.evaluate(FRAME_JS)
+            out.setdefault(f"{name} first", []).append(time.perf_counter() - t0)
+            shown(page, f"{name} · ", "simulated in")
+            out.setdefault(f"{name} run", []).append(time.perf_counter() - t0)
+            session.worker.wait_idle(600)
+        # What the page shows once the run is in (build/screenshots/bench-<scene>.png).
+        page.screenshot(path=str(screenshot_dir() / f"bench-{name}.png"))
+    return out
+
+
+def colour_changes(session, page, repeats: int) -> list[float]:
+    """A colour mode chosen (what the dropdown calls) -> the page holds the spheres' new colours
+    and has drawn a frame, s."""
+    times = []
+    modes = ("contacts", "speed", "body")
+    for r in range(repeats * len(modes)):
+        before = page.evaluate(COLOURS_JS)
+        t0 = time.perf_counter()
+        session.set_show(colour_by=modes[r % len(modes)])
+        page.wait_for_function(f"() => {{ const f = {COLOURS_JS}; const v = f(); "
+                               f"return v !== null && v !== {before!r}; }}", timeout=300_000, polling=50)
+        page.evaluate(FRAME_JS)
+        times.append(time.perf_counter() - t0)
+    return times
+
+
+def slider_changes(session, page, changes: int) -> dict[str, list[float]]:
+    """A parameter moved (the worker's path) -> the page shows the new start (preview), and ->
+    the page shows the new run; the server's memory (with its children) after each."""
+    usable = [p.ident for p in session.controls.params if not p.unused]
+    key = "contact.mu" if "contact.mu" in usable else usable[0]
+    x0 = float(session.values[key])
+    out: dict[str, list[float]] = {"preview": [], "full": [], "rss": [], "server preview": [], "server full": []}
+    for r in range(changes):
+        print(f"  slider change {r + 1} of {changes} ({key})...", file=sys.stderr, flush=True)
+        n = len(session.timings)
+        session.values[key] = x0 * (0.9 if r % 2 == 0 else 1.1)
+        t0 = time.perf_counter()
+        session.request_run()
+        shown(page, "at the start")
+        out["preview"].append(time.perf_counter() - t0)
+        shown(page, "simulated in")
+        out["full"].append(time.perf_counter() - t0)
+        session.worker.wait_idle(600)
+        drawn = list(session.timings)[n:]
+        if drawn and drawn[0]["preview"]:
+            out["server preview"].append(drawn[0]["total"])
+        if drawn and not drawn[-1]["preview"]:
+            out["server full"].append(drawn[-1]["total"])
+        out["rss"].append(rss_mb())
+    return out
+
+
+def recording_opens(session, page, folder: Path, repeats: int) -> dict[str, list[float]]:
+    """The shown run written as a recording (s, against the run's own time), and the recording
+    opened (what the recordings list calls) -> the page shows it, s."""
+    from collide.recording import write_recording
+
+    view = session.view
+    path = folder / f"{view.name}.rrd"
+    t0 = time.perf_counter()
+    write_recording(view.run, path)
+    out = {"write": [time.perf_counter() - t0], "run": [view.result.wall_time_s], "open": [],
+           "size MB": [path.stat().st_size / 1e6]}
+    for _ in range(repeats):
+        session.load_scene("demo-1d")
+        shown(page, "demo-1d · 1D", "simulated in")
+        print("  opening the recording...", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        session.open_recording(path)
+        shown(page, f"recording {path.name}")
+        out["open"].append(time.perf_counter() - t0)
+    return out
+
+
+def bench_many(repeats: int, changes: int) -> None:
+    import tempfile
+
+    from playwright.sync_api import sync_playwright
+
+    def med(xs: list[float]) -> str:
+        return f"{statistics.median(xs):.2f}" if xs else "n/a"
+
+    def spread(xs: list[float]) -> str:
+        return f"{min(xs):.2f}-{max(xs):.2f}" if xs else ""
+
+    with tempfile.TemporaryDirectory() as tmp:
+        app = ViewerApp("demo-bonus", port=0, recordings_dir=Path(tmp))
+        app.start()
+        try:
+            with sync_playwright() as p:
+                browser = launch(p)
+                page = browser.new_page(viewport={"width": 1280, "height": 800})
+                t0 = time.perf_counter()
+                page.goto(app.url + "/?fixedDpr=0.5")
+                session = app.wait_for_session(1, timeout=120)[0]
+                shown(page, "demo-bonus · ", "simulated in")
+                opened = time.perf_counter() - t0
+                frames = first_frames(app, session, page, repeats)
+                colours = colour_changes(session, page, repeats)  # on the pile, shown last
+                sliders = slider_changes(session, page, changes)
+                recs = recording_opens(session, page, Path(tmp), repeats)
+                browser.close()
+        finally:
+            app.stop()
+    load = "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg())
+    print(f"\nMany bodies in headless Chromium (software GL, fixedDpr=0.5), seconds, median of {repeats} "
+          f"(range); {load}")
+    print(f"page opened to its first run shown: {opened:.2f}")
+    print(f"{'scene':<12} {'first frame':>12} {'range':>12} {'own run':>10} {'range':>12}")
+    for name in MANY_SCENES:
+        a, b = frames[f"{name} first"], frames[f"{name} run"]
+        print(f"{name:<12} {med(a):>12} {spread(a):>12} {med(b):>10} {spread(b):>12}")
+    print(f"colour mode on the pile (1 000 spheres), chosen -> page has the colours: {med(colours)} "
+          f"({spread(colours)}, {len(colours)} changes)")
+    print(f"slider on the pile ({changes} changes): preview (its new start) in the page {med(sliders['preview'])} "
+          f"({spread(sliders['preview'])}), server {med(sliders['server preview'])}; full run in the page "
+          f"{med(sliders['full'])} ({spread(sliders['full'])}), server {med(sliders['server full'])}")
+    print("server RSS with its children after each change (MB): "
+          + ", ".join(f"{x:.0f}" for x in sliders["rss"]))
+    print(f"pile recording: written in {recs['write'][0]:.2f} s after a run of {recs['run'][0]:.2f} s "
+          f"({recs['size MB'][0]:.1f} MB); opened -> page shows it: {med(recs['open'])} ({spread(recs['open'])})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=9)
@@ -159,8 +336,14 @@ def main() -> None:
     parser.add_argument("--synthetic", type=int, default=None, metavar="N",
                         help="replay a synthetic pile of N spheres instead of a recording")
     parser.add_argument("--seconds", type=float, default=10.0)
-    parser.add_argument("--only", choices=("latency", "replay"), default=None)
+    parser.add_argument("--only", choices=("latency", "replay", "many"), default=None)
+    parser.add_argument("--changes", type=int, default=10, help="slider changes on the pile (--only many)")
     args = parser.parse_args()
+    if args.only == "many":
+        if not CHROMIUM.exists():
+            parser.error(f"--only many needs {CHROMIUM}")
+        bench_many(max(args.repeats, 1), args.changes)
+        return
     replay_path = args.replay
     if replay_path is None and args.synthetic is None:
         replay_path = DEFAULT_REPLAY if DEFAULT_REPLAY.exists() else None

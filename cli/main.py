@@ -204,7 +204,11 @@ def run(
         from collide.recording import DEFAULT_FPS, last_write, write_recording
 
         write_recording(result, recording, stride=stride)
-        if last_write.fps < DEFAULT_FPS:
+        if last_write.frame_every > 1:
+            summary["warnings"].append(f"the recording's 3D view keeps every k-th frame, k = {last_write.frame_every} "
+                                       f"({last_write.fps:.3g} frames per simulated second: "
+                                       f"{len(loaded.bodies)} bodies); its trajectory is stored whole")
+        elif last_write.fps < DEFAULT_FPS:
             summary["warnings"].append(f"the recording draws free flight at {last_write.fps:.3g} frames per "
                                        "simulated second (a long run: the frames are capped)")
     if json_:

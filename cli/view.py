@@ -45,20 +45,16 @@ def view(
         raise UserError(f"--scenes-dir {scenes_dir} is not a folder")
     if scenes_dir is None and Path("scenes").is_dir():
         scenes_dir = Path("scenes")
-    if source.lower().endswith(".rrd"):
-        if not Path(source).is_file():
-            raise UserError(f"recording '{source}' does not exist")
-        from collide.recording import read_recording_safely
-
-        # Read it once in a child process first: a damaged file can make Rerun's reader abort
-        # the whole process, which must cost the child, not this command (one line instead).
-        read_recording_safely(Path(source))
+    if source.lower().endswith(".rrd") and not Path(source).is_file():
+        raise UserError(f"recording '{source}' does not exist")
     try:
         check_listen_address(host)  # before any work: a wrong --host must not hang
     except OSError as exc:
         raise UserError(f"--host {host}: {exc}") from None
     app = ViewerApp(source, host=host, port=port, recordings_dir=recordings, scenes_dir=scenes_dir)
-    app.prepare()  # reads the scene or recording: a bad one is a one-line error before serving
+    # Reads the scene or the recording (in a child process: a damaged file can make Rerun's
+    # reader abort the process that reads it); a bad one is a one-line error before serving.
+    app.prepare()
     try:
         app.start()
     except OSError as exc:

@@ -103,9 +103,10 @@ def test_stopping_a_background_run_kills_its_process_at_once():
 
 
 def test_a_slider_on_a_many_body_scene_runs_in_the_background_with_a_stop(tmp_path):
-    """More than MANY_BODIES bodies: a moved slider waits for the slider to rest, then runs in
-    the child process with a progress line and a Stop button; Stop keeps the last run on
-    screen; a run let finish is drawn."""
+    """More than MANY_BODIES bodies: a moved slider draws the scene's new start at once, then,
+    once the slider rests, runs in the child process with a progress line and a Stop button;
+    Stop keeps the start on screen; a run let finish is drawn."""
+    from viewer.frames import StartFrames
     from viewer.live import MANY_BODIES
 
     long, short = _pile(216, 2.0), _pile(216, 0.03)
@@ -114,23 +115,26 @@ def test_a_slider_on_a_many_body_scene_runs_in_the_background_with_a_stop(tmp_pa
         # The long scene, shown with a short run of it (its own takes half a minute).
         session.load_scene(long, run=run_scene(replace(long, duration=0.01)))
         assert session.runs_drawn == 1
-        drawn = session.view
         session.values["contact.mu"] = 0.4
         session.request_run()
         wait_until(lambda: "simulated" in session.progress.content, 60, "the run's progress")
-        assert session.stop_button.visible and session.view is drawn
+        # The new values' start was drawn first (a preview), the run goes behind it.
+        start = session.view
+        assert isinstance(start, StartFrames) and session.runs_drawn == 2 and session.stop_button.visible
+        assert start.duration == 0 and start.n_bodies == len(long.bodies)
         pid = session.runner.pid
         session.stop_run()
         assert session.worker.wait_idle(30)
         assert "stopped" in session.progress.content and not session.stop_button.visible
-        assert session.view is drawn and session.runs_drawn == 1 and not _alive(pid)
-        # A run let finish is drawn, and the progress line goes.
+        assert session.view is start and session.runs_drawn == 2 and not _alive(pid)
+        # A run let finish is drawn (after its start), and the progress line goes.
         session.load_scene(short, run=run_scene(short))
         session.values["contact.mu"] = 0.4
         session.request_run()
-        wait_until(lambda: session.runs_drawn == 3, 60, "the new run drawn")
+        wait_until(lambda: session.runs_drawn == 5, 60, "the new run drawn")
         assert session.worker.wait_idle(30)
         assert session.view.scene.contact.mu == pytest.approx(0.4) and session.progress.content == ""
+        assert session.runner.pid is None  # its process is not kept with the tab after a run of many bodies
 
 
 def test_a_slider_the_materials_override_is_disabled_with_the_reason(tmp_path):

@@ -28,11 +28,13 @@ from pathlib import Path
 
 import viser
 
+from collide.model import compile_scenes
 from collide.run import SceneRun, run_scene
 from collide.scene import Scene, load_scene
 from viewer import files
 from viewer.config import SessionConfig
 from viewer.guard import guard_connections
+from viewer.live import MANY_BODIES
 from viewer.params import for_viewing
 from viewer.reading import read_untrusted
 from viewer.session import Session
@@ -116,13 +118,20 @@ class ViewerApp:
             self.initial_scene = run.scene
         else:
             scene = for_viewing(load_scene(source))
-            run = run_scene(scene, record=True)
             self.initial_scene = scene
-            self.initial_view = ViewRun(run, origin=scene.name)
+            if len(scene.bodies) > MANY_BODIES:
+                # Seconds to minutes of run: each tab shows the scene's start at once and runs it
+                # in the background (viewer.live). Its model is built here: a bad scene is
+                # refused before the server starts.
+                compile_scenes([scene])
+                run = None
+            else:
+                run = run_scene(scene, record=True)
+                self.initial_view = ViewRun(run, origin=scene.name)
             if source.endswith(".toml"):
                 extra.append(source)
         self.initial_run = run
-        self.initial_cost = run.result.wall_time_s
+        self.initial_cost = run.result.wall_time_s if run is not None else None
         self.scene_choices = files.scene_choices(self.scenes_dir, extra)
         for choice in self.scene_choices:
             if choice.source == source:
@@ -134,7 +143,7 @@ class ViewerApp:
 
     def start(self) -> None:
         """Prepare the initial run and start serving (non-blocking)."""
-        if self.initial_view is None:
+        if self.initial_scene is None:
             self.prepare()
         # viser retries the next port on any bind error and waits forever when none works: an
         # address this machine does not have hung `collide view --host 10.255.255.1`.

@@ -74,6 +74,9 @@ def _serve() -> None:
         except Exception as exc:  # noqa: BLE001 - anything else is reported, the child lives on
             message = ("error", "RunError", f"{type(exc).__name__}: {exc}")
         answer(message)
+        # The run is the server's now: not held here while the child waits (a pile's trajectory
+        # is some 70 MB, and the tab keeps its child between runs).
+        del message, scene
 
 
 class BackgroundRunner:

@@ -17,6 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from collide.model import compile_scenes
+from collide.scene import Scene
+from viewer.geometry import embed3, orientation_wxyz
 from viewer.state import Frame, Links, PlotData, Series, _conserved_series, body_values_arrays
 
 
@@ -164,6 +167,33 @@ class FramesRun:
         plots = PlotData(self.times, e, p, None, None)
         plots.all = [e, p, contacts]
         return plots
+
+
+class StartFrames(FramesRun):
+    """A scene at its start, one frame: what a scene of many bodies shows while its run goes (a
+    preview: `scene` is the scene, `run` None until the run is in)."""
+
+    preview = True
+    preview_note = "its start: the run follows"
+
+    def status_lines(self) -> list[str]:
+        return [f"{self.n_bodies} bodies at the start (t = {self.t0:.4g} s): the run goes in the background "
+                "and replaces this when done"]
+
+
+def start_frames(scene: Scene) -> StartFrames:
+    """The scene's bodies where they start, as a one-frame run (O(N): its model and initial
+    state, no stepping). A run of a thousand spheres takes seconds to minutes; this is drawn at
+    once, so the page shows the scene (and a moved slider its new start) while the run goes."""
+    model, state = compile_scenes([scene])
+    walls = [(embed3(np.asarray(w.point, float)), embed3(np.asarray(w.normal, float))) for w in scene.walls]
+    gravity = None if model.gravity is None else embed3(model.gravity[0])
+    wxyz = orientation_wxyz(state.q[0])[None] if model.orient_dim else None
+    start = StartFrames(scene.name, model.dim, list(model.body_names), model.radius[0].astype(float),
+                      model.mass[0].astype(float), np.array([float(state.t[0])]), embed3(state.s[0])[None],
+                      embed3(state.v[0])[None], wxyz, walls=walls, gravity=gravity, origin="the start of the run")
+    start.scene = scene
+    return start
 
 
 def settling_pile(n: int = 1000, *, seed: int = 0, duration: float = 2.0, fps: float = 60.0,

@@ -4,7 +4,9 @@ than PREVIEW_BUDGET is first drawn from a coarse preview and redrawn by the real
 slider rests. A run expected to take longer than LONG_RUN_S (its last run did), or of more
 bodies than MANY_BODIES, goes to a child process with a progress line and a Stop button
 (`viewer.background`), and starts once the slider rests: a drag does not start a minute-long
-run for every value it passes.
+run for every value it passes. A scene of many bodies shows its start at once meanwhile (its
+bodies where the new values put them, `viewer.frames.start_frames`: milliseconds for a
+thousand), when it is opened and at every slider change.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from collide.run import SceneRun, auto_dt, run_scene
 from collide.scene import Scene, SceneError
 from collide.stepper import RunError
 from viewer.background import BackgroundRunner, RunStopped
+from viewer.frames import StartFrames, start_frames
 from viewer.guard import FAILURES
 from viewer.messages import Messages, one_line
 from viewer.params import AUTO, Controls, Settings, build_scene
@@ -148,8 +151,10 @@ class LiveRuns:
         self._stop_run.set()
 
     def warm_for(self, view: ViewRun) -> None:
-        """Start the child process now if the next run will go to it."""
-        if view.n_bodies > MANY_BODIES or (self.full_cost or 0.0) > LONG_RUN_S:
+        """Start the child process now if the next run will go to it: a long run's, or, with
+        many bodies, while their start is shown (the run follows once the slider rests; after
+        a run of many bodies the child is not kept, see `_job`)."""
+        if isinstance(view, StartFrames) or (view.n_bodies <= MANY_BODIES and (self.full_cost or 0.0) > LONG_RUN_S):
             self.runner.warm()
 
     def close(self) -> None:
@@ -175,12 +180,22 @@ class LiveRuns:
             if (not final and self.full_cost is not None and self.full_cost > PREVIEW_BUDGET
                     and len(scene.bodies) <= MANY_BODIES):
                 preview = preview_settings(scene)
-            if long and preview is None and not final and not req.refit:
-                # Seconds to a minute of run and no quick preview: only once the slider rests
-                # (the worker calls back with final=True after its settle time, unless a newer
-                # value came).
-                self._messages.show_progress(f"*{scene.name}: the run starts when the slider rests...*")
-                return True
+            if long and preview is None and not final:
+                if len(scene.bodies) > MANY_BODIES:
+                    # Many bodies: their start with these values at once (O(N), milliseconds),
+                    # the run in the background after it.
+                    start = start_frames(scene)
+                    t_start = lap()
+                    if req.controls is not self._tab.controls:
+                        return False
+                    self._tab.show_live(start, refit=req.refit, stamp=req.stamp)
+                    self._record(req, clock, preview=True, simulate=0.0, core=0.0, prepare=t_start)
+                if not req.refit:
+                    # Seconds to a minute of run and no quick preview: only once the slider rests
+                    # (the worker calls back with final=True after its settle time, unless a
+                    # newer value came).
+                    self._messages.show_progress(f"*{scene.name}: the run starts when the slider rests...*")
+                    return True
             t_build = lap()
             if preview is not None:
                 # A preview is a coarse first answer, redrawn by the real run once the slider rests:
@@ -192,6 +207,10 @@ class LiveRuns:
                 run = self._run_in_background(scene)
                 if run is None:
                     return False
+                if len(scene.bodies) > MANY_BODIES:
+                    # Not kept for the next run: its kernels and working memory (about 240 MB
+                    # after a pile) would stay with the tab; the next run starts a fresh one.
+                    self.runner.close()
             else:
                 run = run_scene(scene, record=True)
             t_run = lap()
@@ -208,12 +227,20 @@ class LiveRuns:
         self._tab.show_live(view, refit=req.refit, stamp=req.stamp)
         if long:
             self._messages.show_progress("")
-        self.timings.append({"stamp": req.stamp, "preview": preview is not None, "queued": clock[0] - req.stamp,
-                             "build": t_build, "simulate": t_run, "core_wall": run.result.wall_time_s,
-                             "prepare": t_view, "draw": lap(), "total": time.perf_counter() - req.stamp})
+        self._record(req, clock, preview=preview is not None, simulate=t_run, core=run.result.wall_time_s,
+                     prepare=t_view, build=t_build)
         if not self.worker.pending():
             self._tab.after_run(scene, preview)
         return preview is not None
+
+    def _record(self, req: Request, clock: list[float], *, preview: bool, simulate: float, core: float,
+                prepare: float, build: float = 0.0) -> None:
+        """What a drawn run cost (for benchmarks): the last lap is its drawing."""
+        draw = time.perf_counter() - clock[-1]
+        clock.append(time.perf_counter())
+        self.timings.append({"stamp": req.stamp, "preview": preview, "queued": clock[0] - req.stamp,
+                             "build": build, "simulate": simulate, "core_wall": core, "prepare": prepare,
+                             "draw": draw, "total": time.perf_counter() - req.stamp})
 
     def _expect_long(self, scene: Scene) -> bool:
         return len(scene.bodies) > MANY_BODIES or (self.full_cost is not None and self.full_cost > LONG_RUN_S)

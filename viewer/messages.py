@@ -40,7 +40,8 @@ class Messages:
         the last run that failed."""
         lines = []
         if view is not None:
-            tag = " *(preview: coarse step while you drag)*" if view.preview else ""
+            note = getattr(view, "preview_note", "preview: coarse step while you drag")
+            tag = f" *({note})*" if view.preview else ""
             lines.append(f"**{view.name}** · {view.dim}D · {view.origin}{tag}")
             lines += view.status_lines()
         if notes:

@@ -56,6 +56,8 @@ GHOST_COLOUR_MIX = 0.55
 SUBDIVISIONS = 3
 FEW_BODIES = 12  # above this, instanced spheres
 CHAIN_OPACITY = 0.3  # spheres while the force chains are shown
+CHAIN_BLOCK = 256  # the force chains' batch grows in blocks of this many links
+CHAIN_SEGMENTS = 6  # sides of a force chain's cylinder (thin: six read as round)
 WALL_KEEP = 0.03  # of the scene's extent: walls that moved less are not sent again
 MIN_ARROW = 0.08  # arrows shorter than this many radii are not drawn (no heads on round-off)
 COLOUR_MODES = ("body", "speed", "kinetic energy", "contacts")
@@ -174,6 +176,7 @@ class SceneDrawer:
         self._floor: tuple[np.ndarray, np.ndarray] | None = None  # (point, unit normal) of the floor
         self._opacity: dict[int, float] = {}
         self._rings: dict[int, viser.SceneNodeHandle] = {}
+        self._light_shadows: bool | None = None
         self.frame: Frame | None = None
         self.eye: np.ndarray | None = None  # the camera's position, for the overlays
         self.lift: Lift | None = None
@@ -194,6 +197,11 @@ class SceneDrawer:
         extent = float(max(hi[0] - lo[0], hi[1] - lo[1], 4 * r_max))
         walls = list(view.walls)
         self.many = view.n_bodies > FEW_BODIES
+        if self._light_shadows is not (not self.many):
+            # Many spheres: no shadow map (each frame would draw every sphere twice; under
+            # software GL that doubled a frame's time). Their blob shadows give the depth.
+            self._light_shadows = not self.many
+            scene.configure_default_lights(True, cast_shadow=self._light_shadows)
         self._floor = None
         if not planar:
             up = np.array([0.0, 0.0, 1.0])
@@ -373,10 +381,17 @@ class SceneDrawer:
 
     def set_options(self, **changes) -> None:
         """Change what is shown; redraws the current frame."""
+        changed = {key for key, value in changes.items() if getattr(self.options, key) != value}
         for key, value in changes.items():
             setattr(self.options, key, value)
         if "colour_by" in changes:
             self._colour_range = self._range_for(self.options.colour_by)
+        if changed <= {"colour_by"}:
+            # A colour mode is the spheres' colours only: one message of N colours, nothing moved
+            # (a thousand spheres' positions, shadows and chains sent again cost seconds).
+            if changed and self.frame is not None and self.view is not None:
+                self._recolour(self.frame)
+            return
         if "shadows" in changes or "chains" in changes:
             self._opacity = {}
         if not self.options.forces:
@@ -388,6 +403,20 @@ class SceneDrawer:
             self._remove_com()
         if self.frame is not None:
             self.show_frame(self.frame)
+
+    def _recolour(self, frame: Frame) -> None:
+        """The spheres in the colours of the current mode at `frame`, and nothing else sent."""
+        colours = self._frame_colours(frame)
+        if np.array_equal(colours, self._colours):
+            return
+        self._colours = colours
+        if self.many:
+            spheres = self._batch.get("spheres")
+            if spheres is not None:
+                spheres.batched_colors = colours
+            return
+        for body, colour in zip(self._bodies, colours):
+            body["sphere"].color = tuple(int(c) for c in colour)
 
     # ------------------------------------------------------------------------------------------
     # Bodies
@@ -446,7 +475,7 @@ class SceneDrawer:
         self._batch["spheres"] = scene.add_batched_meshes_simple(
             "/bodies/spheres", verts, faces, batched_wxyzs=ident, batched_positions=zeros,
             batched_scales=view.radius.astype(np.float32), batched_colors=colours, lod="off",
-            cast_shadow=True, receive_shadow=False)
+            cast_shadow=False, receive_shadow=False)
         if view.dim > 1 and view.spin_dim:
             dv, df = unit_sphere(1)
             self._batch["dots"] = scene.add_batched_meshes_simple(
@@ -685,8 +714,10 @@ class SceneDrawer:
                 # colours were sent again: resend them with the next frame.
                 old.remove()
                 self._colours = np.zeros((0, 3), np.uint8)
-            self._chain_capacity = max(64, 1 << int(np.ceil(np.log2(max(k, view.max_links)))))
-            cv, cf = cylinder(10)
+            # Room for the run's most links at once, in steps of CHAIN_BLOCK: every slot is drawn
+            # (unused ones at zero size), so a power of two wasted up to half the chains' work.
+            self._chain_capacity = CHAIN_BLOCK * max(1, -(-max(k, view.max_links) // CHAIN_BLOCK))
+            cv, cf = cylinder(CHAIN_SEGMENTS)
             cap = self._chain_capacity
             self._batch["chains"] = self.scene.add_batched_meshes_simple(
                 "/contact/chains", cv, cf, batched_wxyzs=np.tile([1.0, 0, 0, 0], (cap, 1)),

@@ -24,6 +24,7 @@ from viewer.geometry import embed3, orientation_wxyz
 from viewer.sampling import Knots
 
 MAX_PLOT_POINTS = 400
+MIN_PLOT_POINTS = 120  # many bodies: the plots' points fall as 1/N to this (each costs N samples)
 MAX_PATH_POINTS = 400
 ROUND_OFF = 1e-12  # relative: overlaps and spreads below this are float64 round-off, not physics
 FLAT = 1e-9  # relative spread below which a conserved line is drawn flat (round-off accumulates)
@@ -130,6 +131,14 @@ def plot_times(t: np.ndarray, free: np.ndarray, max_points: int = MAX_PLOT_POINT
     return np.union1d(even, contact_t)
 
 
+def plot_points(n_bodies: int) -> int:
+    """How many times the plots are sampled at: MAX_PLOT_POINTS up to CONTACT_LIST_BODIES bodies,
+    then fewer as the bodies grow (the work is bodies x points), down to MIN_PLOT_POINTS."""
+    if n_bodies <= CONTACT_LIST_BODIES:
+        return MAX_PLOT_POINTS
+    return max(MIN_PLOT_POINTS, MAX_PLOT_POINTS * CONTACT_LIST_BODIES // n_bodies)
+
+
 def _subsample(times: np.ndarray, n: int) -> np.ndarray:
     if len(times) <= n:
         return times
@@ -165,7 +174,7 @@ class ViewRun:
         t = self.traj.knot_times
         self.t0, self.t1 = float(t[0]), float(t[-1])
         self._free = ~self._knots.stepped(t)
-        self.times = plot_times(t, self._free)
+        self.times = plot_times(t, self._free, plot_points(self.n_bodies))
         states = self.sample(self.times)
         engaged = self._contacts.overlaps(self.times, states.s[:, 0])
         self.plots = self._make_plots(states, engaged)

@@ -104,6 +104,7 @@ class _Drawing:
                  f"| wall time | {r.wall_time_s:.4g} s |",
                  f"| frames | {len(self.view.times)} (3D), {len(self.exact.times)} (plots) |",
                  f"| stride | {self.stride} |", f"| fps (free flight) | {self.fps:g} |",
+                 f"| frames kept | {self._frames_kept()} |",
                  f"| force arrows | {self.force_scale:.4g} m/N |", f"| collide | {collide_version()} |"]
         lines += [f"| warning | {w} |" for w in r.warnings]
         self._static("/settings", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
@@ -113,6 +114,13 @@ class _Drawing:
             for k in range(self.model.n_walls):
                 self._static(f"/world/walls/wall{k}", rr.LineStrips3D(
                     [self._wall_outline(k, centre, size)], colors=[(160, 160, 160)], radii=0.002 * size))
+
+    def _frames_kept(self) -> str:
+        """Which frames the 3D view holds (many bodies: every k-th, said here and in the meta)."""
+        if self.frame_every == 1:
+            return "every frame"
+        return (f"every k-th frame, k = {self.frame_every}, of {self.fps * self.frame_every:g} per second "
+                f"({self.model.n_bodies} bodies); the trajectory is stored whole")
 
     def _wall_outline(self, k: int, centre: np.ndarray, size: float) -> np.ndarray:
         """A wall drawn across the region the bodies sweep: a segment (1D, 2D) or a square (3D)."""

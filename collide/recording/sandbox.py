@@ -59,7 +59,10 @@ def verify_recording(path: str | Path, *, trusted: bool = False, timeout_s: floa
 
 _POLL_S = 0.05
 _HEADER = struct.Struct("!Q")
-_IDLE_READERS = 2  # reader processes kept warm between reads
+_IDLE_READERS = 1  # reader processes kept warm between reads
+# MB: a reader that grew past this reading a large file is stopped, not kept: an idle reader
+# held what it last read (360 MB after a 1 000-sphere pile; a fresh one is about 160 MB)
+_IDLE_MAX_MB = 250
 
 
 def _send_message(stream: Any, obj: Any) -> None:
@@ -104,6 +107,7 @@ def _serve_reads() -> None:
         except Exception as exc:  # whatever a damaged file makes the reader raise
             message = ("error", f"{path}: damaged or not a collide recording ({type(exc).__name__}: {exc})")
         _send_message(out, message)
+        del message  # not held while idle
 
 
 class _Reader:
@@ -196,7 +200,7 @@ def _take_reader() -> _Reader:
 
 def _give_back(reader: _Reader) -> None:
     with _idle_lock:
-        if len(_idle) < _IDLE_READERS:
+        if len(_idle) < _IDLE_READERS and reader.rss_mb() <= _IDLE_MAX_MB:
             _idle.append(reader)
             return
     reader.stop()
@@ -210,7 +214,9 @@ def read_recording_safely(path: str | Path, *, timeout_s: float = SAFE_TIMEOUT_S
     loop. Here a crash, a hang (longer than `timeout_s`) or a read that needs more than
     `memory_mb` MB of memory costs only the child; each becomes a `RecordingError` with a
     one-line message naming the file, and the caller carries on. Readers are fresh interpreters
-    (about a second to start), kept warm between reads; safe to call from several threads.
+    (about a second to start); one is kept warm between reads unless a large read grew it past
+    _IDLE_MAX_MB (then it is stopped: its memory is not held for the session); safe to call
+    from several threads.
     """
     return _safely(Path(path), "read", timeout_s, memory_mb)
 

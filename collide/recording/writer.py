@@ -43,6 +43,11 @@ DEFAULT_FPS = 120.0  # frames per simulated second of free flight
 # Rerun's time axis counts int64 nanoseconds: a run ending later than this cannot be recorded.
 MAX_RECORDED_TIME = 9.0e9
 MAX_FREE_FRAMES = 100_000  # frames of free flight in one recording, at most (fps drops beyond)
+# Body positions in the 3D view's frames (frames x bodies), at most: a recording of many bodies
+# keeps every k-th frame of the fps grid beyond this (100 000 bodies: about a hundred frames),
+# and says so (`frame_every` in its settings and meta, `last_write.frame_every`). The trajectory
+# (/collide/knots ...) is stored whole whatever this is.
+MAX_BODY_FRAMES = 10_000_000
 CONTACT_FRAMES = 100  # least frames across one contact in the 3D view
 SEAL_ATTEMPTS = 4  # writes of a recording whose seal's placeholder LZ4 did not keep verbatim
 
@@ -54,6 +59,7 @@ class WriteStats:
     frames: int = 0
     exact_frames: int = 0
     fps: float = 0.0  # the free-flight frame rate used (lower than asked for a long run)
+    frame_every: int = 1  # many bodies: every k-th frame of the asked rate kept (MAX_BODY_FRAMES)
     steps: int = 0
     rows: int = 0
     calls: int = 0
@@ -114,6 +120,13 @@ class _Writer(_Drawing):
         knots = self.traj.knots[:, layout.K_T]
         span = float(knots.max() - knots.min()) if len(knots) else 0.0
         self.fps = min(fps, MAX_FREE_FRAMES / span) if span > 0 else fps
+        self.many = self.model.n_bodies >= MANY_BODIES
+        # Many bodies: the frames are a steady fps (frame_times); every k-th is kept so that the
+        # 3D view holds at most MAX_BODY_FRAMES body positions.
+        self.frame_every = 1
+        if self.many and span > 0:
+            self.frame_every = max(1, math.ceil(span * self.fps * self.model.n_bodies / MAX_BODY_FRAMES))
+            self.fps /= self.frame_every
         self.contact_frames = contact_frames
         self.rows = 0
         self.calls = 0
@@ -122,7 +135,6 @@ class _Writer(_Drawing):
         self.spin = self.model.spin_dim > 0 and self.scene.has_spin
         self.friction = self.model.friction and self.scene.has_friction
         self.dissipative = self.model.dissipative
-        self.many = self.model.n_bodies >= MANY_BODIES
 
     # -- frames ---------------------------------------------------------------------------
 
@@ -198,6 +210,7 @@ class _Writer(_Drawing):
         last_write.frames = len(self.view.times)
         last_write.exact_frames = len(self.exact.times)
         last_write.fps = self.fps
+        last_write.frame_every = self.frame_every
         last_write.steps = int(self.result.steps[0])
         last_write.rows = self.rows
         last_write.calls = self.calls
@@ -262,6 +275,7 @@ class _Writer(_Drawing):
             "intervals": int(len(self.traj.intervals)), "dim": model.dim, "spin_dim": model.spin_dim,
             "n_bodies": model.n_bodies, "n_walls": model.n_walls, "friction": bool(self.friction),
             "stride": self.stride, "fps": float(self.fps), "contact_frames": self.contact_frames,
+            "frame_every": self.frame_every,
             "force_scale": float(self.force_scale),
         }
         if r.warnings:
