@@ -99,11 +99,13 @@ def _parse_bitcode_when_linked() -> None:
     library.get_pointer_to_function = get_pointer_to_function
 
 
-# How LLVM optimises the kernels (numba's NUMBA_OPT, NUMBA_LOOP_VECTORIZE, NUMBA_SLP_VECTORIZE).
-# numba's cache keys a compiled function on its signature and the CPU only, not on these: every
-# process that compiles the kernels (the warm-up, a compile a run starts, a COLLIDE_JIT=1 test)
-# sets them here, whatever its environment says, so the cache never mixes two settings.
-CODE_GENERATION = {"NUMBA_OPT": "1", "NUMBA_LOOP_VECTORIZE": "1", "NUMBA_SLP_VECTORIZE": "0"}
+# How LLVM optimises the kernels (numba's NUMBA_OPT, NUMBA_LOOP_VECTORIZE, NUMBA_SLP_VECTORIZE):
+# numba's defaults (level 1 saves an eighth of the compile's CPU and costs the DEM kernel up to a
+# tenth of its time, measured). numba's cache keys a compiled function on its signature and the
+# CPU only, not on these: every process that compiles the kernels (the warm-up, a compile a run
+# starts, a COLLIDE_JIT=1 test) sets them here, whatever its environment says, so the cache never
+# mixes two settings.
+CODE_GENERATION = {"NUMBA_OPT": "3", "NUMBA_LOOP_VECTORIZE": "1", "NUMBA_SLP_VECTORIZE": "0"}
 
 
 def _same_code_generation() -> None:
