@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import importlib.util
+import os
 
 from collide.engine import tier
 
@@ -98,6 +99,25 @@ def _parse_bitcode_when_linked() -> None:
     library.get_pointer_to_function = get_pointer_to_function
 
 
+# How LLVM optimises the kernels (numba's NUMBA_OPT, NUMBA_LOOP_VECTORIZE, NUMBA_SLP_VECTORIZE):
+# numba's defaults (level 1 saves an eighth of the compile's CPU and costs the DEM kernel up to a
+# tenth of its time, measured). numba's cache keys a compiled function on its signature and the
+# CPU only, not on these: every process that compiles the kernels (the warm-up, a compile a run
+# starts, a COLLIDE_JIT=1 test) sets them here, whatever its environment says, so the cache never
+# mixes two settings.
+CODE_GENERATION = {"NUMBA_OPT": "3", "NUMBA_LOOP_VECTORIZE": "1", "NUMBA_SLP_VECTORIZE": "0"}
+
+
+def _same_code_generation() -> None:
+    """Apply CODE_GENERATION before numba sets its code generator up (at the first compile or
+    cache load). numba reads its settings again from the environment before each compile, so
+    they are set there (this process's children inherit them) and read now."""
+    from numba.core import config
+
+    os.environ.update(CODE_GENERATION)
+    config.reload_config()
+
+
 def _one_signature(options: dict):
     """numba's `njit` with `options`, whose kernels are compiled for the types of their arguments
     only, never for the value of a constant one: numba types a constant argument in a call from
@@ -119,9 +139,28 @@ def _one_signature(options: dict):
             return typed(tuple(types.unliteral(a) for a in args), {k: types.unliteral(v) for k, v in kws.items()})
 
         dispatcher.get_call_template = get_call_template
+        if options.get("no_cpython_wrapper"):
+            _called_from_kernels_only(dispatcher)
         return dispatcher
 
     return decorate
+
+
+def _called_from_kernels_only(dispatcher) -> None:
+    """A kernel part compiled without numba's entry from Python (`no_cpython_wrapper`), whose
+    machine code a call from Python would jump into with Python objects: kept for the kernels
+    that call it, never registered for calls from Python, which run the Python function (the
+    same code the interpreted engine runs; the tests call parts so)."""
+    function = dispatcher.py_func
+
+    def add_overload(compiled) -> None:
+        dispatcher.overloads[tuple(compiled.signature.args)] = compiled
+
+    def run_as_python(*args, **kwargs):
+        return function  # numba's dispatcher calls what this returns with the call's arguments
+
+    dispatcher.add_overload = add_overload
+    dispatcher._compile_for_args = run_as_python
 
 
 if tier.COMPILED:
@@ -130,6 +169,7 @@ if tier.COMPILED:
     _set_up_target_to_compile_only()
     _parse_bitcode_when_linked()
 
+    _same_code_generation()
     # The cache folder named after every kernel source (tier.cache_key): never a stale callee.
     config.CACHE_DIR = str(tier.cache_dir())
     # error_model="numpy": a division by zero gives inf or NaN (checked after each step) instead
@@ -141,12 +181,18 @@ if tier.COMPILED:
     # (`_nrt=False`, as numba's own sort and string helpers): a call each time, and the atomic
     # counts of each array passed, cost more than the physics (a quarter of the DEM step; the
     # event engine's steps 2-5 times, measured).
-    jit_inline = _one_signature(dict(cache=True, error_model="numpy", nogil=True, forceinline=True, _nrt=False))
+    # They are compiled without numba's entries from Python and from C (`no_cpython_wrapper`,
+    # `no_cfunc_wrapper`): only kernels call them, and the entries, which unpack every array
+    # passed, were most of a small part's code to optimise and compile (measured:
+    # benchmarks/bench_compile.py).
+    _part = dict(cache=True, error_model="numpy", nogil=True, _nrt=False, no_cpython_wrapper=True,
+                 no_cfunc_wrapper=True)
+    jit_inline = _one_signature(dict(_part, forceinline=True))
     # Large pieces of that kind called from several places (the event engine's step, friction
     # solve, hold, mode values, decision, settling): called, not copied into every call site,
     # which multiplied the machine code (the cache 32 MB) and the compile's time; still without
     # reference counting, which was most of the gain. Kernel times unchanged, measured.
-    jit_call = _one_signature(dict(cache=True, error_model="numpy", nogil=True, _nrt=False))
+    jit_call = _one_signature(_part)
     # Stages with one caller (the event engine's windows, islands, the step's event location):
     # their code is compiled inside the caller (numba's `inline="always"`), never on its own.
     # numba compiles every kernel that another one calls into a library of its own, links into
