@@ -10,7 +10,8 @@
 2. Throughput: a granular box (Hertz, e = 0.5, tangential springs, mu = 0.5, gravity) of N
    spheres dropped from a loose lattice, run for a fixed number of steps at a fixed dt;
    particle-steps per second of the kernel's own time (`wall_time_s`), median of repeats.
-3. With `--threads 1,2`: the same box run on each number of threads in turn (COLLIDE_THREADS),
+3. With `--threads 1,2`: benchmarks/bench_liggghts.py's box (1 mm spheres from a lattice, in
+   contact within the first steps) run on each number of threads in turn (COLLIDE_THREADS),
    repeats alternated, the kernel's wall time and the process's CPU time over it (every thread),
    medians, the speedups against the first, and the load average before and after.
 """
@@ -150,7 +151,13 @@ def main() -> None:
     parser.add_argument("--threads", help="thread counts to compare, e.g. 1,2 (skips the error table)")
     args = parser.parse_args()
     if args.threads:
-        scene = parse_scene(granular_box(args.spheres, args.steps))
+        import sys
+        import tomllib
+
+        sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+        from bench_liggghts import box_case, scene_toml  # the box LIGGGHTS runs too
+
+        scene = parse_scene(tomllib.loads(scene_toml(box_case(args.steps, spheres=args.spheres))))
         run_scene(scene, record=False)  # load (or compile) the kernels
         thread_scan(scene, [int(c) for c in args.threads.split(",")], args.repeats, args.spheres)
         return

@@ -16,6 +16,7 @@ from its data file.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import subprocess
@@ -51,7 +52,8 @@ def collide_scene(case, workdir: Path) -> Path:
 
 
 def peak_rss(argv: list[str], cwd: Path, env: dict | None = None) -> tuple[float, float]:
-    """(peak resident memory in MB, wall seconds) of a command under /usr/bin/time -v."""
+    """(peak resident memory in MB, wall seconds) of a command under /usr/bin/time -v; a collide
+    summary's steps and threads are printed."""
     start = time.perf_counter()
     proc = subprocess.run(["/usr/bin/time", "-v", *argv], cwd=cwd, capture_output=True, text=True, env=env,
                           check=False)
@@ -60,6 +62,11 @@ def peak_rss(argv: list[str], cwd: Path, env: dict | None = None) -> tuple[float
         raise RuntimeError(f"{argv[0]} failed (exit {proc.returncode}):\n{proc.stdout[-1000:]}\n{proc.stderr[-2000:]}")
     found = re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr)
     assert found is not None
+    if proc.stdout.startswith("{"):
+        summary = json.loads(proc.stdout)
+        print(f"collide: {summary['steps']} steps + {summary['jumps']} jumps to t = {summary['sim_time']:.4g} s on "
+              f"{summary.get('threads')} threads, kernel {summary['wall_time_s']:.1f} s, process {wall:.1f} s",
+              flush=True)
     return int(found.group(1)) / 1024.0, wall
 
 
