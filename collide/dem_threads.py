@@ -29,12 +29,11 @@ from collide.engine.dem.neighbours import rebuild
 from collide.engine.dem.records import energy_row, frame
 from collide.engine.dem.verlet import kick, kinetic
 from collide.engine.numerics import grow
+from collide.stepper import THREADS_VARIABLE  # (a batch's cap on its threads, a run's threads)
 
 # Bodies from which a run takes every core by default (below, one thread: the hand-offs cost
 # more than the split saves), measured with benchmarks/bench_dem.py --threads.
 THREADS_FROM = 4000
-# The environment variable that caps the threads (a batch's members, a run's share).
-THREADS_VARIABLE = "COLLIDE_THREADS"
 
 
 def cores() -> int:

@@ -375,7 +375,8 @@ def energy_sum(EB, n):
 # call of the C library's pthread_barrier_wait, a few microseconds, where a hand-off through
 # Python took a tenth of a millisecond, as long as a step of 1 000 spheres.
 _libc = ctypes.CDLL(None)
-if tier.COMPILED:
+HAVE_BARRIER = hasattr(_libc, "pthread_barrier_wait")  # (POSIX barriers: not on macOS; one thread there)
+if tier.COMPILED and HAVE_BARRIER:
     import llvmlite.binding as llvm
     from numba.core import types
 
