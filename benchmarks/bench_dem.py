@@ -1,6 +1,7 @@
 """The DEM kernel: error against steps per contact, and throughput in particle-steps per second.
 
     python benchmarks/bench_dem.py [--repeats 3] [--spheres 1000] [--steps 4000]
+    python benchmarks/bench_dem.py --threads 1,2 --spheres 10000 --steps 400 --repeats 5
 
 1. Error model (`collide.dem.ERROR_CONSTANT`): for impacts on a wall (linear and Hertz, damped,
    with friction: slide and spring), the outcome's error (final velocity and spin times radius,
@@ -9,6 +10,10 @@
 2. Throughput: a granular box (Hertz, e = 0.5, tangential springs, mu = 0.5, gravity) of N
    spheres dropped from a loose lattice, run for a fixed number of steps at a fixed dt;
    particle-steps per second of the kernel's own time (`wall_time_s`), median of repeats.
+3. With `--threads 1,2`: benchmarks/bench_liggghts.py's box (1 mm spheres from a lattice, in
+   contact within the first steps) run on each number of threads in turn (COLLIDE_THREADS),
+   repeats alternated, the kernel's wall time and the process's CPU time over it (every thread),
+   medians, the speedups against the first, and the load average before and after.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ os.environ.setdefault("COLLIDE_JIT", "1")  # time compiled kernels (waited for),
 
 import argparse
 import statistics
+import time
 
 import numpy as np
 
@@ -91,13 +97,70 @@ def granular_box(n: int, steps: int) -> dict:
             "body": bodies, "wall": walls}
 
 
+def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
+    """The box on each thread count in turn, repeats alternated: wall and CPU medians."""
+    import resource
+
+    import collide.dem
+
+    spent: list[tuple[float, float]] = []
+    real = collide.dem.run_members
+
+    def timed(*args, **kwargs):
+        before, start = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
+        out = real(*args, **kwargs)
+        after = resource.getrusage(resource.RUSAGE_SELF)
+        spent.append((time.perf_counter() - start,
+                      after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime))
+        return out
+
+    collide.dem.run_members = timed
+    loads = [os.getloadavg()[0]]
+    times: dict[int, list[tuple[float, float]]] = {c: [] for c in counts}
+    steps = 0
+    for _ in range(repeats):
+        for count in counts:
+            os.environ["COLLIDE_THREADS"] = str(count)
+            result = run_scene(scene, record=False).result
+            assert result.threads == count
+            times[count].append(spent[-1])
+            steps = int(result.steps[0])
+        loads.append(os.getloadavg()[0])
+    collide.dem.run_members = real
+    print(f"\n{spheres} spheres, {steps} steps, {repeats} runs each alternated; load average (1 min) "
+          f"{', '.join(f'{x:.1f}' for x in loads)} on {os.cpu_count()} cores\n")
+    print("| threads | wall s (median; runs) | CPU s (median) | particle-steps/s wall | per CPU s | "
+          "speedup wall | speedup CPU rate |")
+    print("|---|---|---|---|---|---|---|")
+    base = None
+    for count in counts:
+        wall = statistics.median(w for w, _ in times[count])
+        cpu = statistics.median(c for _, c in times[count])
+        base = base or (wall, cpu)
+        runs = ", ".join(f"{w:.2f}" for w, _ in times[count])
+        print(f"| {count} | {wall:.3f} ({runs}) | {cpu:.3f} | {spheres * steps / wall:.3g} | "
+              f"{spheres * steps / cpu:.3g} | {base[0] / wall:.2f} | {base[1] / cpu:.2f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--spheres", type=int, default=1000)
     parser.add_argument("--steps", type=int, default=4000)
     parser.add_argument("--skip-errors", action="store_true")
+    parser.add_argument("--threads", help="thread counts to compare, e.g. 1,2 (skips the error table)")
     args = parser.parse_args()
+    if args.threads:
+        import sys
+        import tomllib
+
+        sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+        from bench_liggghts import box_case, scene_toml  # the box LIGGGHTS runs too
+
+        scene = parse_scene(tomllib.loads(scene_toml(box_case(args.steps, spheres=args.spheres))))
+        run_scene(scene, record=False)  # load (or compile) the kernels
+        thread_scan(scene, [int(c) for c in args.threads.split(",")], args.repeats, args.spheres)
+        return
     if not args.skip_errors:
         error_table()
     scene = parse_scene(granular_box(args.spheres, args.steps))

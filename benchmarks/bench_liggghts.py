@@ -178,12 +178,17 @@ class LiggghtsRun:
     frames: np.ndarray  # (T, N, 12): x y z vx vy vz wx wy wz fx fy fz, every dump_every steps
 
 
+# LIGGGHTS's processes (`--np`: under mpirun, its domain split among them).
+PROCESSES = [1]
+
+
 def run_liggghts(case: Case, workdir: Path) -> LiggghtsRun:
     workdir.mkdir(parents=True, exist_ok=True)
     inp = liggghts_input(case, workdir)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    proc = subprocess.run([LIGGGHTS, "-echo", "none", "-log", "none", "-in", inp.name], cwd=workdir,
+    mpi = ["mpirun", "--allow-run-as-root", "--oversubscribe", "-np", str(PROCESSES[0])] if PROCESSES[0] > 1 else []
+    proc = subprocess.run([*mpi, LIGGGHTS, "-echo", "none", "-log", "none", "-in", inp.name], cwd=workdir,
                           capture_output=True, text=True, timeout=TIMEOUT_S, check=False)
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -485,23 +490,29 @@ def run_impacts(workdir: Path, liggghts_only: bool) -> None:
 # ------------------------------------------------------------------ (b) granular box
 
 
-def box_case(steps: int, seed: int = 1) -> Case:
-    """1000 spheres (r = 1 mm) on a 10 x 10 x 10 lattice (2.5 mm pitch) with small random velocities,
-    dropped into a 40 mm x 40 mm box (floor and four side walls) under gravity."""
-    r, pitch, side = 1e-3, 2.5e-3, 0.04
+def box_case(steps: int, seed: int = 1, spheres: int = 1000) -> Case:
+    """`spheres` spheres (r = 1 mm; 1000: a 10 x 10 x 10 lattice) on a lattice of 2.5 mm pitch with
+    small random velocities, dropped into a box (floor and four side walls, 40 mm wide for 1000,
+    15 mm wider than the lattice) under gravity."""
+    per = max(1, round(spheres ** (1 / 3)))
+    layers = -(-spheres // (per * per))
+    r, pitch = 1e-3, 2.5e-3
+    side = per * pitch + 0.015
     rng = np.random.default_rng(seed)
-    spheres = []
-    offset = side / 2 - 4.5 * pitch
-    for i in range(10):
-        for j in range(10):
-            for k in range(10):
+    spheres_at = []
+    offset = side / 2 - (per - 1) / 2 * pitch
+    for i in range(per):
+        for j in range(per):
+            for k in range(layers):
                 pos = (offset + i * pitch, offset + j * pitch, 2 * r + k * pitch)
                 vel = tuple(float(x) for x in rng.uniform(-0.05, 0.05, 3))
-                spheres.append(Sphere(pos, vel))
+                spheres_at.append(Sphere(pos, vel))
+    spheres_at = spheres_at[:spheres]
+    top = max(0.2, 2 * r + layers * pitch + 0.01)
     mat = SOFT_GLASS
-    case = Case("granular-box", mat, r, spheres, dt=0.0, steps=steps, restitution=0.5, mu=0.5,
+    case = Case("granular-box", mat, r, spheres_at, dt=0.0, steps=steps, restitution=0.5, mu=0.5,
                 walls=[("zplane", 0.0), ("xplane", 0.0), ("xplane", side), ("yplane", 0.0), ("yplane", side)],
-                gravity=9.81, dump_every=0, box=(-0.001, side + 0.001, -0.001, side + 0.001, -0.001, 0.2),
+                gravity=9.81, dump_every=0, box=(-0.001, side + 0.001, -0.001, side + 0.001, -0.001, top),
                 skin=0.5 * r)
     # dt: 1/50 of the Hertz contact time of two spheres meeting at 1 m/s (the lattice's top falls 25 mm:
     # 0.7 m/s).
@@ -514,9 +525,9 @@ def box_state(x: np.ndarray, v: np.ndarray, m: float) -> tuple[float, float]:
     return 0.5 * m * float((v**2).sum()), float(x[:, 2].mean())
 
 
-def run_box(workdir: Path, steps: int, repeat: int, liggghts_only: bool) -> None:
-    case = box_case(steps)
-    one = box_case(1)  # the same set-up for one step: the cost of all but the steps, to subtract
+def run_box(workdir: Path, steps: int, repeat: int, liggghts_only: bool, spheres: int = 1000) -> None:
+    case = box_case(steps, spheres=spheres)
+    one = box_case(1, spheres=spheres)  # the same set-up for one step: the cost of all but the steps, to subtract
     n = len(case.spheres)
     print(f"\n### (b) Granular box: {n} spheres, r = {case.radius * 1e3:g} mm, "
           f"E = {case.material.youngs_modulus:.2g} Pa, e = {case.restitution}, mu = {case.mu}, "
@@ -578,7 +589,8 @@ def run_box(workdir: Path, steps: int, repeat: int, liggghts_only: bool) -> None
     else:
         rows += [("final kinetic energy (J, translational)", f"{ke_l:.4g}", "", ""),
                  ("final mean height (m)", f"{z_l:.5g}", "", "")]
-    print("| | LIGGGHTS (1 core) | collide | collide / LIGGGHTS (speed; heights, energies) |")
+    print(f"| | LIGGGHTS ({PROCESSES[0]} process(es)) | collide ({os.environ.get('COLLIDE_THREADS', 'default')} "
+          "threads) | collide / LIGGGHTS (speed; heights, energies) |")
     print("|---|---|---|---|")
     for row in rows:
         print("| " + " | ".join(row) + " |")
@@ -593,7 +605,13 @@ def main() -> None:
     parser.add_argument("--only", choices=["impacts", "box"], help="run one part")
     parser.add_argument("--liggghts-only", action="store_true", help="skip collide (check LIGGGHTS alone)")
     parser.add_argument("--keep", type=Path, help="write inputs and outputs here and keep them")
+    parser.add_argument("--spheres", type=int, default=1000, help="box spheres")
+    parser.add_argument("--np", type=int, default=1, help="LIGGGHTS processes (mpirun -np)")
+    parser.add_argument("--threads", type=int, help="collide's threads (COLLIDE_THREADS)")
     args = parser.parse_args()
+    PROCESSES[0] = args.np
+    if args.threads is not None:
+        os.environ["COLLIDE_THREADS"] = str(args.threads)
     if not Path(LIGGGHTS).exists():
         sys.exit("LIGGGHTS not found: apt-get install liggghts (Debian/Ubuntu)")
     workdir = args.keep or Path(tempfile.mkdtemp(prefix="bench_liggghts_"))
@@ -601,7 +619,7 @@ def main() -> None:
         if args.only != "box":
             run_impacts(workdir, args.liggghts_only)
         if args.only != "impacts":
-            run_box(workdir, args.steps, args.repeat, args.liggghts_only)
+            run_box(workdir, args.steps, args.repeat, args.liggghts_only, args.spheres)
     except (RuntimeError, subprocess.TimeoutExpired) as exc:
         sys.exit(f"error: {exc}")
     finally:

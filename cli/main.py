@@ -5,6 +5,7 @@ from __future__ import annotations
 import inspect
 import json
 import math
+import os
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -147,6 +148,9 @@ def run(
         "--max-steps", min=1, help="Refuse the run past this many steps.",
         show_default=f"{MAX_STEPS_DEFAULT:.0e} with a duration, {OPEN_RUN_STEPS:.0e} without one; the seed at "
                      f"most {SEED_BODY_STEPS:.0e} body-steps")] = None,
+    threads: Annotated[int | None, typer.Option(
+        "--threads", min=1, help="Threads a DEM run steps on, the same result whatever the number (also "
+        "COLLIDE_THREADS=N).", show_default="every core from 4 000 bodies, 1 below")] = None,
 ) -> None:
     """Run one scene, print a summary and write a Rerun recording.
 
@@ -167,6 +171,8 @@ def run(
     with loading_display(scene) as show:
         loaded = load_scene(scene, set_ or [], progress=show)
     step = parse_dt(dt)
+    if threads is not None:
+        os.environ["COLLIDE_THREADS"] = str(threads)  # read by collide.dem.run_threads
     recording = None
     if not no_record:
         from collide.batch import safe_name

@@ -11,6 +11,7 @@ time: `contact_time` estimates the shortest one from the fastest approach the sc
 from __future__ import annotations
 
 import math
+import os
 import time
 
 import numpy as np
@@ -188,35 +189,21 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
     finals, trajectories = [], [] if record else None
     stats = np.zeros((b_count, int(dk.NSTAT)), np.int64)
     figures = np.zeros((b_count, int(dk.NFIG)))
-    members = []
-    for b in range(b_count):
-        X, V = _pad3(initial.s[b]), _pad3(initial.v[b])
-        W = np.zeros((model.n_bodies, 3))
-        Q = np.zeros((model.n_bodies, 4))
-        if model.spin_dim == 1:
-            W[:, 2] = initial.w[b, :, 0]
-            Q[:, 0] = initial.q[b, :, 0]
-        elif model.spin_dim == 3:
-            W[:] = initial.w[b]
-            Q[:] = initial.q[b]
-        WP = np.zeros((model.n_walls, 6))
-        if model.n_walls:
-            WP[:, :3] = _pad3(model.wall_point)
-            WP[:, 3:] = _pad3(model.wall_normal)
-        grav = _pad3(model.gravity[b]) if model.gravity is not None else np.zeros(3)
-        t_end = duration[b] if np.isfinite(duration[b]) else np.inf
-        frames = int(np.clip(FRAME_BUDGET // max(model.n_bodies, 1), 100, 1500))
-        frame = t_end / frames if np.isfinite(t_end) else t_c[b] / 10.0
-        fl = np.array([model.dim, model.spin_dim > 0, model.hertz, model.tangential_spring, record, max_steps],
-                      dtype=np.int64)
-        fp = np.array([dt[b], t_end, rest[b] if np.isfinite(rest[b]) else 0.0, 0.0, frame,
-                       SKIN * float(model.radius[b].min()), 0.0, 0.0])
-        pair, wall = kernel_tables(model, b)
-        members.append(((X, V, W, Q, _bodies(model, b), pair, wall, WP, grav, fl, fp), t_end))
+    members = [kernel_args(model, initial, b, dt=dt, duration=duration, rest=rest, record=record,
+                           max_steps=max_steps, t_c=t_c) for b in range(b_count)]
     _load_compiled(*members[0][0])
+    # One run takes the cores itself (`dem_threads`); a batch's members go one a core.
+    threads = run_threads(model.n_bodies) if b_count == 1 and tier.COMPILED else 1
     started = time.perf_counter()
-    outcomes = run_members(b_count, lambda b: dem_loop.dem_run(*members[b][0]), progress,
-                           [(m[0][-1], int(dk.P_NOW), m[1]) for m in members])
+    if threads > 1:
+        from collide.dem_threads import dem_run_threaded
+
+        def run_member(b: int) -> tuple:
+            return dem_run_threaded(*members[b][0], threads)
+    else:
+        def run_member(b: int) -> tuple:
+            return dem_loop.dem_run(*members[b][0])
+    outcomes = run_members(b_count, run_member, progress, [(m[0][-1], int(dk.P_NOW), m[1]) for m in members])
     wall_time = time.perf_counter() - started
     body_tables = np.zeros((b_count, model.n_bodies, int(layout.NG)))
     for b, (t, WK, KN, REC, IV, EP, st, fg) in enumerate(outcomes):
@@ -255,7 +242,51 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
                        dt_min=dt.copy(),
                        windows=np.zeros(b_count, np.int64))
     result.dissipation = figures[:, [dk.G_DAMP, dk.G_FRIC, dk.G_ROLL]].copy()
+    result.threads = threads
     return result
+
+
+def run_threads(n_bodies: int) -> int:
+    """The threads one run of n_bodies steps on: COLLIDE_THREADS if set (`collide run
+    --threads`), else every core from THREADS_FROM bodies and one below."""
+    from collide.dem_threads import THREADS_FROM, THREADS_VARIABLE, cores
+    from collide.engine.dem.threads import HAVE_BARRIER
+
+    if not HAVE_BARRIER:
+        return 1
+    asked = os.environ.get(THREADS_VARIABLE, "")
+    if asked.isdigit() and int(asked) > 0:
+        return int(asked)
+    return cores() if n_bodies >= THREADS_FROM else 1
+
+
+def kernel_args(model: Model, initial: State, b: int, *, dt: np.ndarray, duration: np.ndarray, rest: np.ndarray,
+                record: bool, max_steps: int, t_c: np.ndarray) -> tuple[tuple, float]:
+    """Member b's arguments of `loop.dem_run` (X, V, W, Q, bodies, tables, walls, gravity, flags,
+    figures), and its end time."""
+    X, V = _pad3(initial.s[b]), _pad3(initial.v[b])
+    W = np.zeros((model.n_bodies, 3))
+    Q = np.zeros((model.n_bodies, 4))
+    if model.spin_dim == 1:
+        W[:, 2] = initial.w[b, :, 0]
+        Q[:, 0] = initial.q[b, :, 0]
+    elif model.spin_dim == 3:
+        W[:] = initial.w[b]
+        Q[:] = initial.q[b]
+    WP = np.zeros((model.n_walls, 6))
+    if model.n_walls:
+        WP[:, :3] = _pad3(model.wall_point)
+        WP[:, 3:] = _pad3(model.wall_normal)
+    grav = _pad3(model.gravity[b]) if model.gravity is not None else np.zeros(3)
+    t_end = duration[b] if np.isfinite(duration[b]) else np.inf
+    frames = int(np.clip(FRAME_BUDGET // max(model.n_bodies, 1), 100, 1500))
+    frame = t_end / frames if np.isfinite(t_end) else t_c[b] / 10.0
+    fl = np.array([model.dim, model.spin_dim > 0, model.hertz, model.tangential_spring, record, max_steps],
+                  dtype=np.int64)
+    fp = np.array([dt[b], t_end, rest[b] if np.isfinite(rest[b]) else 0.0, 0.0, frame,
+                   SKIN * float(model.radius[b].min()), 0.0, 0.0])
+    pair, wall = kernel_tables(model, b)
+    return (X, V, W, Q, _bodies(model, b), pair, wall, WP, grav, fl, fp), t_end
 
 
 def _tail_knots(KN: np.ndarray, t: float, X: np.ndarray, V: np.ndarray, grav: np.ndarray) -> np.ndarray:

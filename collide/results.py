@@ -50,6 +50,7 @@ class RunResult:
     closed_steps: np.ndarray | None = None  # (B,) of the steps, intervals run in closed form (a sphere on a wall)
     attempts: np.ndarray | None = None  # (B,) whole steps tried from a step's start (events cost more than one)
     free_since: np.ndarray | None = None  # (B, N) when each body's last contact ended (0: none; the end: open)
+    threads: int = 1  # the threads one DEM run stepped on (collide.dem.run_threads)
 
     @property
     def batch_size(self) -> int:

@@ -56,6 +56,7 @@ def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
         # Which kernels ran (collide.engine.tier): a small run stays interpreted, quicker as a
         # whole process, and its wall_time_s is then the interpreted code's.
         "kernels": "compiled" if tier.COMPILED else "interpreted",
+        "threads": r.threads,
         "bodies": bodies,
         "residuals": {
             "energy": _finite_or_none(res.energy[member]),

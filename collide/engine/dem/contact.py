@@ -34,6 +34,14 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, 
     """Add contact (i, j)'s forces and torques (j < 0: a rigid wall along -n) to F, T, and by
     part to PT. n points from i into j; the law's coefficients are tabs[mi, mj]. Returns the normal
     force; `out` gets the friction force on i (3) and the mode."""
+    return contact_into(X, V, W, F, T, T, PT, Bd, i, j, i, j, nx, ny, nz, delta, tabs, mi, mj, hist, k, fl, dt, out)
+
+
+@jit_inline
+def contact_into(X, V, W, F, T, TR, PT, Bd, i, j, oi, oj, nx, ny, nz, delta, tabs, mi, mj, hist, k, fl, dt, out):
+    """`contact_force` adding i's and j's shares to rows oi and oj of F, T and PT, the rolling
+    torque to TR (the threaded force pass keeps a contact between two threads' bodies apart:
+    `collide.engine.dem.threads`), each element of each row receiving at most one addition."""
     tspring, spin = fl[F_TSPRING], fl[F_SPIN]
     ri = Bd[i, B_R]
     if j >= 0:
@@ -68,41 +76,41 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, 
         fx += sx
         fy += sy
         fz += sz
-        friction_torque(T, PT, i, j, nx, ny, nz, ai, aj, sx, sy, sz)
+        friction_torque(T, PT, oi, oj, nx, ny, nz, ai, aj, sx, sy, sz)
     roll = tabs[mi, mj, T_ROLL]
     if spin and roll > 0.0 and press > 0.0:
-        rolling_resistance(W, T, PT, Bd, i, j, roll * rstar * press, dt)
-    F[i, 0] += fx
-    F[i, 1] += fy
-    F[i, 2] += fz
+        rolling_resistance(W, TR, PT, Bd, i, j, oi, oj, roll * rstar * press, dt)
+    F[oi, 0] += fx
+    F[oi, 1] += fy
+    F[oi, 2] += fz
     dx, dy, dz = -damp * nx, -damp * ny, -damp * nz
-    PT[i, PT_DAMP] += dx
-    PT[i, PT_DAMP + 1] += dy
-    PT[i, PT_DAMP + 2] += dz
+    PT[oi, PT_DAMP] += dx
+    PT[oi, PT_DAMP + 1] += dy
+    PT[oi, PT_DAMP + 2] += dz
     if j >= 0:
-        F[j, 0] -= fx
-        F[j, 1] -= fy
-        F[j, 2] -= fz
-        PT[j, PT_DAMP] -= dx
-        PT[j, PT_DAMP + 1] -= dy
-        PT[j, PT_DAMP + 2] -= dz
+        F[oj, 0] -= fx
+        F[oj, 1] -= fy
+        F[oj, 2] -= fz
+        PT[oj, PT_DAMP] -= dx
+        PT[oj, PT_DAMP + 1] -= dy
+        PT[oj, PT_DAMP + 2] -= dz
     out[0], out[1], out[2], out[3] = sx, sy, sz, mode
     return fn
 
 
 @jit_inline
-def friction_torque(T, PT, i, j, nx, ny, nz, ai, aj, sx, sy, sz):
+def friction_torque(T, PT, oi, oj, nx, ny, nz, ai, aj, sx, sy, sz):
     """The friction force s on i (and -s on j) at the contact point: its torque a x s with
-    a = ai n on i, -aj n on j, and its share of PT."""
+    a = ai n on i, -aj n on j, and its share of PT (i's in row oi, j's in row oj; none for a wall, oj < 0)."""
     cx, cy, cz = ny * sz - nz * sy, nz * sx - nx * sz, nx * sy - ny * sx
     for d, c in ((0, cx), (1, cy), (2, cz)):
-        T[i, d] += ai * c
-        if j >= 0:
-            T[j, d] += aj * c
-    PT[i, PT_FRIC] += sx
-    PT[i, PT_FRIC + 1] += sy
-    PT[i, PT_FRIC + 2] += sz
-    if j >= 0:
-        PT[j, PT_FRIC] -= sx
-        PT[j, PT_FRIC + 1] -= sy
-        PT[j, PT_FRIC + 2] -= sz
+        T[oi, d] += ai * c
+        if oj >= 0:
+            T[oj, d] += aj * c
+    PT[oi, PT_FRIC] += sx
+    PT[oi, PT_FRIC + 1] += sy
+    PT[oi, PT_FRIC + 2] += sz
+    if oj >= 0:
+        PT[oj, PT_FRIC] -= sx
+        PT[oj, PT_FRIC + 1] -= sy
+        PT[oj, PT_FRIC + 2] -= sz

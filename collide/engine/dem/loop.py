@@ -23,7 +23,6 @@ from collide.engine.dem.layout import (
     G_STATUS_T,
     G_STORED,
     G_TOUCH,
-    H_IV,
     H_ON,
     MAXSTEPS,
     NEP,
@@ -76,10 +75,8 @@ def _outputs(n, nw):
     FG[G_FIRST] = np.nan
     FG[G_LAST] = np.nan
     FG[G_STATUS_T] = np.nan
-    WH = np.zeros((n * nw, NH))
-    for k in range(WH.shape[0]):
-        WH[k, H_IV] = -1.0
-    return ST, FG, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, NPT)), np.zeros((n, 3)), WH
+    # The wall contacts' history: rows of the wall list (`neighbours.wall_list`), none yet.
+    return ST, FG, np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, NPT)), np.zeros((n, 3)), np.zeros((0, NH))
 
 
 @jit
@@ -112,8 +109,8 @@ def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, keys, PI, 
     # anything touched before (bodies moving apart from the start, with nothing ahead, stepped
     # on until the step limit).
     if not math.isfinite(t_end) and not will_meet(X, V, Bd, WP, grav, n):
-        return True, t, keys, PI, PJ, hist, WL, KN, nkn
-    keys, PI, PJ, hist, WL = rebuild(X, X0, Bd, WP, WH, n, dim, skin, keys, hist, ST)
+        return True, t, keys, PI, PJ, hist, WL, WH, KN, nkn
+    keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST)
     tau = free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin)
     if _at_end(t + tau, t_end):
         tau = t_end - t
@@ -123,7 +120,7 @@ def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, keys, PI, 
         t += tau
         ST[S_JUMPS] += 1
         over = _at_end(t, t_end) or (not math.isfinite(t_end) and ever and not will_meet(X, V, Bd, WP, grav, n))
-    return over, t, keys, PI, PJ, hist, WL, KN, nkn
+    return over, t, keys, PI, PJ, hist, WL, WH, KN, nkn
 
 
 @jit
@@ -165,7 +162,8 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     wt = wtabs.reshape((wtabs.shape[0], 1, wtabs.shape[1]))
     rolling = _any_rolling(tabs, wtabs, spin)
     X0 = X.copy()
-    keys, PI, PJ, hist, WL = rebuild(X, X0, Bd, WP, WH, n, dim, skin, np.zeros(0, np.int64), np.zeros((0, NH)), ST)
+    keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin,
+                                         np.zeros(0, np.int64), np.zeros((0, NH)), ST)
     t = 0.0
     scratch = np.zeros(4)
     # IV and REC get room for every listed contact to open and be recorded before forces runs,
@@ -191,8 +189,8 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     moved = 0.0
     while not last:
         if engaged == 0:
-            over, t, keys, PI, PJ, hist, WL, KN, nkn = _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t,
-                                                               ever, keys, PI, PJ, hist, WL, ST, KN, nkn)
+            over, t, keys, PI, PJ, hist, WL, WH, KN, nkn = _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp,
+                                                                   t, ever, keys, PI, PJ, hist, WL, ST, KN, nkn)
             if over:
                 break
         h, last = _step_length(t, dt, t_end)
@@ -202,7 +200,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, False)
             moved = drift(X, X0, V, W, Qo, h, n, spin, planar)
         if 4.0 * moved > skin * skin:
-            keys, PI, PJ, hist, WL = rebuild(X, X0, Bd, WP, WH, n, dim, skin, keys, hist, ST)
+            keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST)
         t = t + h
         steps += 1
         record_now = record != 0 and (t >= next_frame or last)

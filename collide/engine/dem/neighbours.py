@@ -78,7 +78,7 @@ def build_pairs(P, Bd, n, dim, reach_pad):
     while True:
         count = _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, keys)
         if count >= 0:
-            found = keys[:count]
+            found = keys[:count].copy()  # (not a view holding the whole search buffer)
             rows = np.empty(count, np.int64)
             partners = np.empty(count, np.int64)
             i = 0
@@ -174,27 +174,37 @@ def carry_history(old_keys, old_hist, new_keys):
 
 
 @jit
-def wall_list(X, Bd, WP, WH, n, skin):
+def wall_list(X, Bd, WP, WL, WH, n, skin):
     """Body-wall pairs within the skin of touching, and those still engaged (with the list rebuilt
-    when a body has moved half the skin, no other can touch), in order: rows (i * walls + w, i, w)."""
+    when a body has moved half the skin, no other can touch), in order: rows (m, i, w,
+    i * walls + w), m the row of their history in the new WH, carried over from the last list
+    (WL, WH): the wall contacts' table sized from the contacts, not bodies x walls."""
     nw = WP.shape[0]
-    out = np.empty((n * nw, 3), np.int64)
     count = 0
-    for i in range(n):
-        for w in range(nw):
-            if wall_height(X, WP, i, w) - Bd[i, B_R] < skin or WH[i * nw + w, H_ON] != 0.0:
-                out[count, 0], out[count, 1], out[count, 2] = i * nw + w, i, w
-                count += 1
-    return out[:count].copy()
+    for step in range(2):  # count, then fill: no table of every body and wall even for a moment
+        out = np.empty((count if step else 0, 4), np.int64)
+        count = 0
+        a = 0
+        for i in range(n):
+            for w in range(nw):
+                key = i * nw + w
+                while a < WL.shape[0] and WL[a, 3] < key:
+                    a += 1
+                engaged = a < WL.shape[0] and WL[a, 3] == key and WH[WL[a, 0], H_ON] != 0.0
+                if wall_height(X, WP, i, w) - Bd[i, B_R] < skin or engaged:
+                    if step:
+                        out[count, 0], out[count, 1], out[count, 2], out[count, 3] = count, i, w, key
+                    count += 1
+    return out, carry_history(WL[:, 3].copy(), WH, out[:, 3].copy())
 
 
 @jit
-def rebuild(X, X0, Bd, WP, WH, n, dim, skin, keys, hist, ST):
-    """Fresh neighbour lists (pairs as keys i * n + j and as (i, j); body-wall pairs), the
-    listed pairs' history carried over."""
+def rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST):
+    """Fresh neighbour lists (pairs as keys i * n + j and as (i, j); body-wall pairs, `wall_list`),
+    the listed pairs' and wall contacts' history carried over."""
     fresh, PI, PJ = build_pairs(X, Bd, n, dim, skin)
     hist = carry_history(keys, hist, fresh)
     X0[:, :] = X
     ST[S_BUILDS] += 1
-    return fresh, PI, PJ, hist, wall_list(X, Bd, WP, WH, n, skin)
-
+    WL, WH = wall_list(X, Bd, WP, WL, WH, n, skin)
+    return fresh, PI, PJ, hist, WL, WH

@@ -1,0 +1,226 @@
+"""One DEM run on several threads: `dem_run` of `collide.engine.dem.loop` step for step, its
+force pass and kicks split among the threads (`collide.engine.dem.threads`: every body's sums in
+the one-thread order, so the run is the same bit for bit whatever the number of threads).
+
+Every thread runs `threads.run_share` at once; they meet at a pthread barrier between the passes
+of a step (a few microseconds) and come back here only for what one thread does: coasting where
+nothing touches, rebuilding the neighbour lists (a few per cent of a settling box's time), the
+steps that record a frame, and growing the record tables. Below THREADS_FROM bodies a run takes
+one thread by default: the barriers cost more than the split saves.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import math
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from collide.engine.dem import layout as dk
+from collide.engine.dem import threads as par
+from collide.engine.dem.flight import will_meet
+from collide.engine.dem.forces import forces
+from collide.engine.dem.loop import _any_rolling, _coast, _finish, _materials, _outputs, _step_length
+from collide.engine.dem.neighbours import rebuild
+from collide.engine.dem.records import energy_row, frame
+from collide.engine.dem.verlet import kick, kinetic
+from collide.engine.numerics import grow
+from collide.stepper import THREADS_VARIABLE  # (a batch's cap on its threads, a run's threads)
+
+# Bodies from which a run takes every core by default (below, one thread: the hand-offs cost
+# more than the split saves), measured with benchmarks/bench_dem.py --threads.
+THREADS_FROM = 4000
+
+
+def cores() -> int:
+    """The cores this process may use, capped by COLLIDE_THREADS if set."""
+    count = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    cap = os.environ.get(THREADS_VARIABLE, "")
+    return min(count, int(cap)) if cap.isdigit() and int(cap) > 0 else count
+
+
+def default_threads(n_bodies: int) -> int:
+    """The threads a run of n_bodies takes when none are asked for."""
+    return cores() if n_bodies >= THREADS_FROM else 1
+
+
+_POOL: list = []
+_POOL_LOCK = threading.Lock()
+
+
+def _pool(workers: int) -> ThreadPoolExecutor:
+    with _POOL_LOCK:
+        if not _POOL or _POOL[0][0] != os.getpid() or _POOL[0][1] < workers:
+            _POOL[:] = [(os.getpid(), workers, ThreadPoolExecutor(workers, thread_name_prefix="collide-dem"))]
+        return _POOL[0][2]
+
+
+def _each(task, threads: int) -> None:
+    """task(r) for every thread r, share 0 on this thread."""
+    futures = [_pool(threads - 1).submit(task, r) for r in range(1, threads)] if threads > 1 else []
+    task(0)
+    for future in futures:
+        future.result()
+
+
+class _Shares:
+    """The threads' shares of the current pair list (`threads.plan`) and their buffers."""
+
+    def __init__(self, PI, PJ, WL, n: int, threads: int, record: bool, rest: bool):
+        self.PI = PI
+        bounds, kb, wb, sb, self.cross, self.inc_start, self.inc_slot = par.plan(PI, PJ, WL, n, threads)
+        self.kb, self.wb = kb, wb
+        self.RB = np.array([[bounds[r], bounds[r + 1], kb[r], kb[r + 1], wb[r], wb[r + 1], sb[r], sb[r + 1]]
+                            for r in range(threads)], np.int64)
+        self.XB = np.zeros((len(self.cross), 2, par.NX))
+        self.SF = np.zeros(len(self.cross), np.int64)
+        self.EVP = np.zeros(len(PI) if record else 0, np.int64)
+        self.EVW = np.zeros(len(WL) if record else 0, np.int64)
+        self.EB = np.zeros((n if rest else 0, 2))
+
+
+class Barrier:
+    """A pthread barrier for `threads` threads (the kernels wait at it by its address)."""
+
+    def __init__(self, threads: int):
+        self._libc = ctypes.CDLL(None)
+        self._buffer = ctypes.create_string_buffer(256)  # (a pthread_barrier_t is 32 bytes on x86-64)
+        if self._libc.pthread_barrier_init(self._buffer, None, threads) != 0:
+            raise OSError("pthread_barrier_init failed")
+        self.address = ctypes.addressof(self._buffer)
+
+    def close(self) -> None:
+        self._libc.pthread_barrier_destroy(self._buffer)
+
+
+def dem_run_threaded(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads: int):
+    """`loop.dem_run` on `threads` threads: the same arguments and outputs, bit for bit."""
+    barrier = Barrier(threads)
+    try:
+        return _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier.address)
+    finally:
+        barrier.close()
+
+
+def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
+    n = X.shape[0]
+    dim, spin, rest, skin = fl[dk.F_DIM], fl[dk.F_SPIN], fp[dk.P_REST], fp[dk.P_SKIN]
+    record = fl[dk.F_RECORD]
+    ST, FG, F, T, PT, WK, WH = _outputs(n, WP.shape[0])
+    KN, REC, IV, EP = np.zeros((0, dk.NK)), np.zeros((0, dk.NR)), np.zeros((0, 4)), np.zeros((0, dk.NEP))
+    nkn, nep = 0, 0
+    MAT = _materials(Bd, n)
+    wt = wtabs.reshape((wtabs.shape[0], 1, wtabs.shape[1]))
+    rolling = _any_rolling(tabs, wtabs, spin)
+    X0 = X.copy()
+    keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin,
+                                         np.zeros(0, np.int64), np.zeros((0, dk.NH)), ST)
+    scratch = np.zeros(4)
+    STT, PM, outs = np.zeros((2, threads, par.NST)), np.zeros((2, threads)), np.zeros((threads, 4))
+    most = PI.shape[0] + WL.shape[0]
+    if record:
+        IV, REC = grow(IV, most), grow(REC, most)
+    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl,
+                                0.0, 0.0, n, FG, ST, IV, 0, REC, 0, record != 0, scratch)
+    if record:
+        KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, 0.0, n, 0.0)
+        EP = grow(EP, nep)
+        EP[nep, :] = 0.0
+        nep += 1
+    C = np.zeros(par.NCTL)
+    C[par.C_NEXT], C[par.C_PEAK], C[par.C_EVER] = fp[dk.P_FRAME], kinetic(V, W, Bd, n), engaged > 0
+    C[par.C_ENGAGED], C[par.C_NIV], C[par.C_NREC] = engaged, niv, nrec
+    shares = None
+    while True:
+        if shares is None or shares.PI is not PI:
+            shares = _Shares(PI, PJ, WL, n, threads, bool(record), rest > 0.0)
+        s = shares
+        args = (barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl, fp,
+                rolling, ST, FG, IV, REC, s.RB, s.kb, s.wb, s.cross, s.inc_start, s.inc_slot, s.XB, s.SF, s.EVP, s.EVW,
+                s.EB, STT, PM, outs, C)
+        _each(functools.partial(_share, args), threads)
+        reason, t = int(C[par.C_REASON]), C[par.C_T]
+        C[par.C_STAY] = 0.0
+        if reason == par.R_COAST:
+            over, t, keys, PI, PJ, hist, WL, WH, KN, nkn = _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t,
+                                                                   C[par.C_EVER] != 0.0, keys, PI, PJ, hist, WL,
+                                                                   ST, KN, nkn)
+            C[par.C_T], C[par.C_STAY] = t, 1.0
+            if over:
+                break
+        elif reason == par.R_REBUILD:
+            keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST)
+        elif reason == par.R_GROW:
+            most = PI.shape[0] + WL.shape[0]
+            IV, REC = grow(IV, int(C[par.C_NIV]) + most), grow(REC, int(C[par.C_NREC]) + most)
+        elif reason == par.R_RECORD:
+            state = (X, V, W, Qo, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl, fp, WK, rolling,
+                     ST, FG, scratch)
+            over, IV, REC, KN, nkn, EP, nep = _recorded_step(state, C, IV, REC, KN, nkn, EP, nep)
+            if over:
+                break
+        elif reason == par.R_MEET:
+            if not will_meet(X, V, Bd, WP, grav, n):
+                break
+        else:
+            if reason == par.R_NONFINITE:
+                ST[dk.S_STATUS], FG[dk.G_STATUS_T] = dk.NONFINITE, t
+            elif reason == par.R_MAXSTEPS:
+                ST[dk.S_STATUS], FG[dk.G_STATUS_T] = dk.MAXSTEPS, t
+            break
+    t = C[par.C_T]
+    ST[dk.S_STEPS] = int(C[par.C_STEPS])
+    ST[dk.S_PAIRS] = keys.shape[0]
+    niv, nrec = int(C[par.C_NIV]), int(C[par.C_NREC])
+    KN, nkn, REC, nrec = _finish(X, V, W, Qo, F, Bd, WK, hist, WH, PI, PJ, WL, t, record, ST, FG, KN, nkn, REC, nrec)
+    return t, WK, KN[:nkn], REC[:nrec], IV[:niv], EP[:nep], ST, FG
+
+
+def _share(args: tuple, r: int) -> None:
+    par.run_share(r, *args)
+
+
+def _recorded_step(state, C, IV, REC, KN, nkn, EP, nep):
+    """The rest of a step that records a frame, on this thread as `loop.dem_run` takes it (its
+    opening kick and drift done). Returns (whether the run is over, IV, REC, KN, nkn, EP, nep)."""
+    (X, V, W, Qo, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl, fp, WK, rolling, ST, FG,
+     scratch) = state
+    n = X.shape[0]
+    h, last = _step_length(C[par.C_T], fp[dk.P_DT], fp[dk.P_TEND])
+    t = C[par.C_T] + h
+    steps = int(C[par.C_STEPS]) + 1
+    niv, nrec = int(C[par.C_NIV]), int(C[par.C_NREC])
+    most = PI.shape[0] + WL.shape[0]
+    if niv + most >= IV.shape[0]:
+        IV = grow(IV, niv + most)
+    if nrec + most >= REC.shape[0]:
+        REC = grow(REC, nrec + most)
+    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl, h, t, n,
+                                FG, ST, IV, niv, REC, nrec, True, scratch)
+    kinetic_now = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, True)
+    ever = C[par.C_EVER] != 0.0 or engaged > 0
+    if engaged:
+        FG[dk.G_TOUCH] += h
+    C[par.C_T], C[par.C_STEPS], C[par.C_FUSED], C[par.C_OPENED] = t, steps, 0.0, 0.0
+    C[par.C_ENGAGED], C[par.C_NIV], C[par.C_NREC], C[par.C_EVER] = engaged, niv, nrec, ever
+    if not math.isfinite(kinetic_now):
+        ST[dk.S_STATUS], FG[dk.G_STATUS_T] = dk.NONFINITE, t
+        return True, IV, REC, KN, nkn, EP, nep
+    C[par.C_PEAK] = peak = max(C[par.C_PEAK], kinetic_now)
+    KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
+    EP, nep = energy_row(EP, nep, t, WK, hist, WH, n)
+    while C[par.C_NEXT] <= t:
+        C[par.C_NEXT] += fp[dk.P_FRAME]
+    if steps & 255 == 0:
+        fp[dk.P_NOW], fp[dk.P_NOW_STEPS] = t, steps
+    if steps >= fl[dk.F_MAXSTEPS]:
+        ST[dk.S_STATUS], FG[dk.G_STATUS_T] = dk.MAXSTEPS, t
+        return True, IV, REC, KN, nkn, EP, nep
+    rest, t_end = fp[dk.P_REST], fp[dk.P_TEND]
+    over = (rest > 0.0 and ever and kinetic_now < rest * peak) or last or (
+        not math.isfinite(t_end) and ever and engaged == 0 and not will_meet(X, V, Bd, WP, grav, n))
+    return over, IV, REC, KN, nkn, EP, nep

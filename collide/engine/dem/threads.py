@@ -1,0 +1,554 @@
+"""The force pass and the kicks on several threads, bit for bit as on one (`collide.dem_threads`
+drives them; each kernel releases the GIL and works on one thread's share).
+
+The bodies are split into contiguous ranges, one a thread, balanced by their listed pairs (a
+pair (i, j), i < j, belongs to i's thread: the pair list is sorted by i, so a thread's pairs are
+one run of it). One step's forces take two passes:
+
+1. `cross_pass`: each thread works out its pairs whose j is another thread's (the "cross" pairs,
+   a few where the bodies are numbered in space, as a filled box) into a buffer, each body's
+   share apart, every element written once onto -0.0 (adding -0.0 changes nothing, not even a
+   zero's sign);
+2. `own_pass`, after every thread's first pass: each thread sets its bodies' forces to their
+   weight, adds the cross pairs' shares coming in from lower threads (in the order of their i),
+   then goes through its own pairs in the list's order (its cross pairs' i shares from the
+   buffer) and its bodies' wall contacts, and kicks its bodies.
+
+Every body's force, torque and parts then receive the same additions in the same order as in
+the one-thread pass (`forces.forces`: weight, pairs in key order, walls), so the sums are equal
+bit for bit whatever the number of threads (tests/engine/dem/test_threads.py).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+
+import numpy as np
+
+from collide.engine import tier
+from collide.engine.dem.contact import contact_force, contact_into
+from collide.engine.dem.forces import _close, _peak
+from collide.engine.dem.geometry import wall_height
+from collide.engine.dem.layout import (
+    B_II,
+    B_IM,
+    B_M,
+    B_R,
+    F_DIM,
+    F_MAXSTEPS,
+    F_RECORD,
+    F_SPIN,
+    G_FIRST,
+    G_FORCE,
+    G_LAST,
+    G_OVERLAP,
+    G_TOUCH,
+    H_IV,
+    H_KT,
+    H_ON,
+    H_PEAK,
+    H_XI,
+    NPT,
+    P_DT,
+    P_NOW,
+    P_NOW_STEPS,
+    P_REST,
+    P_SKIN,
+    P_TEND,
+    S_CONTACTS,
+)
+from collide.engine.dem.loop import _step_length
+from collide.engine.dem.verlet import _drift_body, _half_kick, kinetic_parts
+from collide.engine.jit import jit, jit_inline
+
+# A cross pair's buffer row, per side (0: i, 1: j): force (3), friction torque (3), rolling
+# torque (3), parts (NPT).
+XF, XT, XTR, XPT = 0, 3, 6, 9
+NX = 9 + int(NPT)
+# A cross pair's state in a step (SF): not engaged, engaged, engaged and opened, closed.
+IDLE, ENGAGED, OPENED, CLOSED = 0, 1, 2, 3
+# A thread's figures of a step (STT rows): engaged, opened, closed, deepest, strongest, kinetic
+# energy, moved, whether it fused the kicks, events (pairs, walls).
+ST_ENG, ST_OPEN, ST_CLOSE, ST_DEEP, ST_STRONG, ST_E, ST_MOVED, ST_FUSED, ST_EVP, ST_EVW = range(10)
+NST = 10
+
+
+@jit
+def plan(PI, PJ, WL, n, threads):
+    """The threads' shares of a pair list: body bounds, pair bounds, wall bounds, cross-pair slot
+    bounds (each (threads + 1,)); each slot's pair; and the slots coming into each body (CSR:
+    inc_start (n + 1,), inc_slot), in the order of their i."""
+    npairs = PI.shape[0]
+    bounds = np.zeros(threads + 1, np.int64)
+    kb = np.zeros(threads + 1, np.int64)
+    total = n + npairs
+    k, t, acc = 0, 1, 0
+    for a in range(n):
+        while t < threads and acc * threads >= t * total:
+            bounds[t], kb[t] = a, k
+            t += 1
+        first = k
+        while k < npairs and PI[k] == a:
+            k += 1
+        acc += 1 + k - first
+    while t < threads:
+        bounds[t], kb[t] = n, npairs
+        t += 1
+    bounds[threads], kb[threads] = n, npairs
+    wb = np.zeros(threads + 1, np.int64)
+    m = 0
+    for t in range(1, threads + 1):
+        while m < WL.shape[0] and WL[m, 1] < bounds[t]:
+            m += 1
+        wb[t] = m
+    wb[threads] = WL.shape[0]
+    sb = np.zeros(threads + 1, np.int64)
+    for t in range(threads):
+        sb[t + 1] = sb[t]
+        for k in range(kb[t], kb[t + 1]):
+            sb[t + 1] += PJ[k] >= bounds[t + 1]
+    cross = np.empty(sb[threads], np.int64)
+    inc_start = np.zeros(n + 1, np.int64)
+    s = 0
+    for t in range(threads):
+        for k in range(kb[t], kb[t + 1]):
+            if PJ[k] >= bounds[t + 1]:
+                cross[s] = k
+                inc_start[PJ[k] + 1] += 1
+                s += 1
+    for a in range(n):
+        inc_start[a + 1] += inc_start[a]
+    inc_slot = np.empty(s, np.int64)
+    fill = inc_start[:n].copy()
+    for q in range(s):
+        j = PJ[cross[q]]
+        inc_slot[fill[j]] = q
+        fill[j] += 1
+    return bounds, kb, wb, sb, cross, inc_start, inc_slot
+
+
+@jit_inline
+def _open_here(hist, k):
+    """Start contact k's history as `forces._open` does (its interval row, if recorded, and the
+    run's counts are set after the pass, by `events` and the driver)."""
+    hist[k, H_ON] = 1.0
+    for c in range(3):
+        hist[k, H_XI + c] = 0.0
+    hist[k, H_KT] = 0.0
+    hist[k, H_PEAK + 1] = -math.inf
+    hist[k, H_IV] = -1.0
+
+
+@jit_inline
+def _close_here(hist, k):
+    """End contact k's phase as `forces._close` does when nothing is recorded."""
+    hist[k, H_ON] = 0.0
+    for c in range(4):
+        hist[k, H_XI + c] = 0.0
+    hist[k, H_IV] = -1.0
+
+
+@jit_inline
+def _begin(hist, k, record, STT, row):
+    """A contact engaged: opened if it was not (counted). Returns whether it opened."""
+    if hist[k, H_ON] != 0.0:
+        return False
+    _open_here(hist, k)
+    STT[row, ST_OPEN] += 1.0
+    return True
+
+
+@jit_inline
+def _end(hist, k, record, STT, row):
+    """A contact no longer engaged: its phase closed now, or after the pass if recorded (its
+    peak and interval rows). Returns whether it was engaged."""
+    if hist[k, H_ON] == 0.0:
+        return False
+    if not record:
+        _close_here(hist, k)
+    STT[row, ST_CLOSE] += 1.0
+    return True
+
+
+@jit_inline
+def _engaged(STT, row, delta, fn):
+    STT[row, ST_ENG] += 1.0
+    STT[row, ST_DEEP] = max(STT[row, ST_DEEP], delta)
+    STT[row, ST_STRONG] = max(STT[row, ST_STRONG], fn)
+
+
+@jit
+def cross_pass(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out):
+    """Thread `row`'s cross pairs (slots s0..s1) into XB, their states into SF."""
+    for s in range(s0, s1):
+        k = cross[s]
+        i, j = PI[k], PJ[k]
+        SF[s] = IDLE
+        dx = X[j, 0] - X[i, 0]
+        dy = X[j, 1] - X[i, 1]
+        dz = X[j, 2] - X[i, 2]
+        reach = Bd[i, B_R] + Bd[j, B_R]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 >= reach * reach:
+            if _end(hist, k, record, STT, row):
+                SF[s] = CLOSED
+            continue
+        dist = math.sqrt(d2)
+        inv = 1.0 / dist
+        delta = reach - dist
+        SF[s] = OPENED if _begin(hist, k, record, STT, row) else ENGAGED
+        XB[s, :, :] = -0.0
+        fn = contact_into(X, V, W, XB[s, :, XF:XF + 3], XB[s, :, XT:XT + 3], XB[s, :, XTR:XTR + 3], XB[s, :, XPT:],
+                          Bd, i, j, 0, 1, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j], hist, k, fl, dt,
+                          out)
+        _engaged(STT, row, delta, fn)
+        if record:
+            _peak(hist, k, t, delta, fn, out)
+
+
+@jit_inline
+def _take(XB, s, side, F, T, PT, a):
+    """A cross pair's share for body a, added in the one-thread pass's order (friction torque,
+    rolling torque, force and parts)."""
+    for d in range(3):
+        T[a, d] += XB[s, side, XT + d]
+    for d in range(3):
+        T[a, d] += XB[s, side, XTR + d]
+    for d in range(3):
+        F[a, d] += XB[s, side, XF + d]
+    for c in range(NPT):
+        PT[a, c] += XB[s, side, XPT + c]
+
+
+@jit
+def own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd, row,
+             inc_start, inc_slot, XB, SF, STT, EVP, EVW, out):
+    """Thread `row`'s bodies' forces (bd: its body, pair, wall and slot starts, then ends), after
+    every thread's `cross_pass`. Events (pairs: 2 k, + 1 if closed; walls: 2 m, + 1) go to EVP
+    from the thread's first pair and EVW from its first wall contact, if recorded."""
+    lo, hi, k0, k1, m0, m1, s = bd[0], bd[1], bd[2], bd[3], bd[4], bd[5], bd[6]
+    g0, g1, g2 = grav[0], grav[1], grav[2]
+    nw = 0
+    for a in range(lo, hi):
+        T[a, :] = 0.0
+        PT[a, :] = 0.0
+        m = Bd[a, B_M]
+        F[a, 0], F[a, 1], F[a, 2] = m * g0, m * g1, m * g2
+        for q in range(inc_start[a], inc_start[a + 1]):
+            if SF[inc_slot[q]] == ENGAGED or SF[inc_slot[q]] == OPENED:
+                _take(XB, inc_slot[q], 1, F, T, PT, a)
+    for k in range(k0, k1):
+        i, j = PI[k], PJ[k]
+        if j >= hi:
+            state = SF[s]
+            if state == ENGAGED or state == OPENED:
+                _take(XB, s, 0, F, T, PT, i)
+            if record and (state == OPENED or state == CLOSED):
+                EVP[k0 + nw] = 2 * k + (state == CLOSED)
+                nw += 1
+            s += 1
+            continue
+        dx = X[j, 0] - X[i, 0]
+        dy = X[j, 1] - X[i, 1]
+        dz = X[j, 2] - X[i, 2]
+        reach = Bd[i, B_R] + Bd[j, B_R]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 >= reach * reach:
+            if _end(hist, k, record, STT, row) and record:
+                EVP[k0 + nw] = 2 * k + 1
+                nw += 1
+            continue
+        dist = math.sqrt(d2)
+        inv = 1.0 / dist
+        if _begin(hist, k, record, STT, row) and record:
+            EVP[k0 + nw] = 2 * k
+            nw += 1
+        delta = reach - dist
+        fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j],
+                           hist, k, fl, dt, out)
+        _engaged(STT, row, delta, fn)
+        if record:
+            _peak(hist, k, t, delta, fn, out)
+    STT[row, ST_EVP] = nw
+    STT[row, ST_EVW] = _walls(X, V, W, F, T, PT, Bd, MAT, WL, WH, WP, wtabs, fl, dt, t, record, m0, m1, STT, row,
+                              EVW, out)
+
+
+@jit_inline
+def _walls(X, V, W, F, T, PT, Bd, MAT, WL, WH, WP, wtabs, fl, dt, t, record, m0, m1, STT, row, EVW, out):
+    """Body-wall contacts m0..m1 (as `forces.forces`). Returns the events written to EVW."""
+    nw = 0
+    for m in range(m0, m1):
+        k, i, w = WL[m, 0], WL[m, 1], WL[m, 2]
+        delta = Bd[i, B_R] - wall_height(X, WP, i, w)
+        if delta <= 0.0:
+            if _end(WH, k, record, STT, row) and record:
+                EVW[m0 + nw] = 2 * m + 1
+                nw += 1
+            continue
+        if _begin(WH, k, record, STT, row) and record:
+            EVW[m0 + nw] = 2 * m
+            nw += 1
+        fn = contact_force(X, V, W, F, T, PT, Bd, i, -1 - w, -WP[w, 3], -WP[w, 4], -WP[w, 5], delta, wtabs, MAT[i], 0,
+                           WH, k, fl, dt, out)
+        _engaged(STT, row, delta, fn)
+        if record:
+            _peak(WH, k, t, delta, fn, out)
+    return nw
+
+
+@jit
+def events(EVP, EVW, kb, wb, STT, PI, PJ, WL, hist, WH, IV, niv, REC, nrec, t, FG):
+    """The recorded contacts' starts and ends of a step, in the one-thread pass's order (pairs
+    by key, then walls): interval rows, and closed phases' peaks (IV and REC have room).
+    Returns (niv, nrec)."""
+    threads = STT.shape[0]
+    for table in range(2):
+        for r in range(threads):
+            first = kb[r] if table == 0 else wb[r]
+            count = np.int64(STT[r, ST_EVP + table])
+            for q in range(first, first + count):
+                if table == 0:
+                    e = EVP[q]
+                    k = e >> 1
+                    i, j = PI[k], PJ[k]
+                    H = hist
+                else:
+                    e = EVW[q]
+                    k, i, j = WL[e >> 1, 0], WL[e >> 1, 1], -1 - WL[e >> 1, 2]
+                    H = WH
+                if e & 1:
+                    nrec = _close(H, k, IV, t, FG, REC, nrec, i, j)
+                else:
+                    IV[niv, 0], IV[niv, 1], IV[niv, 2], IV[niv, 3] = i, j, t, np.nan
+                    H[k, H_IV] = niv
+                    niv += 1
+    return niv, nrec
+
+
+@jit
+def kick_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, lo, hi, rolling, spin, planar, close, fuse, EB,
+               STT, row):
+    """Bodies lo..hi: the closing half kick h_close (if `close`) and the next step's opening half
+    kick h_open and drift h (if `fuse`), body by body as `verlet.kick_kick_drift` makes them. Into
+    STT: the kinetic energy after the closing kick (each body's also into EB (N, 2) if it has
+    rows), the largest squared distance from X0 after the drift, and whether it drifted."""
+    e = 0.0
+    moved = 0.0
+    keep = EB.shape[0] > 0
+    for a in range(lo, hi):
+        im, ii, spins = Bd[a, B_IM], Bd[a, B_II], Bd[a, B_II] > 0.0
+        v0, v1, v2, w0, w1, w2 = V[a, 0], V[a, 1], V[a, 2], W[a, 0], W[a, 1], W[a, 2]
+        if close:
+            v0, v1, v2, w0, w1, w2 = _half_kick(WK, a, h_close, im, ii, spins, F, T, PT, rolling, v0, v1, v2, w0, w1,
+                                                w2)
+            lin, rot = kinetic_parts(Bd, a, v0, v1, v2, w0, w1, w2)
+            e += lin
+            e += rot
+            if keep:
+                EB[a, 0], EB[a, 1] = lin, rot
+        if fuse:
+            v0, v1, v2, w0, w1, w2 = _half_kick(WK, a, h_open, im, ii, spins, F, T, PT, rolling, v0, v1, v2, w0, w1,
+                                                w2)
+        V[a, 0], V[a, 1], V[a, 2] = v0, v1, v2
+        W[a, 0], W[a, 1], W[a, 2] = w0, w1, w2
+        if fuse:
+            moved = max(moved, _drift_body(X, X0, Qo, a, v0, v1, v2, w0, w1, w2, h, spin, planar))
+    if close:  # (a late drift leaves the row's figures as the other threads read them)
+        STT[row, ST_E] = e
+        STT[row, ST_FUSED] = 1.0 if fuse else 0.0
+    STT[row, ST_MOVED] = max(STT[row, ST_MOVED], moved)
+
+
+@jit
+def energy_sum(EB, n):
+    """The kinetic energy summed body by body, as `verlet.kick` sums it."""
+    e = 0.0
+    for a in range(n):
+        e += EB[a, 0]
+        e += EB[a, 1]
+    return e
+
+
+# The threads meet at a pthread barrier between passes (`dem_threads.Barrier` makes it): one
+# call of the C library's pthread_barrier_wait, a few microseconds, where a hand-off through
+# Python took a tenth of a millisecond, as long as a step of 1 000 spheres.
+_libc = ctypes.CDLL(None)
+HAVE_BARRIER = hasattr(_libc, "pthread_barrier_wait")  # (POSIX barriers: not on macOS; one thread there)
+if tier.COMPILED and HAVE_BARRIER:
+    import llvmlite.binding as llvm
+    from numba.core import types
+
+    llvm.add_symbol("pthread_barrier_wait", ctypes.cast(_libc.pthread_barrier_wait, ctypes.c_void_p).value)
+    barrier_wait = types.ExternalFunction("pthread_barrier_wait", types.int32(types.int64))  # (its address)
+else:
+    def barrier_wait(address: int) -> int:
+        """Interpreted: the same barrier through ctypes (which lets the GIL go while it waits)."""
+        return _libc.pthread_barrier_wait(ctypes.c_void_p(address))
+
+# The run's state between `run_share` calls (CTL): time, steps, whether the last step fused the
+# next one's opening kick and drift, the squared distance moved, the next frame's time, the
+# kinetic energy's peak, whether anything touched yet, contacts engaged, interval and record
+# rows, the last kinetic energy, why the call returned, whether this step's opening kick and
+# drift are done (the call returned to rebuild or grow), whether to step on without coasting.
+(C_T, C_STEPS, C_FUSED, C_MOVED, C_NEXT, C_PEAK, C_EVER, C_ENGAGED, C_NIV, C_NREC, C_KIN, C_REASON, C_OPENED,
+ C_STAY) = range(14)
+NCTL = 14
+# Why `run_share` returned: to coast (nothing touches), the end, to rebuild the lists, to record a
+# frame (the step done on one thread), to grow IV and REC, non-finite numbers, the step limit,
+# rest, to ask whether anything can meet again (no end set), the last step done.
+(R_COAST, R_END, R_REBUILD, R_RECORD, R_GROW, R_NONFINITE, R_MAXSTEPS, R_REST, R_MEET, R_LAST) = range(10)
+
+
+@jit_inline
+def _sum_col(S, c):
+    total = 0.0
+    for r in range(S.shape[0]):
+        total += S[r, c]
+    return total
+
+
+@jit_inline
+def _max_col(S, c):
+    best = 0.0
+    for r in range(S.shape[0]):
+        best = max(best, S[r, c])
+    return best
+
+
+@jit
+def _figures(S, ST, FG, t, record):
+    """A step's contact counts and figures from the threads' rows S, as `forces.forces` keeps them."""
+    opened = np.int64(_sum_col(S, ST_OPEN))
+    ST[S_CONTACTS] += opened
+    if opened > 0 and not FG[G_FIRST] <= t:
+        FG[G_FIRST] = t
+    if not record and _sum_col(S, ST_CLOSE) > 0.0:
+        FG[G_LAST] = t
+    FG[G_OVERLAP] = max(FG[G_OVERLAP], _max_col(S, ST_DEEP))
+    FG[G_FORCE] = max(FG[G_FORCE], _max_col(S, ST_STRONG))
+
+
+@jit
+def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl,
+              fp, rolling, ST, FG, IV, REC, RB, kb, wb, cross, inc_start, inc_slot, XB, SF, EVP, EVW, EB, STT, PM,
+              outs, CTL):
+    """Thread r's part of the run's steps (every thread runs it at once, with the same control
+    flow, meeting at `barrier`), from the state in CTL until the run needs what only the driver
+    does (`dem_threads`: coasting, rebuilding the lists, recording a frame, growing IV and REC)
+    or ends. STT (2, threads, NST) and PM (2, threads) alternate between steps, so that no thread
+    writes a row another may still read. Thread 0 keeps the run's figures and writes CTL back."""
+    threads = STT.shape[1]
+    n = X.shape[0]
+    dt, t_end, rest, skin = fp[P_DT], fp[P_TEND], fp[P_REST], fp[P_SKIN]
+    spin, planar, record = fl[F_SPIN], fl[F_DIM] < 3, fl[F_RECORD] != 0
+    t, steps, fused, moved = CTL[C_T], np.int64(CTL[C_STEPS]), CTL[C_FUSED] != 0.0, CTL[C_MOVED]
+    next_frame, peak, ever, engaged = CTL[C_NEXT], CTL[C_PEAK], CTL[C_EVER] != 0.0, np.int64(CTL[C_ENGAGED])
+    niv, nrec, kinetic_now = np.int64(CTL[C_NIV]), np.int64(CTL[C_NREC]), CTL[C_KIN]
+    opened, stay = CTL[C_OPENED] != 0.0, CTL[C_STAY] != 0.0
+    lo, hi = RB[r, 0], RB[r, 1]
+    reason = R_END
+    while True:
+        if engaged == 0 and not opened and not stay:
+            reason = R_COAST
+            break
+        stay = False
+        h, last = _step_length(t, dt, t_end)
+        if h <= 0.0:
+            reason = R_END
+            break
+        p = (steps + 1) & 1  # this step's rows
+        if not opened:
+            if not fused:
+                PM[p, r] = _open_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, 0.5 * h, h, lo, hi, rolling, spin, planar)
+                barrier_wait(barrier)
+                moved = 0.0
+                for q in range(threads):
+                    moved = max(moved, PM[p, q])
+            if 4.0 * moved > skin * skin:
+                reason = R_REBUILD
+                break
+        opened = False
+        if record and (t + h >= next_frame or last):
+            reason = R_RECORD
+            break
+        most = PI.shape[0] + WL.shape[0]
+        if record and (niv + most >= IV.shape[0] or nrec + most >= REC.shape[0]):
+            reason = R_GROW
+            break
+        t = t + h
+        steps += 1
+        h_next, _ = _step_length(t, dt, t_end)
+        fuse_ok = not last and h_next > 0.0 and rest <= 0.0 and steps < fl[F_MAXSTEPS]
+        S = STT[p]
+        S[r, :] = 0.0
+        cross_pass(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, h, t, record, RB[r, 6], RB[r, 7], cross, XB, SF, S, r,
+                   outs[r])
+        barrier_wait(barrier)
+        own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, h, t, record, RB[r],
+                 r, inc_start, inc_slot, XB, SF, S, EVP, EVW, outs[r])
+        kick_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, 0.5 * h, 0.5 * h_next, h_next, lo, hi, rolling, spin, planar,
+                   True, fuse_ok and S[r, ST_ENG] > 0.0, EB, S, r)
+        barrier_wait(barrier)
+        engaged = np.int64(_sum_col(S, ST_ENG))
+        fused = engaged != 0 and fuse_ok
+        behind = False  # a share with no contact of its own did not know it could drift
+        for q in range(threads):
+            behind |= fused and S[q, ST_FUSED] == 0.0
+        if behind and S[r, ST_FUSED] == 0.0:
+            kick_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, 0.5 * h, 0.5 * h_next, h_next, lo, hi, rolling, spin,
+                       planar, False, True, EB, S, r)
+        kinetic_now = energy_sum(EB, n) if rest > 0.0 else _sum_col(S, ST_E)
+        if r == 0:
+            _figures(S, ST, FG, t, record)
+            if record:
+                niv, nrec = events(EVP, EVW, kb, wb, S, PI, PJ, WL, hist, WH, IV, niv, REC, nrec, t, FG)
+                CTL[C_NIV], CTL[C_NREC] = niv, nrec
+            if engaged:
+                FG[G_TOUCH] += h
+            if steps & 255 == 0:
+                fp[P_NOW] = t
+                fp[P_NOW_STEPS] = steps
+        if behind or record:  # the late drifts, thread 0's contact starts and ends: seen by all
+            barrier_wait(barrier)
+            niv, nrec = np.int64(CTL[C_NIV]), np.int64(CTL[C_NREC])
+        moved = _max_col(S, ST_MOVED)
+        if engaged:
+            ever = True
+        if not math.isfinite(kinetic_now):
+            reason = R_NONFINITE
+            break
+        peak = max(peak, kinetic_now)
+        if steps >= fl[F_MAXSTEPS]:
+            reason = R_MAXSTEPS
+            break
+        if rest > 0.0 and ever and kinetic_now < rest * peak:
+            reason = R_REST
+            break
+        if not math.isfinite(t_end) and ever and engaged == 0:
+            reason = R_MEET
+            break
+        if last:
+            reason = R_LAST
+            break
+    if r == 0:
+        CTL[C_T], CTL[C_STEPS], CTL[C_FUSED], CTL[C_MOVED] = t, steps, 1.0 if fused else 0.0, moved
+        CTL[C_NEXT], CTL[C_PEAK], CTL[C_EVER], CTL[C_ENGAGED] = next_frame, peak, 1.0 if ever else 0.0, engaged
+        CTL[C_NIV], CTL[C_NREC], CTL[C_KIN], CTL[C_REASON] = niv, nrec, kinetic_now, reason
+        CTL[C_OPENED] = 1.0 if reason == R_REBUILD or reason == R_RECORD or reason == R_GROW else 0.0
+
+
+@jit_inline
+def _open_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, h2, h, lo, hi, rolling, spin, planar):
+    """Bodies lo..hi's opening half kick h2 and drift h (as `verlet.kick` then `verlet.drift`).
+    Returns the largest squared distance from X0."""
+    moved = 0.0
+    for a in range(lo, hi):
+        im, ii, spins = Bd[a, B_IM], Bd[a, B_II], Bd[a, B_II] > 0.0
+        v0, v1, v2, w0, w1, w2 = _half_kick(WK, a, h2, im, ii, spins, F, T, PT, rolling,
+                                            V[a, 0], V[a, 1], V[a, 2], W[a, 0], W[a, 1], W[a, 2])
+        V[a, 0], V[a, 1], V[a, 2] = v0, v1, v2
+        W[a, 0], W[a, 1], W[a, 2] = w0, w1, w2
+        moved = max(moved, _drift_body(X, X0, Qo, a, v0, v1, v2, w0, w1, w2, h, spin, planar))
+    return moved

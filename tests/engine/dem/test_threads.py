@@ -1,0 +1,98 @@
+"""The DEM run on several threads (collide/dem_threads.py, collide/engine/dem/threads.py) against
+the one-thread kernel (`loop.dem_run`): every output equal bit for bit, at 2 and 3 threads."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from collide.dem import contact_time, kernel_args
+from collide.model import compile_scenes
+from collide.scene import parse_scene
+
+
+def _box(n: int, shuffled: bool, rolling: float, seed: int) -> dict:
+    """n spheres of two sizes and materials dropped in a box of five walls, shaken: many
+    contacts open and close; `shuffled` numbers them at random (most pairs then join two
+    threads' bodies)."""
+    rng = np.random.default_rng(seed)
+    per = int(np.ceil(n ** (1 / 3)))
+    cells = np.array([(i, j, k) for k in range(per) for j in range(per) for i in range(per)][:n], float)
+    if shuffled:
+        cells = cells[rng.permutation(n)]
+    side = per * 0.024
+    bodies = [{"name": f"b{a}", "material": "glass" if a % 3 else "steel", "radius": 0.01 if a % 2 else 0.009,
+               "position": (cells[a] * 0.024 + 0.012 + rng.uniform(-1e-3, 1e-3, 3)).tolist(),
+               "velocity": rng.uniform(-1.5, 1.5, 3).tolist(), "spin": rng.uniform(-5, 5, 3).tolist()}
+              for a in range(n)]
+    walls = [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]
+    for axis in range(2):
+        for value, sign in ((0.0, 1.0), (side, -1.0)):
+            point, normal = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+            point[axis], normal[axis] = value, sign
+            walls.append({"point": point, "normal": normal})
+    return {"dim": 3, "integrator": "dem", "dt": 2e-5, "duration": 0.006, "gravity": [0.0, 0.0, -9.81],
+            "contact": {"model": "hertz", "restitution": 0.5, "tangential": "spring", "mu": 0.4,
+                        "rolling_friction": rolling},
+            "material": [{"name": "glass", "density": 2500.0, "youngs_modulus": 5e6, "poisson_ratio": 0.25},
+                         {"name": "steel", "density": 7800.0, "youngs_modulus": 2e7, "poisson_ratio": 0.3}],
+            "body": bodies, "wall": walls}
+
+
+def _args(raw: dict, record: bool, rest: float):
+    model, state = compile_scenes([parse_scene(raw)])
+    t_c, _, _ = contact_time(model, state)
+    duration = np.array([np.nan if rest else raw["duration"]])
+    args, _ = kernel_args(model, state, 0, dt=np.array([raw["dt"]]), duration=duration, rest=np.array([rest or np.nan]),
+                          record=record, max_steps=100_000, t_c=t_c)
+    return args
+
+
+def _copy(args):
+    return tuple(a.copy() if isinstance(a, np.ndarray) else a for a in args)
+
+
+@pytest.mark.parametrize(("shuffled", "record", "rest", "rolling"),
+                         [(False, False, 0.0, 0.0), (True, False, 0.0, 0.02), (True, True, 0.0, 0.0),
+                          (False, True, 0.0, 0.02), (True, False, 0.05, 0.0)])
+def test_threads_give_the_one_thread_run_bit_for_bit(shuffled, record, rest, rolling):
+    """1, 2 and 3 threads: the final state (positions, velocities, spins, orientations), the work
+    of each force part per body, the frames, records, intervals, energy parts, counts and
+    figures all the same bits (recorded or not, stopped at rest or at a duration, with rolling
+    resistance, bodies numbered along the box or at random)."""
+    from collide.dem_threads import dem_run_threaded
+    from collide.engine.dem.loop import dem_run
+
+    args = _args(_box(64, shuffled, rolling, seed=3), record, rest)
+    one = _copy(args)
+    expected = dem_run(*one)
+    assert expected[6][2] > 20  # contacts opened: not vacuous
+    for threads in (2, 3):
+        mine = _copy(args)
+        got = dem_run_threaded(*mine, threads)
+        for a, b in zip(one[:4] + expected, mine[:4] + got):
+            assert np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True)
+            assert np.asarray(a).tobytes() == np.asarray(b).tobytes()
+
+
+def test_a_run_takes_the_threads_asked_and_says_so(monkeypatch):
+    """COLLIDE_THREADS (what `collide run --threads` sets) is the number of threads one compiled
+    DEM run steps on, reported in its result (the summary's `threads`), its outcome the same as on
+    one thread; unset, a run takes every core from THREADS_FROM bodies and one below."""
+    from collide.dem import run_threads
+    from collide.dem_threads import THREADS_FROM, cores
+    from collide.engine import tier
+    from collide.run import run_scene
+
+    scene = parse_scene(_box(27, True, 0.0, seed=5))
+    results = {}
+    for count in ("1", "2"):
+        monkeypatch.setenv("COLLIDE_THREADS", count)
+        results[count] = run_scene(scene, record=False).result
+    assert results["1"].threads == 1
+    assert results["2"].threads == (2 if tier.COMPILED else 1)  # interpreted kernels hold the GIL: one
+    for field in ("s", "v", "w", "q", "work"):
+        assert np.array_equal(getattr(results["1"].final, field), getattr(results["2"].final, field))
+    monkeypatch.delenv("COLLIDE_THREADS")
+    assert run_threads(THREADS_FROM - 1) == 1
+    assert run_threads(THREADS_FROM) == cores()
