@@ -45,7 +45,8 @@ def test_materials_give_masses_moduli_and_mixed_pair_values():
 
 @pytest.mark.parametrize("change, message", [
     ({"contact": {"restitution": 1.5}}, "contact.restitution: a restitution is at most 1"),
-    ({"contact": {"restitution": 0.0}}, "contact.restitution: must be positive"),
+    ({"contact": {"restitution": -0.2}}, "contact.restitution: must not be negative"),
+    ({"contact": {"restitution": 0.0}}, "restitution = 0 (perfectly inelastic): the bodies stay in contact"),
     ({"contact": {"model": "hertz", "poisson_ratio": 0.5, "youngs_modulus": 1e9}}, "contact.poisson_ratio"),
     ({"contact": {"model": "hertz"}}, "contact.youngs_modulus: missing"),
     ({"contact": {"model": "hooke"}}, "contact.model: unknown 'hooke'"),
