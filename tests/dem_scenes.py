@@ -29,6 +29,17 @@ def hertz_closed_form(m_star: float, r_star: float, e_star: float, speed: float)
     return delta, force, time
 
 
+def open_box_walls(side: float) -> list[dict]:
+    """A floor at z = 0 and four side walls at x, y = 0 and side: a box open at the top."""
+    walls = [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]
+    for axis in range(2):
+        for value, sign in ((0.0, 1.0), (side, -1.0)):
+            point, normal = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+            point[axis], normal[axis] = value, sign
+            walls.append({"point": point, "normal": normal})
+    return walls
+
+
 def _pile(per_side: int, layers: int) -> dict:
     """Spheres on a loose lattice above the floor of a box open at the top, like `pile`."""
     r, spacing = 0.005, 0.012
@@ -41,12 +52,7 @@ def _pile(per_side: int, layers: int) -> dict:
                 x, y = (i + 0.5) * spacing + rng.uniform(-1e-4, 1e-4), (j + 0.5) * spacing + rng.uniform(-1e-4, 1e-4)
                 bodies.append({"name": f"g{len(bodies)}", "material": "glass", "radius": r,
                                "position": [x, y, r + 0.002 + k * spacing], "velocity": [0.0, 0.0, 0.0]})
-    walls = [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]
-    for axis in range(2):
-        for value, sign in ((0.0, 1.0), (side, -1.0)):
-            point, normal = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
-            point[axis], normal[axis] = value, sign
-            walls.append({"point": point, "normal": normal})
+    walls = open_box_walls(side)
     return {"dim": 3, "integrator": "dem", "dt": "auto", "tol": 2e-2, "duration": 5.0, "rest": 1e-6,
             "gravity": [0.0, 0.0, -9.81],
             "contact": {"model": "hertz", "restitution": 0.5, "tangential": "spring", "mu": 0.5,

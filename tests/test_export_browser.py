@@ -10,28 +10,9 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import BROWSER_MARKS
-from viewer.testing import group_button, hide_notifications, open_page, settle, wait_until
+from viewer.testing import group_button, settle, wait_until
 
 pytestmark = BROWSER_MARKS
-
-
-@pytest.fixture(scope="module")
-def app(tmp_path_factory):
-    from viewer.app import ViewerApp
-
-    app = ViewerApp("demo-bonus", host="127.0.0.1", port=0, recordings_dir=tmp_path_factory.mktemp("recordings"))
-    app.start()
-    yield app
-    app.stop()
-
-
-@pytest.fixture
-def page(browser, app):
-    page = open_page(browser, app, width=1280, height=800)
-    hide_notifications(page)
-    yield page
-    page.close()
-    wait_until(lambda: page.session.client.client_id not in app.sessions, 30, "the tab to close")
 
 
 def _download(page, session, label: str, timeout_ms: int = 120_000) -> tuple[str, Path]:

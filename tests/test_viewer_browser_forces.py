@@ -22,16 +22,6 @@ PEAK = re.compile(r"(?:normal force: |thickest )([0-9.]+(?:e[+-]?[0-9]+)?) N pea
 
 
 @pytest.fixture(scope="module")
-def app():
-    from viewer.app import ViewerApp
-
-    app = ViewerApp("demo-bonus", host="127.0.0.1", port=0)
-    app.start()
-    yield app
-    app.stop()
-
-
-@pytest.fixture(scope="module")
 def page(browser, app):
     page = open_page(browser, app, width=1280, height=800)
     yield page

@@ -35,16 +35,6 @@ BACKGROUND_TOL = 12
 
 
 @pytest.fixture(scope="module")
-def app():
-    from viewer.app import ViewerApp
-
-    app = ViewerApp("demo-bonus", host="127.0.0.1", port=0)
-    app.start()
-    yield app
-    app.stop()
-
-
-@pytest.fixture(scope="module")
 def page(browser, app):
     page = open_page(browser, app, width=1100, height=760, query="fixedDpr=0.6")
     hide_notifications(page)

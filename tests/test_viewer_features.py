@@ -43,26 +43,6 @@ DOCS = screenshot_dir()
 CHAIN = (190, 60, 60)  # the force chains' red as lit (the axes gizmo's red also matches: compare counts)
 
 
-@pytest.fixture(scope="module")
-def app(tmp_path_factory):
-    from viewer.app import ViewerApp
-
-    app = ViewerApp("demo-bonus", host="127.0.0.1", port=0, recordings_dir=tmp_path_factory.mktemp("recordings"))
-    app.start()
-    yield app
-    app.stop()
-
-
-
-@pytest.fixture
-def page(browser, app):
-    page = open_page(browser, app, width=1280, height=800)
-    hide_notifications(page)
-    yield page
-    page.close()
-    wait_until(lambda: page.session.client.client_id not in app.sessions, 30, "the tab to close")
-
-
 @pytest.fixture
 def half_page(browser, app):
     """A tab at half the pixels: hundreds of see-through spheres take seconds a frame under

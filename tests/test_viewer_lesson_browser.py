@@ -32,16 +32,6 @@ SHOTS = screenshot_dir()
 
 
 @pytest.fixture(scope="module")
-def app():
-    from viewer.app import ViewerApp
-
-    app = ViewerApp("demo-bonus", host="127.0.0.1", port=0)
-    app.start()
-    yield app
-    app.stop()
-
-
-@pytest.fixture(scope="module")
 def page(browser, app):
     page = open_page(browser, app, width=1400, height=850)
     hide_notifications(page)

@@ -9,6 +9,7 @@ import pytest
 from collide.dem import contact_time, kernel_args
 from collide.model import compile_scenes
 from collide.scene import parse_scene
+from tests.dem_scenes import open_box_walls
 
 
 def _box(n: int, shuffled: bool, rolling: float, seed: int) -> dict:
@@ -25,12 +26,7 @@ def _box(n: int, shuffled: bool, rolling: float, seed: int) -> dict:
                "position": (cells[a] * 0.024 + 0.012 + rng.uniform(-1e-3, 1e-3, 3)).tolist(),
                "velocity": rng.uniform(-1.5, 1.5, 3).tolist(), "spin": rng.uniform(-5, 5, 3).tolist()}
               for a in range(n)]
-    walls = [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]
-    for axis in range(2):
-        for value, sign in ((0.0, 1.0), (side, -1.0)):
-            point, normal = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
-            point[axis], normal[axis] = value, sign
-            walls.append({"point": point, "normal": normal})
+    walls = open_box_walls(side)
     return {"dim": 3, "integrator": "dem", "dt": 2e-5, "duration": 0.006, "gravity": [0.0, 0.0, -9.81],
             "contact": {"model": "hertz", "restitution": 0.5, "tangential": "spring", "mu": 0.4,
                         "rolling_friction": rolling},
