@@ -94,3 +94,25 @@ def test_the_hint_is_not_inherited_by_child_processes() -> None:
     env = dict(os.environ, COLLIDE_JIT_HINT="interpreted")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
     assert out.stdout.strip() == "gone", out.stderr
+
+
+def test_the_engine_sources_list_is_kept_until_any_collide_source_changes(tmp_path, monkeypatch) -> None:
+    """The followed imports are kept beside the caches; a kept list is used only while no
+    collide source changed (size or modification time), so it cannot hide a new import."""
+    from collide.engine import tier
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    sources = tier.engine_sources()
+    assert sources == tier._follow_imports()
+    memo = tmp_path / "engine-sources.json"
+    kept = json.loads(memo.read_text())
+    kept["sources"] = kept["sources"][:1]  # as if it were stale
+    memo.write_text(json.dumps(kept))
+    assert tier.engine_sources() == sources[:1]
+    edited = sources[-1]
+    stat = edited.stat()
+    os.utime(edited, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1000))
+    try:
+        assert tier.engine_sources() == sources
+    finally:
+        os.utime(edited, ns=(stat.st_atime_ns, stat.st_mtime_ns))

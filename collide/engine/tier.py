@@ -72,11 +72,56 @@ def _module_file(name: str) -> Path | None:
     return None
 
 
+def _engine_files() -> list[Path]:
+    """The engine's Python files, its subpackages' included; not its __pycache__ folders, whose
+    hundreds of compiled files made a glob over the tree most of a process's look-up."""
+    files = []
+    for folder, subfolders, names in os.walk(_ENGINE):
+        subfolders[:] = [d for d in subfolders if d != "__pycache__"]
+        files.extend(Path(folder, name) for name in names if name.endswith(".py"))
+    return sorted(files)
+
+
 def engine_sources() -> list[Path]:
     """Every file whose code or constants the compiled kernels hold: the engine's modules that
     define kernels, and what they import from collide, followed to the end. This file, which
-    only chooses between compiled and interpreted, is not among them."""
-    pending = [p for p in sorted(_ENGINE.rglob("*.py")) if re.search(r"^@jit", p.read_text(), re.M)]
+    only chooses between compiled and interpreted, is not among them.
+
+    Following the imports costs a process about 8 ms, so the list is kept beside the caches
+    under a signature of every collide source's size and modification time: any edit anywhere
+    in collide follows them again. (The cache key hashes the listed files' contents each time.)"""
+    signature = _tree_signature()
+    memo = cache_root() / "engine-sources.json"
+    kept = _read_json(memo)
+    if kept.get("signature") == signature and isinstance(kept.get("sources"), list):
+        return [_PACKAGE_ROOT / name for name in kept["sources"]]
+    sources = _follow_imports()
+    try:
+        memo.parent.mkdir(parents=True, exist_ok=True)
+        scratch = memo.with_name(f"{memo.name}.{os.getpid()}")
+        scratch.write_text(json.dumps({"signature": signature,
+                                       "sources": [p.relative_to(_PACKAGE_ROOT).as_posix() for p in sources]}))
+        os.replace(scratch, memo)
+    except OSError:
+        pass  # a read-only install follows the imports each time
+    return sources
+
+
+def _tree_signature() -> str:
+    """A hash of every collide source file's path, size and modification time."""
+    digest = hashlib.sha256()
+    for folder, subfolders, names in os.walk(_PACKAGE_ROOT / "collide"):
+        subfolders[:] = sorted(d for d in subfolders if d != "__pycache__")
+        for name in sorted(names):
+            if name.endswith(".py"):
+                stat = os.stat(os.path.join(folder, name))
+                digest.update(f"{folder}/{name}\0{stat.st_size}\0{stat.st_mtime_ns}\n".encode())
+    return digest.hexdigest()
+
+
+def _follow_imports() -> list[Path]:
+    """engine_sources, worked out: the kernel modules and their collide imports, transitively."""
+    pending = [p for p in _engine_files() if re.search(r"^@jit", p.read_text(), re.M)]
     found: dict[Path, None] = {}
     while pending:
         path = pending.pop()

@@ -91,8 +91,9 @@ _GL8_X, _GL8_W = np.polynomial.legendre.leggauss(8)
 GL8_X = 0.5 * (_GL8_X + 1.0)
 GL8_W = 0.5 * _GL8_W
 # The integral from 0 to each Gauss point of the polynomial through values at all of them.
-GL8_S = np.array([[np.polynomial.Polynomial.fit(GL8_X, np.eye(8)[j], 7, domain=[0, 1], window=[0, 1]).integ()(x)
-                   for j in range(8)] for x in GL8_X])
+_GL8_INTEGRALS = [np.polynomial.Polynomial.fit(GL8_X, np.eye(8)[j], 7, domain=[0, 1], window=[0, 1]).integ()
+                  for j in range(8)]
+GL8_S = np.array([[_GL8_INTEGRALS[j](x) for j in range(8)] for x in GL8_X])
 # Tangential quantities are pairs in the wall's tangent basis (e1, e2 = n x e1): the velocity v,
 # the spin turned into the plane (n x w: the slip is u = v + l n x w) and the friction force;
 # the spin about n is constant. h: the direction a mode holds (the slide's, the stuck slip's).
