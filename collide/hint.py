@@ -1,8 +1,9 @@
 """Whether one run is quicker with the kernels interpreted than with the compiled ones loaded.
 
-Loading numba and the compiled kernels costs a process about 0.65 s of CPU here before its first
-step (numba's import 0.2 s, the cached code 0.1 s, besides numpy and typer), more than the
-interpreted kernels take for a few spheres that meet a few times.
+Loading numba and the compiled kernels costs a process about 0.6 s of CPU here before its first
+step (`benchmarks/bench_startup.py`: numba's import 0.14 s, the kernels' modules and cached code
+0.17 s, besides numpy), more than the interpreted kernels take for a few spheres that meet a
+few times.
 A command that runs one scene asks `quick` before
 the engine is first imported; `prefer_interpreted` then tells the engine (`collide.engine.tier`)
 to stay interpreted for that process. What decides is the steps a run can take: few bodies, no
