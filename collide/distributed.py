@@ -336,6 +336,12 @@ class DaskExecutor:
         try:
             for future in _finished(queue, client, address):
                 i, alone = live.pop(future)
+                if future.status == "lost":
+                    # It finished, but its result was on a worker that died before it came back:
+                    # Dask computes it again for the future still held.
+                    live[future] = (i, alone)
+                    queue.add(future)
+                    continue
                 if future.status == "error" and not alone and isinstance(_exception(future, address), KilledWorker):
                     suspects.append(i)
                 else:
