@@ -133,8 +133,8 @@ class DragSetup:
             arrow = scene.add_line_segments(f"{ROOT}/{name}/arrow", np.zeros((1, 2, 3)), colors=(230, 120, 0),
                                             thickness=3.0, thickness_units="screen")
             item = _Ball(name, ball, tip, arrow)
-            ball.on_update(lambda e, item=item: self._on_ball(e, item))
-            tip.on_update(lambda e, item=item: self._on_tip(e, item))
+            ball.on_update(lambda e, item=item: self._on_drag(e, item, self.move_ball))
+            tip.on_update(lambda e, item=item: self._on_drag(e, item, self.aim_ball))
             self._balls[name] = item
         self._made_for = (controls, plane)
 
@@ -179,19 +179,14 @@ class DragSetup:
         if view is not None and session.player.t != view.t0:
             session.seek(view.t0)
 
-    def _on_ball(self, event: Any, ball: _Ball) -> None:
+    def _on_drag(self, event: Any, ball: _Ball, apply: Any) -> None:
+        """A handle's drag: its start pauses at t0; each move after it is `apply` (move_ball for
+        the ball, aim_ball for its velocity tip)."""
         if event.phase == "start":
             self._dragging = ball.name
             self._start()
             return
-        self.move_ball(ball.name, np.asarray(event.target.position, float), end=event.phase == "end")
-
-    def _on_tip(self, event: Any, ball: _Ball) -> None:
-        if event.phase == "start":
-            self._dragging = ball.name
-            self._start()
-            return
-        self.aim_ball(ball.name, np.asarray(event.target.position, float), end=event.phase == "end")
+        apply(ball.name, np.asarray(event.target.position, float), end=event.phase == "end")
 
     def move_ball(self, name: str, position: np.ndarray, *, end: bool = True) -> bool:
         """Set a ball's start position (m, 3D) as the drag left it: snapped if asked, refused at
