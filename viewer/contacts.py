@@ -20,8 +20,7 @@ import numpy as np
 from collide.contact_forces import RecordedForces
 from collide.engine import layout
 from collide.model import Model
-from collide.trajectory import Trajectory, segment_search
-from viewer.sampling import Knots
+from collide.trajectory import Knots, Trajectory, segment_search
 
 SLICE = 1 << 16  # contact entries evaluated at once by `ContactIndex.overlaps`
 

@@ -19,9 +19,9 @@ from collide.contact_forces import peak_normal_force
 from collide.engine import layout
 from collide.model import State
 from collide.run import SceneRun
+from collide.trajectory import Knots
 from viewer.contacts import SLICE, ContactIndex
 from viewer.geometry import embed3, orientation_wxyz
-from viewer.sampling import Knots
 
 MAX_PLOT_POINTS = 400
 MIN_PLOT_POINTS = 120  # many bodies: the plots' points fall as 1/N to this (each costs N samples)
@@ -233,7 +233,7 @@ class ViewRun:
 
     def sample(self, times: np.ndarray) -> State:
         """States at these times (T, 1, N, D): exact in free flight, quintic inside contact steps
-        (`diagnostics.sample`'s values, all bodies at once: `viewer.sampling`)."""
+        (`collide.trajectory.Knots`: all bodies at once)."""
         return self._knots.sample(np.asarray(times, dtype=float))
 
     # ------------------------------------------------------------------------------------------
