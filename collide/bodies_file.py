@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from collide.body_columns import as_bodies
 from collide.scene_values import MAX_MAGNITUDE, MIN_POSITIVE, NAME_PATTERN, SceneError, _shown
 
 AXES = ("x", "y", "z")
@@ -180,10 +181,9 @@ def write_state(path: Path, scene: object, pos: np.ndarray, vel: np.ndarray, spi
     (n, spin components)) as a body table, `.csv` or `.npz`, whole or not at all."""
     from collide.output import write_atomic, write_text_atomic
 
-    bodies = scene.bodies  # type: ignore[attr-defined]
+    bodies = as_bodies(scene.bodies, scene.dim)  # type: ignore[attr-defined]
     n = len(bodies)
-    columns_ = ([b.name for b in bodies], np.array([b.radius for b in bodies]), np.array([b.mass for b in bodies]),
-                np.array([b.inertia for b in bodies]), [b.material for b in bodies],
+    columns_ = (bodies.names, bodies.radius, bodies.mass, bodies.inertia, bodies.material,
                 np.asarray(pos, dtype=float).reshape(n, -1), np.asarray(vel, dtype=float).reshape(n, -1),
                 np.asarray(spin, dtype=float).reshape(n, -1))
     if path.suffix == ".npz":

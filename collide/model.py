@@ -33,6 +33,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from collide.body_columns import Bodies, as_bodies
 from collide.scene import Scene, SceneError
 
 TABLE_K, TABLE_MU, TABLE_EPS, TABLE_ESTAR, TABLE_REST, TABLE_ROLL, TABLE_KTR = range(7)
@@ -126,11 +127,19 @@ class State:
                      self.work.copy(), None if self.stored is None else self.stored.copy())
 
 
+def _material_numbers(scene: Scene, bodies: Bodies) -> list[int]:
+    """Each body's material as the model numbers it: 0 for none, 1 + its place in the scene's."""
+    number: dict[str, int] = {}
+    for i, m in enumerate(scene.materials):
+        number.setdefault(m.name, 1 + i)
+    return [0 if m is None else number[m] for m in bodies.material]
+
+
 def shape_key(scene: Scene) -> tuple:
     """What scenes run together in one batch must share. Walls are the model's, not a member's:
     two scenes with walls elsewhere ran the first one's (a ball on a floor turned another way
     came out 7.7 m/s off)."""
-    return (scene.dim, tuple(b.name for b in scene.bodies), tuple((w.point, w.normal) for w in scene.walls),
+    return (scene.dim, tuple(as_bodies(scene.bodies, scene.dim).names), tuple((w.point, w.normal) for w in scene.walls),
             scene.gravity is not None, scene.has_spin, scene.contact.lever, len(scene.materials),
             scene.contact.model, scene.contact.tangential)
 
@@ -256,12 +265,10 @@ def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
     b = len(scenes)
     spin_dim = first.spin_dim if any(s.has_spin for s in scenes) else 0
 
-    def per_body(attr: str) -> np.ndarray:
-        return np.array([[getattr(body, attr) for body in s.bodies] for s in scenes], dtype=float)
-
-    mass = per_body("mass")
-    radius = per_body("radius")
-    inertia = per_body("inertia")
+    columns = [as_bodies(s.bodies, dim) for s in scenes]
+    mass = np.stack([c.mass for c in columns]).reshape(b, n)
+    radius = np.stack([c.radius for c in columns]).reshape(b, n)
+    inertia = np.stack([c.inertia for c in columns]).reshape(b, n)
     k = np.array([s.contact.k for s in scenes], dtype=float)
     mu = np.array([s.contact.mu for s in scenes], dtype=float)
     eps = np.array([s.contact.eps for s in scenes], dtype=float)
@@ -270,12 +277,11 @@ def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
     tables = [contact_tables(s) for s in scenes]
     pair_table = np.stack([t[0] for t in tables])
     wall_table = np.stack([t[1] for t in tables])
-    material = np.array([[0 if body.material is None else 1 + [m.name for m in s.materials].index(body.material)
-                          for body in s.bodies] for s in scenes], dtype=np.int64).reshape(b, n)
+    material = np.array([_material_numbers(s, c) for s, c in zip(scenes, columns)], dtype=np.int64).reshape(b, n)
     gravity = None if first.gravity is None else np.array([s.gravity for s in scenes], dtype=float)
     walls = first.walls
     model = Model(
-        dim=dim, spin_dim=spin_dim, body_names=tuple(body.name for body in first.bodies),
+        dim=dim, spin_dim=spin_dim, body_names=tuple(columns[0].names),
         mass=mass, inv_mass=1.0 / mass, radius=radius, inertia=inertia, inv_inertia=1.0 / inertia,
         material=material, pair_table=pair_table, wall_table=wall_table,
         k=k, mu=mu, eps=eps, gravity=gravity,
@@ -285,10 +291,10 @@ def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
         hertz=first.contact.model == "hertz", tangential_spring=first.contact.tangential == "spring",
         dissipative=any(s.has_friction or s.needs_dem for s in scenes),
     )
-    s = np.array([[body.position for body in sc.bodies] for sc in scenes], dtype=float).reshape(b, n, dim)
-    v = np.array([[body.velocity for body in sc.bodies] for sc in scenes], dtype=float).reshape(b, n, dim)
+    s = np.stack([c.position for c in columns]).reshape(b, n, dim)
+    v = np.stack([c.velocity for c in columns]).reshape(b, n, dim)
     if spin_dim:
-        w = np.array([[body.spin for body in sc.bodies] for sc in scenes], dtype=float).reshape(b, n, spin_dim)
+        w = np.stack([c.spin for c in columns]).reshape(b, n, spin_dim)
     else:
         w = np.zeros((b, n, 0))
     q = np.zeros((b, n, model.orient_dim))

@@ -12,7 +12,7 @@ import gc
 import math
 import re
 import tomllib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from importlib import resources
@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from collide.body_columns import Bodies, as_bodies
 from collide.fill import FILL_KEYS
 from collide.scene_bodies import BODY_KEYS, check_names, check_start_overlap, parse_bodies
 from collide.scene_toml import FlatTables, loads_scene
@@ -127,7 +128,7 @@ class Scene:
     dt: float | str
     integrator: str
     contact: Contact
-    bodies: tuple[Body, ...]
+    bodies: Sequence[Body]  # a tuple of Body, or Bodies (the same, held as columns)
     walls: tuple[Wall, ...] = ()
     materials: tuple[Material, ...] = ()
     pairs: tuple[PairLaw, ...] = ()
@@ -168,7 +169,7 @@ class Scene:
         """Angular state is carried only when something can spin."""
         if self.dim == 1:
             return False
-        return self.has_friction or any(any(c != 0.0 for c in b.spin) for b in self.bodies)
+        return self.has_friction or bool(as_bodies(self.bodies, self.dim).spin.any())
 
     def body_index(self, name: str) -> int:
         for i, body in enumerate(self.bodies):
@@ -524,7 +525,7 @@ def _parse_scene(raw: dict, default_name: str, progress: Progress) -> Scene:
 
     bodies, from_file = _more_bodies(raw, dim, by_name, domain, bodies, tuple(walls), progress)
     scene = Scene(name=name, dim=dim, dt=dt, integrator=integrator, contact=contact,
-                  bodies=tuple(bodies), walls=tuple(walls), materials=materials, pairs=pairs,
+                  bodies=bodies, walls=tuple(walls), materials=materials, pairs=pairs,
                   gravity=gravity, duration=duration, tail=tail, tol=tol, rest=rest,
                   description=raw.get("description", ""), domain=domain, source=raw)
     if scene.needs_dem:
@@ -571,8 +572,8 @@ def _parse_domain(table: Any, dim: int) -> Domain | None:
     return Domain(lower, upper)
 
 
-def _more_bodies(raw: dict, dim: int, materials: dict, domain: Domain | None, bodies: list[Body],
-                 walls: tuple[Wall, ...], progress: Progress) -> tuple[list[Body], range]:
+def _more_bodies(raw: dict, dim: int, materials: dict, domain: Domain | None, bodies: Bodies,
+                 walls: tuple[Wall, ...], progress: Progress) -> tuple[Bodies, range]:
     """The [[body]] tables' bodies, then a [bodies] file's, then each [[fill]]'s (docs/design.md
     section 10); and where the file's are."""
     from collide.bodies_file import read_table
@@ -592,14 +593,13 @@ def _more_bodies(raw: dict, dim: int, materials: dict, domain: Domain | None, bo
     if not isinstance(fills, list):
         raise SceneError("fill: expected [[fill]] tables")
     for index, fill in enumerate(fills):
-        placed = (np.array([b.position for b in bodies], dtype=float).reshape(len(bodies), dim),
-                  np.array([b.radius for b in bodies], dtype=float))
+        placed = (bodies.position, bodies.radius)
         made = fill_bodies(fill, index, dim, materials, domain, placed, walls, progress)
         bodies = bodies + bodies_from_fill(made, dim)
     if not bodies:
         raise SceneError("body: a scene needs at least one body ([[body]], [[fill]] or [bodies] file)")
     if len(bodies) > len(raw.get("body", [])):
-        check_names([b.name for b in bodies])
+        check_names(bodies.names)
     return bodies, from_file
 
 
@@ -622,14 +622,13 @@ def _check_sticky(scene: Scene) -> None:
 def _check_start(scene: Scene, from_file: range) -> None:
     """No overlaps at the start (docs/design.md section 3; a saved state's contacts in a DEM
     scene excepted) and every body inside the domain."""
-    n, dim = len(scene.bodies), scene.dim
-    pos = np.array([b.position for b in scene.bodies], dtype=float).reshape(n, dim)
-    radius = np.array([b.radius for b in scene.bodies], dtype=float)
+    bodies = as_bodies(scene.bodies, scene.dim)
+    n, pos, radius = len(bodies), bodies.position, bodies.radius
     in_contact = None
     if scene.integrator == "dem" and len(from_file):
         in_contact = np.zeros(n, dtype=bool)
         in_contact[from_file.start:from_file.stop] = True
-    check_start_overlap([b.name for b in scene.bodies], pos, radius, scene.walls, in_contact)
+    check_start_overlap(bodies.names, pos, radius, scene.walls, in_contact)
     if scene.domain is not None:
         outside = ((pos < np.array(scene.domain.lower)) | (pos > np.array(scene.domain.upper))).any(axis=1)
         if outside.any():

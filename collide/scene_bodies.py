@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from collide.body_columns import Bodies
 from collide.scene_values import (
     MAX_MAGNITUDE,
     MIN_POSITIVE,
@@ -87,12 +88,12 @@ def _inertia(value: Any, mass: float, radius: float, where: str) -> float:
     return _number(value, f"{where}.inertia", positive=True)
 
 
-def parse_bodies(tables: list, dim: int, materials: dict) -> list[Body]:
+def parse_bodies(tables: list, dim: int, materials: dict) -> Bodies:
     """Every `[[body]]` table (in bulk when each is plainly right, else one by one)."""
     bodies = _bulk(tables, dim, materials)
     if bodies is None:
-        bodies = [parse_body(b, index, dim, materials) for index, b in enumerate(tables)]
-    check_names([b.name for b in bodies])
+        bodies = Bodies.of([parse_body(b, index, dim, materials) for index, b in enumerate(tables)], dim)
+    check_names(bodies.names)
     return bodies
 
 
@@ -145,7 +146,7 @@ def _column(tables: list, key: str) -> np.ndarray | None:
         return None
 
 
-def _bulk(tables: list, dim: int, materials: dict) -> list[Body] | None:
+def _bulk(tables: list, dim: int, materials: dict) -> Bodies | None:
     """The bodies, or None when any is not plainly right (the one-by-one reader then names it).
     Solid spheres only: a body that gives its inertia is read one by one."""
     if not all(type(t) is dict and t.keys() <= BODY_KEYS and "radius" in t and "position" in t
@@ -180,7 +181,7 @@ def _bulk(tables: list, dim: int, materials: dict) -> list[Body] | None:
     return _assemble(tables, dim, names, r, masses.tolist(), material)
 
 
-def _assemble(tables: list, dim: int, names: list, radius: list, mass: list, material: list) -> list[Body] | None:
+def _assemble(tables: list, dim: int, names: list, radius: list, mass: list, material: list) -> Bodies | None:
     """The bodies from checked columns (solid spheres), or None when a vector is not plain."""
     zero = [0.0] * dim if dim > 1 else 0.0
     position = _vectors(tables, "position", dim, None)
@@ -191,17 +192,15 @@ def _assemble(tables: list, dim: int, names: list, radius: list, mass: list, mat
     if spin_len == 0:
         if any("spin" in t for t in tables):
             return None
-        spins = [()] * len(tables)
+        spin = np.zeros((len(tables), 0))
     else:
         spin = _vectors(tables, "spin", spin_len, [0.0] * spin_len if spin_len > 1 else 0.0)
         if spin is None:
             return None
-        spins = list(map(tuple, spin.tolist()))
     inertia = [0.4 * m * r**2 for m, r in zip(mass, radius)]
     if not _in_range(np.array(inertia), True):
         return None
-    return [Body(*row) for row in zip(names, mass, radius, inertia, map(tuple, position.tolist()),
-                                      map(tuple, velocity.tolist()), spins, material)]
+    return Bodies(names, np.array(mass), np.array(radius), np.array(inertia), position, velocity, spin, material)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -317,16 +316,14 @@ def _overlapping(pos: np.ndarray, radius: np.ndarray, i: np.ndarray, j: np.ndarr
 
 
 def bodies_from_columns(names: list[str], radius: np.ndarray, mass: np.ndarray, inertia: np.ndarray | None,
-                        pos: np.ndarray, vel: np.ndarray, spin: np.ndarray, material: list) -> list[Body]:
+                        pos: np.ndarray, vel: np.ndarray, spin: np.ndarray, material: list) -> Bodies:
     """Bodies from checked columns; a missing inertia is a solid sphere's."""
     if inertia is None:
         inertia = 0.4 * mass * radius**2
-    spins = map(tuple, spin.tolist()) if spin.shape[1] else [()] * len(names)
-    return [Body(*row) for row in zip(names, mass.tolist(), radius.tolist(), inertia.tolist(),
-                                      map(tuple, pos.tolist()), map(tuple, vel.tolist()), spins, material)]
+    return Bodies(names, mass, radius, inertia, pos, vel, spin, material)
 
 
-def bodies_from_table(table: Any, dim: int, materials: dict, where: str) -> list[Body]:
+def bodies_from_table(table: Any, dim: int, materials: dict, where: str) -> Bodies:
     """The bodies of a table file (`collide.bodies_file.Table`): materials known, a mass for each
     row (its own, or its material's density)."""
     bad = next((i for i, m in enumerate(table.material) if m is not None and m not in materials), None)
@@ -352,7 +349,7 @@ def bodies_from_table(table: Any, dim: int, materials: dict, where: str) -> list
                                table.spin, table.material)
 
 
-def bodies_from_fill(fill: Any, dim: int) -> list[Body]:
+def bodies_from_fill(fill: Any, dim: int) -> Bodies:
     """The bodies of one fill (`collide.fill.FillBodies`), named prefix0, prefix1, ..."""
     n = len(fill.radius)
     names = [f"{fill.prefix}{i}" for i in range(n)]
