@@ -61,9 +61,15 @@ class Conserved:
 def all_contacts(model: Model) -> np.ndarray:
     """Every possible contact (C, 2) of a small scene: all pairs, then every sphere on every wall."""
     i, j = np.triu_indices(model.n_bodies, k=1)
-    walls = [(n, -1 - w) for w in range(model.n_walls) for n in range(model.n_bodies)]
-    out = np.concatenate((np.stack((i, j), axis=1), np.array(walls, dtype=np.int64).reshape(-1, 2)))
+    out = np.concatenate((np.stack((i, j), axis=1), _wall_contacts(model)))
     return out.astype(np.int64)
+
+
+def _wall_contacts(model: Model) -> np.ndarray:
+    """(n_walls * N, 2): every sphere on the first wall, then on the second, ... (j = -1 - wall)."""
+    n, walls = model.n_bodies, model.n_walls
+    return np.stack((np.tile(np.arange(n, dtype=np.int64), walls),
+                     np.repeat(-1 - np.arange(walls, dtype=np.int64), n)), axis=1)
 
 
 def contacts_near(model: Model, s: np.ndarray, margin: float = 0.0) -> np.ndarray:
@@ -72,16 +78,15 @@ def contacts_near(model: Model, s: np.ndarray, margin: float = 0.0) -> np.ndarra
     if model.n_bodies <= 64:
         return all_contacts(model)
     flat = s.reshape(-1, model.n_bodies, model.dim)
-    found = set()
+    found = [np.zeros((0, 2), np.int64)]
     radius = model.radius[0]
     for frame in flat:
         pos = np.zeros((model.n_bodies, 3))
         pos[:, :model.dim] = frame
-        pairs = near_pairs(pos, radius, margin * radius + 1e-12 * radius, model.n_bodies, model.dim)
-        found.update(map(tuple, pairs.tolist()))
-    pairs = np.array(sorted(found), dtype=np.int64).reshape(-1, 2)
-    walls = [(n, -1 - w) for w in range(model.n_walls) for n in range(model.n_bodies)]
-    return np.concatenate((pairs, np.array(walls, dtype=np.int64).reshape(-1, 2)))
+        found.append(near_pairs(pos, radius, margin * radius + 1e-12 * radius, model.n_bodies,
+                                model.dim).astype(np.int64).reshape(-1, 2))
+    pairs = np.unique(np.concatenate(found), axis=0)  # sorted by (i, j)
+    return np.concatenate((pairs, _wall_contacts(model)))
 
 
 def contact_geometry(model: Model, s: np.ndarray, contacts: np.ndarray) -> tuple[np.ndarray, ...]:

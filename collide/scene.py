@@ -535,20 +535,27 @@ def _parse_scene(raw: dict, default_name: str, progress: Progress) -> Scene:
             raise SceneError(f"integrator: {_shown(integrator)} runs the report's contact law only; this scene's "
                              f"({dem_reason(scene)}) runs with integrator = 'dem'")
     _check_sticky(scene)
-    if scene.contact.model == "hertz":
-        for body in scene.bodies:
-            if body.material is None and contact.youngs_modulus is None:
-                raise SceneError(f"contact.youngs_modulus: missing for model = 'hertz' (body.{body.name} has no "
-                                 "material giving one)")
-            if body.material is not None and by_name[body.material].youngs_modulus is None \
-                    and contact.youngs_modulus is None:
-                raise SceneError(f"material.{body.material}.youngs_modulus: missing for model = 'hertz'")
+    if scene.contact.model == "hertz" and contact.youngs_modulus is None:
+        _check_hertz_moduli(bodies, by_name)
     if rest is not None and scene.integrator != "dem":
         raise SceneError("rest: ends a DEM run (integrator = 'dem') when it comes to rest; this scene's "
                          f"integrator is {_shown(scene.integrator)}")
     progress(f"checking {len(scene.bodies):,} bodies for overlaps", 0, 0)
     _check_start(scene, from_file)
     return scene
+
+
+def _check_hertz_moduli(bodies: Bodies, materials: dict) -> None:
+    """Without [contact] youngs_modulus, every body's material must give one (the first body
+    in order without one is named)."""
+    lacking = {None} | {name for name, m in materials.items() if m.youngs_modulus is None}
+    if lacking.isdisjoint(bodies.material):
+        return
+    i = next(i for i, m in enumerate(bodies.material) if m in lacking)
+    if bodies.material[i] is None:
+        raise SceneError(f"contact.youngs_modulus: missing for model = 'hertz' (body.{bodies.names[i]} has no "
+                         "material giving one)")
+    raise SceneError(f"material.{bodies.material[i]}.youngs_modulus: missing for model = 'hertz'")
 
 
 def _parse_domain(table: Any, dim: int) -> Domain | None:

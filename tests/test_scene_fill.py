@@ -456,3 +456,51 @@ def test_a_saved_state_may_start_in_its_contacts_in_dem_only(tmp_path):
     assert _verdict(scene(-0.011, "dem")) == ("body.a.position: overlaps body.b at the start by 0.011 m (deeper "
                                               "than a saved state's contacts may start)")
     assert _verdict(scene(-0.009, "kahan6")) == "body.a.position: overlaps body.b at the start by 0.009 m"
+
+
+def test_masses_from_densities_are_each_rows_own_and_a_lacking_one_is_named(tmp_path):
+    """A body table's rows without a mass take 4/3 pi r^3 rho of their material, the same bits
+    as a [[body]] table's; the first row whose material gives no density is named."""
+    materials = '[[material]]\nname = "glass"\ndensity = 2500.0\n\n[[material]]\nname = "cork"\ndensity = 240.0\n\n'
+    rows = ["name,radius,mass,material,position_x,position_y"]
+    radii = np.random.default_rng(4).uniform(0.01, 0.02, 40).tolist()
+    for i, r in enumerate(radii):
+        rows.append(f"b{i},{r!r},{'' if i % 3 else 1.5},{('glass', 'cork')[i % 2]},{0.1 * i},0")
+    (tmp_path / "t.csv").write_text("\n".join(rows) + "\n")
+    (tmp_path / "s.toml").write_text(materials + '[bodies]\nfile = "t.csv"\n')
+    scene = load_scene(tmp_path / "s.toml")
+    density = {"glass": 2500.0, "cork": 240.0}
+    for i, body in enumerate(scene.bodies):
+        expected = 1.5 if i % 3 == 0 else 4.0 / 3.0 * math.pi * radii[i] ** 3 * density[body.material]
+        assert body.mass == expected, i
+    (tmp_path / "s.toml").write_text(materials.replace("density = 240.0\n", "") + '[bodies]\nfile = "t.csv"\n')
+    with pytest.raises(SceneError, match=re_escape("row 2, mass: missing")):
+        load_scene(tmp_path / "s.toml")
+
+
+def test_bodies_held_as_columns_read_as_the_bodies_they_hold():
+    """A scene's bodies made in bulk (a fill) index, slice, iterate, join and compare as a tuple
+    of Body does, and pack into the same model as that tuple."""
+    from dataclasses import replace
+
+    from collide.body_columns import Bodies
+    from collide.model import compile_scenes
+
+    raw = {"dim": 3, "fill": [{"name": "g", "region": "box", "lower": [0, 0, 0], "upper": [0.1, 0.1, 0.1],
+                               "count": 30, "radius": 0.005, "mass_density": 2500.0, "seed": 3,
+                               "velocity": [0.1, 0.0, -0.2]}]}
+    scene = parse_scene(raw)
+    bodies = scene.bodies
+    assert isinstance(bodies, Bodies) and len(bodies) == 30
+    listed = tuple(bodies)
+    assert bodies == listed and listed == bodies and bodies[-1] == listed[-1] and bodies[3] == listed[3]
+    assert tuple(bodies[5:9]) == listed[5:9] and tuple(bodies[:2] + bodies[28:]) == listed[:2] + listed[28:]
+    assert bodies != listed[:-1] + (replace(listed[-1], mass=2 * listed[-1].mass),)
+    with pytest.raises(IndexError):
+        bodies[30]
+    a, a_state = compile_scenes([scene])
+    b, b_state = compile_scenes([replace(scene, bodies=listed)])
+    for name in ("mass", "radius", "inertia", "material"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert a.body_names == b.body_names and np.array_equal(a_state.s, b_state.s) \
+        and np.array_equal(a_state.v, b_state.v)
