@@ -11,6 +11,7 @@ import numpy as np
 from collide import diagnostics as dg
 from collide.engine import tier
 from collide.model import Model, State
+from collide.periodic import wrap
 from collide.run import SceneRun
 from collide.stepper import RunError
 
@@ -25,10 +26,15 @@ def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
     scene = run.scenes[member]
     res = dg.residuals(r)
     bodies = []
+    # In a periodic box the positions are reported wrapped into it, with the periods each body
+    # crossed (docs/design.md section 10): the engines' own are unwrapped.
+    placed, images = wrap(r.final.s[member], np.array(r.model.box_lower), np.array(r.model.period))
     for n, name in enumerate(r.model.body_names):
         body: dict[str, Any] = {"name": name}
-        pos, vel = r.final.s[member, n], r.final.v[member, n]
+        pos, vel = placed[n], r.final.v[member, n]
         body["position"] = float(pos[0]) if scene.dim == 1 else pos.tolist()
+        if r.model.periodic:
+            body["images"] = images[n].tolist()
         body["velocity"] = float(vel[0]) if scene.dim == 1 else vel.tolist()
         if scene.dim == 2:
             body["spin"] = float(r.final.w[member, n, 0]) if r.model.spin_dim else 0.0
