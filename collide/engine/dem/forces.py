@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from collide.engine.broad import BOX_ANY, nearest
 from collide.engine.dem.contact import contact_force
 from collide.engine.dem.geometry import wall_height
 from collide.engine.dem.layout import (
@@ -29,13 +30,15 @@ from collide.engine.jit import jit, jit_inline
 
 @jit
 def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST, IV, niv,
-           REC, nrec, record_now, out):
+           REC, nrec, record_now, out, box):
     """Forces and torques of every engaged contact (F, T, and by part PT) and the run's contact
     figures, over the listed pairs (PI, PJ) and body-wall pairs (WL: rows k = i * walls + w, i, w); wtabs is
     the wall table as (materials, 1, columns). IV and REC have room for every listed contact
     (the caller grows them); out is scratch (4,). Returns (engaged, niv, nrec): no array is made
-    or returned here, which at a few bodies costs a step as much as its contacts."""
+    or returned here, which at a few bodies costs a step as much as its contacts. In a periodic
+    box (`box`) a pair meets at its nearest images."""
     record = fl[F_RECORD]
+    periodic = box[BOX_ANY] != 0.0
     g0, g1, g2 = grav[0], grav[1], grav[2]
     # Whole-array fills: stored element by element with F's, they took twice as long.
     T[:, :] = 0.0
@@ -50,6 +53,8 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
         dx = X[j, 0] - X[i, 0]
         dy = X[j, 1] - X[i, 1]
         dz = X[j, 2] - X[i, 2]
+        if periodic:
+            dx, dy, dz = nearest(dx, dy, dz, box)
         reach = Bd[i, B_R] + Bd[j, B_R]
         d2 = dx * dx + dy * dy + dz * dz
         if d2 >= reach * reach:
