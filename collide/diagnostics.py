@@ -14,6 +14,7 @@ import numpy as np
 from collide.contact_forces import RecordedForces
 from collide.engine.broad import near_pairs
 from collide.model import TABLE_ESTAR, Model, State
+from collide.periodic import kernel_box, nearest_image
 from collide.results import RunResult
 from collide.trajectory import Trajectory, body_knots, sample, settled
 
@@ -77,7 +78,8 @@ def contacts_near(model: Model, s: np.ndarray, margin: float = 0.0) -> np.ndarra
     for frame in flat:
         pos = np.zeros((model.n_bodies, 3))
         pos[:, :model.dim] = frame
-        pairs = near_pairs(pos, radius, margin * radius + 1e-12 * radius, model.n_bodies, model.dim)
+        pairs = near_pairs(pos, radius, margin * radius + 1e-12 * radius, model.n_bodies, model.dim,
+                           kernel_box(model.period))
         found.update(map(tuple, pairs.tolist()))
     pairs = np.array(sorted(found), dtype=np.int64).reshape(-1, 2)
     walls = [(n, -1 - w) for w in range(model.n_walls) for n in range(model.n_bodies)]
@@ -91,7 +93,7 @@ def contact_geometry(model: Model, s: np.ndarray, contacts: np.ndarray) -> tuple
     pair = j >= 0
     si = s[..., i, :]
     jj = np.where(pair, j, 0)
-    d = s[..., jj, :] - si
+    d = nearest_image(s[..., jj, :] - si, model.period)  # (positions are unwrapped in a periodic box)
     dist = np.sqrt(_dot(d, d))
     with np.errstate(invalid="ignore", divide="ignore"):
         n = d / dist[..., None]

@@ -83,6 +83,20 @@ def check_image_overlap(scene: Scene, pos: np.ndarray, radius: np.ndarray, in_co
                          f"periodic side at the start by {-gap:.3g} m")
 
 
+def kernel_box(period: tuple[float, float, float]) -> np.ndarray:
+    """collide.engine.broad's `box` for these periods: the periods, then 1.0 if any wraps."""
+    return np.array([*period, 1.0 if any(p > 0.0 for p in period) else 0.0])
+
+
+def nearest_image(d: np.ndarray, period: tuple[float, float, float]) -> np.ndarray:
+    """Separations d (..., dim) taken to the nearest image along the periodic axes (period > 0)."""
+    per = np.asarray(period, float)[:d.shape[-1]]
+    if not (per > 0.0).any():
+        return d
+    safe = np.where(per > 0.0, per, 1.0)
+    return d - np.where(per > 0.0, per * np.floor(d / safe + 0.5), 0.0)
+
+
 def wrap(s: np.ndarray, lower: np.ndarray, period: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Positions (..., dim) wrapped into the box along the periodic axes (period > 0), and the
     whole periods each body has crossed there (int; 0 elsewhere): s = wrapped + images period."""
