@@ -289,7 +289,7 @@ def _residuals(result: RunResult) -> Residuals:
         momentum = np.full(model.batch, np.nan)
         angular = np.full(model.batch, np.nan)
     if model.periodic:  # a contact across a periodic side pushes images: no torque balance about a point
-        angular = np.full(model.batch, np.nan)
+        angular = np.full(np.shape(energy), np.nan)
     return Residuals(energy, momentum, angular)
 
 

@@ -218,3 +218,42 @@ def test_the_saved_state_is_wrapped_into_the_box(tmp_path: Path) -> None:
     for body, row in zip(out["bodies"], rows):
         x, y = (float(v) for v in row.split(",")[4:6])
         assert [x, y] == body["position"] and 0.0 <= x < 1.0 and 0.0 <= y < 1.0
+
+
+def test_the_viewer_draws_bodies_in_the_box_and_a_copy_across_each_side_crossed(tmp_path: Path) -> None:
+    """Read back from its recording, a periodic run's frames hold the bodies wrapped into the box
+    (the recording keeps the unwrapped trajectory: the same run exactly) and their contacts with
+    them; a sphere across a side is drawn a second time on the other side (at a corner, four
+    times in all), and the drawing takes them all."""
+    import viser
+
+    from collide.recording import read_recording, write_recording
+    from viewer.scene3d import SceneDrawer
+    from viewer.state import ViewRun
+
+    raw = _scene([_ball("a", [0.15, 0.5], [-1.0, 0.0], radius=0.1), _ball("b", [0.7, 0.52], [0.0, 0.0], radius=0.1),
+                  _ball("c", [0.5, 0.93], [0.3, 0.0], radius=0.1)], periodic=("x", "y"), duration=0.5)
+    run = run_scene(parse_scene(raw))
+    view = ViewRun(read_recording(write_recording(run, tmp_path / "periodic.rrd")))
+    assert np.array_equal(view.result.final.s, run.result.final.s)
+    t = 0.2  # a is across x = 0, c across y = 1
+    frame = view.frame(t)
+    exact = np.array([0.15 - t, 0.5])
+    assert np.allclose(frame.positions[0, :2], exact + [1.0, 0.0], atol=1e-12)  # wrapped
+    body, centre = view.images(frame.positions)
+    assert body.tolist() == [0, 2] and np.allclose(centre[0, :2], exact, atol=1e-12)
+    assert np.allclose(centre[1, :2], frame.positions[2, :2] - [0.0, 1.0])
+    touching = view.frame(0.3)  # a, come round through x = 0, meets b (its contact: 0.251 to 0.345 s)
+    assert len(touching.contacts) == 1 and touching.contacts[0].normal[0] < -0.99  # from a to b: -x
+    assert np.linalg.norm(touching.contacts[0].point - touching.positions[0]) < 0.1  # at a, not across the box
+    corner = view.images(np.array([[0.05, 0.95, 0.0], [0.5, 0.5, 0.0], [0.5, 0.5, 0.0]]))
+    assert corner[0].tolist() == [0, 0, 0]
+    assert {tuple(np.round(p[:2], 12)) for p in corner[1]} == {(1.05, 0.95), (0.05, -0.05), (1.05, -0.05)}
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        drawer = SceneDrawer(server.scene)
+        drawer.show_run(view)
+        for time in np.linspace(view.t0, view.t1, 7):
+            drawer.show_frame(view.frame(time))
+    finally:
+        server.stop()
