@@ -292,6 +292,9 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     integ = INTEGRATORS[integrator]
     if integrator == "dem":  # the fixed-step DEM kernel is its own engine
         raise ValueError("the DEM integrator runs through collide.dem.simulate_dem (collide.run chooses it)")
+    if model.periodic and not integ.events:
+        raise RunError("domain.periodic: integrator 'seed' (the report's update) has no periodic boundaries; "
+                       "use the default integrator or 'dem'")
     dt = np.broadcast_to(np.asarray(dt, dtype=float), (b_count,)).copy()
     auto = np.zeros(b_count, bool) if auto is None else np.broadcast_to(np.asarray(auto, bool), (b_count,))
     if omega_h is None:

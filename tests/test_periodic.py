@@ -257,3 +257,13 @@ def test_the_viewer_draws_bodies_in_the_box_and_a_copy_across_each_side_crossed(
             drawer.show_frame(view.frame(time))
     finally:
         server.stop()
+
+
+def test_the_seed_integrator_asked_on_the_command_line_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "scene.toml"
+    path.write_text(f'name = "s"\ndim = 2\nduration = 0.1\n[domain]\nlower = [0.0, 0.0]\nupper = [1.0, 1.0]\n'
+                    f'periodic = ["x"]\n{BALLS}')
+    done = subprocess.run([sys.executable, "-m", "cli.main", "run", str(path), "--no-record", "--integrator", "seed",
+                           "--dt", "1e-4"], capture_output=True, text=True, cwd=REPO, timeout=120)
+    lines = [line for line in (done.stderr + done.stdout).splitlines() if line.strip()]
+    assert done.returncode == 2 and len(lines) == 1 and "integrator 'seed'" in lines[0], lines

@@ -18,8 +18,8 @@ from collide import diagnostics as dg
 from collide.contact_forces import peak_normal_force
 from collide.engine import layout
 from collide.model import State
-from collide.run import SceneRun
 from collide.periodic import nearest_image, wrap
+from collide.run import SceneRun
 from viewer.contacts import SLICE, ContactIndex
 from viewer.geometry import embed3, orientation_wxyz
 from viewer.sampling import Knots

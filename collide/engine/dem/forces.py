@@ -38,7 +38,6 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
     or returned here, which at a few bodies costs a step as much as its contacts. In a periodic
     box (`box`) a pair meets at its nearest images."""
     record = fl[F_RECORD]
-    periodic = box[BOX_ANY] != 0.0
     g0, g1, g2 = grav[0], grav[1], grav[2]
     # Whole-array fills: stored element by element with F's, they took twice as long.
     T[:, :] = 0.0
@@ -46,6 +45,44 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
     for a in range(n):
         m = Bd[a, B_M]
         F[a, 0], F[a, 1], F[a, 2] = m * g0, m * g1, m * g2
+    # The pair pass in two copies, the nearest-image test folded away in the one without: a scene
+    # with no periodic axis runs the pass it ran before periodic boundaries.
+    if box[BOX_ANY] != 0.0:
+        engaged, niv, nrec, deepest, strongest = _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t,
+                                                        FG, ST, IV, niv, REC, nrec, record, record_now, out, box,
+                                                        True)
+    else:
+        engaged, niv, nrec, deepest, strongest = _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t,
+                                                        FG, ST, IV, niv, REC, nrec, record, record_now, out, box,
+                                                        False)
+    for m in range(WL.shape[0]):
+        k, i, w = WL[m, 0], WL[m, 1], WL[m, 2]
+        delta = Bd[i, B_R] - wall_height(X, WP, i, w)
+        if delta <= 0.0:
+            if WH[k, H_ON] != 0.0:
+                nrec = _close(WH, k, IV, t, FG, REC, nrec, i, -1 - w)
+            continue
+        if WH[k, H_ON] == 0.0:
+            niv = _open(WH, k, IV, niv, i, -1 - w, t, FG, ST, record)
+        engaged += 1
+        fn = contact_force(X, V, W, F, T, PT, Bd, i, -1 - w, -WP[w, 3], -WP[w, 4], -WP[w, 5], delta, wtabs, MAT[i], 0,
+                           WH, k, fl, dt, out)
+        deepest = max(deepest, delta)
+        strongest = max(strongest, fn)
+        if record:
+            _peak(WH, k, t, delta, fn, out)
+        if record_now:
+            _record(REC, nrec, t, i, -1 - w, delta, fn, out)
+            nrec += 1
+    FG[G_OVERLAP], FG[G_FORCE] = deepest, strongest
+    return engaged, niv, nrec
+
+
+@jit_inline
+def _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, FG, ST, IV, niv, REC, nrec, record, record_now,
+           out, box, periodic):
+    """The listed pairs' part of `forces` (at the nearest images if `periodic`). Returns (engaged,
+    niv, nrec, deepest overlap, strongest force)."""
     engaged = 0
     deepest, strongest = FG[G_OVERLAP], FG[G_FORCE]
     for k in range(PI.shape[0]):
@@ -76,27 +113,7 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
         if record_now:
             _record(REC, nrec, t, i, j, delta, fn, out)
             nrec += 1
-    for m in range(WL.shape[0]):
-        k, i, w = WL[m, 0], WL[m, 1], WL[m, 2]
-        delta = Bd[i, B_R] - wall_height(X, WP, i, w)
-        if delta <= 0.0:
-            if WH[k, H_ON] != 0.0:
-                nrec = _close(WH, k, IV, t, FG, REC, nrec, i, -1 - w)
-            continue
-        if WH[k, H_ON] == 0.0:
-            niv = _open(WH, k, IV, niv, i, -1 - w, t, FG, ST, record)
-        engaged += 1
-        fn = contact_force(X, V, W, F, T, PT, Bd, i, -1 - w, -WP[w, 3], -WP[w, 4], -WP[w, 5], delta, wtabs, MAT[i], 0,
-                           WH, k, fl, dt, out)
-        deepest = max(deepest, delta)
-        strongest = max(strongest, fn)
-        if record:
-            _peak(WH, k, t, delta, fn, out)
-        if record_now:
-            _record(REC, nrec, t, i, -1 - w, delta, fn, out)
-            nrec += 1
-    FG[G_OVERLAP], FG[G_FORCE] = deepest, strongest
-    return engaged, niv, nrec
+    return engaged, niv, nrec, deepest, strongest
 
 
 @jit_inline

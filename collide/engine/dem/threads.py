@@ -183,8 +183,19 @@ def _engaged(STT, row, delta, fn):
 @jit
 def cross_pass(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out, box):
     """Thread `row`'s cross pairs (slots s0..s1) into XB, their states into SF (a pair in a
-    periodic box at its nearest images)."""
-    periodic = box[BOX_ANY] != 0.0
+    periodic box at its nearest images). Two copies, the nearest-image test folded away in the
+    one without (as `forces.forces`)."""
+    if box[BOX_ANY] != 0.0:
+        _cross(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out, box,
+               True)
+    else:
+        _cross(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out, box,
+               False)
+
+
+@jit_inline
+def _cross(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out, box,
+           periodic):
     for s in range(s0, s1):
         k = cross[s]
         i, j = PI[k], PJ[k]
@@ -230,12 +241,23 @@ def _take(XB, s, side, F, T, PT, a):
 @jit
 def own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd, row,
              inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box):
+    """Thread `row`'s bodies' forces (`_own`), in two copies as `cross_pass`."""
+    if box[BOX_ANY] != 0.0:
+        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd, row,
+             inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, True)
+    else:
+        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd, row,
+             inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, False)
+
+
+@jit_inline
+def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd, row,
+         inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, periodic):
     """Thread `row`'s bodies' forces (bd: its body, pair, wall and slot starts, then ends), after
     every thread's `cross_pass`. Events (pairs: 2 k, + 1 if closed; walls: 2 m, + 1) go to EVP
     from the thread's first pair and EVW from its first wall contact, if recorded."""
     lo, hi, k0, k1, m0, m1, s = bd[0], bd[1], bd[2], bd[3], bd[4], bd[5], bd[6]
     g0, g1, g2 = grav[0], grav[1], grav[2]
-    periodic = box[BOX_ANY] != 0.0
     nw = 0
     for a in range(lo, hi):
         T[a, :] = 0.0
