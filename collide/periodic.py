@@ -1,5 +1,6 @@
 """Periodic boundaries (docs/design.md section 10): what a scene with periodic axes must satisfy,
-overlaps across its sides at the start, and positions wrapped into the box for output.
+overlaps across its sides at the start, and positions wrapped into the box for output. (A
+`scene` here is a `collide.scene.Scene`, which imports this module.)
 
 The engines keep every body's position unwrapped (continuous: its free flight and its recorded
 trajectory never jump) and meet two bodies at their nearest images; what is reported is wrapped
@@ -8,20 +9,17 @@ into the box, with the number of periods each body has crossed (`wrap`).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from collide.scene_values import SceneError
 
-if TYPE_CHECKING:
-    from collide.scene import Scene
-
 NEIGHBOUR_SKIN = 0.25  # the DEM's neighbour-list skin, in smallest radii (collide.dem.SKIN)
 AXES = ("x", "y", "z")
 
 
-def check_periodic(scene: Scene) -> None:
+def check_periodic(scene: Any) -> None:
     """Refuse, in one line, a periodic scene the engines cannot answer right: a period too short
     for the nearest image (at least twice the largest diameter plus the neighbour skin: two
     spheres then meet at one image only), a wall across a periodic axis, the seed's
@@ -49,7 +47,7 @@ def check_periodic(scene: Scene) -> None:
                              f"({need:.6g} m)")
 
 
-def check_image_overlap(scene: Scene, pos: np.ndarray, radius: np.ndarray, in_contact: np.ndarray | None) -> None:
+def check_image_overlap(scene: Any, pos: np.ndarray, radius: np.ndarray, in_contact: np.ndarray | None) -> None:
     """No two spheres overlap across a periodic side at the start: the bodies within a diameter
     of a side, copied to the other (corners too), checked against the rest."""
     from collide.scene_bodies import _first_pair_overlap
