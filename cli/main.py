@@ -202,10 +202,14 @@ def run(
 
         write_text_atomic(csv, report_csv(result, every, csv_layout))
     if save_state is not None:
-        from collide.bodies_file import write_state
+        import numpy as np
 
-        final = result.result.final
-        write_state(save_state, loaded, final.s[0], final.v[0], final.w[0])
+        from collide.bodies_file import write_state
+        from collide.periodic import wrap
+
+        final, model = result.result.final, result.result.model
+        placed, _ = wrap(final.s[0], np.array(model.box_lower), np.array(model.period))  # (into a periodic box)
+        write_state(save_state, loaded, placed, final.v[0], final.w[0])
     if recording is not None:
         from collide.recording import DEFAULT_FPS, last_write, write_recording
 

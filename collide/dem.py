@@ -20,6 +20,7 @@ from collide.engine import layout, tier
 from collide.engine.dem import layout as dk
 from collide.engine.dem import loop as dem_loop
 from collide.model import KISSING, TABLE_ESTAR, TABLE_K, TABLE_KTR, TABLE_REST, Model, State, select_model
+from collide.periodic import NEIGHBOUR_SKIN
 from collide.results import ContactLog, RunResult, Trajectory
 from collide.stepper import (
     Progress,
@@ -39,7 +40,7 @@ HERTZ_TIME = 2.868  # t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5): Johnson, Contact M
 ERROR_CONSTANT, ERROR_ORDER = 1.2, 1
 MIN_STEPS_PER_CONTACT, MAX_STEPS_PER_CONTACT = 50, 20_000
 FRAME_BUDGET = 2_000_000  # body-frames a recording keeps at most
-SKIN = 0.25  # neighbour-list skin, in smallest radii
+SKIN = NEIGHBOUR_SKIN  # neighbour-list skin, in smallest radii (a periodic box's shortest period needs it)
 
 
 def _extremes(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -284,7 +285,7 @@ def kernel_args(model: Model, initial: State, b: int, *, dt: np.ndarray, duratio
     fl = np.array([model.dim, model.spin_dim > 0, model.hertz, model.tangential_spring, record, max_steps],
                   dtype=np.int64)
     fp = np.array([dt[b], t_end, rest[b] if np.isfinite(rest[b]) else 0.0, 0.0, frame,
-                   SKIN * float(model.radius[b].min()), 0.0, 0.0])
+                   SKIN * float(model.radius[b].min()), 0.0, 0.0, *model.period, 1.0 if model.periodic else 0.0])
     pair, wall = kernel_tables(model, b)
     return (X, V, W, Q, _bodies(model, b), pair, wall, WP, grav, fl, fp), t_end
 

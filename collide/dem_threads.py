@@ -20,9 +20,10 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from collide.engine.broad import NBOX
 from collide.engine.dem import layout as dk
 from collide.engine.dem import threads as par
-from collide.engine.dem.flight import will_meet
+from collide.engine.dem.flight import may_meet
 from collide.engine.dem.forces import forces
 from collide.engine.dem.loop import _any_rolling, _coast, _finish, _materials, _outputs, _step_length
 from collide.engine.dem.neighbours import rebuild
@@ -109,6 +110,7 @@ def dem_run_threaded(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads: in
 def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
     n = X.shape[0]
     dim, spin, rest, skin = fl[dk.F_DIM], fl[dk.F_SPIN], fp[dk.P_REST], fp[dk.P_SKIN]
+    box = fp[dk.P_BOX:dk.P_BOX + NBOX]
     record = fl[dk.F_RECORD]
     ST, FG, F, T, PT, WK, WH = _outputs(n, WP.shape[0])
     KN, REC, IV, EP = np.zeros((0, dk.NK)), np.zeros((0, dk.NR)), np.zeros((0, 4)), np.zeros((0, dk.NEP))
@@ -118,14 +120,14 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
     rolling = _any_rolling(tabs, wtabs, spin)
     X0 = X.copy()
     keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin,
-                                         np.zeros(0, np.int64), np.zeros((0, dk.NH)), ST)
+                                         np.zeros(0, np.int64), np.zeros((0, dk.NH)), ST, box)
     scratch = np.zeros(4)
     STT, PM, outs = np.zeros((2, threads, par.NST)), np.zeros((2, threads)), np.zeros((threads, 4))
     most = PI.shape[0] + WL.shape[0]
     if record:
         IV, REC = grow(IV, most), grow(REC, most)
     engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl,
-                                0.0, 0.0, n, FG, ST, IV, 0, REC, 0, record != 0, scratch)
+                                0.0, 0.0, n, FG, ST, IV, 0, REC, 0, record != 0, scratch, box)
     if record:
         KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, 0.0, n, 0.0)
         EP = grow(EP, nep)
@@ -153,7 +155,7 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
             if over:
                 break
         elif reason == par.R_REBUILD:
-            keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST)
+            keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST, box)
         elif reason == par.R_GROW:
             most = PI.shape[0] + WL.shape[0]
             IV, REC = grow(IV, int(C[par.C_NIV]) + most), grow(REC, int(C[par.C_NREC]) + most)
@@ -164,7 +166,7 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
             if over:
                 break
         elif reason == par.R_MEET:
-            if not will_meet(X, V, Bd, WP, grav, n):
+            if not may_meet(X, V, Bd, WP, grav, n, box):
                 break
         else:
             if reason == par.R_NONFINITE:
@@ -200,7 +202,7 @@ def _recorded_step(state, C, IV, REC, KN, nkn, EP, nep):
     if nrec + most >= REC.shape[0]:
         REC = grow(REC, nrec + most)
     engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl, h, t, n,
-                                FG, ST, IV, niv, REC, nrec, True, scratch)
+                                FG, ST, IV, niv, REC, nrec, True, scratch, fp[dk.P_BOX:dk.P_BOX + NBOX])
     kinetic_now = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, True)
     ever = C[par.C_EVER] != 0.0 or engaged > 0
     if engaged:
@@ -222,5 +224,6 @@ def _recorded_step(state, C, IV, REC, KN, nkn, EP, nep):
         return True, IV, REC, KN, nkn, EP, nep
     rest, t_end = fp[dk.P_REST], fp[dk.P_TEND]
     over = (rest > 0.0 and ever and kinetic_now < rest * peak) or last or (
-        not math.isfinite(t_end) and ever and engaged == 0 and not will_meet(X, V, Bd, WP, grav, n))
+        not math.isfinite(t_end) and ever and engaged == 0 and not may_meet(X, V, Bd, WP, grav, n,
+                                                                             fp[dk.P_BOX:dk.P_BOX + NBOX]))
     return over, IV, REC, KN, nkn, EP, nep

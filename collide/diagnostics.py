@@ -14,6 +14,7 @@ import numpy as np
 from collide.contact_forces import RecordedForces
 from collide.engine.broad import near_pairs
 from collide.model import TABLE_ESTAR, Model, State
+from collide.periodic import kernel_box, nearest_image
 from collide.results import RunResult
 from collide.trajectory import Trajectory, body_knots, sample, settled
 
@@ -83,8 +84,8 @@ def contacts_near(model: Model, s: np.ndarray, margin: float = 0.0) -> np.ndarra
     for frame in flat:
         pos = np.zeros((model.n_bodies, 3))
         pos[:, :model.dim] = frame
-        found.append(near_pairs(pos, radius, margin * radius + 1e-12 * radius, model.n_bodies,
-                                model.dim).astype(np.int64).reshape(-1, 2))
+        found.append(near_pairs(pos, radius, margin * radius + 1e-12 * radius, model.n_bodies, model.dim,
+                                kernel_box(model.period)).astype(np.int64).reshape(-1, 2))
     pairs = np.unique(np.concatenate(found), axis=0)  # sorted by (i, j)
     return np.concatenate((pairs, _wall_contacts(model)))
 
@@ -96,7 +97,7 @@ def contact_geometry(model: Model, s: np.ndarray, contacts: np.ndarray) -> tuple
     pair = j >= 0
     si = s[..., i, :]
     jj = np.where(pair, j, 0)
-    d = s[..., jj, :] - si
+    d = nearest_image(s[..., jj, :] - si, model.period)  # (positions are unwrapped in a periodic box)
     dist = np.sqrt(_dot(d, d))
     with np.errstate(invalid="ignore", divide="ignore"):
         n = d / dist[..., None]
@@ -228,7 +229,8 @@ class Residuals:
     energy: |E + W - E0| / E0 (W = work dissipated by friction, gravity's potential included);
     momentum: |P - P0 - M g t| / sum m|v|; angular_momentum: |L - L0 - gravity's torque| /
     sum |s x m v| + |I w| (largest of start and end). With walls, momentum and angular momentum
-    are not conserved and their residuals are NaN (null in JSON).
+    are not conserved and their residuals are NaN (null in JSON); in a periodic box angular
+    momentum is not.
     """
 
     energy: np.ndarray
@@ -290,6 +292,8 @@ def _residuals(result: RunResult) -> Residuals:
     if model.n_walls:
         momentum = np.full(model.batch, np.nan)
         angular = np.full(model.batch, np.nan)
+    if model.periodic:  # a contact across a periodic side pushes images: no torque balance about a point
+        angular = np.full(np.shape(energy), np.nan)
     return Residuals(energy, momentum, angular)
 
 

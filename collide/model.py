@@ -68,6 +68,14 @@ class Model:
     hertz: bool = False
     tangential_spring: bool = False
     dissipative: bool = False  # damping, friction or rolling resistance can take energy out
+    # The periodic box (docs/design.md section 10), shared by the batch: each axis's period (x, y,
+    # z; 0 where it does not wrap) and the box's lower corner.
+    period: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    box_lower: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def periodic(self) -> bool:
+        return any(p > 0.0 for p in self.period)
 
     @property
     def batch(self) -> int:
@@ -141,7 +149,15 @@ def shape_key(scene: Scene) -> tuple:
     came out 7.7 m/s off)."""
     return (scene.dim, tuple(as_bodies(scene.bodies, scene.dim).names), tuple((w.point, w.normal) for w in scene.walls),
             scene.gravity is not None, scene.has_spin, scene.contact.lever, len(scene.materials),
-            scene.contact.model, scene.contact.tangential)
+            scene.contact.model, scene.contact.tangential, _box(scene))
+
+
+def _box(scene: Scene) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """A scene's periodic box: (periods, lower corner), zeros where nothing wraps."""
+    domain = scene.domain
+    if domain is None or not domain.periodic:
+        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    return domain.period, tuple(float(x) for x in (tuple(domain.lower) + (0.0, 0.0, 0.0))[:3])
 
 
 def _mixed(a: float | None, b: float | None, default: float, mean: str) -> float:
@@ -290,6 +306,7 @@ def compile_scenes(scenes: list[Scene]) -> tuple[Model, State]:
         friction=any(s.has_friction for s in scenes), seed_lever=first.contact.lever == "seed",
         hertz=first.contact.model == "hertz", tangential_spring=first.contact.tangential == "spring",
         dissipative=any(s.has_friction or s.needs_dem for s in scenes),
+        period=_box(first)[0], box_lower=_box(first)[1],
     )
     s = np.stack([c.position for c in columns]).reshape(b, n, dim)
     v = np.stack([c.velocity for c in columns]).reshape(b, n, dim)

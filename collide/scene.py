@@ -23,6 +23,7 @@ import numpy as np
 
 from collide.body_columns import Bodies, as_bodies
 from collide.fill import FILL_KEYS
+from collide.periodic import check_image_overlap, check_periodic
 from collide.scene_bodies import BODY_KEYS, check_names, check_start_overlap, parse_bodies
 from collide.scene_toml import FlatTables, loads_scene
 from collide.scene_values import (  # noqa: F401 (re-exported: the scene's API)
@@ -113,10 +114,19 @@ class PairLaw:
 @dataclass(frozen=True)
 class Domain:
     """The box a scene lives in (docs/design.md section 10): every body starts inside it, and a
-    box fill without corners fills it. Nothing holds bodies in it once they move (walls do)."""
+    box fill without corners fills it. Along the `periodic` axes it wraps: a body leaving one
+    side enters the other and contacts see the images across it; along the others nothing holds
+    bodies in it once they move (walls do)."""
 
     lower: tuple[float, ...]
     upper: tuple[float, ...]
+    periodic: tuple[str, ...] = ()
+
+    @property
+    def period(self) -> tuple[float, float, float]:
+        """Each axis's period (x, y, z; 0 where it does not wrap)."""
+        return tuple(u - lo if axis in self.periodic else 0.0
+                     for axis, lo, u in zip("xyz", self.lower + (0.0,) * 3, self.upper + (0.0,) * 3))
 
 
 @dataclass(frozen=True)
@@ -535,6 +545,7 @@ def _parse_scene(raw: dict, default_name: str, progress: Progress) -> Scene:
             raise SceneError(f"integrator: {_shown(integrator)} runs the report's contact law only; this scene's "
                              f"({dem_reason(scene)}) runs with integrator = 'dem'")
     _check_sticky(scene)
+    check_periodic(scene)
     if scene.contact.model == "hertz" and contact.youngs_modulus is None:
         _check_hertz_moduli(bodies, by_name)
     if rest is not None and scene.integrator != "dem":
@@ -566,17 +577,18 @@ def _parse_domain(table: Any, dim: int) -> Domain | None:
     if not isinstance(periodic, list) or not all(a in ("x", "y", "z")[:dim] for a in periodic):
         raise SceneError(f"domain.periodic: expected a list of axes among {', '.join(('x', 'y', 'z')[:dim])}, "
                          f"got {_shown(periodic)}")
-    if periodic:
-        raise SceneError("domain.periodic: periodic boundaries are not built yet (leave periodic out, or [])")
+    if len(set(periodic)) != len(periodic):
+        raise SceneError(f"domain.periodic: an axis named twice in {_shown(periodic)}")
     for key in ("lower", "upper"):
         if key not in table:
-            raise SceneError(f"domain.{key}: missing")
+            raise SceneError(f"domain.{key}: missing" + (" (a periodic axis wraps from lower to upper)"
+                                                         if periodic else ""))
     lower = _vector(table["lower"], "domain.lower", dim)
     upper = _vector(table["upper"], "domain.upper", dim)
     if not all(u > lo for lo, u in zip(lower, upper)):
         raise SceneError(f"domain.upper: must exceed lower along every axis, got lower {list(lower)}, "
                          f"upper {list(upper)}")
-    return Domain(lower, upper)
+    return Domain(lower, upper, tuple(a for a in "xyz" if a in periodic))
 
 
 def _more_bodies(raw: dict, dim: int, materials: dict, domain: Domain | None, bodies: Bodies,
@@ -636,6 +648,8 @@ def _check_start(scene: Scene, from_file: range) -> None:
         in_contact = np.zeros(n, dtype=bool)
         in_contact[from_file.start:from_file.stop] = True
     check_start_overlap(bodies.names, pos, radius, scene.walls, in_contact)
+    if scene.domain is not None and scene.domain.periodic:
+        check_image_overlap(scene, pos, radius, in_contact)
     if scene.domain is not None:
         outside = ((pos < np.array(scene.domain.lower)) | (pos > np.array(scene.domain.upper))).any(axis=1)
         if outside.any():

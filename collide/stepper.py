@@ -262,6 +262,20 @@ def unpack_state(model: Model, G: np.ndarray) -> tuple:
     return s, v, w, q
 
 
+def periodic_settings(model: Model, fp: np.ndarray, box: int, cap: int) -> None:
+    """The periodic box into the kernels' settings fp (B, ...) from column `box`: the periods, 1.0
+    if any axis wraps; and at `cap` how far a body may move between two looks at the nearest
+    images: while two bodies close or part by less than L / 2 - (r_i + r_j), the image of the
+    other that can touch one stays the nearest (docs/design.md section 10)."""
+    if not model.periodic:
+        return
+    period = np.array(model.period)
+    fp[:, box:box + 3] = period
+    fp[:, box + 3] = 1.0
+    shortest = period[period > 0.0].min()
+    fp[:, cap] = 0.45 * (0.5 * shortest - 2.0 * model.radius.max(axis=1))
+
+
 def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
              duration: np.ndarray | None = None, tail: np.ndarray | None = None,
              record: bool = True, max_steps: int = MAX_STEPS_DEFAULT,
@@ -278,6 +292,9 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     integ = INTEGRATORS[integrator]
     if integrator == "dem":  # the fixed-step DEM kernel is its own engine
         raise ValueError("the DEM integrator runs through collide.dem.simulate_dem (collide.run chooses it)")
+    if model.periodic and not integ.events:
+        raise RunError("domain.periodic: integrator 'seed' (the report's update) has no periodic boundaries; "
+                       "use the default integrator or 'dem'")
     dt = np.broadcast_to(np.asarray(dt, dtype=float), (b_count,)).copy()
     auto = np.zeros(b_count, bool) if auto is None else np.broadcast_to(np.asarray(auto, bool), (b_count,))
     if omega_h is None:
@@ -302,7 +319,9 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     G, WP, grav = kernel_inputs(model, initial)
     spin = model.spin_dim > 0
     friction = model.friction & (model.mu > 0) & (model.dim > 1)
-    planes = [plane_of_motion(model, initial, b) if friction[b] and model.dim == 3 else None for b in range(b_count)]
+    # (A periodic box is not turned: its axes are the scene's.)
+    planes = [plane_of_motion(model, initial, b) if friction[b] and model.dim == 3 and not model.periodic else None
+              for b in range(b_count)]
     turns = friction & np.array([model.dim == 3 and plane is None for plane in planes])
     fl = np.zeros((b_count, int(layout.NFL)), np.int64)
     fl[:, layout.FL_SPIN], fl[:, layout.FL_FRICTION], fl[:, layout.FL_SEED] = spin, friction, model.seed_lever
@@ -320,6 +339,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     fp[:, layout.FP_SLOW] = 1e-9
     fastest = np.sqrt((initial.v ** 2).sum(-1)).max(-1)
     fp[:, layout.FP_END_SLOW] = np.where(np.asarray(resolved) > 1e-9, resolved, 0.0) * fastest
+    periodic_settings(model, fp, layout.FP_BOX, layout.FP_CAP)
     # Contiguous already (stacked per scene); a strided view would compile the kernel anew.
     tables = [(np.ascontiguousarray(model.pair_table[b]), np.ascontiguousarray(model.wall_table[b]))
               for b in range(b_count)]

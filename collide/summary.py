@@ -11,6 +11,7 @@ import numpy as np
 from collide import diagnostics as dg
 from collide.engine import tier
 from collide.model import Model, State
+from collide.periodic import wrap
 from collide.run import SceneRun
 from collide.stepper import RunError
 
@@ -84,20 +85,30 @@ def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
 
 
 def _final_bodies(r: Any, dim: int, member: int) -> list[dict[str, Any]]:
-    """Each body's name and final position, velocity and spin as the JSON shows them."""
-    s, v = r.final.s[member], r.final.v[member]
-    if dim == 1:
-        pos, vel = s[:, 0].tolist(), v[:, 0].tolist()
-    else:
-        pos, vel = s.tolist(), v.tolist()
+    """Each body's name and final position, velocity and spin as the JSON shows them. In a
+    periodic box the positions are wrapped into it, with the periods each body crossed
+    (docs/design.md section 10): the engines' own are unwrapped."""
+    s, images = wrap(r.final.s[member], np.array(r.model.box_lower), np.array(r.model.period))
+    v = r.final.v[member]
+    pos, vel = (s[:, 0].tolist(), v[:, 0].tolist()) if dim == 1 else (s.tolist(), v.tolist())
     names = r.model.body_names
     if dim == 1:
-        return [{"name": n, "position": p, "velocity": u} for n, p, u in zip(names, pos, vel)]
-    if r.model.spin_dim:
+        spin = [None] * len(names)
+    elif r.model.spin_dim:
         spin = r.final.w[member][:, 0].tolist() if dim == 2 else r.final.w[member].tolist()
     else:
         spin = [0.0 if dim == 2 else [0.0, 0.0, 0.0] for _ in names]
-    return [{"name": n, "position": p, "velocity": u, "spin": w} for n, p, u, w in zip(names, pos, vel, spin)]
+    crossed = images.tolist() if r.model.periodic else [None] * len(names)
+    bodies = []
+    for n, p, u, w, c in zip(names, pos, vel, spin, crossed):
+        body: dict[str, Any] = {"name": n, "position": p}
+        if c is not None:
+            body["images"] = c
+        body["velocity"] = u
+        if dim > 1:
+            body["spin"] = w
+        bodies.append(body)
+    return bodies
 
 
 def _refuse_non_finite(value: Any, scene: str, where: str = "") -> None:

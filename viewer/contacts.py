@@ -20,6 +20,7 @@ import numpy as np
 from collide.contact_forces import RecordedForces
 from collide.engine import layout
 from collide.model import Model
+from collide.periodic import nearest_image
 from collide.trajectory import Knots, Trajectory, segment_search
 
 SLICE = 1 << 16  # contact entries evaluated at once by `ContactIndex.overlaps`
@@ -117,7 +118,7 @@ class ContactIndex:
         pair = j >= 0
         si = s[tk, i]
         jj = np.where(pair, j, 0)
-        delta = s[tk, jj] - si
+        delta = nearest_image(s[tk, jj] - si, model.period)
         dist = np.sqrt(np.sum(delta * delta, axis=-1))
         with np.errstate(invalid="ignore", divide="ignore"):
             n = delta / dist[:, None]

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import viser
 
+from collide.periodic import nearest_image
 from viewer.clip import BodyLook, links_shown
 from viewer.colours import body_colours, colour_map, darker, legend_html, lighter
 from viewer.geometry import (
@@ -57,6 +58,7 @@ SUBDIVISIONS = 3
 FEW_BODIES = 12  # above this, instanced spheres
 CHAIN_OPACITY = 0.3  # spheres while the force chains are shown
 CHAIN_BLOCK = 256  # the force chains' batch grows in blocks of this many links
+IMAGE_BLOCK = 64  # the periodic copies' batch grows in blocks of this many spheres
 CHAIN_SEGMENTS = 6  # sides of a force chain's cylinder (thin: six read as round)
 WALL_KEEP = 0.03  # of the scene's extent: walls that moved less are not sent again
 MIN_ARROW = 0.08  # arrows shorter than this many radii are not drawn (no heads on round-off)
@@ -153,6 +155,7 @@ class SceneDrawer:
         self._bodies: list[dict] = []
         self._batch: dict[str, viser.SceneNodeHandle] = {}
         self._chain_capacity = 0
+        self._image_capacity = 0
         self._force_scale = 1.0
         self._friction_scale = 1.0
         self._velocity_scale = 1.0
@@ -536,11 +539,13 @@ class SceneDrawer:
             self._show_forces(frame)
         self._show_vectors(frame)
         self._show_com(frame)
+        self._show_images(frame)
         if self._past:
             k = int(np.searchsorted(view.path_times, frame.t, side="right"))
             for i, past in enumerate(self._past):
                 path = np.concatenate((view.paths[i][:k], frame.positions[i][None]), axis=0)
-                past.points = _segments(path).astype(np.float32)
+                segments = view.trail_breaks(_segments(path))  # (none across a periodic side)
+                past.points = (segments if len(segments) else _segments(path[-1:])).astype(np.float32)
         self._apply_clip(frame)
         self.look.frame_shown(frame)
 
@@ -678,6 +683,33 @@ class SceneDrawer:
             # vanish until their next update.
             self._batch["chains"].visible = False
 
+    def _show_images(self, frame: Frame) -> None:
+        """In a periodic box, a copy of each sphere across every side it crosses (plain spheres
+        in the body's colour: `ViewRun.images`), in one batched mesh grown in blocks."""
+        view = self.view
+        if view is None or not view.model.periodic:
+            return
+        body, centre = view.images(frame.positions)
+        k = len(body)
+        handle = self._batch.get("images")
+        cap = 0 if handle is None else self._image_capacity
+        if k > cap:
+            if handle is not None:
+                handle.remove()
+                self._colours = np.zeros((0, 3), np.uint8)  # (see _show_chains: resent with the next frame)
+            cap = self._image_capacity = IMAGE_BLOCK * -(-k // IMAGE_BLOCK)
+            verts, faces = unit_sphere(2)
+            handle = self._batch["images"] = self.scene.add_batched_meshes_simple(
+                "/bodies/images", verts, faces, batched_wxyzs=np.tile([1.0, 0.0, 0.0, 0.0], (cap, 1)),
+                batched_positions=np.zeros((cap, 3)), batched_scales=np.zeros(cap, np.float32),
+                batched_colors=np.zeros((cap, 3), np.uint8), lod="off", cast_shadow=False, receive_shadow=False)
+        pos, scales = np.zeros((cap, 3), np.float32), np.zeros(cap, np.float32)
+        colours = np.zeros((cap, 3), np.uint8)
+        pos[:k], scales[:k] = centre, view.radius[body]
+        if k and len(self._colours):
+            colours[:k] = self._colours[body]
+        handle.batched_positions, handle.batched_scales, handle.batched_colors = pos, scales, colours
+
     def _show_shadows(self, frame: Frame) -> None:
         shadows = self._batch.get("shadows")
         if shadows is None or self.view is None:
@@ -705,7 +737,10 @@ class SceneDrawer:
         strong &= links_shown(links.i, links.j, self._hidden)
         i, j, point, force = links.i[strong], links.j[strong], links.point[strong], links.force[strong]
         start = frame.positions[i]
-        end = np.where((j >= 0)[:, None], frame.positions[np.maximum(j, 0)], point)
+        # (across a periodic side, to the other body's nearest image)
+        other = start + embed3(nearest_image((frame.positions[np.maximum(j, 0)] - start)[:, :view.dim],
+                                             view.model.period))
+        end = np.where((j >= 0)[:, None], other, point)
         k = len(i)
         if k > self._chain_capacity:
             old = self._batch.pop("chains", None)

@@ -18,6 +18,7 @@ from collide import diagnostics as dg
 from collide.contact_forces import peak_normal_force
 from collide.engine import layout
 from collide.model import State
+from collide.periodic import nearest_image, wrap
 from collide.run import SceneRun
 from collide.trajectory import Knots
 from viewer.contacts import SLICE, ContactIndex
@@ -181,7 +182,7 @@ class ViewRun:
         path_k = _subsample(np.arange(len(self.times)), MAX_PATH_POINTS)
         self.path_times = self.times[path_k]
         path_s = embed3(states.s[path_k, 0])
-        self.paths = path_s.transpose(1, 0, 2)
+        self.paths = self._wrapped(path_s).transpose(1, 0, 2)
         self.com_path = (self.mass[None, :, None] * path_s).sum(axis=1) / self.mass.sum()
         self.walls = [(embed3(np.asarray(w.point, float)), embed3(np.asarray(w.normal, float)))
                       for w in self.scene.walls]
@@ -227,6 +228,38 @@ class ViewRun:
         self._end_values = {float(self.times[k]): body_values_arrays(self.mass, self.model.inertia[0],
                                                                      states.v[k, 0], states.w[k, 0])
                             for k in (0, -1) if float(self.times[k]) in (self.t0, self.t1)}
+
+    # ------------------------------------------------------------------------------------------
+    # A periodic box (docs/design.md section 10): bodies drawn wrapped into it, with a copy across
+    # each side their sphere crosses
+
+    def _wrapped(self, s: np.ndarray) -> np.ndarray:
+        """Positions (..., 3) wrapped into the periodic box (unchanged without one)."""
+        if not self.model.periodic:
+            return s
+        return wrap(s, np.array(self.model.box_lower), np.array(self.model.period))[0]
+
+    def images(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The copies to draw of the spheres that cross a periodic side: (body (M,), centre
+        (M, 3)), the copy on the other side of each side crossed (at a corner, each combination)."""
+        n = len(positions)
+        body, points = np.arange(n), np.asarray(positions, float)
+        for d, period in enumerate(self.model.period):
+            if period <= 0.0:
+                continue
+            lo, r = self.model.box_lower[d], self.radius[body]
+            low, high = points[:, d] - lo < r, lo + period - points[:, d] < r
+            shift = np.eye(3)[d] * period
+            points = np.concatenate((points, points[low] + shift, points[high] - shift))
+            body = np.concatenate((body, body[low], body[high]))
+        return body[n:], points[n:]
+
+    def trail_breaks(self, segments: np.ndarray) -> np.ndarray:
+        """Trail segments (K, 2, 3) without those that jump across the periodic box (a wrap)."""
+        if not self.model.periodic:
+            return segments
+        half = 0.5 * np.where(np.array(self.model.period) > 0.0, self.model.period, np.inf)
+        return segments[~(np.abs(segments[:, 1] - segments[:, 0]) > half).any(axis=1)]
 
     # ------------------------------------------------------------------------------------------
     # Sampling
@@ -277,6 +310,10 @@ class ViewRun:
         velocities = embed3(st.v[0, 0])
         wxyz = orientation_wxyz(st.q[0, 0])
         e = self._contacts.at(times, st.s[:, 0])
+        if self.model.periodic:  # drawn in the box: the bodies wrapped into it, their contacts with them
+            placed, _ = wrap(st.s[0, 0], np.array(self.model.box_lower), np.array(self.model.period))
+            e.point = e.point + (placed - st.s[0, 0])[e.i]
+            positions = embed3(placed)
         # Spheres that touch only to round-off (an overlap of 1e-17 m) are not in contact; those
         # the engine had pressing are, though the motion rebuilt between two DEM frames may
         # have them apart (a collision shorter than a frame).
@@ -289,7 +326,7 @@ class ViewRun:
             for k in range(len(e.ck)):
                 i, j = int(e.i[k]), int(e.j[k])
                 if j >= 0:
-                    d = positions[j] - positions[i]
+                    d = embed3(nearest_image((positions[j] - positions[i])[:self.dim], self.model.period))
                     normal = d / np.linalg.norm(d)
                 else:
                     normal = -embed3(self.model.wall_normal[-1 - j])

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from collide.engine.broad import join, near_pairs, root_of
+from collide.engine.broad import BOX_ANY, join, near_pairs, nearest, root_of
 from collide.engine.jit import jit, jit_inline
 from collide.engine.layout import CN_IVALS, FL_PLANAR, FL_SPIN, G_Q, G_R, G_S, G_TB, G_V, G_W, V_I, V_J
 from collide.engine.numerics import smallest_positive_root
@@ -71,12 +71,16 @@ def bring(G, i, t, grav, fl):
 
 
 @jit
-def touch_time(G, i, j, t, WP, grav):
-    """Time from t until body i touches body j (or wall -1 - j) in free flight (inf: never)."""
+def touch_time(G, i, j, t, WP, grav, box):
+    """Time from t until body i touches body j (or wall -1 - j) in free flight (inf: never). In a
+    periodic box, j's nearest image at t: the callers look no further ahead than a body can
+    cross to another image."""
     px, py, pz, ux, uy, uz = free_state(G, i, t, grav)
     if j >= 0:
         qx, qy, qz, wx, wy, wz = free_state(G, j, t, grav)
         dx, dy, dz = qx - px, qy - py, qz - pz
+        if box[BOX_ANY] != 0.0:
+            dx, dy, dz = nearest(dx, dy, dz, box)
         ex, ey, ez = wx - ux, wy - uy, wz - uz  # gravity cancels in relative motion
         b = 2.0 * (dx * ex + dy * ey + dz * ez)
         if b >= 0:
@@ -100,12 +104,14 @@ def positions_at(G, n, t, grav, P, V):
 
 
 @jit_inline
-def approaches(P, V, i, j, slow, floor, scale):
+def approaches(P, V, i, j, slow, floor, scale, box):
     """Whether bodies i and j close along their line of centres faster than `slow` times their
     speed scales (`speed_scales`: round-off of the speeds the pair itself carries, never of the
     scene's fastest body, beside which a slow pair would pass through unseen) and than `floor`
     (m/s)."""
     dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
+    if box[BOX_ANY] != 0.0:
+        dx, dy, dz = nearest(dx, dy, dz, box)
     closing = -((V[j, 0] - V[i, 0]) * dx + (V[j, 1] - V[i, 1]) * dy + (V[j, 2] - V[i, 2]) * dz)
     return closing > max(slow * (scale[i] + scale[j]), floor) * math.sqrt(dx * dx + dy * dy + dz * dz)
 
@@ -150,7 +156,7 @@ def speed_scales(V, n, parent):
 
 
 @jit
-def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow, scale):
+def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow, scale, box):
     """The earliest contact start after t, looking `horizon` ahead (every pair if asked). Two
     bodies closing at under `slow` times their speed scales are taken as not approaching: what is
     left of a perfect exchange of velocities, round-off, would otherwise meet again billions of
@@ -159,26 +165,26 @@ def next_contact(G, P, V, n, t, WP, grav, dim, horizon, every_pair, slow, scale)
     if every_pair:
         for i in range(n):
             for j in range(i + 1, n):
-                if approaches(P, V, i, j, slow, 0.0, scale):
-                    best = min(best, touch_time(G, i, j, t, WP, grav))
+                if approaches(P, V, i, j, slow, 0.0, scale, box):
+                    best = min(best, touch_time(G, i, j, t, WP, grav, box))
     else:
         g = math.sqrt(grav[0] ** 2 + grav[1] ** 2 + grav[2] ** 2)
         margin = np.empty(n)
         for i in range(n):
             margin[i] = math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2) * horizon + 0.5 * g * horizon ** 2
-        pairs = near_pairs(P, G[:, G_R], margin, n, dim)
+        pairs = near_pairs(P, G[:, G_R], margin, n, dim, box)
         for p in range(pairs.shape[0]):
             i, j = pairs[p, 0], pairs[p, 1]
-            if approaches(P, V, i, j, slow, 0.0, scale):
-                best = min(best, touch_time(G, i, j, t, WP, grav))
+            if approaches(P, V, i, j, slow, 0.0, scale, box):
+                best = min(best, touch_time(G, i, j, t, WP, grav, box))
     for w in range(WP.shape[0]):
         for i in range(n):
-            best = min(best, touch_time(G, i, -1 - w, t, WP, grav))
+            best = min(best, touch_time(G, i, -1 - w, t, WP, grav, box))
     return best
 
 
 @jit
-def meets_again(G, P, V, n, t, WP, grav, count, slow, resolved, within, scale):
+def meets_again(G, P, V, n, t, WP, grav, count, slow, resolved, within, scale, box):
     """Whether a wall or a pair meets again after t, a pair only if it closes faster than its
     velocities are known: each contact a body took part in left it with the run's resolved
     velocity error at most (`resolved`, m/s), so a pair whose bodies had c_i and c_j contacts
@@ -189,14 +195,14 @@ def meets_again(G, P, V, n, t, WP, grav, count, slow, resolved, within, scale):
     (`account_contacts`)."""
     for i in range(n):
         for j in range(i + 1, n):
-            if not approaches(P, V, i, j, slow, 0.0, scale):
+            if not approaches(P, V, i, j, slow, 0.0, scale, box):
                 continue
-            tau = touch_time(G, i, j, t, WP, grav)
+            tau = touch_time(G, i, j, t, WP, grav, box)
             floor = (count[i] + count[j]) * resolved
-            if tau <= within or (tau < math.inf and approaches(P, V, i, j, slow, floor, scale)):
+            if tau <= within or (tau < math.inf and approaches(P, V, i, j, slow, floor, scale, box)):
                 return True
     for w in range(WP.shape[0]):
         for i in range(n):
-            if touch_time(G, i, -1 - w, t, WP, grav) < math.inf:
+            if touch_time(G, i, -1 - w, t, WP, grav, box) < math.inf:
                 return True
     return False

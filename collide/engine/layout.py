@@ -135,7 +135,8 @@ C_N, C_DELTA, C_DIST, C_LIF, C_LJF, C_LIS, C_LJS, C_FN = 0, 3, 4, 5, 6, 7, 8, 9
 C_K, C_MU, C_EPS, C_REACH, C_HELD, C_FF, C_B = 10, 11, 12, 13, 14, 17, 20
 C_INV = 26  # 1 / C_DIST of a pair (the slip rates' turning terms divide by it)
 C_GV = 27  # in the plane, a stuck contact's hold rate's velocity terms along e1, at a kick's last pass
-NC = 28
+C_SH = 28  # what takes j's centre to its image nearest i's in a periodic box (QF_SH's; else 0)
+NC = 31
 CI_I, CI_J, CI_GI, CI_GJ, CI_MODE, CI_Q, CI_EDGE, CI_RETRIED, CI_FLIPPED, CI_GRAZE = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
 # CI_RETRIED, CI_FLIPPED: `decide`'s marks (arrays of its own were allocated at every call);
 # CI_GRAZE: run_island's, for the next step.
@@ -143,14 +144,22 @@ NCI = 10
 # Q / QF: an island's candidate contacts.
 Q_I, Q_J, Q_ENG = 0, 1, 2
 QF_REACH, QF_D0, QF_R0, QF_D1, QF_R1, QF_DP, QF_RP, QF_DB, QF_RB = 0, 1, 2, 3, 4, 5, 6, 7, 8
-NQF = 9
+# QF_SH: the image shift of a pair in a periodic box (3), fixed for its window: the nearest
+# image at the window's start, which no body moves far enough within it to change (FP_CAP).
+QF_SH = 9
+NQF = 12
 E_V0, E_R0, E_V1, E_R1, E_VC, E_RC, E_FORCED = 0, 1, 2, 3, 4, 5, 6
 NE = 7
 # Settings: flags (int) and figures (float).
 FL_SPIN, FL_FRICTION, FL_SEED, FL_PLANAR, FL_RECORD, FL_AUTO, FL_MAXSTEPS, FL_DIM, FL_TURNS = range(9)
 NFL = 9
 FP_DT, FP_OMEGA_H, FP_TEND, FP_TAIL, FP_SCALE, FP_SLOW, FP_EVENT_TOL, FP_END_SLOW, FP_NOW, FP_NOW_STEPS = range(10)
-NFP = 10  # the last two are written by the run: time reached and steps, read by a progress display
+# FP_NOW, FP_NOW_STEPS are written by the run: time reached and steps, read by a progress display.
+# FP_BOX..: the periodic box (collide.engine.broad's `box`: the periods, 0 where an axis does not
+# wrap, then 1.0 if any does); FP_CAP: how far a body may move between two looks at its nearest
+# images (a jump or a window longer is cut).
+FP_BOX, FP_CAP = 10, 14
+NFP = 15
 # Contact parameter tables: pairs (M, M, NP), walls (M, NP).
 TP_K, TP_MU, TP_EPS = range(3)
 # Records.

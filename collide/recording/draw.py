@@ -286,6 +286,6 @@ class _Drawing:
         self._send("/residuals/energy", rr.Scalars.columns(scalars=res.energy), at)
         if not model.n_walls:
             self._send("/residuals/momentum", rr.Scalars.columns(scalars=res.momentum), at)
-            if model.dim > 1:
+            if model.dim > 1 and not model.periodic:  # (no torque balance in a periodic box)
                 angular = rr.Scalars.columns(scalars=res.angular_momentum)
                 self._send("/residuals/angular_momentum", angular, at)

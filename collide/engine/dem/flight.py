@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+from collide.engine.broad import BOX_ANY, nearest
 from collide.engine.dem.geometry import wall_height
 from collide.engine.dem.layout import B_R
 from collide.engine.dem.records import frame
@@ -14,7 +15,7 @@ from collide.engine.jit import jit
 
 
 @jit
-def free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin):
+def free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin, box):
     """How long every body can fly freely with no contact able to begin: until the fastest could
     have covered half the smallest gap (listed pairs, walls; an unlisted pair's gap is at least
     the skin, the lists being fresh), gravity included."""
@@ -22,6 +23,8 @@ def free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin):
     for k in range(PI.shape[0]):
         i, j = PI[k], PJ[k]
         dx, dy, dz = X[j, 0] - X[i, 0], X[j, 1] - X[i, 1], X[j, 2] - X[i, 2]
+        if box[BOX_ANY] != 0.0:
+            dx, dy, dz = nearest(dx, dy, dz, box)
         gap = min(gap, math.sqrt(dx * dx + dy * dy + dz * dz) - Bd[i, B_R] - Bd[j, B_R])
     for m in range(WL.shape[0]):
         i, w = WL[m, 1], WL[m, 2]
@@ -66,6 +69,17 @@ def will_meet(X, V, Bd, WP, grav, n):
     return False
 
 
+
+
+@jit
+def may_meet(X, V, Bd, WP, grav, n, box):
+    """`will_meet`, in a periodic box too: there two bodies moving apart meet again at another
+    image unless they move together (conservative: any difference of velocities)."""
+    if box[BOX_ANY] != 0.0:
+        for i in range(1, n):
+            if V[i, 0] != V[0, 0] or V[i, 1] != V[0, 1] or V[i, 2] != V[0, 2]:
+                return True
+    return will_meet(X, V, Bd, WP, grav, n)
 
 
 @jit

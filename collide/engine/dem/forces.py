@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from collide.engine.broad import BOX_ANY, nearest
 from collide.engine.dem.contact import contact_force
 from collide.engine.dem.geometry import wall_height
 from collide.engine.dem.layout import (
@@ -29,12 +30,13 @@ from collide.engine.jit import jit, jit_inline
 
 @jit
 def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST, IV, niv,
-           REC, nrec, record_now, out):
+           REC, nrec, record_now, out, box):
     """Forces and torques of every engaged contact (F, T, and by part PT) and the run's contact
     figures, over the listed pairs (PI, PJ) and body-wall pairs (WL: rows k = i * walls + w, i, w); wtabs is
     the wall table as (materials, 1, columns). IV and REC have room for every listed contact
     (the caller grows them); out is scratch (4,). Returns (engaged, niv, nrec): no array is made
-    or returned here, which at a few bodies costs a step as much as its contacts."""
+    or returned here, which at a few bodies costs a step as much as its contacts. In a periodic
+    box (`box`) a pair meets at its nearest images."""
     record = fl[F_RECORD]
     g0, g1, g2 = grav[0], grav[1], grav[2]
     # Whole-array fills: stored element by element with F's, they took twice as long.
@@ -43,34 +45,16 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
     for a in range(n):
         m = Bd[a, B_M]
         F[a, 0], F[a, 1], F[a, 2] = m * g0, m * g1, m * g2
-    engaged = 0
-    deepest, strongest = FG[G_OVERLAP], FG[G_FORCE]
-    for k in range(PI.shape[0]):
-        i, j = PI[k], PJ[k]
-        dx = X[j, 0] - X[i, 0]
-        dy = X[j, 1] - X[i, 1]
-        dz = X[j, 2] - X[i, 2]
-        reach = Bd[i, B_R] + Bd[j, B_R]
-        d2 = dx * dx + dy * dy + dz * dz
-        if d2 >= reach * reach:
-            if hist[k, H_ON] != 0.0:
-                nrec = _close(hist, k, IV, t, FG, REC, nrec, i, j)
-            continue
-        dist = math.sqrt(d2)
-        inv = 1.0 / dist
-        delta = reach - dist
-        if hist[k, H_ON] == 0.0:
-            niv = _open(hist, k, IV, niv, i, j, t, FG, ST, record)
-        engaged += 1
-        fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j],
-                           hist, k, fl, dt, out)
-        deepest = max(deepest, delta)
-        strongest = max(strongest, fn)
-        if record:
-            _peak(hist, k, t, delta, fn, out)
-        if record_now:
-            _record(REC, nrec, t, i, j, delta, fn, out)
-            nrec += 1
+    # The pair pass in two copies, the nearest-image test folded away in the one without: a scene
+    # with no periodic axis runs the pass it ran before periodic boundaries.
+    if box[BOX_ANY] != 0.0:
+        engaged, niv, nrec, deepest, strongest = _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t,
+                                                        FG, ST, IV, niv, REC, nrec, record, record_now, out, box,
+                                                        True)
+    else:
+        engaged, niv, nrec, deepest, strongest = _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t,
+                                                        FG, ST, IV, niv, REC, nrec, record, record_now, out, box,
+                                                        False)
     for m in range(WL.shape[0]):
         k, i, w = WL[m, 0], WL[m, 1], WL[m, 2]
         delta = Bd[i, B_R] - wall_height(X, WP, i, w)
@@ -92,6 +76,44 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
             nrec += 1
     FG[G_OVERLAP], FG[G_FORCE] = deepest, strongest
     return engaged, niv, nrec
+
+
+@jit_inline
+def _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, FG, ST, IV, niv, REC, nrec, record, record_now,
+           out, box, periodic):
+    """The listed pairs' part of `forces` (at the nearest images if `periodic`). Returns (engaged,
+    niv, nrec, deepest overlap, strongest force)."""
+    engaged = 0
+    deepest, strongest = FG[G_OVERLAP], FG[G_FORCE]
+    for k in range(PI.shape[0]):
+        i, j = PI[k], PJ[k]
+        dx = X[j, 0] - X[i, 0]
+        dy = X[j, 1] - X[i, 1]
+        dz = X[j, 2] - X[i, 2]
+        if periodic:
+            dx, dy, dz = nearest(dx, dy, dz, box)
+        reach = Bd[i, B_R] + Bd[j, B_R]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 >= reach * reach:
+            if hist[k, H_ON] != 0.0:
+                nrec = _close(hist, k, IV, t, FG, REC, nrec, i, j)
+            continue
+        dist = math.sqrt(d2)
+        inv = 1.0 / dist
+        delta = reach - dist
+        if hist[k, H_ON] == 0.0:
+            niv = _open(hist, k, IV, niv, i, j, t, FG, ST, record)
+        engaged += 1
+        fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j],
+                           hist, k, fl, dt, out)
+        deepest = max(deepest, delta)
+        strongest = max(strongest, fn)
+        if record:
+            _peak(hist, k, t, delta, fn, out)
+        if record_now:
+            _record(REC, nrec, t, i, j, delta, fn, out)
+            nrec += 1
+    return engaged, niv, nrec, deepest, strongest
 
 
 @jit_inline

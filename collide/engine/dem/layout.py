@@ -30,7 +30,11 @@ NPT = 9
 F_DIM, F_SPIN, F_HERTZ, F_TSPRING, F_RECORD, F_MAXSTEPS = range(6)
 NFLAG = 6
 P_DT, P_TEND, P_REST, P_TAIL, P_FRAME, P_SKIN, P_NOW, P_NOW_STEPS = range(8)
-NPAR = 8  # the last two are written by the run: time reached and steps, read by a progress display
+# P_NOW, P_NOW_STEPS are written by the run: time reached and steps, read by a progress display.
+# P_BOX..: the periodic box as collide.engine.broad's `box` (the periods, 0 where an axis does
+# not wrap, then 1.0 if any does).
+P_BOX = 8
+NPAR = 12
 # Outputs: stats (int) and figures (float).
 S_STEPS, S_STATUS, S_CONTACTS, S_BUILDS, S_PAIRS, S_JUMPS = range(6)
 NSTAT = 6

@@ -9,7 +9,8 @@ import math
 
 import numpy as np
 
-from collide.engine.dem.flight import fly, free_time, will_meet
+from collide.engine.broad import NBOX
+from collide.engine.dem.flight import fly, free_time, may_meet
 from collide.engine.dem.forces import forces, peak_record
 from collide.engine.dem.layout import (
     B_MAT,
@@ -33,6 +34,7 @@ from collide.engine.dem.layout import (
     NPT,
     NR,
     NSTAT,
+    P_BOX,
     P_DT,
     P_FRAME,
     P_NOW,
@@ -105,13 +107,14 @@ def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, keys, PI, 
     (whether the run is over, t, the lists, KN, nkn)."""
     n, dim, planar, spin, record = X.shape[0], fl[F_DIM], fl[F_DIM] < 3, fl[F_SPIN], fl[F_RECORD]
     dt, t_end, skin = fp[P_DT], fp[P_TEND], fp[P_SKIN]
+    box = fp[P_BOX:P_BOX + NBOX]
     # Nothing touches and nothing ever can (with no end set): the run is over, whether or not
     # anything touched before (bodies moving apart from the start, with nothing ahead, stepped
     # on until the step limit).
-    if not math.isfinite(t_end) and not will_meet(X, V, Bd, WP, grav, n):
+    if not math.isfinite(t_end) and not may_meet(X, V, Bd, WP, grav, n, box):
         return True, t, keys, PI, PJ, hist, WL, WH, KN, nkn
-    keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST)
-    tau = free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin)
+    keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST, box)
+    tau = free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin, box)
     if _at_end(t + tau, t_end):
         tau = t_end - t
     over = False
@@ -119,7 +122,7 @@ def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, keys, PI, 
         KN, nkn = fly(X, V, W, Qo, F, Bd, WK, grav, tau, t, n, spin, planar, record, KN, nkn)
         t += tau
         ST[S_JUMPS] += 1
-        over = _at_end(t, t_end) or (not math.isfinite(t_end) and ever and not will_meet(X, V, Bd, WP, grav, n))
+        over = _at_end(t, t_end) or (not math.isfinite(t_end) and ever and not may_meet(X, V, Bd, WP, grav, n, box))
     return over, t, keys, PI, PJ, hist, WL, WH, KN, nkn
 
 
@@ -154,6 +157,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     n = X.shape[0]
     dim, planar, spin = fl[F_DIM], fl[F_DIM] < 3, fl[F_SPIN]
     dt, t_end, rest, skin = fp[P_DT], fp[P_TEND], fp[P_REST], fp[P_SKIN]
+    box = fp[P_BOX:P_BOX + NBOX]
     record = fl[F_RECORD]
     ST, FG, F, T, PT, WK, WH = _outputs(n, WP.shape[0])
     KN, REC, IV, EP = np.zeros((0, NK)), np.zeros((0, NR)), np.zeros((0, 4)), np.zeros((0, NEP))
@@ -163,7 +167,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     rolling = _any_rolling(tabs, wtabs, spin)
     X0 = X.copy()
     keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin,
-                                         np.zeros(0, np.int64), np.zeros((0, NH)), ST)
+                                         np.zeros(0, np.int64), np.zeros((0, NH)), ST, box)
     t = 0.0
     scratch = np.zeros(4)
     # IV and REC get room for every listed contact to open and be recorded before forces runs,
@@ -174,7 +178,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         IV = grow(IV, niv + most)
         REC = grow(REC, nrec + most)
     engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl,
-                                0.0, t, n, FG, ST, IV, niv, REC, nrec, record != 0, scratch)
+                                0.0, t, n, FG, ST, IV, niv, REC, nrec, record != 0, scratch, box)
     if record:
         KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
         EP = grow(EP, nep)
@@ -200,7 +204,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, False)
             moved = drift(X, X0, V, W, Qo, h, n, spin, planar)
         if 4.0 * moved > skin * skin:
-            keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST)
+            keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST, box)
         t = t + h
         steps += 1
         record_now = record != 0 and (t >= next_frame or last)
@@ -210,7 +214,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         if record and nrec + most >= REC.shape[0]:  # a frame's records, or the peaks of phases that end
             REC = grow(REC, nrec + most)
         engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav,
-                                    fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now, scratch)
+                                    fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now, scratch, box)
         # The closing kick and, where nothing before the next step reads the velocities at this
         # step's end (no frame to record, no free flight, no end or rest to test), the next
         # step's opening kick and drift with it, in one pass over the bodies.
@@ -243,7 +247,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             break
         if rest > 0.0 and ever and kinetic_now < rest * peak:
             break
-        if not math.isfinite(t_end) and ever and engaged == 0 and not will_meet(X, V, Bd, WP, grav, n):
+        if not math.isfinite(t_end) and ever and engaged == 0 and not may_meet(X, V, Bd, WP, grav, n, box):
             break
     ST[S_STEPS] = steps
     ST[S_PAIRS] = keys.shape[0]

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from collide.engine.broad import BOX_ANY, image_pairs
 from collide.engine.dem.geometry import wall_height
 from collide.engine.dem.layout import B_R, H_IV, H_ON, NH, S_BUILDS
 from collide.engine.jit import jit, jit_inline
@@ -199,10 +200,31 @@ def wall_list(X, Bd, WP, WL, WH, n, skin):
 
 
 @jit
-def rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST):
+def periodic_pairs(P, Bd, n, dim, reach_pad, box):
+    """`build_pairs` in a periodic box: the pairs whose nearest images' gap is within reach_pad
+    (`broad.image_pairs`), as (keys ascending, i, j)."""
+    pairs = image_pairs(P, Bd[:, B_R].copy(), n, dim, box, reach_pad)
+    keys = np.empty(pairs.shape[0], np.int64)
+    for k in range(pairs.shape[0]):
+        keys[k] = pairs[k, 0] * n + pairs[k, 1]
+    keys = np.sort(keys)
+    rows = np.empty(keys.shape[0], np.int64)
+    partners = np.empty(keys.shape[0], np.int64)
+    for k in range(keys.shape[0]):
+        rows[k] = keys[k] // n
+        partners[k] = keys[k] - rows[k] * n
+    return keys, rows, partners
+
+
+@jit
+def rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST, box):
     """Fresh neighbour lists (pairs as keys i * n + j and as (i, j); body-wall pairs, `wall_list`),
-    the listed pairs' and wall contacts' history carried over."""
-    fresh, PI, PJ = build_pairs(X, Bd, n, dim, skin)
+    the listed pairs' and wall contacts' history carried over. In a periodic box (`box`) a pair
+    is listed at its nearest images: the force pass meets it there."""
+    if box[BOX_ANY] != 0.0:
+        fresh, PI, PJ = periodic_pairs(X, Bd, n, dim, skin, box)
+    else:
+        fresh, PI, PJ = build_pairs(X, Bd, n, dim, skin)
     hist = carry_history(keys, hist, fresh)
     X0[:, :] = X
     ST[S_BUILDS] += 1

@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from collide.engine import tier
+from collide.engine.broad import BOX_ANY, NBOX, nearest
 from collide.engine.dem.contact import contact_force, contact_into
 from collide.engine.dem.forces import _close, _peak
 from collide.engine.dem.geometry import wall_height
@@ -50,6 +51,7 @@ from collide.engine.dem.layout import (
     H_PEAK,
     H_XI,
     NPT,
+    P_BOX,
     P_DT,
     P_NOW,
     P_NOW_STEPS,
@@ -179,8 +181,21 @@ def _engaged(STT, row, delta, fn):
 
 
 @jit
-def cross_pass(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out):
-    """Thread `row`'s cross pairs (slots s0..s1) into XB, their states into SF."""
+def cross_pass(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out, box):
+    """Thread `row`'s cross pairs (slots s0..s1) into XB, their states into SF (a pair in a
+    periodic box at its nearest images). Two copies, the nearest-image test folded away in the
+    one without (as `forces.forces`)."""
+    if box[BOX_ANY] != 0.0:
+        _cross(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out, box,
+               True)
+    else:
+        _cross(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out, box,
+               False)
+
+
+@jit_inline
+def _cross(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out, box,
+           periodic):
     for s in range(s0, s1):
         k = cross[s]
         i, j = PI[k], PJ[k]
@@ -188,6 +203,8 @@ def cross_pass(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, 
         dx = X[j, 0] - X[i, 0]
         dy = X[j, 1] - X[i, 1]
         dz = X[j, 2] - X[i, 2]
+        if periodic:
+            dx, dy, dz = nearest(dx, dy, dz, box)
         reach = Bd[i, B_R] + Bd[j, B_R]
         d2 = dx * dx + dy * dy + dz * dz
         if d2 >= reach * reach:
@@ -223,7 +240,19 @@ def _take(XB, s, side, F, T, PT, a):
 
 @jit
 def own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd, row,
-             inc_start, inc_slot, XB, SF, STT, EVP, EVW, out):
+             inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box):
+    """Thread `row`'s bodies' forces (`_own`), in two copies as `cross_pass`."""
+    if box[BOX_ANY] != 0.0:
+        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd, row,
+             inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, True)
+    else:
+        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd, row,
+             inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, False)
+
+
+@jit_inline
+def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd, row,
+         inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, periodic):
     """Thread `row`'s bodies' forces (bd: its body, pair, wall and slot starts, then ends), after
     every thread's `cross_pass`. Events (pairs: 2 k, + 1 if closed; walls: 2 m, + 1) go to EVP
     from the thread's first pair and EVW from its first wall contact, if recorded."""
@@ -252,6 +281,8 @@ def own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, 
         dx = X[j, 0] - X[i, 0]
         dy = X[j, 1] - X[i, 1]
         dz = X[j, 2] - X[i, 2]
+        if periodic:
+            dx, dy, dz = nearest(dx, dy, dz, box)
         reach = Bd[i, B_R] + Bd[j, B_R]
         d2 = dx * dx + dy * dy + dz * dz
         if d2 >= reach * reach:
@@ -448,6 +479,7 @@ def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, hist, 
     niv, nrec, kinetic_now = np.int64(CTL[C_NIV]), np.int64(CTL[C_NREC]), CTL[C_KIN]
     opened, stay = CTL[C_OPENED] != 0.0, CTL[C_STAY] != 0.0
     lo, hi = RB[r, 0], RB[r, 1]
+    box = fp[P_BOX:P_BOX + NBOX]
     reason = R_END
     while True:
         if engaged == 0 and not opened and not stay:
@@ -484,10 +516,10 @@ def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, hist, 
         S = STT[p]
         S[r, :] = 0.0
         cross_pass(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, h, t, record, RB[r, 6], RB[r, 7], cross, XB, SF, S, r,
-                   outs[r])
+                   outs[r], box)
         barrier_wait(barrier)
         own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, h, t, record, RB[r],
-                 r, inc_start, inc_slot, XB, SF, S, EVP, EVW, outs[r])
+                 r, inc_start, inc_slot, XB, SF, S, EVP, EVW, outs[r], box)
         kick_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, 0.5 * h, 0.5 * h_next, h_next, lo, hi, rolling, spin, planar,
                    True, fuse_ok and S[r, ST_ENG] > 0.0, EB, S, r)
         barrier_wait(barrier)

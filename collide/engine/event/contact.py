@@ -22,6 +22,7 @@ from collide.engine.layout import (
     C_LJS,
     C_N,
     C_REACH,
+    C_SH,
     CI_I,
     CI_J,
     GI_LOC,
@@ -30,6 +31,7 @@ from collide.engine.layout import (
     Q_I,
     Q_J,
     QF_REACH,
+    QF_SH,
     TOUCH_TOL,
     X_A,
     X_FO,
@@ -53,9 +55,9 @@ def geometry(X, C, CI, nc, WP, seed, fric):
         j = CI[c, CI_J]
         r = X[i, X_R]
         if j >= 0:
-            dx = X[j, X_S] - X[i, X_S]
-            dy = X[j, X_S + 1] - X[i, X_S + 1]
-            dz = X[j, X_S + 2] - X[i, X_S + 2]
+            dx = X[j, X_S] - X[i, X_S] + C[c, C_SH]
+            dy = X[j, X_S + 1] - X[i, X_S + 1] + C[c, C_SH + 1]
+            dz = X[j, X_S + 2] - X[i, X_S + 2] + C[c, C_SH + 2]
             dist = math.sqrt(dx * dx + dy * dy + dz * dz)
             if fric:
                 C[c, C_INV] = 1.0 / dist
@@ -362,7 +364,7 @@ def overlap(G, GI, X, Q, QF, k, t, WP, grav):
     reach = QF[k, QF_REACH]
     if j >= 0:
         qx, qy, qz, wx, wy, wz = body_pv(G, GI, X, j, t, grav)
-        dx, dy, dz = qx - px, qy - py, qz - pz
+        dx, dy, dz = qx - px + QF[k, QF_SH], qy - py + QF[k, QF_SH + 1], qz - pz + QF[k, QF_SH + 2]
         dist = math.sqrt(dx * dx + dy * dy + dz * dz)
         return (reach - dist) / reach, ((ux - wx) * dx + (uy - wy) * dy + (uz - wz) * dz) / (dist * reach)
     w = -1 - j

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from collide.engine.broad import NBOX
 from collide.engine.event.contact import engaged, geometry, overlap, springs
 from collide.engine.event.locate import step_events, stiff_slide
 from collide.engine.event.modes import decide, flips, mode_events
@@ -23,6 +24,7 @@ from collide.engine.layout import (
     C_K,
     C_MU,
     C_REACH,
+    C_SH,
     CI_EDGE,
     CI_GI,
     CI_GJ,
@@ -56,6 +58,7 @@ from collide.engine.layout import (
     FL_SPIN,
     FL_TURNS,
     FLIP,
+    FP_BOX,
     FP_DT,
     FP_EVENT_TOL,
     FP_OMEGA_H,
@@ -93,6 +96,7 @@ from collide.engine.layout import (
     QF_D0,
     QF_R0,
     QF_REACH,
+    QF_SH,
     S_STATUS,
     S_STEPS,
     S_UNLOCATED,
@@ -169,6 +173,8 @@ def gather(G, GI, X, XI, C, CI, Q, QF, nq, bodies_params):
         else:
             C[nc, C_K], C[nc, C_MU], C[nc, C_EPS] = wtab[mi, TP_K], wtab[mi, TP_MU], wtab[mi, TP_EPS]
         C[nc, C_REACH] = QF[k, QF_REACH]
+        for d in range(3):
+            C[nc, C_SH + d] = QF[k, QF_SH + d]
         nc += 1
     return na, nc
 
@@ -255,12 +261,12 @@ def engage(G, GI, X, Q, QF, nq, t, WP, grav):
 
 
 @jit_call
-def fly_free(G, Q, nq, t, W, WP, grav, stalled, ST, FG):
+def fly_free(G, Q, nq, t, W, WP, grav, stalled, ST, FG, box):
     """Nothing engaged: on in closed form to the first touch. Returns (t, stalled, whether the
     island is done in this window: no touch before W, or a stall)."""
     tau = math.inf
     for k in range(nq):
-        tau = min(tau, touch_time(G, Q[k, Q_I], Q[k, Q_J], t, WP, grav))
+        tau = min(tau, touch_time(G, Q[k, Q_I], Q[k, Q_J], t, WP, grav, box))
     if t + tau >= W:
         return t, stalled, True
     # A touch closer than the clock resolves lands on its next tick (late by less than one:
@@ -556,7 +562,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         n_eng = engage(G, GI, X, Q, QF, nq, t, WP, grav)
         IV, OP = intervals(Q, nq, t, IV, OP, CNT, ST)
         if n_eng == 0:
-            t, stalled, done = fly_free(G, Q, nq, t, W, WP, grav, stalled, ST, FG)
+            t, stalled, done = fly_free(G, Q, nq, t, W, WP, grav, stalled, ST, FG, fp[FP_BOX:FP_BOX + NBOX])
             if done:
                 break
             continue

@@ -10,10 +10,10 @@ import math
 
 import numpy as np
 
-from collide.engine.broad import crossed, join, largest_set, near_pairs, root_of
+from collide.engine.broad import BOX_ANY, NBOX, crossed, join, largest_set, near_pairs, nearest, root_of
 from collide.engine.event.island import run_island
-from collide.engine.flight import account_contacts, meets_again, next_contact, positions_at, speed_scales
-from collide.engine.jit import jit, jit_call, jit_part
+from collide.engine.flight import account_contacts, free_state, meets_again, next_contact, positions_at, speed_scales
+from collide.engine.jit import jit, jit_call, jit_inline, jit_part
 from collide.engine.layout import (
     CN_IVALS,
     CN_OPEN,
@@ -22,6 +22,8 @@ from collide.engine.layout import (
     FL_AUTO,
     FL_DIM,
     FL_RECORD,
+    FP_BOX,
+    FP_CAP,
     FP_DT,
     FP_END_SLOW,
     FP_NOW,
@@ -48,6 +50,7 @@ from collide.engine.layout import (
     Q_I,
     Q_J,
     QF_REACH,
+    QF_SH,
     S_JUMPS,
     S_RETRIES,
     S_STATUS,
@@ -66,17 +69,17 @@ from collide.engine.records import tail_after
 
 
 @jit
-def engaged_now(G, P, V, n, WP, grav, dim):
+def engaged_now(G, P, V, n, WP, grav, dim, box):
     """Contacts engaged at positions P and velocities V: (K, 2), walls as (i, -1 - wall)."""
     margin = np.zeros(n)
     for i in range(n):
         margin[i] = 2.0 * TOUCH_TOL * G[i, G_R]
-    pairs = near_pairs(P, G[:, G_R], margin, n, dim)
+    pairs = near_pairs(P, G[:, G_R], margin, n, dim, box)
     out = np.empty((pairs.shape[0] + n * WP.shape[0] + 1, 2), np.int64)
     m = 0
     for p in range(pairs.shape[0]):
         i, j = pairs[p, 0], pairs[p, 1]
-        dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
+        dx, dy, dz = _apart(P, i, j, box)
         dist = math.sqrt(dx * dx + dy * dy + dz * dz)
         reach = G[i, G_R] + G[j, G_R]
         d = (reach - dist) / reach
@@ -97,7 +100,7 @@ def engaged_now(G, P, V, n, WP, grav, dim):
 
 
 @jit_part
-def window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim):
+def window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim, box):
     """Contacts that may go on or start within the window: pairs and walls whose gap could close
     within `horizon`, each body's speed bounded by the energy its engaged cluster holds (spin
     included: friction can turn it into motion), plus gravity's pull. (K, 2), and each body's
@@ -114,7 +117,7 @@ def window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim):
         mi = int(G[i, G_MAT])
         if j >= 0:
             k = ptab[mi, int(G[j, G_MAT]), TP_K]
-            dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
+            dx, dy, dz = _apart(P, i, j, box)
             delta = G[i, G_R] + G[j, G_R] - math.sqrt(dx * dx + dy * dy + dz * dz)
             clustered[j] = True
         else:
@@ -135,7 +138,7 @@ def window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim):
         if clustered[i]:
             speed = max(speed, math.sqrt(2.0 * pool[root_of(parent, i)] / G[i, G_M]))
         margin[i] = safety * (speed * horizon + 0.5 * g * horizon * horizon) + 2.0 * TOUCH_TOL * G[i, G_R]
-    pairs = near_pairs(P, G[:, G_R], margin, n, dim)
+    pairs = near_pairs(P, G[:, G_R], margin, n, dim, box)
     out = np.empty((pairs.shape[0] + n * WP.shape[0], 2), np.int64)
     m = 0
     for p in range(pairs.shape[0]):
@@ -152,7 +155,7 @@ def window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim):
 
 
 @jit_part
-def missed_contact(G, P, V, n, t, cand, WP, grav, dim, P0, margin):
+def missed_contact(G, P, V, n, t, cand, WP, grav, dim, P0, margin, box):
     """Whether bodies (or a body and a wall) overlap at t without having been candidates, or
     went through each other since the window's start (positions P0)."""
     positions_at(G, n, t, grav, P, V)
@@ -167,11 +170,11 @@ def missed_contact(G, P, V, n, t, cand, WP, grav, dim, P0, margin):
     for k in range(cand.shape[0]):
         other[fill[cand[k, 0]]] = cand[k, 1]
         fill[cand[k, 0]] += 1
-    eng = engaged_now(G, P, V, n, WP, grav, dim)
+    eng = engaged_now(G, P, V, n, WP, grav, dim, box)
     for p in range(eng.shape[0]):
         i, j = eng[p, 0], eng[p, 1]
         if j >= 0:
-            dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
+            dx, dy, dz = _apart(P, i, j, box)
             reach = G[i, G_R] + G[j, G_R]
             deep = reach - math.sqrt(dx * dx + dy * dy + dz * dz) > 1e-9 * reach
         else:
@@ -187,7 +190,7 @@ def missed_contact(G, P, V, n, t, cand, WP, grav, dim, P0, margin):
                 break
         if not found:
             return True
-    return crossed(P0, P, G, n, start, other, margin)
+    return crossed(P0, P, G, n, start, other, margin, box)
 
 
 @jit
@@ -211,12 +214,13 @@ def jump(G, P, V, n, t, t_end, search, ticks, WP, grav, dim, fp, IV, CNT, ST, FG
     to record in free flight). `graph`: who met whom so far (`account_contacts`). Returns (t,
     t_end, search, ticks, whether the run stops here)."""
     small = YES if n <= 64 else NO
+    box = fp[FP_BOX:FP_BOX + NBOX]
     parent, count, seen = graph
     account_contacts(IV, CNT, parent, count, seen)
     scale = speed_scales(V, n, parent)
     if (t_end == math.inf and small == YES and CNT[CN_IVALS] > 0 and fp[FP_END_SLOW] > 0.0
             and not meets_again(G, P, V, n, t, WP, grav, count, fp[FP_SLOW], fp[FP_END_SLOW],
-                                run_end(t, fp, IV, CNT) - t, scale)):
+                                run_end(t, fp, IV, CNT) - t, scale, box)):
         # What still approaches closes slower than the run resolves velocities (its
         # tolerance): the step's error, not a contact to come (a Newton's cradle at k =
         # 1e6, tol 1e-7, left its balls at 1e-8 m/s and met them again 11 hours later).
@@ -229,7 +233,12 @@ def jump(G, P, V, n, t, t_end, search, ticks, WP, grav, dim, fp, IV, CNT, ST, FG
             fastest = max(fastest, math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2))
         search = 4.0 * G[0, G_R] / fastest if fastest > 0 else 1.0
     horizon = min(search, t_end - t)
-    tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, small, fp[FP_SLOW], scale)
+    if box[BOX_ANY] != 0.0:
+        # In a periodic box a contact is looked for at the nearest images now: no further ahead
+        # than a body can move before another image could come nearer (a scene there has an end).
+        horizon = min(horizon, periodic_reach(V, n, fp[FP_CAP]))
+        small = NO
+    tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, small, fp[FP_SLOW], scale, box)
     if tau <= horizon or (small == YES and tau < math.inf):
         if not min(t + tau, t_end) > t:
             # A contact due closer than the clock resolves lands on its next tick (see
@@ -253,12 +262,41 @@ def jump(G, P, V, n, t, t_end, search, ticks, WP, grav, dim, fp, IV, CNT, ST, FG
         t = min(t + horizon, t_end)
         search *= 2.0
         return t, t_end, search, ticks, False
-    tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, YES, fp[FP_SLOW], scale)
+    tau = next_contact(G, P, V, n, t, WP, grav, dim, horizon, YES, fp[FP_SLOW], scale, box)
     if tau < math.inf:
         t += tau
         return t, t_end, search, ticks, False
     t = t_end = run_end(t, fp, IV, CNT)  # no contact ahead
     return t, t_end, search, ticks, True
+
+
+@jit_inline
+def _apart(P, i, j, box):
+    """Body j's centre less body i's (at the nearest image in a periodic box)."""
+    dx, dy, dz = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1], P[j, 2] - P[i, 2]
+    if box[BOX_ANY] != 0.0:
+        dx, dy, dz = nearest(dx, dy, dz, box)
+    return dx, dy, dz
+
+
+@jit_inline
+def image_shift(G, i, j, t, grav, box, out):
+    """What takes body j's centre to its image nearest body i's at t, into out (3,)."""
+    px, py, pz, _, _, _ = free_state(G, i, t, grav)
+    qx, qy, qz, _, _, _ = free_state(G, j, t, grav)
+    dx, dy, dz = qx - px, qy - py, qz - pz
+    ex, ey, ez = nearest(dx, dy, dz, box)
+    out[0], out[1], out[2] = ex - dx, ey - dy, ez - dz
+
+
+@jit_inline
+def periodic_reach(V, n, cap):
+    """How long no two bodies close or part by more than 2 `cap`, at their speeds now (gravity
+    cancels in their relative motion)."""
+    fastest = 0.0
+    for i in range(n):
+        fastest = max(fastest, math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2))
+    return cap / fastest if fastest > 0.0 else math.inf
 
 
 @jit_call
@@ -310,6 +348,8 @@ def run_islands(G, GI, cand, parent, n, t, horizon, tables, WP, grav, weights, f
             i, j = cand[order[k], 0], cand[order[k], 1]
             Q[k - k0, Q_I], Q[k - k0, Q_J] = i, j
             QF[k - k0, QF_REACH] = G[i, G_R] + (G[j, G_R] if j >= 0 else 0.0)
+            if j >= 0 and fp[FP_BOX + BOX_ANY] != 0.0:
+                image_shift(G, i, j, t, grav, fp[FP_BOX:FP_BOX + NBOX], QF[k - k0, QF_SH:QF_SH + 3])
         KN, RC, IV, OP = run_island(G, GI, Q, QF, t, t + horizon, tables, WP, grav, weights, fl, fp,
                                     (KN, RC, IV, OP), CNT, ST, FG)
         if ST[S_STATUS] != OK:
@@ -342,6 +382,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     KN, RC, IV, OP = bufs
     n = G.shape[0]
     dim = fl[FL_DIM]
+    box = fp[FP_BOX:FP_BOX + NBOX]
     P = np.zeros((n, 3))
     V = np.zeros((n, 3))
     t = 0.0
@@ -354,7 +395,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
         fp[FP_NOW] = t
         fp[FP_NOW_STEPS] = ST[S_STEPS]
         positions_at(G, n, t, grav, P, V)
-        eng = engaged_now(G, P, V, n, WP, grav, dim)
+        eng = engaged_now(G, P, V, n, WP, grav, dim, box)
         if eng.shape[0] == 0:
             t, t_end, search, ticks, stop = jump(G, P, V, n, t, t_end, search, ticks, WP, grav, dim, fp, IV, CNT, ST,
                                                  FG, graph)
@@ -381,8 +422,14 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
         halved = False
         P0 = P.copy()
         while True:
-            cand, margin = window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim)
+            cand, margin = window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim, box)
             parent = clusters(cand, n)
+            if box[BOX_ANY] != 0.0 and margin.max() > fp[FP_CAP]:
+                # A body that may move further than this within the window could meet another
+                # image than the nearest it was found at.
+                horizon *= 0.5
+                halved = True
+                continue
             if largest_set(parent, n) > max(ISLAND_SLACK * touching, 16) and horizon > 4.0 * step_est:
                 horizon *= 0.5
                 halved = True
@@ -401,7 +448,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 continue
             KN, RC, IV, OP = run_islands(G, GI, cand, parent, n, t, horizon, tables, WP, grav, weights, fl, fp,
                                          (KN, RC, IV, OP), CNT, ST, FG)
-            if ST[S_STATUS] != OK or not missed_contact(G, P, V, n, t + horizon, cand, WP, grav, dim, P0, margin):
+            if ST[S_STATUS] != OK or not missed_contact(G, P, V, n, t + horizon, cand, WP, grav, dim, P0, margin, box):
                 break
             # A contact between islands: a speed bound failed. Redo the window, shorter and safer.
             ST[S_RETRIES] += 1
