@@ -317,7 +317,7 @@ if tier.COMPILED:
     config.CACHE_DIR = str(tier.cache_dir())
     # error_model="numpy": a division by zero gives inf or NaN (checked after each step) instead
     # of raising, which also keeps the compiled code smaller.
-    jit = _one_signature(dict(cache=True, error_model="numpy", nogil=True))
+    jit = _one_signature(dict(cache=True, error_model="numpy", nogil=True, no_cfunc_wrapper=True))
     # Pieces called per contact, per body or per substep, which allocate nothing (a contact
     # law's parts, a body's turn; the event engine's step with its kicks, friction solve,
     # geometry and mode values): inlined into the loops, and without reference counting
@@ -342,7 +342,7 @@ if tier.COMPILED:
     # it the libraries of everything it calls, and optimises and compiles the whole again: a
     # chain of called stages compiled the event engine's code once per level (LLVM spent 21 s
     # of CPU less without the chain, numba's inliner 11 s more). Kernel times unchanged, measured.
-    jit_part = njit(cache=True, error_model="numpy", nogil=True, inline="always")
+    jit_part = _one_signature(dict(cache=True, error_model="numpy", nogil=True, no_cpython_wrapper=True, no_cfunc_wrapper=True))
 else:
     def jit(function):
         """Interpreted: the kernel as plain Python."""
