@@ -157,6 +157,7 @@ def _compile_only_what_runs() -> None:
         if kind != "bitcode":
             return unserialize(cls, owner, state)
         self = owner.create_library(name)
+        self.enable_object_caching()  # compiled when it first runs, then cached with machine code
         self._final_module = ll.parse_bitcode(data)
         self._finalize_dynamic_globals()
         self._finalized = True
