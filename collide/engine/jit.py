@@ -108,6 +108,7 @@ def _compile_only_what_runs() -> None:
     with machine code; until then a caller links its code as numba's function passes left it,
     and the caller's module optimisation (the same passes) sees the parts' code once, with its
     own. A part that never runs is cached as bitcode (numba's other cache format)."""
+    import llvmlite.binding as ll
     from numba.core import codegen
     from numba.core.compiler_lock import require_global_compiler_lock
 
@@ -170,8 +171,6 @@ def _compile_only_what_runs() -> None:
         if self._engine.get_global_value_address(env_name):
             set_environment(self, env_name, env)
 
-    import llvmlite.binding as ll
-
     set_environment = codegen.JITCPUCodegen.set_env
     codegen.JITCPUCodegen.set_env = set_env
     library.finalize = finalize
@@ -215,9 +214,10 @@ def _compile_entries_when_called() -> None:
 
     def add_overload(self, cres) -> None:
         entry = cres.entry_point
-        if not isinstance(entry, Entry) or entry.compiled is not None:
-            return add(self, cres if entry is None or not isinstance(entry, Entry)
-                       else cres._replace(entry_point=entry.compiled))
+        if not isinstance(entry, Entry):
+            return add(self, cres)
+        if entry.compiled is not None:
+            return add(self, cres._replace(entry_point=entry.compiled))
         # Not in the dispatcher's table: a call from Python asks numba's compile, which returns
         # this entry; once compiled it goes into the table.
         args = tuple(cres.signature.args)
@@ -306,7 +306,7 @@ def _called_from_kernels_only(dispatcher) -> None:
 
 
 if tier.COMPILED:
-    from numba import config, njit
+    from numba import config
 
     _set_up_target_to_compile_only()
     _parse_bitcode_when_linked()
@@ -317,7 +317,8 @@ if tier.COMPILED:
     # The cache folder named after every kernel source (tier.cache_key): never a stale callee.
     config.CACHE_DIR = str(tier.cache_dir())
     # error_model="numpy": a division by zero gives inf or NaN (checked after each step) instead
-    # of raising, which also keeps the compiled code smaller.
+    # of raising, which also keeps the compiled code smaller. No entry from C
+    # (`no_cfunc_wrapper`): nothing takes a kernel's address.
     jit = _one_signature(dict(cache=True, error_model="numpy", nogil=True, no_cfunc_wrapper=True))
     # Pieces called per contact, per body or per substep, which allocate nothing (a contact
     # law's parts, a body's turn; the event engine's step with its kicks, friction solve,
@@ -337,13 +338,12 @@ if tier.COMPILED:
     # which multiplied the machine code (the cache 32 MB) and the compile's time; still without
     # reference counting, which was most of the gain. Kernel times unchanged, measured.
     jit_call = _one_signature(_part)
-    # Stages with one caller (the event engine's windows, islands, the step's event location):
-    # their code is compiled inside the caller (numba's `inline="always"`), never on its own.
-    # numba compiles every kernel that another one calls into a library of its own, links into
-    # it the libraries of everything it calls, and optimises and compiles the whole again: a
-    # chain of called stages compiled the event engine's code once per level (LLVM spent 21 s
-    # of CPU less without the chain, numba's inliner 11 s more). Kernel times unchanged, measured.
-    jit_part = _one_signature(dict(cache=True, error_model="numpy", nogil=True, no_cpython_wrapper=True, no_cfunc_wrapper=True))
+    # Stages with one caller (the event engine's windows, islands, the step's event location)
+    # allocate their work arrays, so they keep reference counting; called, not copied into
+    # their caller (numba's `inline="always"` spent 10 s of CPU re-typing them inside
+    # `simulate`; a call per window, island or step costs nothing measurable).
+    jit_part = _one_signature(dict(cache=True, error_model="numpy", nogil=True, no_cpython_wrapper=True,
+                                   no_cfunc_wrapper=True))
 else:
     def jit(function):
         """Interpreted: the kernel as plain Python."""
