@@ -117,7 +117,7 @@ def instrument(profile: Profile) -> None:
     library = codegen.CPUCodeLibrary
     profile.wrap(library, "add_ir_module", "llvm parse")
     profile.wrap(library, "_optimize_functions", "llvm function opt")
-    profile.wrap(library, "finalize", "llvm link")
+    profile.wrap(codegen.JITCodeLibrary, "finalize", "llvm link")
     profile.wrap(library, "_optimize_final_module", "llvm module opt")
     profile.wrap(codegen.JITCodeLibrary, "_finalize_specific", "llvm machine code")
     profile.wrap(caching.Cache, "save_overload", "cache save")

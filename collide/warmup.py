@@ -25,11 +25,11 @@ from pathlib import Path
 # How a whole compile progresses, for the first compile on a machine (later ones measure by the
 # last compile there): pairs of functions compiled and the fraction of the compile's time, and
 # that time in seconds, as measured here.
-REFERENCE_CURVE = [[0, 0.0], [8, 0.0399], [21, 0.0437], [35, 0.0474], [48, 0.0523], [62, 0.0764], [75, 0.0818],
-                   [89, 0.1172], [102, 0.1402], [116, 0.179], [129, 0.2155], [143, 0.2453], [156, 0.3128],
-                   [170, 0.3889], [183, 0.4975], [197, 0.5893], [210, 0.6312], [224, 0.8533], [237, 0.8921],
-                   [251, 0.9344], [264, 1.0]]
-REFERENCE_SECONDS = 150.0  # on a quiet machine; three to five times that at a load of 10
+REFERENCE_CURVE = [[0, 0.0], [8, 0.0141], [23, 0.0232], [38, 0.0321], [53, 0.0406], [67, 0.0584],
+                   [82, 0.0729], [97, 0.1239], [111, 0.1459], [126, 0.1864], [141, 0.2612], [156, 0.3507],
+                   [170, 0.4195], [185, 0.4758], [200, 0.5346], [214, 0.5808], [229, 0.6139], [244, 0.8309],
+                   [259, 0.8856], [273, 0.9306], [288, 1.0]]
+REFERENCE_SECONDS = 85.0  # on a quiet machine; three to five times that at a load of 10
 
 
 def warm() -> float:

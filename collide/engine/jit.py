@@ -99,6 +99,148 @@ def _parse_bitcode_when_linked() -> None:
     library.get_pointer_to_function = get_pointer_to_function
 
 
+def _compile_only_what_runs() -> None:
+    """numba optimises every compiled library as a whole and compiles it to machine code as soon
+    as it is finished, also the libraries of kernel parts that only other kernels call: their
+    code is linked into each caller's library, optimised and compiled again there, and their
+    own machine code never runs. A finished library here is optimised as a module and compiled
+    when it is to run (numba asks for an entry point that it defines) or is saved to the cache
+    with machine code; until then a caller links its code as numba's function passes left it,
+    and the caller's module optimisation (the same passes) sees the parts' code once, with its
+    own. A part that never runs is cached as bitcode (numba's other cache format)."""
+    import llvmlite.binding as ll
+    from numba.core import codegen
+    from numba.core.compiler_lock import require_global_compiler_lock
+
+    library = codegen.JITCodeLibrary
+    pointer_to = library.get_pointer_to_function
+    unserialize = library._unserialize.__func__
+    as_object_code = library.serialize_using_object_code
+
+    def finalize(self) -> None:
+        require_global_compiler_lock()
+        self._codegen._check_llvm_bugs()
+        self._raise_if_finalized()
+        seen = set()
+        for linked in self._linking_libraries:
+            if linked not in seen:
+                self._reload_init.update(linked._reload_init)
+                seen.add(linked)
+                self._final_module.link_in(linked._get_module_for_linking(), preserve=True)
+        self._finalize_dynamic_globals()
+        self._verify_declare_only_symbols()
+        self._finalized = True
+        self._not_compiled = True
+
+    def compile_now(self) -> None:
+        if self.__dict__.pop("_not_compiled", False):
+            self._optimize_final_module()
+            self._final_module.verify()
+            self._dynamic_globals.clear()
+            self._finalize_final_module()
+
+    def get_pointer_to_function(self, name):
+        self._ensure_finalized()
+        if "_not_compiled" in self.__dict__:
+            if not _defines(self, name):
+                return 0
+            compile_now(self)
+        return pointer_to(self, name)
+
+    def serialize_using_object_code(self):
+        self._ensure_finalized()
+        if "_not_compiled" in self.__dict__:
+            return (self.name, "bitcode", self._final_module.as_bitcode())
+        return as_object_code(self)
+
+    def _unserialize(cls, owner, state):
+        name, kind, data = state
+        if kind != "bitcode":
+            return unserialize(cls, owner, state)
+        self = owner.create_library(name)
+        self.enable_object_caching()  # compiled when it first runs, then cached with machine code
+        self._final_module = ll.parse_bitcode(data)
+        self._finalize_dynamic_globals()
+        self._finalized = True
+        self._not_compiled = True
+        return self
+
+    def set_env(self, env_name, env) -> None:
+        # A part not compiled has no environment to set; its copies in the kernels that call it
+        # leave theirs unset, as the kernels loaded from the cache always have.
+        if self._engine.get_global_value_address(env_name):
+            set_environment(self, env_name, env)
+
+    set_environment = codegen.JITCPUCodegen.set_env
+    codegen.JITCPUCodegen.set_env = set_env
+    library.finalize = finalize
+    library.get_pointer_to_function = get_pointer_to_function
+    library.serialize_using_object_code = serialize_using_object_code
+    library._unserialize = classmethod(_unserialize)
+
+
+def _compile_entries_when_called() -> None:
+    """numba compiles every kernel with its entry from Python ready to be called, although most
+    kernels are only called by other kernels, which hold their code. A kernel here gets an entry
+    that compiles its library (`_compile_only_what_runs`) at its first call from Python, and the
+    dispatcher uses the compiled entry from then on."""
+    from numba.core import cpu, dispatcher
+    from numba.core.compiler_lock import global_compiler_lock
+
+    executable = cpu.CPUContext.get_executable
+    add = dispatcher.Dispatcher.add_overload
+
+    class Entry:
+        def __init__(self, context, library, fndesc, env) -> None:
+            self.made = (context, library, fndesc, env)
+            self.compiled = None
+            self.ready = None
+
+        def __call__(self, *args, **kwargs):
+            if self.compiled is None:
+                with global_compiler_lock:
+                    if self.compiled is None:
+                        compiled = executable(*self.made)
+                        if self.ready is not None:
+                            self.ready(compiled)
+                        self.compiled = compiled
+            return self.compiled(*args, **kwargs)
+
+    def get_executable(self, library, fndesc, env):
+        compiled = library._finalized and "_not_compiled" not in library.__dict__
+        if not compiled and _defines(library, fndesc.llvm_cpython_wrapper_name):
+            return Entry(self, library, fndesc, env)
+        return executable(self, library, fndesc, env)
+
+    def add_overload(self, cres) -> None:
+        entry = cres.entry_point
+        if not isinstance(entry, Entry):
+            return add(self, cres)
+        if entry.compiled is not None:
+            return add(self, cres._replace(entry_point=entry.compiled))
+        # Not in the dispatcher's table: a call from Python asks numba's compile, which returns
+        # this entry; once compiled it goes into the table.
+        args = tuple(cres.signature.args)
+
+        def ready(compiled) -> None:
+            done = cres._replace(entry_point=compiled)
+            add(self, done)
+            self._cache.save_overload(args, done)  # again, now with its machine code
+
+        entry.ready = ready
+        self.overloads[args] = cres
+
+    cpu.CPUContext.get_executable = get_executable
+    dispatcher.Dispatcher.add_overload = add_overload
+
+
+def _defines(library, name: str) -> bool:
+    try:
+        return not library._final_module.get_function(name).is_declaration
+    except NameError:
+        return False
+
+
 # How LLVM optimises the kernels (numba's NUMBA_OPT, NUMBA_LOOP_VECTORIZE, NUMBA_SLP_VECTORIZE):
 # numba's defaults (level 1 saves an eighth of the compile's CPU and costs the DEM kernel up to a
 # tenth of its time, measured). numba's cache keys a compiled function on its signature and the
@@ -164,17 +306,20 @@ def _called_from_kernels_only(dispatcher) -> None:
 
 
 if tier.COMPILED:
-    from numba import config, njit
+    from numba import config
 
     _set_up_target_to_compile_only()
     _parse_bitcode_when_linked()
+    _compile_only_what_runs()
+    _compile_entries_when_called()
 
     _same_code_generation()
     # The cache folder named after every kernel source (tier.cache_key): never a stale callee.
     config.CACHE_DIR = str(tier.cache_dir())
     # error_model="numpy": a division by zero gives inf or NaN (checked after each step) instead
-    # of raising, which also keeps the compiled code smaller.
-    jit = _one_signature(dict(cache=True, error_model="numpy", nogil=True))
+    # of raising, which also keeps the compiled code smaller. No entry from C
+    # (`no_cfunc_wrapper`): nothing takes a kernel's address.
+    jit = _one_signature(dict(cache=True, error_model="numpy", nogil=True, no_cfunc_wrapper=True))
     # Pieces called per contact, per body or per substep, which allocate nothing (a contact
     # law's parts, a body's turn; the event engine's step with its kicks, friction solve,
     # geometry and mode values): inlined into the loops, and without reference counting
@@ -193,13 +338,12 @@ if tier.COMPILED:
     # which multiplied the machine code (the cache 32 MB) and the compile's time; still without
     # reference counting, which was most of the gain. Kernel times unchanged, measured.
     jit_call = _one_signature(_part)
-    # Stages with one caller (the event engine's windows, islands, the step's event location):
-    # their code is compiled inside the caller (numba's `inline="always"`), never on its own.
-    # numba compiles every kernel that another one calls into a library of its own, links into
-    # it the libraries of everything it calls, and optimises and compiles the whole again: a
-    # chain of called stages compiled the event engine's code once per level (LLVM spent 21 s
-    # of CPU less without the chain, numba's inliner 11 s more). Kernel times unchanged, measured.
-    jit_part = njit(cache=True, error_model="numpy", nogil=True, inline="always")
+    # Stages with one caller (the event engine's windows, islands, the step's event location)
+    # allocate their work arrays, so they keep reference counting; called, not copied into
+    # their caller (numba's `inline="always"` spent 10 s of CPU re-typing them inside
+    # `simulate`; a call per window, island or step costs nothing measurable).
+    jit_part = _one_signature(dict(cache=True, error_model="numpy", nogil=True, no_cpython_wrapper=True,
+                                   no_cfunc_wrapper=True))
 else:
     def jit(function):
         """Interpreted: the kernel as plain Python."""
