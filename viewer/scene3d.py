@@ -86,6 +86,12 @@ def _segments(path: np.ndarray) -> np.ndarray:
     return np.stack((path[:-1], path[1:]), axis=1)
 
 
+def _periodic(view: object) -> bool:
+    """Whether a view is a run in a periodic box (a preview of frames has no model: never)."""
+    model = getattr(view, "model", None)
+    return model is not None and model.periodic
+
+
 @dataclass(frozen=True)
 class Lift:
     """A scaling by s about the eye: x -> eye + s (x - eye). Projections are unchanged."""
@@ -544,7 +550,7 @@ class SceneDrawer:
             k = int(np.searchsorted(view.path_times, frame.t, side="right"))
             for i, past in enumerate(self._past):
                 path = np.concatenate((view.paths[i][:k], frame.positions[i][None]), axis=0)
-                segments = view.trail_breaks(_segments(path))  # (none across a periodic side)
+                segments = view.trail_breaks(_segments(path)) if _periodic(view) else _segments(path)
                 past.points = (segments if len(segments) else _segments(path[-1:])).astype(np.float32)
         self._apply_clip(frame)
         self.look.frame_shown(frame)
@@ -687,7 +693,7 @@ class SceneDrawer:
         """In a periodic box, a copy of each sphere across every side it crosses (plain spheres
         in the body's colour: `ViewRun.images`), in one batched mesh grown in blocks."""
         view = self.view
-        if view is None or not view.model.periodic:
+        if view is None or not _periodic(view):
             return
         body, centre = view.images(frame.positions)
         k = len(body)
@@ -737,9 +743,9 @@ class SceneDrawer:
         strong &= links_shown(links.i, links.j, self._hidden)
         i, j, point, force = links.i[strong], links.j[strong], links.point[strong], links.force[strong]
         start = frame.positions[i]
-        # (across a periodic side, to the other body's nearest image)
-        other = start + embed3(nearest_image((frame.positions[np.maximum(j, 0)] - start)[:, :view.dim],
-                                             view.model.period))
+        other = frame.positions[np.maximum(j, 0)]
+        if _periodic(view):  # across a periodic side: to the other body's nearest image
+            other = start + embed3(nearest_image((other - start)[:, :view.dim], view.model.period))
         end = np.where((j >= 0)[:, None], other, point)
         k = len(i)
         if k > self._chain_capacity:
