@@ -55,6 +55,12 @@ CHAIN_COLOUR = (200, 30, 30)
 GHOST_COLOUR_MIX = 0.55
 SUBDIVISIONS = 3
 FEW_BODIES = 12  # above this, instanced spheres
+# Under software GL a frame of many spheres costs in proportion to their vertices (a thousand
+# 320-face spheres: about a second a frame, so seconds for any change to show): above this many
+# bodies each is an 80-face sphere (a quarter of the vertices; at a pile's size on screen still
+# round), its spin dot an icosahedron and its shadow an 8-sided disc.
+DETAILED_BODIES = 250
+FILL_SKY, FILL_GROUND, FILL_INTENSITY = (255, 255, 255), (150, 150, 160), 1.6  # for many bodies
 CHAIN_OPACITY = 0.3  # spheres while the force chains are shown
 CHAIN_BLOCK = 256  # the force chains' batch grows in blocks of this many links
 CHAIN_SEGMENTS = 6  # sides of a force chain's cylinder (thin: six read as round)
@@ -177,6 +183,7 @@ class SceneDrawer:
         self._opacity: dict[int, float] = {}
         self._rings: dict[int, viser.SceneNodeHandle] = {}
         self._light_shadows: bool | None = None
+        self._fill_light: viser.SceneNodeHandle | None = None
         self.frame: Frame | None = None
         self.eye: np.ndarray | None = None  # the camera's position, for the overlays
         self.lift: Lift | None = None
@@ -198,10 +205,8 @@ class SceneDrawer:
         walls = list(view.walls)
         self.many = view.n_bodies > FEW_BODIES
         if self._light_shadows is not (not self.many):
-            # Many spheres: no shadow map (each frame would draw every sphere twice; under
-            # software GL that doubled a frame's time). Their blob shadows give the depth.
             self._light_shadows = not self.many
-            scene.configure_default_lights(True, cast_shadow=self._light_shadows)
+            self._configure_lights()
         self._floor = None
         if not planar:
             up = np.array([0.0, 0.0, 1.0])
@@ -265,6 +270,22 @@ class SceneDrawer:
             ring.remove()
         self._rings = {}
         self._opacity = {}
+
+    def _configure_lights(self) -> None:
+        """Many spheres: no shadow map (each frame would draw every sphere twice; under software
+        GL that doubled a frame's time; their blob shadows give the depth) and no environment
+        map (its lighting, sampled at every pixel of every sphere, was 60 % of a pile's frame
+        under software GL): a hemisphere light fills in for it. A few: viser's defaults."""
+        scene = self.scene
+        scene.configure_default_lights(True, cast_shadow=not self.many)
+        if self.many:
+            scene.configure_environment_map(None)
+            self._fill_light = scene.add_light_hemisphere("/lights/fill", sky_color=FILL_SKY,
+                                                          ground_color=FILL_GROUND, intensity=FILL_INTENSITY)
+        elif self._fill_light is not None:
+            self._fill_light.remove()
+            self._fill_light = None
+            scene.configure_environment_map("city")  # viser's default map
 
     def _show_ground(self, centre: np.ndarray, half: float, cell: float, z: float) -> None:
         # Lines only: a plane filling the view (viser's grid shader, or any lit surface) costs
@@ -469,7 +490,8 @@ class SceneDrawer:
     def _build_batch(self, view: ViewRun, colours: np.ndarray) -> None:
         scene = self.scene
         n = view.n_bodies
-        verts, faces = unit_sphere(2)
+        coarse = n > DETAILED_BODIES
+        verts, faces = unit_sphere(1 if coarse else 2)
         ident = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
         zeros = np.zeros((n, 3))
         self._batch["spheres"] = scene.add_batched_meshes_simple(
@@ -477,7 +499,7 @@ class SceneDrawer:
             batched_scales=view.radius.astype(np.float32), batched_colors=colours, lod="off",
             cast_shadow=False, receive_shadow=False)
         if view.dim > 1 and view.spin_dim:
-            dv, df = unit_sphere(1)
+            dv, df = unit_sphere(0 if coarse else 1)
             self._batch["dots"] = scene.add_batched_meshes_simple(
                 "/bodies/dots", dv, df, batched_wxyzs=ident, batched_positions=zeros,
                 batched_scales=(0.22 * view.radius).astype(np.float32), batched_colors=(255, 255, 255),
@@ -490,7 +512,7 @@ class SceneDrawer:
         if self._floor is None:
             return
         n = view.n_bodies
-        dv, df = disc()
+        dv, df = disc(8 if n > DETAILED_BODIES else 24)
         self._batch["shadows"] = self.scene.add_batched_meshes_simple(
             "/bodies/shadows", dv, df, batched_wxyzs=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
             batched_positions=np.zeros((n, 3)), batched_scales=view.radius.astype(np.float32),
