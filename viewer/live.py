@@ -11,6 +11,9 @@ thousand), when it is opened and at every slider change.
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import gc
 import math
 import threading
 import time
@@ -108,6 +111,24 @@ def _dem_preview(scene: Scene) -> Preview | None:
     except (RunError, SceneError, ValueError, ZeroDivisionError):
         return None
     return None
+
+
+def release_memory() -> None:
+    """Hand the heap freed by a replaced run of many bodies back to the system. glibc keeps freed
+    memory for reuse, and a pile's view arrays (tens of MB, freed by the worker thread while
+    the next are built) stayed resident: the live pile's server grew by 30-60 MB a slider change
+    (375 to 473 MB in four; 377 MB once trimmed). A no-op where the C library is not glibc."""
+    gc.collect()  # a replaced view in a reference cycle is freed now, before the trim
+    trim = getattr(_libc(), "malloc_trim", None)
+    if trim is not None:
+        trim(0)
+
+
+def _libc() -> Any:
+    try:
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+    except OSError:
+        return None
 
 
 def may_be_measured(scene: Scene) -> bool:
@@ -265,6 +286,8 @@ class LiveRuns:
         self._tab.show_live(view, refit=req.refit, stamp=req.stamp)
         if long:
             self._messages.show_progress("")
+        if len(scene.bodies) > MANY_BODIES:
+            release_memory()  # the run it replaced
         self._record(req, clock, preview=preview is not None or measuring, simulate=t_run,
                      core=run.result.wall_time_s, prepare=t_view, build=t_build)
         if measuring:
