@@ -60,7 +60,7 @@ FEW_BODIES = 12  # above this, instanced spheres
 # bodies each is an 80-face sphere (a quarter of the vertices; at a pile's size on screen still
 # round), its spin dot an icosahedron and its shadow an 8-sided disc.
 DETAILED_BODIES = 250
-FILL_SKY, FILL_GROUND, FILL_INTENSITY = (255, 255, 255), (150, 150, 160), 1.6  # for many bodies
+FILL_SKY, FILL_GROUND, FILL_INTENSITY = (255, 255, 255), (150, 150, 160), 1.6  # instead of an environment map
 CHAIN_OPACITY = 0.3  # spheres while the force chains are shown
 CHAIN_BLOCK = 256  # the force chains' batch grows in blocks of this many links
 CHAIN_SEGMENTS = 6  # sides of a force chain's cylinder (thin: six read as round)
@@ -273,19 +273,16 @@ class SceneDrawer:
 
     def _configure_lights(self) -> None:
         """Many spheres: no shadow map (each frame would draw every sphere twice; under software
-        GL that doubled a frame's time; their blob shadows give the depth) and no environment
-        map (its lighting, sampled at every pixel of every sphere, was 60 % of a pile's frame
-        under software GL): a hemisphere light fills in for it. A few: viser's defaults."""
+        GL that doubled a frame's time; their blob shadows give the depth). Every scene: no
+        environment map, a hemisphere light instead. The map's lighting, sampled at every pixel
+        of every sphere, was 60 % of a pile's frame under software GL; switched per scene, each
+        switch recompiled every material's shaders (seconds there), so it is set once."""
         scene = self.scene
         scene.configure_default_lights(True, cast_shadow=not self.many)
-        if self.many:
+        if self._fill_light is None:
             scene.configure_environment_map(None)
             self._fill_light = scene.add_light_hemisphere("/lights/fill", sky_color=FILL_SKY,
                                                           ground_color=FILL_GROUND, intensity=FILL_INTENSITY)
-        elif self._fill_light is not None:
-            self._fill_light.remove()
-            self._fill_light = None
-            scene.configure_environment_map("city")  # viser's default map
 
     def _show_ground(self, centre: np.ndarray, half: float, cell: float, z: float) -> None:
         # Lines only: a plane filling the view (viser's grid shader, or any lit surface) costs
