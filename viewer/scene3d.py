@@ -204,8 +204,10 @@ class SceneDrawer:
         extent = float(max(hi[0] - lo[0], hi[1] - lo[1], 4 * r_max))
         walls = list(view.walls)
         self.many = view.n_bodies > FEW_BODIES
-        if self._light_shadows is not (not self.many):
-            self._light_shadows = not self.many
+        # A shadow map up to DETAILED_BODIES (switching it recompiles every material's shaders:
+        # seconds under software GL, so not between a few bodies and a rack of sixteen).
+        if self._light_shadows is not (view.n_bodies <= DETAILED_BODIES):
+            self._light_shadows = view.n_bodies <= DETAILED_BODIES
             self._configure_lights()
         self._floor = None
         if not planar:
@@ -272,13 +274,13 @@ class SceneDrawer:
         self._opacity = {}
 
     def _configure_lights(self) -> None:
-        """Many spheres: no shadow map (each frame would draw every sphere twice; under software
-        GL that doubled a frame's time; their blob shadows give the depth). Every scene: no
+        """Above DETAILED_BODIES: no shadow map (each frame would draw every sphere twice; under
+        software GL that doubled a frame's time; their blob shadows give the depth). Every scene: no
         environment map, a hemisphere light instead. The map's lighting, sampled at every pixel
         of every sphere, was 60 % of a pile's frame under software GL; switched per scene, each
         switch recompiled every material's shaders (seconds there), so it is set once."""
         scene = self.scene
-        scene.configure_default_lights(True, cast_shadow=not self.many)
+        scene.configure_default_lights(True, cast_shadow=bool(self._light_shadows))
         if self._fill_light is None:
             scene.configure_environment_map(None)
             self._fill_light = scene.add_light_hemisphere("/lights/fill", sky_color=FILL_SKY,
