@@ -181,8 +181,8 @@ class FileActions:
             return None
         run = view.run
         try:
-            if view.preview:
-                run = run_scene(view.scene, record=True)
+            if view.preview or getattr(view, "measuring", False):
+                run = run_scene(view.scene, record=True)  # the scene's own run, its error measured
             self._folder.mkdir(parents=True, exist_ok=True)
             path = files.unique_path(self._folder, files.save_name(view.scene.name))
             write_recording(run, path)

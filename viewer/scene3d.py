@@ -56,6 +56,12 @@ CHAIN_COLOUR = (200, 30, 30)
 GHOST_COLOUR_MIX = 0.55
 SUBDIVISIONS = 3
 FEW_BODIES = 12  # above this, instanced spheres
+# Under software GL a frame of many spheres costs in proportion to their vertices (a thousand
+# 320-face spheres: about a second a frame, so seconds for any change to show): above this many
+# bodies each is an 80-face sphere (a quarter of the vertices; at a pile's size on screen still
+# round), its spin dot an icosahedron and its shadow an 8-sided disc.
+DETAILED_BODIES = 250
+FILL_SKY, FILL_GROUND, FILL_INTENSITY = (255, 255, 255), (150, 150, 160), 1.6  # instead of an environment map
 CHAIN_OPACITY = 0.3  # spheres while the force chains are shown
 CHAIN_BLOCK = 256  # the force chains' batch grows in blocks of this many links
 IMAGE_BLOCK = 64  # the periodic copies' batch grows in blocks of this many spheres
@@ -186,6 +192,7 @@ class SceneDrawer:
         self._opacity: dict[int, float] = {}
         self._rings: dict[int, viser.SceneNodeHandle] = {}
         self._light_shadows: bool | None = None
+        self._fill_light: viser.SceneNodeHandle | None = None
         self.frame: Frame | None = None
         self.eye: np.ndarray | None = None  # the camera's position, for the overlays
         self.lift: Lift | None = None
@@ -206,11 +213,11 @@ class SceneDrawer:
         extent = float(max(hi[0] - lo[0], hi[1] - lo[1], 4 * r_max))
         walls = list(view.walls)
         self.many = view.n_bodies > FEW_BODIES
-        if self._light_shadows is not (not self.many):
-            # Many spheres: no shadow map (each frame would draw every sphere twice; under
-            # software GL that doubled a frame's time). Their blob shadows give the depth.
-            self._light_shadows = not self.many
-            scene.configure_default_lights(True, cast_shadow=self._light_shadows)
+        # A shadow map up to DETAILED_BODIES (switching it recompiles every material's shaders:
+        # seconds under software GL, so not between a few bodies and a rack of sixteen).
+        if self._light_shadows is not (view.n_bodies <= DETAILED_BODIES):
+            self._light_shadows = view.n_bodies <= DETAILED_BODIES
+            self._configure_lights()
         self._floor = None
         if not planar:
             up = np.array([0.0, 0.0, 1.0])
@@ -274,6 +281,19 @@ class SceneDrawer:
             ring.remove()
         self._rings = {}
         self._opacity = {}
+
+    def _configure_lights(self) -> None:
+        """Above DETAILED_BODIES: no shadow map (each frame would draw every sphere twice; under
+        software GL that doubled a frame's time; their blob shadows give the depth). Every scene: no
+        environment map, a hemisphere light instead. The map's lighting, sampled at every pixel
+        of every sphere, was 60 % of a pile's frame under software GL; switched per scene, each
+        switch recompiled every material's shaders (seconds there), so it is set once."""
+        scene = self.scene
+        scene.configure_default_lights(True, cast_shadow=bool(self._light_shadows))
+        if self._fill_light is None:
+            scene.configure_environment_map(None)
+            self._fill_light = scene.add_light_hemisphere("/lights/fill", sky_color=FILL_SKY,
+                                                          ground_color=FILL_GROUND, intensity=FILL_INTENSITY)
 
     def _show_ground(self, centre: np.ndarray, half: float, cell: float, z: float) -> None:
         # Lines only: a plane filling the view (viser's grid shader, or any lit surface) costs
@@ -478,7 +498,8 @@ class SceneDrawer:
     def _build_batch(self, view: ViewRun, colours: np.ndarray) -> None:
         scene = self.scene
         n = view.n_bodies
-        verts, faces = unit_sphere(2)
+        coarse = n > DETAILED_BODIES
+        verts, faces = unit_sphere(1 if coarse else 2)
         ident = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
         zeros = np.zeros((n, 3))
         self._batch["spheres"] = scene.add_batched_meshes_simple(
@@ -486,7 +507,7 @@ class SceneDrawer:
             batched_scales=view.radius.astype(np.float32), batched_colors=colours, lod="off",
             cast_shadow=False, receive_shadow=False)
         if view.dim > 1 and view.spin_dim:
-            dv, df = unit_sphere(1)
+            dv, df = unit_sphere(0 if coarse else 1)
             self._batch["dots"] = scene.add_batched_meshes_simple(
                 "/bodies/dots", dv, df, batched_wxyzs=ident, batched_positions=zeros,
                 batched_scales=(0.22 * view.radius).astype(np.float32), batched_colors=(255, 255, 255),
@@ -499,7 +520,7 @@ class SceneDrawer:
         if self._floor is None:
             return
         n = view.n_bodies
-        dv, df = disc()
+        dv, df = disc(8 if n > DETAILED_BODIES else 24)
         self._batch["shadows"] = self.scene.add_batched_meshes_simple(
             "/bodies/shadows", dv, df, batched_wxyzs=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
             batched_positions=np.zeros((n, 3)), batched_scales=view.radius.astype(np.float32),

@@ -146,14 +146,18 @@ def _subsample(times: np.ndarray, n: int) -> np.ndarray:
     return times[np.linspace(0, len(times) - 1, n).round().astype(int)]
 
 
+# What the status says while a run's error is measured (viewer.live shows the run first).
+MEASURING = "pending, being measured (the run again at a tenth of the tolerance)"
+
 class ViewRun:
     """A run prepared for display (member 0 of the run's batch)."""
 
-    def __init__(self, run: SceneRun, *, origin: str = "", preview: bool = False) -> None:
+    def __init__(self, run: SceneRun, *, origin: str = "", preview: bool = False, measuring: bool = False) -> None:
         self.run = run.member(0) if run.result.batch_size > 1 else run
         self.scene = self.run.scene
         self.origin = origin
         self.preview = preview
+        self.measuring = measuring  # the run's own, its error being measured (viewer.live)
         result = self.run.result
         if result.trajectory is None:
             raise ValueError("the run has no trajectory (run it with record=True)")
@@ -501,7 +505,20 @@ class ViewRun:
                          f"max overlap {float(log.max_overlap[0]) * 1e3:.4g} mm")
         else:
             lines.append("contact: none")
+        lines.append(self.error_line())
         return lines
+
+    def error_line(self) -> str:
+        """The outcome's error estimate and where it comes from: pending while it is measured."""
+        if self.measuring:
+            return f"error estimate: *{MEASURING}*"
+        estimate = self.run.error_estimate
+        if estimate is None:
+            return "error estimate: n/a"
+        method = (self.run.error_method or ["model"])[0]
+        how = ("measured: against the run at a tenth of the tolerance" if method == "measured"
+               else "the error model's")
+        return f"error estimate: {float(estimate[0]):.2g} ({how})"
 
 
 def body_values_arrays(mass: np.ndarray, inertia: np.ndarray, v: np.ndarray, w: np.ndarray) -> dict[str, np.ndarray]:
