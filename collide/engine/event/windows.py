@@ -290,6 +290,16 @@ def image_shift(G, i, j, t, grav, box, out):
 
 
 @jit_inline
+def any_above(values, cap):
+    """Whether any value exceeds cap (a loop: numpy's max would make every cached load of the
+    engine import numba's array maths, and with it scipy's linear algebra, 0.3 s of CPU)."""
+    for k in range(values.shape[0]):
+        if values[k] > cap:
+            return True
+    return False
+
+
+@jit_inline
 def periodic_reach(V, n, cap):
     """How long no two bodies close or part by more than 2 `cap`, at their speeds now (gravity
     cancels in their relative motion)."""
@@ -424,7 +434,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
         while True:
             cand, margin = window_candidates(G, P, V, n, eng, tables, horizon, safety, WP, grav, dim, box)
             parent = clusters(cand, n)
-            if box[BOX_ANY] != 0.0 and margin.max() > fp[FP_CAP]:
+            if box[BOX_ANY] != 0.0 and any_above(margin, fp[FP_CAP]):
                 # A body that may move further than this within the window could meet another
                 # image than the nearest it was found at.
                 horizon *= 0.5
