@@ -54,6 +54,12 @@ class Rerun:
     floor: float
 
 
+def measurable(scene: Scene, auto: bool) -> bool:
+    """Whether a run of the scene may have its error measured: an automatic step (a given dt is
+    the user's) and at most MEASURED_MAX_BODIES bodies (beyond, final states decorrelate)."""
+    return auto and len(scene.bodies) <= MEASURED_MAX_BODIES
+
+
 def outside_model(result: RunResult, lasting: bool | None = None) -> bool:
     """Whether a single run's outcome is outside what the error model covers: contacts in a
     chain, or one that lasts (`lasting` where the caller judged it; else from the contact log's

@@ -286,7 +286,7 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     if not measure:
         return run  # a measuring run: its caller judges it
     if len(scenes) == 1 and measure_mod.outside_model(run.result):
-        if run.auto[0] and len(scenes[0].bodies) <= measure_mod.MEASURED_MAX_BODIES:
+        if measure_mod.measurable(scenes[0], run.auto[0]):
             run = measure_mod.measured(run, _event_rerun(scenes[0], integ, record), max_steps)
         else:
             run.result.warnings.append(measure_mod.unmeasured_warning(run))
@@ -351,7 +351,7 @@ def _run_dem(scenes: list[Scene], model, state, requested: list, auto_used: list
     # (t_c: the shortest the scene can produce), is measured as event runs are.
     lasting = float(result.contacts.duration[0]) > measure_mod.LASTING_CONTACT * float(t_c[0])
     if len(scenes) == 1 and measure_mod.outside_model(result, lasting):
-        if auto_used[0] and len(scenes[0].bodies) <= measure_mod.MEASURED_MAX_BODIES:
+        if measure_mod.measurable(scenes[0], auto_used[0]):
             run = measure_mod.measured(run, _dem_rerun(scenes[0], model, state, record), max_steps)
         else:
             result.warnings.append(measure_mod.unmeasured_warning(run, engine="the DEM error model"))

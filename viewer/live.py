@@ -163,14 +163,14 @@ def may_be_measured(scene: Scene) -> bool:
     and at most MEASURED_MAX_BODIES bodies). Such a run is shown as soon as it is done, its
     estimate pending, and measured after (the scene again at a tenth of the tolerance: 1.8 s
     against the billiards break's 0.26 s run)."""
-    return scene.dt == AUTO and len(scene.bodies) <= cmeasure.MEASURED_MAX_BODIES
+    return cmeasure.measurable(scene, scene.dt == AUTO)
 
 
 def needs_measuring(scene: Scene, run: SceneRun) -> bool:
     """Whether `run_scene` would measure this unmeasured run's error (collide.run's rule: an
     outcome outside the error model: contacts in a chain, or one lasting, in DEM judged against
     the shortest contact time the scene can produce)."""
-    if not run.auto[0] or len(scene.bodies) > cmeasure.MEASURED_MAX_BODIES:
+    if not cmeasure.measurable(scene, bool(run.auto[0])):
         return False
     lasting = None
     if run.result.integrator == "dem":
