@@ -250,7 +250,8 @@ def fill_bodies(table: Any, index: int, dim: int, materials: dict, domain: Any,
     name = table.get("name", "fill" if index == 0 else f"fill{index}_")
     if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
         raise SceneError(f"{where}.name: expected a name of letters, digits, _ or -, got {_shown(name)}")
-    where = f"fill.{name}"
+    if "name" in table:  # (a named fill's messages name it; an unnamed one's give its place)
+        where = f"fill.{name}"
     region = parse_region(table, where, dim, domain)
     seed = table.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:

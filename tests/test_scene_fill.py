@@ -303,6 +303,13 @@ def test_bad_fills_are_refused_in_one_line(keys, message):
     assert str(caught.value).startswith(message) and "\n" not in str(caught.value)
 
 
+def test_an_unnamed_fill_is_named_by_its_place_in_messages():
+    raw = _fill(upper=[1.0, 1.0, 0.0])
+    del raw["fill"][0]["name"]
+    with pytest.raises(SceneError, match=r"^fill\[0\]\.upper: must exceed lower"):
+        parse_scene(raw)
+
+
 def test_a_fill_refused_for_too_many_says_how_many_fit():
     with pytest.raises(SceneError, match=r"only (\d+) of 20000 spheres fit without overlap") as caught:
         parse_scene(_fill(count=20000))
