@@ -44,9 +44,13 @@ LAND = 40  # secant passes landing a root at a step's end
 SWITCH = 0.25  # the ends' sigma phase reaches this part of the estimated largest overlap (measured:
 # 0.5 left Hertz's ends ten times the error at the same steps, 0.1 the middle)
 TIME, SIGMA = 0, 1  # the independent variable of a phase
-# What an impact returns (OUT columns).
+# What an impact returns (OUT columns); `contact` adds how it ended and the state at a stop.
 O_VOUT, O_TIME, O_DMAX, O_FMAX, O_WORK, O_STEPS, O_OK = 0, 1, 2, 3, 4, 5, 6
-NOUT = 7
+O_END, O_DELTA, O_U = 7, 8, 9
+NOUT = 10
+P_STOP = 8  # the law's parameters P: the time since touching at which `contact` stops (inf: none)
+NP = 9
+ENDED, STOPPED, FAILED = 1.0, 2.0, 0.0  # O_END: separated, stopped at P_STOP, not answered
 
 
 @jit
@@ -113,7 +117,10 @@ def gl_step(P, phase, x, y0, y1, y2, h):
 @jit
 def watched(P, phase, x, y0, y1, which):
     """The watched function at a state: which 0, the overlap's rate; 1, the force's rate dF/dt
-    (Hertz's dashpot grows as delta^(1/4): gamma' = gamma / (4 delta))."""
+    (Hertz's dashpot grows as delta^(1/4): gamma' = gamma / (4 delta)); 2, the time past the
+    stop P_STOP."""
+    if which == 2:
+        return (x if phase == TIME else y0) - P[P_STOP]
     delta, u = (y0, y1) if phase == TIME else (x ** P[7], y1)
     if which == 0:
         return u
@@ -184,62 +191,98 @@ def watch_step(P, phase, x, y0, y1, y2, h, e0, e1, e2, peaks):
     return True
 
 
+# How a phase ended (`rise`, `middle`, `fall`).
+FAIL, DONE, STOP, TURNED = 0, 1, 2, 3
+
+
 @jit
-def rise(P, v_in, sigma1, n, peaks):
-    """The contact's start over sigma, from touching to delta = sigma1^p. Returns (t, u, work,
-    steps, ok); not ok where the approach slows below a quarter (the switch lies too deep)."""
+def stop_inside(P, phase, x, y0, y1, y2, h, e0):
+    """Whether a step from (x, y) of h passes the stop P_STOP: then the state there (landed on
+    it by secant steps), as (x, y0, y1, y2, ok, True); else (..., True, False)."""
+    t0 = x if phase == TIME else y0
+    t1 = x + h if phase == TIME else e0
+    if not t1 > P[P_STOP]:
+        return x, y0, y1, y2, True, False
+    lx, l0, l1, l2, ok = land(P, phase, x, y0, y1, y2, h, 2, t0 - P[P_STOP], t1 - P[P_STOP])
+    return lx, l0, l1, l2, ok, True
+
+
+@jit
+def rise(P, v_in, sigma1, n, peaks, trail):
+    """The contact's start over sigma, from touching to delta = sigma1^p (or the stop). Returns
+    (sigma, t, u, work, steps, how); FAIL where the approach slows below a quarter (the switch
+    lies too deep)."""
     h = sigma1 / n
     t, u, w = 0.0, v_in, 0.0
     for s in range(n):
         x = s * h
         e0, e1, e2, ok = gl_step(P, SIGMA, x, t, u, w, h)
         if not ok or not e1 > 0.25 * v_in:
-            return t, u, w, s, False
+            return x, t, u, w, s, FAIL
+        lx, l0, l1, l2, ok, stopped = stop_inside(P, SIGMA, x, t, u, w, h, e0)
+        if stopped:
+            if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, peaks):
+                return x, t, u, w, s, FAIL
+            trail.append((P[P_STOP], lx ** P[7], l1, l2))
+            return lx, P[P_STOP], l1, l2, s + 1, STOP
         if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks):
-            return t, u, w, s, False
+            return x, t, u, w, s, FAIL
         t, u, w = e0, e1, e2
-    return t, u, w, n, True
+        trail.append((t, (x + h) ** P[7], u, w))
+    return sigma1, t, u, w, n, DONE
 
 
 @jit
-def middle(P, t, delta1, u, w, h, limit, peaks):
-    """Over time from delta = delta1 (approaching) until delta is back below delta1 (separating),
-    ending at no less than half of it, within `limit` steps (else the contact does not end as an
-    impact: it comes to rest). Returns (t, delta, u, work, steps, ok)."""
-    d = delta1
+def middle(P, t, delta1, d, u, w, h, limit, peaks, trail):
+    """Over time from delta = d until delta is back below delta1 (separating), ending at no less
+    than half of it, or the stop, within `limit` steps. Returns (t, delta, u, work, steps, how);
+    FAIL where the limit is reached."""
     steps = 0
     size = h
     while steps < limit:
-        e0, e1, e2, ok = gl_step(P, TIME, t, d, u, w, h)
+        stopping = P[P_STOP] - t <= h
+        step = P[P_STOP] - t if stopping else h
+        e0, e1, e2, ok = gl_step(P, TIME, t, d, u, w, step)
         if not ok or (e1 < 0.0 and e0 < 0.5 * delta1):
             h *= 0.5  # too long a step for this part of the contact
             if h < 1e-12 * size:
                 break
             continue
         steps += 1
-        if not watch_step(P, TIME, t, d, u, w, h, e0, e1, e2, peaks):
+        if not watch_step(P, TIME, t, d, u, w, step, e0, e1, e2, peaks):
             break
-        t, d, u, w = t + h, e0, e1, e2
+        t, d, u, w = P[P_STOP] if stopping else t + step, e0, e1, e2
+        trail.append((t, d, u, w))
         h = size
+        if stopping:
+            return t, d, u, w, steps, STOP
         if u < 0.0 and d < delta1:
-            return t, d, u, w, steps, True
-    return t, d, u, w, steps, False
+            return t, d, u, w, steps, DONE
+    return t, d, u, w, steps, FAIL
 
 
 @jit
-def fall(P, t, sigma, u, w, n, peaks):
-    """The contact's end over sigma, from delta = sigma^p (separating) to 0. Returns (t, u, work,
-    ok); not ok where the separation stops before the overlap is gone."""
+def fall(P, t, sigma, u, w, n, peaks, trail):
+    """The contact's end over sigma, from delta = sigma^p (separating) to 0, or the stop. Returns
+    (sigma, t, u, work, steps, how); TURNED (the state before the step that failed) where the
+    separation stops before the overlap is gone."""
     h = -sigma / n
     for s in range(n):
         x = sigma + s * h
         e0, e1, e2, ok = gl_step(P, SIGMA, x, t, u, w, h)
         if not ok or not e1 < 0.0:
-            return t, u, w, False
+            return x, t, u, w, s, TURNED
+        lx, l0, l1, l2, ok, stopped = stop_inside(P, SIGMA, x, t, u, w, h, e0)
+        if stopped:
+            if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, peaks):
+                return x, t, u, w, s, TURNED
+            trail.append((P[P_STOP], lx ** P[7], l1, l2))
+            return lx, P[P_STOP], l1, l2, s + 1, STOP
         if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks):
-            return t, u, w, False
+            return x, t, u, w, s, TURNED
         t, u, w = e0, e1, e2
-    return t, u, w, True
+        trail.append((t, 0.0 if s == n - 1 else (x + h) ** P[7], u, w))
+    return 0.0, t, u, w, n, DONE
 
 
 @jit
@@ -255,33 +298,83 @@ def estimate(P, v_in):
 
 
 @jit
-def impact(P, v_in, n_end, n_mid, out):
-    """One contact from touching at approach speed v_in > 0 to separating, n_end steps over sigma
-    at each end and steps of a contact time over n_mid between. out (NOUT): the speed of
-    separation, the contact time, the largest overlap and force, the dashpot's work, the steps
-    taken, and 1 where every part converged (0: the contact does not separate as the phases
-    need, or a step failed)."""
-    dmax, span = estimate(P, v_in)
-    peaks = [0.0, law(P, 0.0, v_in)[1]]
-    for c in range(NOUT):
-        out[c] = 0.0
+def start(P, v_in, n_end, peaks, trail):
+    """The rise, its switch to time steps at a quarter of the estimated largest overlap (halved
+    while the approach slows too much before it). Returns (delta1, sigma, t, u, work, steps,
+    how)."""
+    dmax, _ = estimate(P, v_in)
     frac = SWITCH
     for _ in range(10):
         peaks[0], peaks[1] = 0.0, law(P, 0.0, v_in)[1]
         delta1 = frac * dmax
-        t, u, w, s1, ok = rise(P, v_in, delta1 ** (1.0 / P[7]), n_end, peaks)
-        if ok:
-            break
+        while len(trail) > 0:  # a deeper switch's attempt
+            trail.pop()
+        x, t, u, w, s1, how = rise(P, v_in, delta1 ** (1.0 / P[7]), n_end, peaks, trail)
+        if how != FAIL:
+            return delta1, x, t, u, w, s1, how
         frac *= 0.5
-    if not ok:
-        return
-    t, d, u, w, s2, ok = middle(P, t, delta1, u, w, span / n_mid, 50 * n_mid, peaks)
-    if not ok:
-        return
-    t, u, w, ok = fall(P, t, d ** (1.0 / P[7]), u, w, n_end, peaks)
+    return delta1, x, t, u, w, s1, FAIL
+
+
+@jit
+def contact(P, v_in, n_end, n_mid, limit, out, trail):
+    """One contact from touching at approach speed v_in > 0 until it separates or P_STOP (time
+    since touching) comes, n_end steps over sigma at each end and steps of a contact time over
+    n_mid between, at most `limit` steps over time. A contact whose separation stops before the
+    overlap is gone (gravity holds a slow, damped ball) goes on over time. out (NOUT): the speed
+    of separation, the time, the largest overlap and force, the dashpot's work, the steps, O_OK,
+    and O_END (ENDED, STOPPED: O_DELTA and O_U the overlap and its rate at the stop; FAILED).
+    trail (an empty list) gets (time, overlap, its rate, work) after every step taken."""
+    _, span = estimate(P, v_in)
+    peaks = [0.0, 0.0]
+    for c in range(NOUT):
+        out[c] = 0.0
+    delta1, x, t, u, w, steps, how = start(P, v_in, n_end, peaks, trail)
+    d = delta1 if how == DONE else x ** P[7]
+    ended = False
+    while how == DONE:
+        t, d, u, w, s2, how = middle(P, t, delta1, d, u, w, span / n_mid, limit - steps, peaks, trail)
+        steps += s2
+        if how != DONE:
+            break
+        x, t, u, w, s3, how = fall(P, t, d ** (1.0 / P[7]), u, w, n_end, peaks, trail)
+        steps += s3
+        d = x ** P[7]
+        if how == DONE:
+            ended = True
+            break
+        if how == TURNED:
+            delta1, how = d, DONE  # held on the wall: it does not come back below this
     out[O_VOUT], out[O_TIME], out[O_DMAX], out[O_FMAX], out[O_WORK] = -u, t, peaks[0], peaks[1], w
-    out[O_STEPS] = s1 + s2 + n_end
-    out[O_OK] = 1.0 if ok else 0.0
+    out[O_STEPS] = steps
+    out[O_END] = ENDED if ended else (STOPPED if how == STOP else FAILED)
+    out[O_OK] = 1.0 if ended else 0.0
+    out[O_DELTA], out[O_U] = d, u
+
+
+@jit
+def impact(P, v_in, n_end, n_mid, out):
+    """One contact from touching at approach speed v_in > 0 to separating, n_end steps over sigma
+    at each end and steps of a contact time over n_mid between. out (NOUT): the speed of
+    separation, the contact time, the largest overlap and force, the dashpot's work, the steps
+    taken, and 1 where every part converged (0: the contact does not separate as an impact, or a
+    step failed)."""
+    _, span = estimate(P, v_in)
+    peaks = [0.0, 0.0]
+    for c in range(NOUT):
+        out[c] = 0.0
+    trail = [(0.0, 0.0, 0.0, 0.0)]  # (the states after each step: `contact`'s callers keep them)
+    delta1, x, t, u, w, s1, how = start(P, v_in, n_end, peaks, trail)
+    if how != DONE:
+        return
+    t, d, u, w, s2, how = middle(P, t, delta1, delta1, u, w, span / n_mid, 50 * n_mid, peaks, trail)
+    if how != DONE:
+        return
+    x, t, u, w, s3, how = fall(P, t, d ** (1.0 / P[7]), u, w, n_end, peaks, trail)
+    out[O_VOUT], out[O_TIME], out[O_DMAX], out[O_FMAX], out[O_WORK] = -u, t, peaks[0], peaks[1], w
+    out[O_STEPS] = s1 + s2 + s3
+    out[O_OK] = 1.0 if how == DONE else 0.0
+    out[O_END] = ENDED if how == DONE else FAILED
 
 
 def steps_for(tol: float) -> tuple[int, int]:
@@ -297,7 +390,7 @@ def impact_params(*, hertz: bool, mstar: float, k: float = 0.0, estar: float = 0
     """The law's parameters as `impact` takes them (P): the linear spring k, or Hertz with E* and
     R*; the dashpot's zeta (`collide.dem.damping_ratio`); m*; a constant acceleration pressing the
     contact (gravity's part along the normal into a wall)."""
-    return np.array([1.0 if hertz else 0.0, k, estar, rstar, mstar, zeta, accel, 4.0 if hertz else 1.0])
+    return np.array([1.0 if hertz else 0.0, k, estar, rstar, mstar, zeta, accel, 4.0 if hertz else 1.0, math.inf])
 
 
 def normal_impact(params: np.ndarray, v_in: float, tol: float) -> np.ndarray:
