@@ -332,7 +332,10 @@ def _run_alone(scene: Scene, integ: str, model, state, tol: float, record: bool,
     except AloneError as exc:
         if forced:
             raise RunError(f"{exc}; run it with --integrator dem") from None
-        run = run_scenes([scene], integrator="dem", tol=tol, record=record, max_steps=max_steps, measure=measure)
+        try:
+            run = run_scenes([scene], integrator="dem", tol=tol, record=record, max_steps=max_steps, measure=measure)
+        except RunError as dem_exc:
+            raise RunError(f"in the event engine {exc}; in DEM instead: {dem_exc}") from None
         run.result.engine_reason = (f"{dem_reason(scene)}: the fixed-step DEM kernel (first order), since in the "
                                     f"event engine {exc}")
         return run
@@ -344,7 +347,12 @@ def _run_alone(scene: Scene, integ: str, model, state, tol: float, record: bool,
         return run
     t_c = float(contact_time(model, state)[0][0]) if model.n_walls else math.inf
     lasting = float(result.contacts.duration[0]) > measure_mod.LASTING_CONTACT * t_c
-    if measure_mod.outside_model(result, lasting):
+    at_rest = not np.any(state.v)  # --tol is relative to the fastest initial speed: none to measure against
+    if measure_mod.outside_model(result, lasting) and at_rest:
+        result.warnings.append(measure_mod.unmeasured_warning(run, "every body starts at rest, and --tol is relative "
+                                                                   "to the fastest initial speed; each contact is "
+                                                                   "within it of its approach speed"))
+    elif measure_mod.outside_model(result, lasting):
         rerun = measure_mod.Rerun(
             run=lambda finer, steps: run_scenes([scene], integrator=integ, tol=finer, record=record, max_steps=steps,
                                                 measure=False),

@@ -187,8 +187,6 @@ def take_contact(G, WP, LAW, grav, fl, w, t, t_end, ends, steps_left, out, trail
     P = LAW[w].copy()
     P[6] = -gn  # gravity pressing the contact
     P[P_STOP] = t_end - t
-    while len(trail) > 0:
-        trail.pop()
     contact(P, -vn, ends[0], ends[1], steps_left, out, trail)
     if out[O_END] != ENDED and out[O_END] != STOPPED:
         return t, False, True, KN, RC

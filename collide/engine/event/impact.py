@@ -49,7 +49,8 @@ O_VOUT, O_TIME, O_DMAX, O_FMAX, O_WORK, O_STEPS, O_OK = 0, 1, 2, 3, 4, 5, 6
 O_END, O_DELTA, O_U = 7, 8, 9
 NOUT = 10
 P_STOP = 8  # the law's parameters P: the time since touching at which `contact` stops (inf: none)
-NP = 9
+P_SPEED = 9  # ... and the round-off of the approach speed (set by `contact` and `impact`)
+NP = 10
 ENDED, STOPPED, FAILED = 1.0, 2.0, 0.0  # O_END: separated, stopped at P_STOP, not answered
 
 
@@ -98,9 +99,12 @@ def gl_step(P, phase, x, y0, y1, y2, h):
         n20, n21, n22 = rhs(P, phase, x + GL_C2 * h, y0 + h * (GL_A20 * k00 + GL_A21 * k10 + GL_A22 * k20),
                             y1 + h * (GL_A20 * k01 + GL_A21 * k11 + GL_A22 * k21),
                             y2 + h * (GL_A20 * k02 + GL_A21 * k12 + GL_A22 * k22))
-        # Each part's change relative to its own size (the parts have different units).
+        # Each part's change relative to its own size (the parts have different units; the rate's
+        # at least what the step makes of the pressing acceleration, which a ball held at rest
+        # balances: its rate is round-off of that, or of the approach speed).
         change = abs(h) * max((abs(n00 - k00) + abs(n10 - k10) + abs(n20 - k20)) / (abs(y0) + abs(h * f0) + 1e-300),
-                              (abs(n01 - k01) + abs(n11 - k11) + abs(n21 - k21)) / (abs(y1) + abs(h * f1) + 1e-300),
+                              (abs(n01 - k01) + abs(n11 - k11) + abs(n21 - k21))
+                              / (abs(y1) + abs(h * f1) + abs(h * P[6]) + P[P_SPEED]),
                               (abs(n02 - k02) + abs(n12 - k12) + abs(n22 - k22)) / (abs(y2) + abs(h * f2) + 1e-300))
         k00, k01, k02, k10, k11, k12, k20, k21, k22 = n00, n01, n02, n10, n11, n12, n20, n21, n22
         # Done at round-off: below it, or no longer shrinking near it.
@@ -324,8 +328,11 @@ def contact(P, v_in, n_end, n_mid, limit, out, trail):
     overlap is gone (gravity holds a slow, damped ball) goes on over time. out (NOUT): the speed
     of separation, the time, the largest overlap and force, the dashpot's work, the steps, O_OK,
     and O_END (ENDED, STOPPED: O_DELTA and O_U the overlap and its rate at the stop; FAILED).
-    trail (an empty list) gets (time, overlap, its rate, work) after every step taken."""
+    trail (a list, emptied first) gets (time, overlap, its rate, work) after every step taken."""
+    while len(trail) > 0:
+        trail.pop()
     _, span = estimate(P, v_in)
+    P[P_SPEED] = 1e-300 + 1e-17 * v_in
     peaks = [0.0, 0.0]
     for c in range(NOUT):
         out[c] = 0.0
@@ -344,7 +351,9 @@ def contact(P, v_in, n_end, n_mid, limit, out, trail):
             ended = True
             break
         if how == TURNED:
-            delta1, how = d, DONE  # held on the wall: it does not come back below this
+            # Held on the wall (or the separation too slow for sigma's steps): over time again,
+            # back to the end's sigma only if it goes on well below here.
+            delta1, how = 0.25 * d, DONE
     out[O_VOUT], out[O_TIME], out[O_DMAX], out[O_FMAX], out[O_WORK] = -u, t, peaks[0], peaks[1], w
     out[O_STEPS] = steps
     out[O_END] = ENDED if ended else (STOPPED if how == STOP else FAILED)
@@ -363,6 +372,7 @@ def impact(P, v_in, n_end, n_mid, out):
     peaks = [0.0, 0.0]
     for c in range(NOUT):
         out[c] = 0.0
+    P[P_SPEED] = 1e-300 + 1e-17 * v_in
     trail = [(0.0, 0.0, 0.0, 0.0)]  # (the states after each step: `contact`'s callers keep them)
     delta1, x, t, u, w, s1, how = start(P, v_in, n_end, peaks, trail)
     if how != DONE:
@@ -390,7 +400,8 @@ def impact_params(*, hertz: bool, mstar: float, k: float = 0.0, estar: float = 0
     """The law's parameters as `impact` takes them (P): the linear spring k, or Hertz with E* and
     R*; the dashpot's zeta (`collide.dem.damping_ratio`); m*; a constant acceleration pressing the
     contact (gravity's part along the normal into a wall)."""
-    return np.array([1.0 if hertz else 0.0, k, estar, rstar, mstar, zeta, accel, 4.0 if hertz else 1.0, math.inf])
+    return np.array([1.0 if hertz else 0.0, k, estar, rstar, mstar, zeta, accel, 4.0 if hertz else 1.0, math.inf,
+                     0.0])
 
 
 def normal_impact(params: np.ndarray, v_in: float, tol: float) -> np.ndarray:
