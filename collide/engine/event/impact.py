@@ -172,26 +172,38 @@ def land(P, phase, x, y0, y1, y2, h, which, g0, g1):
 
 
 @jit
-def watch_step(P, phase, x, y0, y1, y2, h, e0, e1, e2, peaks):
+def watch_step(P, phase, x, y0, y1, y2, h, e0, e1, e2, peaks, trail):
     """After a step from (x, y) to (x + h, e): the largest force so far at its end, and where the
     overlap's rate (peaks[0]: the largest overlap) or the force's rate (peaks[1]) changes sign
-    from + to - inside it, that peak landed. Returns ok."""
+    from + to - inside it, that peak landed and its state added to trail (in time order, before
+    the step's end that the caller adds). Returns ok."""
     peaks[1] = max(peaks[1], force_at(P, phase, x + h, e0, e1))
     if phase == SIGMA:
         peaks[0] = max(peaks[0], (x + h) ** P[7])
     else:
         peaks[0] = max(peaks[0], e0)
+    first = (math.inf, 0.0, 0.0, 0.0)
+    second = (math.inf, 0.0, 0.0, 0.0)
     for which in range(2):
         g0 = watched(P, phase, x, y0, y1, which)
         g1 = watched(P, phase, x + h, e0, e1, which)
         if g0 > 0.0 and g1 < 0.0:
-            lx, l0, l1, _, ok = land(P, phase, x, y0, y1, y2, h, which, g0, g1)
+            lx, l0, l1, l2, ok = land(P, phase, x, y0, y1, y2, h, which, g0, g1)
             if not ok:
                 return False
             if which == 0:
                 peaks[0] = max(peaks[0], l0 if phase == TIME else lx ** P[7])
             else:
                 peaks[1] = max(peaks[1], force_at(P, phase, lx, l0, l1))
+            state = (lx, l0, l1, l2) if phase == TIME else (l0, lx ** P[7], l1, l2)
+            if state[0] < first[0]:
+                first, second = state, first
+            else:
+                second = state
+    if first[0] < math.inf:
+        trail.append(first)
+    if second[0] < math.inf:
+        trail.append(second)
     return True
 
 
@@ -225,11 +237,11 @@ def rise(P, v_in, sigma1, n, peaks, trail):
             return x, t, u, w, s, FAIL
         lx, l0, l1, l2, ok, stopped = stop_inside(P, SIGMA, x, t, u, w, h, e0)
         if stopped:
-            if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, peaks):
+            if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, peaks, trail):
                 return x, t, u, w, s, FAIL
             trail.append((P[P_STOP], lx ** P[7], l1, l2))
             return lx, P[P_STOP], l1, l2, s + 1, STOP
-        if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks):
+        if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks, trail):
             return x, t, u, w, s, FAIL
         t, u, w = e0, e1, e2
         trail.append((t, (x + h) ** P[7], u, w))
@@ -253,7 +265,7 @@ def middle(P, t, delta1, d, u, w, h, limit, peaks, trail):
                 break
             continue
         steps += 1
-        if not watch_step(P, TIME, t, d, u, w, step, e0, e1, e2, peaks):
+        if not watch_step(P, TIME, t, d, u, w, step, e0, e1, e2, peaks, trail):
             break
         t, d, u, w = P[P_STOP] if stopping else t + step, e0, e1, e2
         trail.append((t, d, u, w))
@@ -278,11 +290,11 @@ def fall(P, t, sigma, u, w, n, peaks, trail):
             return x, t, u, w, s, TURNED
         lx, l0, l1, l2, ok, stopped = stop_inside(P, SIGMA, x, t, u, w, h, e0)
         if stopped:
-            if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, peaks):
+            if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, peaks, trail):
                 return x, t, u, w, s, TURNED
             trail.append((P[P_STOP], lx ** P[7], l1, l2))
             return lx, P[P_STOP], l1, l2, s + 1, STOP
-        if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks):
+        if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks, trail):
             return x, t, u, w, s, TURNED
         t, u, w = e0, e1, e2
         trail.append((t, 0.0 if s == n - 1 else (x + h) ** P[7], u, w))
