@@ -72,7 +72,9 @@ def law_rows(model: Model, b: int = 0) -> np.ndarray:
     zeta = float(damping_ratio(np.array(row[TABLE_REST]), model.hertz))
     params = impact.impact_params(hertz=model.hertz, mstar=float(model.mass[b, 0]), k=float(row[TABLE_K]),
                                   estar=float(row[TABLE_ESTAR]), rstar=float(model.radius[b, 0]), zeta=zeta)
-    return np.ascontiguousarray(np.broadcast_to(params, (model.n_walls, params.size)))
+    rows = np.array(np.broadcast_to(params, (model.n_walls, params.size)))
+    rows.setflags(write=False)  # one type for every count of walls: the compiled kernel's (numba types read-only)
+    return rows
 
 
 def contact_tol(model: Model, state: State, tol: float) -> float:

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from numba.typed import List
 from scipy.integrate import solve_ivp
 
 from collide.dem import damping_ratio
@@ -22,7 +23,7 @@ def _stopped(params, v, stop, tol=1e-10):
     P = params.copy()
     P[im.P_STOP] = stop
     out = np.zeros(im.NOUT)
-    trail = [(0.0, 0.0, 0.0, 0.0)]  # (emptied by `contact`: numba cannot type an empty list)
+    trail = List([(0.0, 0.0, 0.0, 0.0)])  # (emptied by `contact`: numba cannot type an empty list)
     n_end, n_mid = im.steps_for(tol)
     im.contact(P, v, n_end, n_mid, 10**6, out, trail)
     return out, trail
@@ -82,7 +83,8 @@ def _run(walls, position, velocity, t_end):
     G[0, layout.G_R], G[0, layout.G_M] = params[3], params[4]
     G[0, layout.G_IM] = 1.0 / params[4]
     WP = np.array(walls, dtype=float)
-    laws = np.ascontiguousarray(np.broadcast_to(params, (len(walls), params.size)))
+    laws = np.array(np.broadcast_to(params, (len(walls), params.size)))
+    laws.setflags(write=False)  # as collide.alone.law_rows gives them (the compiled signature)
     fl = np.zeros(layout.NFL, np.int64)
     fl[layout.FL_RECORD], fl[layout.FL_MAXSTEPS], fl[layout.FL_PLANAR] = 1, 10**6, 1
     fp = np.zeros(layout.NFP)
