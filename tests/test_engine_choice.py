@@ -179,7 +179,7 @@ def test_either_engine_may_be_forced(monkeypatch, capsys, tmp_path):
 
 
 def test_bad_input_is_refused_or_sent_where_it_runs(monkeypatch, capsys, tmp_path):
-    code, out, err = _main(["run", "bounce", "--tol", "1e-13", "--no-record"], monkeypatch, capsys, tmp_path)
+    code, out, err = _main(["run", "bounce", "--tol", "1e-14", "--no-record"], monkeypatch, capsys, tmp_path)
     assert code != 0 and len(err.splitlines()) == 1 and "finer than a sphere's contacts reach" in err
     assert "Traceback" not in err
     # A given step is DEM's notion: the automatic choice sends the run there, and says so.
