@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import inspect
-import json
 import math
 import os
+import sys
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -186,14 +186,14 @@ def run(
     prefer_interpreted(loaded, integrator, step, tol)
     compiled_for_large(len(loaded.bodies))
     from collide.run import run_scene  # the engine: compiled or interpreted from here on
-    from collide.summary import report_csv, run_summary
+    from collide.summary import report_csv, run_summary, write_summary_json
 
     # The trajectory is kept only for what uses it: the recording and the CSV.
     keep = not no_record or csv is not None
     with progress_display(loaded.name) as show:
         result = run_scene(loaded, integrator=integrator, dt=step, tol=tol, record=keep, progress=show,
                            max_steps=max_steps)
-    summary = run_summary(result)
+    summary = run_summary(result, bodies=not json_)  # (--json writes the bodies a chunk at a time)
     if csv is not None:
         every = csv_every if csv_every is not None else 100 * float(result.result.dt[0])
         if not every > 0:
@@ -222,7 +222,7 @@ def run(
             summary["warnings"].append(f"the recording draws free flight at {last_write.fps:.3g} frames per "
                                        "simulated second (a long run: the frames are capped)")
     if json_:
-        typer.echo(json.dumps(summary))
+        write_summary_json(summary, result, sys.stdout)
     else:
         print_summary(summary, recording, all_bodies)
         if csv is not None:

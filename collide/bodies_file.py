@@ -73,7 +73,10 @@ def read_table(path: Path, dim: int, where: str = "bodies.file") -> Table:
             return np.full(n, default)
         return _numbers(raw[column], f"{where}: {path.name}", column, positive)
 
-    material = [str(m) or None for m in raw["material"]] if "material" in raw else [None] * n
+    # One string a material name, not one a body (a body table's bodies share a few materials).
+    shared: dict[str, str] = {}
+    material = [shared.setdefault(m, m) or None for m in map(str, raw["material"])] if "material" in raw \
+        else [None] * n
     vel = [number(f"velocity_{a}", default=0.0) for a in AXES[:dim]]
     spin = [number(c, default=0.0) for c in SPIN_COLUMNS[dim]]
     return Table(names, number("radius", True),

@@ -29,7 +29,6 @@ from collide.stepper import (
     approach_bound,
     run_members,
     step_limit_error,
-    unpack_state,
 )
 
 HERTZ_TIME = 2.868  # t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5): Johnson, Contact Mechanics, 11.4
@@ -206,7 +205,7 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
             return dem_loop.dem_run(*members[b][0])
     outcomes = run_members(b_count, run_member, progress, [(m[0][-1], int(dk.P_NOW), m[1]) for m in members])
     wall_time = time.perf_counter() - started
-    body_tables = np.zeros((b_count, model.n_bodies, int(layout.NG)))
+    ends = _final_arrays(model)  # (the state's own columns: no table of every body's columns beside them)
     for b, (t, WK, KN, REC, IV, EP, st, fg) in enumerate(outcomes):
         (X, V, W, Q, _, _, _, _, grav, _, _), t_end = members[b]
         if st[dk.S_STATUS] == dk.NONFINITE:
@@ -220,9 +219,7 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
             t += tail[b]
             if record:
                 KN = _tail_knots(KN, t, X, V, grav)
-        G = body_tables[b]
-        G[:, layout.G_S:layout.G_S + 3], G[:, layout.G_V:layout.G_V + 3] = X, V
-        G[:, layout.G_W:layout.G_W + 3], G[:, layout.G_Q:layout.G_Q + 4] = W, Q
+        _fill_final(model, ends, b, X, V, W, Q)
         finals.append((t, float(WK.sum()), float(fg[dk.G_STORED])))
         stats[b], figures[b] = st, fg
         if record:
@@ -231,7 +228,7 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
             traj = Trajectory(KN, REC, IV, select_model(model, b))
             traj.energy_parts = EP
             trajectories.append(traj)
-    final = State(np.array([f[0] for f in finals]), *unpack_state(model, body_tables),
+    final = State(np.array([f[0] for f in finals]), *ends,
                   # The kernel's friction work includes what the tangential springs still hold:
                   # that is elastic energy (State.stored), not dissipated.
                   initial.work + np.array([f[1] - f[2] for f in finals]), np.array([f[2] for f in finals]))
@@ -245,6 +242,24 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
     result.dissipation = figures[:, [dk.G_DAMP, dk.G_FRIC, dk.G_ROLL]].copy()
     result.threads = threads
     return result
+
+
+def _final_arrays(model: Model) -> tuple[np.ndarray, ...]:
+    """The members' final s, v, w, q, shaped as `stepper.unpack_state` returns them."""
+    b, n, d = model.batch, model.n_bodies, model.dim
+    spin = {1: (1, 1), 3: (3, 4)}.get(model.spin_dim, (0, 0))
+    return np.zeros((b, n, d)), np.zeros((b, n, d)), np.zeros((b, n, spin[0])), np.zeros((b, n, spin[1]))
+
+
+def _fill_final(model: Model, ends: tuple[np.ndarray, ...], b: int, X: np.ndarray, V: np.ndarray, W: np.ndarray,
+                Q: np.ndarray) -> None:
+    """Member b's final state from the kernel's arrays (N, 3), (N, 4) into `ends`."""
+    s, v, w, q = ends
+    s[b], v[b] = X[:, :model.dim], V[:, :model.dim]
+    if model.spin_dim == 1:
+        w[b], q[b] = W[:, 2:3], Q[:, 0:1]
+    elif model.spin_dim == 3:
+        w[b], q[b] = W, Q
 
 
 def run_threads(n_bodies: int) -> int:

@@ -26,7 +26,7 @@ from collide.engine.dem import threads as par
 from collide.engine.dem.flight import may_meet
 from collide.engine.dem.forces import forces
 from collide.engine.dem.loop import _any_rolling, _coast, _finish, _materials, _outputs, _step_length
-from collide.engine.dem.neighbours import rebuild
+from collide.engine.dem.neighbours import rebuild, slot_regions
 from collide.engine.dem.records import energy_row, frame
 from collide.engine.dem.verlet import kick, kinetic
 from collide.engine.numerics import grow
@@ -69,12 +69,15 @@ def _each(task, threads: int) -> None:
 
 
 class _Shares:
-    """The threads' shares of the current pair list (`threads.plan`) and their buffers."""
+    """The threads' shares of the current pair list (`threads.plan`) and their buffers; made as the
+    list is built, before any force pass on it (each share's region of new contacts' slots,
+    BUMP, starts empty)."""
 
-    def __init__(self, PI, PJ, WL, n: int, threads: int, record: bool, rest: bool):
+    def __init__(self, PI, PJ, PS, HS, WL, n: int, threads: int, record: bool, rest: bool):
         self.PI = PI
         bounds, kb, wb, sb, self.cross, self.inc_start, self.inc_slot = par.plan(PI, PJ, WL, n, threads)
         self.kb, self.wb = kb, wb
+        self.BUMP = slot_regions(PS, HS, kb)
         self.RB = np.array([[bounds[r], bounds[r + 1], kb[r], kb[r + 1], wb[r], wb[r + 1], sb[r], sb[r + 1]]
                             for r in range(threads)], np.int64)
         self.XB = np.zeros((len(self.cross), 2, par.NX))
@@ -119,15 +122,17 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
     wt = wtabs.reshape((wtabs.shape[0], 1, wtabs.shape[1]))
     rolling = _any_rolling(tabs, wtabs, spin)
     X0 = X.copy()
-    keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin,
-                                         np.zeros(0, np.int64), np.zeros((0, dk.NH)), ST, box)
+    none = np.zeros(0, np.int64)
+    PI, PJ, PS, HS, _, _, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin, none, none,
+                                           none, np.zeros((0, dk.NH)), ST, box)
+    shares = _Shares(PI, PJ, PS, HS, WL, n, threads, bool(record), rest > 0.0)
     scratch = np.zeros(4)
     STT, PM, outs = np.zeros((2, threads, par.NST)), np.zeros((2, threads)), np.zeros((threads, 4))
     most = PI.shape[0] + WL.shape[0]
     if record:
         IV, REC = grow(IV, most), grow(REC, most)
-    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl,
-                                0.0, 0.0, n, FG, ST, IV, 0, REC, 0, record != 0, scratch, box)
+    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, shares.kb, shares.BUMP, WL, WH, WP, tabs,
+                                wt, grav, fl, 0.0, 0.0, n, FG, ST, IV, 0, REC, 0, record != 0, scratch, box)
     if record:
         KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, 0.0, n, 0.0)
         EP = grow(EP, nep)
@@ -136,32 +141,31 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
     C = np.zeros(par.NCTL)
     C[par.C_NEXT], C[par.C_PEAK], C[par.C_EVER] = fp[dk.P_FRAME], kinetic(V, W, Bd, n), engaged > 0
     C[par.C_ENGAGED], C[par.C_NIV], C[par.C_NREC] = engaged, niv, nrec
-    shares = None
     while True:
-        if shares is None or shares.PI is not PI:
-            shares = _Shares(PI, PJ, WL, n, threads, bool(record), rest > 0.0)
+        if shares.PI is not PI:  # (the lists were rebuilt)
+            shares = _Shares(PI, PJ, PS, HS, WL, n, threads, bool(record), rest > 0.0)
         s = shares
-        args = (barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl, fp,
-                rolling, ST, FG, IV, REC, s.RB, s.kb, s.wb, s.cross, s.inc_start, s.inc_slot, s.XB, s.SF, s.EVP, s.EVW,
-                s.EB, STT, PM, outs, C)
+        args = (barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS, s.BUMP, WL, WH, WP, tabs, wt, grav,
+                fl, fp, rolling, ST, FG, IV, REC, s.RB, s.kb, s.wb, s.cross, s.inc_start, s.inc_slot, s.XB, s.SF, s.EVP,
+                s.EVW, s.EB, STT, PM, outs, C)
         _each(functools.partial(_share, args), threads)
         reason, t = int(C[par.C_REASON]), C[par.C_T]
         C[par.C_STAY] = 0.0
         if reason == par.R_COAST:
-            over, t, keys, PI, PJ, hist, WL, WH, KN, nkn = _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t,
-                                                                   C[par.C_EVER] != 0.0, keys, PI, PJ, hist, WL,
-                                                                   ST, KN, nkn)
+            over, t, PI, PJ, PS, HS, _, _, WL, WH, KN, nkn = _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp,
+                                                                     t, C[par.C_EVER] != 0.0, PI, PJ, PS, HS,
+                                                                     s.kb, s.BUMP, WL, ST, KN, nkn)
             C[par.C_T], C[par.C_STAY] = t, 1.0
             if over:
                 break
         elif reason == par.R_REBUILD:
-            keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST, box)
+            PI, PJ, PS, HS, _, _, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box)
         elif reason == par.R_GROW:
             most = PI.shape[0] + WL.shape[0]
             IV, REC = grow(IV, int(C[par.C_NIV]) + most), grow(REC, int(C[par.C_NREC]) + most)
         elif reason == par.R_RECORD:
-            state = (X, V, W, Qo, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl, fp, WK, rolling,
-                     ST, FG, scratch)
+            state = (X, V, W, Qo, F, T, PT, Bd, MAT, PI, PJ, PS, HS, s.kb, s.BUMP, WL, WH, WP, tabs, wt, grav, fl, fp,
+                     WK, rolling, ST, FG, scratch)
             over, IV, REC, KN, nkn, EP, nep = _recorded_step(state, C, IV, REC, KN, nkn, EP, nep)
             if over:
                 break
@@ -176,9 +180,10 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
             break
     t = C[par.C_T]
     ST[dk.S_STEPS] = int(C[par.C_STEPS])
-    ST[dk.S_PAIRS] = keys.shape[0]
+    ST[dk.S_PAIRS] = PI.shape[0]
     niv, nrec = int(C[par.C_NIV]), int(C[par.C_NREC])
-    KN, nkn, REC, nrec = _finish(X, V, W, Qo, F, Bd, WK, hist, WH, PI, PJ, WL, t, record, ST, FG, KN, nkn, REC, nrec)
+    KN, nkn, REC, nrec = _finish(X, V, W, Qo, F, Bd, WK, PS, HS, WH, PI, PJ, WL, t, record, ST, FG, KN, nkn, REC,
+                                 nrec)
     return t, WK, KN[:nkn], REC[:nrec], IV[:niv], EP[:nep], ST, FG
 
 
@@ -189,8 +194,8 @@ def _share(args: tuple, r: int) -> None:
 def _recorded_step(state, C, IV, REC, KN, nkn, EP, nep):
     """The rest of a step that records a frame, on this thread as `loop.dem_run` takes it (its
     opening kick and drift done). Returns (whether the run is over, IV, REC, KN, nkn, EP, nep)."""
-    (X, V, W, Qo, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl, fp, WK, rolling, ST, FG,
-     scratch) = state
+    (X, V, W, Qo, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wt, grav, fl, fp, WK, rolling, ST,
+     FG, scratch) = state
     n = X.shape[0]
     h, last = _step_length(C[par.C_T], fp[dk.P_DT], fp[dk.P_TEND])
     t = C[par.C_T] + h
@@ -201,8 +206,8 @@ def _recorded_step(state, C, IV, REC, KN, nkn, EP, nep):
         IV = grow(IV, niv + most)
     if nrec + most >= REC.shape[0]:
         REC = grow(REC, nrec + most)
-    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl, h, t, n,
-                                FG, ST, IV, niv, REC, nrec, True, scratch, fp[dk.P_BOX:dk.P_BOX + NBOX])
+    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wt, grav, fl,
+                                h, t, n, FG, ST, IV, niv, REC, nrec, True, scratch, fp[dk.P_BOX:dk.P_BOX + NBOX])
     kinetic_now = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, True)
     ever = C[par.C_EVER] != 0.0 or engaged > 0
     if engaged:
@@ -214,7 +219,7 @@ def _recorded_step(state, C, IV, REC, KN, nkn, EP, nep):
         return True, IV, REC, KN, nkn, EP, nep
     C[par.C_PEAK] = peak = max(C[par.C_PEAK], kinetic_now)
     KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
-    EP, nep = energy_row(EP, nep, t, WK, hist, WH, n)
+    EP, nep = energy_row(EP, nep, t, WK, PS, HS, WH, n)
     while C[par.C_NEXT] <= t:
         C[par.C_NEXT] += fp[dk.P_FRAME]
     if steps & 255 == 0:

@@ -99,7 +99,7 @@ def near_pairs(s: np.ndarray, within: float) -> tuple[np.ndarray, np.ndarray]:
 
             P = np.zeros((len(s), 3))
             P[:, :s.shape[1]] = s
-            _, i, j = build_pairs(P, np.zeros((len(s), int(NB))), len(s), s.shape[1], float(within))
+            i, j = build_pairs(P, np.zeros((len(s), int(NB))), len(s), s.shape[1], float(within))
             return i, j
     order = np.argsort(s[:, 0], kind="stable")
     x = s[order, 0]

@@ -18,8 +18,8 @@ import numpy as np
 
 _PRIMES = np.array([73856093, 19349663, 83492791], dtype=np.int64)
 _CLIP = float(2**50)  # cell coordinates beyond this merge (more candidates, none lost)
-QUERY_CHUNK = 1 << 15  # queries whose neighbour ranges are held at once
-PAIR_CHUNK = 1 << 22  # candidate pairs expanded at once (memory: a few tens of MB)
+QUERY_CHUNK = 1 << 13  # queries whose neighbour ranges are held at once (27 ranges each in 3D)
+PAIR_CHUNK = 1 << 18  # candidate pairs expanded at once (memory: about 15 MB, with their distances)
 DENSE_PER_SPHERE = 8  # cells per sphere up to which the grid indexes cells directly
 DENSE_MIN = 1 << 16
 

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import io
+import json
 import math
-from typing import Any
+from collections.abc import Iterator
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -20,12 +22,22 @@ def _finite_or_none(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
-    """The docs/design.md section 4 object for one member of a run. Inapplicable residuals are None."""
+# Bodies a chunk of the JSON summary's body list (`write_summary_json`): 100 000 bodies as Python
+# objects took about 70 MB, more than the run's own arrays.
+BODY_CHUNK = 4096
+
+
+def run_summary(run: SceneRun, member: int = 0, bodies: bool = True) -> dict[str, Any]:
+    """The docs/design.md section 4 object for one member of a run. Inapplicable residuals are None.
+    `bodies=False` leaves the body list empty (`write_summary_json` writes it a chunk at a time)."""
     r = run.result
     scene = run.scenes[member]
     res = dg.residuals(r)
-    bodies = _final_bodies(r, scene.dim, member)
+    # The bodies' values are checked as arrays (100 000 bodies: 7 s walked one number at a time);
+    # where one is not finite the walk below names it.
+    final = (r.final.s[member], r.final.v[member], r.final.w[member])
+    finite = all(np.isfinite(a).all() for a in final)
+    listed = _final_bodies(r, scene.dim, member) if bodies or not finite else []
     log = r.contacts
     max_overlap = float(log.max_overlap[member])
     summary = {
@@ -52,7 +64,7 @@ def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
         # whole process, and its wall_time_s is then the interpreted code's.
         "kernels": "compiled" if tier.COMPILED else "interpreted",
         "threads": r.threads,
-        "bodies": bodies,
+        "bodies": listed,
         "residuals": {
             "energy": _finite_or_none(res.energy[member]),
             "momentum": _finite_or_none(res.momentum[member]),
@@ -80,29 +92,50 @@ def run_summary(run: SceneRun, member: int = 0) -> dict[str, Any]:
                                  "tangential_spring_energy": stored}
     if scene.rest is not None:
         summary["packing_fraction"] = _finite_or_none(dg.packing_fraction(r.model, r.final.s[member], member))
-    # The bodies' values are checked as arrays (100 000 bodies: 7 s walked one number at a time);
-    # where one is not finite the walk names it.
-    final = (r.final.s[member], r.final.v[member], r.final.w[member])
-    finite = all(np.isfinite(a).all() for a in final)
     _refuse_non_finite({k: v for k, v in summary.items() if k != "bodies" or not finite}, scene.name)
     return summary
+
+
+def write_summary_json(summary: dict[str, Any], run: SceneRun, out: TextIO, member: int = 0) -> None:
+    """`summary` (from `run_summary(run, member, bodies=False)`) as the line json.dumps of the whole
+    summary makes, its bodies written BODY_CHUNK at a time: never all of them as Python objects."""
+    text = json.dumps(summary)
+    head, key, tail = text.partition('"bodies": []')  # (in a JSON string a quote is escaped: the key)
+    out.write(head + '"bodies": [')
+    first = True
+    for chunk in _body_chunks(run.result, run.scenes[member].dim, member, BODY_CHUNK):
+        if chunk:
+            out.write(("" if first else ", ") + json.dumps(chunk)[1:-1])
+            first = False
+    out.write("]" + tail + "\n")
 
 
 def _final_bodies(r: Any, dim: int, member: int) -> list[dict[str, Any]]:
     """Each body's name and final position, velocity and spin as the JSON shows them. In a
     periodic box the positions are wrapped into it, with the periods each body crossed
     (docs/design.md section 10): the engines' own are unwrapped."""
-    s, images = wrap(r.final.s[member], np.array(r.model.box_lower), np.array(r.model.period))
-    v = r.final.v[member]
+    return [body for chunk in _body_chunks(r, dim, member, max(len(r.model.body_names), 1)) for body in chunk]
+
+
+def _body_chunks(r: Any, dim: int, member: int, size: int) -> Iterator[list[dict[str, Any]]]:
+    """`_final_bodies`, `size` bodies at a time."""
+    s_all, images_all = wrap(r.final.s[member], np.array(r.model.box_lower), np.array(r.model.period))
+    for lo in range(0, len(r.model.body_names), size):
+        yield _bodies_of(r, dim, member, s_all, images_all, slice(lo, lo + size))
+
+
+def _bodies_of(r: Any, dim: int, member: int, s_all: np.ndarray, images_all: np.ndarray,
+               part: slice) -> list[dict[str, Any]]:
+    s, v, names = s_all[part], r.final.v[member][part], r.model.body_names[part]
     pos, vel = (s[:, 0].tolist(), v[:, 0].tolist()) if dim == 1 else (s.tolist(), v.tolist())
-    names = r.model.body_names
     if dim == 1:
         spin = [None] * len(names)
     elif r.model.spin_dim:
-        spin = r.final.w[member][:, 0].tolist() if dim == 2 else r.final.w[member].tolist()
+        w = r.final.w[member][part]
+        spin = w[:, 0].tolist() if dim == 2 else w.tolist()
     else:
         spin = [0.0 if dim == 2 else [0.0, 0.0, 0.0] for _ in names]
-    crossed = images.tolist() if r.model.periodic else [None] * len(names)
+    crossed = images_all[part].tolist() if r.model.periodic else [None] * len(names)
     bodies = []
     for n, p, u, w, c in zip(names, pos, vel, spin, crossed):
         body: dict[str, Any] = {"name": n, "position": p}

@@ -25,14 +25,17 @@ from collide.engine.dem.layout import (
     H_XI,
     S_CONTACTS,
 )
+from collide.engine.dem.neighbours import take_slot
 from collide.engine.jit import jit, jit_inline
 
 
 @jit
-def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST, IV, niv,
-           REC, nrec, record_now, out, box):
+def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST,
+           IV, niv, REC, nrec, record_now, out, box):
     """Forces and torques of every engaged contact (F, T, and by part PT) and the run's contact
-    figures, over the listed pairs (PI, PJ) and body-wall pairs (WL: rows k = i * walls + w, i, w); wtabs is
+    figures, over the listed pairs (PI, PJ; their history in HS at slots PS, new contacts' slots
+    taken from the regions KB, BUMP: `neighbours.take_slot`) and body-wall pairs (WL: rows
+    k = i * walls + w, i, w); wtabs is
     the wall table as (materials, 1, columns). IV and REC have room for every listed contact
     (the caller grows them); out is scratch (4,). Returns (engaged, niv, nrec): no array is made
     or returned here, which at a few bodies costs a step as much as its contacts. In a periodic
@@ -48,12 +51,14 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
     # The pair pass in two copies, the nearest-image test folded away in the one without: a scene
     # with no periodic axis runs the pass it ran before periodic boundaries.
     if box[BOX_ANY] != 0.0:
-        engaged, niv, nrec, deepest, strongest = _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t,
-                                                        FG, ST, IV, niv, REC, nrec, record, record_now, out, box,
+        engaged, niv, nrec, deepest, strongest = _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB,
+                                                        BUMP, tabs, fl, dt, t, FG, ST, IV, niv, REC, nrec, record,
+                                                        record_now, out, box,
                                                         True)
     else:
-        engaged, niv, nrec, deepest, strongest = _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t,
-                                                        FG, ST, IV, niv, REC, nrec, record, record_now, out, box,
+        engaged, niv, nrec, deepest, strongest = _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB,
+                                                        BUMP, tabs, fl, dt, t, FG, ST, IV, niv, REC, nrec, record,
+                                                        record_now, out, box,
                                                         False)
     for m in range(WL.shape[0]):
         k, i, w = WL[m, 0], WL[m, 1], WL[m, 2]
@@ -79,8 +84,8 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, gr
 
 
 @jit_inline
-def _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, FG, ST, IV, niv, REC, nrec, record, record_now,
-           out, box, periodic):
+def _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, FG, ST, IV, niv, REC, nrec, record,
+           record_now, out, box, periodic):
     """The listed pairs' part of `forces` (at the nearest images if `periodic`). Returns (engaged,
     niv, nrec, deepest overlap, strongest force)."""
     engaged = 0
@@ -94,22 +99,24 @@ def _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, FG, ST, IV
             dx, dy, dz = nearest(dx, dy, dz, box)
         reach = Bd[i, B_R] + Bd[j, B_R]
         d2 = dx * dx + dy * dy + dz * dz
+        s = PS[k]
         if d2 >= reach * reach:
-            if hist[k, H_ON] != 0.0:
-                nrec = _close(hist, k, IV, t, FG, REC, nrec, i, j)
+            if s >= 0 and HS[s, H_ON] != 0.0:
+                nrec = _close(HS, s, IV, t, FG, REC, nrec, i, j)
             continue
         dist = math.sqrt(d2)
         inv = 1.0 / dist
         delta = reach - dist
-        if hist[k, H_ON] == 0.0:
-            niv = _open(hist, k, IV, niv, i, j, t, FG, ST, record)
+        if s < 0 or HS[s, H_ON] == 0.0:
+            s = take_slot(PS, BUMP, KB, k)
+            niv = _open(HS, s, IV, niv, i, j, t, FG, ST, record)
         engaged += 1
         fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j],
-                           hist, k, fl, dt, out)
+                           HS, s, fl, dt, out)
         deepest = max(deepest, delta)
         strongest = max(strongest, fn)
         if record:
-            _peak(hist, k, t, delta, fn, out)
+            _peak(HS, s, t, delta, fn, out)
         if record_now:
             _record(REC, nrec, t, i, j, delta, fn, out)
             nrec += 1

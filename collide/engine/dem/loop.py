@@ -101,7 +101,7 @@ def _any_rolling(tabs, wtabs, spin):
 
 
 @jit
-def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, keys, PI, PJ, hist, WL, ST, KN, nkn):
+def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, PI, PJ, PS, HS, KB, BUMP, WL, ST, KN, nkn):
     """Where nothing touches: fly in closed form as far as no contact can begin (free flight is
     not stepped, as in the event engine), the neighbour lists made fresh for it. Returns
     (whether the run is over, t, the lists, KN, nkn)."""
@@ -112,8 +112,8 @@ def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, keys, PI, 
     # anything touched before (bodies moving apart from the start, with nothing ahead, stepped
     # on until the step limit).
     if not math.isfinite(t_end) and not may_meet(X, V, Bd, WP, grav, n, box):
-        return True, t, keys, PI, PJ, hist, WL, WH, KN, nkn
-    keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST, box)
+        return True, t, PI, PJ, PS, HS, KB, BUMP, WL, WH, KN, nkn
+    PI, PJ, PS, HS, KB, BUMP, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box)
     tau = free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin, box)
     if _at_end(t + tau, t_end):
         tau = t_end - t
@@ -123,24 +123,25 @@ def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, keys, PI, 
         t += tau
         ST[S_JUMPS] += 1
         over = _at_end(t, t_end) or (not math.isfinite(t_end) and ever and not may_meet(X, V, Bd, WP, grav, n, box))
-    return over, t, keys, PI, PJ, hist, WL, WH, KN, nkn
+    return over, t, PI, PJ, PS, HS, KB, BUMP, WL, WH, KN, nkn
 
 
 @jit
-def _finish(X, V, W, Qo, F, Bd, WK, hist, WH, PI, PJ, WL, t, record, ST, FG, KN, nkn, REC, nrec):
+def _finish(X, V, W, Qo, F, Bd, WK, PS, HS, WH, PI, PJ, WL, t, record, ST, FG, KN, nkn, REC, nrec):
     """The run's totals into FG, its last frame if not recorded yet, and the peaks of the
     contacts still engaged. Returns (KN, nkn, REC, nrec)."""
     n = X.shape[0]
-    FG[G_STORED] = stored(hist, WH)
+    FG[G_STORED] = stored(PS, HS, WH)
     for c in range(3):
         FG[G_DAMP + c] = work_total(WK, n, c)
     if record and (nkn == 0 or KN[nkn - 1, 0] < t):
         KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
     if record:
-        REC = grow(REC, nrec + hist.shape[0] + WL.shape[0])
-        for k in range(hist.shape[0]):
-            if hist[k, H_ON] != 0.0:
-                nrec = peak_record(hist, k, REC, nrec, PI[k], PJ[k])
+        REC = grow(REC, nrec + PS.shape[0] + WL.shape[0])
+        for k in range(PS.shape[0]):
+            s = PS[k]
+            if s >= 0 and HS[s, H_ON] != 0.0:
+                nrec = peak_record(HS, s, REC, nrec, PI[k], PJ[k])
         for m in range(WL.shape[0]):
             k, i, w = WL[m, 0], WL[m, 1], WL[m, 2]
             if WH[k, H_ON] != 0.0:
@@ -166,8 +167,9 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     wt = wtabs.reshape((wtabs.shape[0], 1, wtabs.shape[1]))
     rolling = _any_rolling(tabs, wtabs, spin)
     X0 = X.copy()
-    keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin,
-                                         np.zeros(0, np.int64), np.zeros((0, NH)), ST, box)
+    none = np.zeros(0, np.int64)
+    PI, PJ, PS, HS, KB, BUMP, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin, none,
+                                               none, none, np.zeros((0, NH)), ST, box)
     t = 0.0
     scratch = np.zeros(4)
     # IV and REC get room for every listed contact to open and be recorded before forces runs,
@@ -177,8 +179,8 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     if record:
         IV = grow(IV, niv + most)
         REC = grow(REC, nrec + most)
-    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl,
-                                0.0, t, n, FG, ST, IV, niv, REC, nrec, record != 0, scratch, box)
+    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wt, grav,
+                                fl, 0.0, t, n, FG, ST, IV, niv, REC, nrec, record != 0, scratch, box)
     if record:
         KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
         EP = grow(EP, nep)
@@ -193,8 +195,9 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     moved = 0.0
     while not last:
         if engaged == 0:
-            over, t, keys, PI, PJ, hist, WL, WH, KN, nkn = _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp,
-                                                                   t, ever, keys, PI, PJ, hist, WL, ST, KN, nkn)
+            over, t, PI, PJ, PS, HS, KB, BUMP, WL, WH, KN, nkn = _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav,
+                                                                         fl, fp, t, ever, PI, PJ, PS, HS, KB, BUMP,
+                                                                         WL, ST, KN, nkn)
             if over:
                 break
         h, last = _step_length(t, dt, t_end)
@@ -204,7 +207,8 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, False)
             moved = drift(X, X0, V, W, Qo, h, n, spin, planar)
         if 4.0 * moved > skin * skin:
-            keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST, box)
+            PI, PJ, PS, HS, KB, BUMP, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST,
+                                                       box)
         t = t + h
         steps += 1
         record_now = record != 0 and (t >= next_frame or last)
@@ -213,8 +217,8 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             IV = grow(IV, niv + most)
         if record and nrec + most >= REC.shape[0]:  # a frame's records, or the peaks of phases that end
             REC = grow(REC, nrec + most)
-        engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wt, grav,
-                                    fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now, scratch, box)
+        engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wt,
+                                    grav, fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now, scratch, box)
         # The closing kick and, where nothing before the next step reads the velocities at this
         # step's end (no frame to record, no free flight, no end or rest to test), the next
         # step's opening kick and drift with it, in one pass over the bodies.
@@ -235,7 +239,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         peak = max(peak, kinetic_now)
         if record_now:
             KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
-            EP, nep = energy_row(EP, nep, t, WK, hist, WH, n)
+            EP, nep = energy_row(EP, nep, t, WK, PS, HS, WH, n)
             while next_frame <= t:
                 next_frame += fp[P_FRAME]
         if steps & 255 == 0:
@@ -250,6 +254,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         if not math.isfinite(t_end) and ever and engaged == 0 and not may_meet(X, V, Bd, WP, grav, n, box):
             break
     ST[S_STEPS] = steps
-    ST[S_PAIRS] = keys.shape[0]
-    KN, nkn, REC, nrec = _finish(X, V, W, Qo, F, Bd, WK, hist, WH, PI, PJ, WL, t, record, ST, FG, KN, nkn, REC, nrec)
+    ST[S_PAIRS] = PI.shape[0]
+    KN, nkn, REC, nrec = _finish(X, V, W, Qo, F, Bd, WK, PS, HS, WH, PI, PJ, WL, t, record, ST, FG, KN, nkn, REC,
+                                 nrec)
     return t, WK, KN[:nkn], REC[:nrec], IV[:niv], EP[:nep], ST, FG

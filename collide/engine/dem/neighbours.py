@@ -2,7 +2,12 @@
 spread far apart), body-wall pairs, and the contact history carried from one list to the next.
 
 A Verlet list: rebuilt when a body has moved half the skin since the last build, so no pair it
-leaves out can touch before then.
+leaves out can touch before then. A listed pair is (i, j) and a slot (PS): the row of its history
+in a table (HS) that holds only contacts, not every listed pair (most listed pairs never touch
+before the next build). The table's first rows are the contacts engaged at the build, packed;
+then room for a slot for every listed pair, taken in order as contacts start (`take_slot`: a
+region a thread, bump pointers), untouched and so not resident until taken. A pair keeps its
+slot until the next build, however often it closes and opens again.
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ def _cell(x, size):
 
 @jit
 def build_pairs(P, Bd, n, dim, reach_pad):
-    """Pairs (i < j) whose gap is under reach_pad: (keys i * n + j in ascending order, i, j). A
+    """Pairs (i < j) whose gap is under reach_pad, in ascending order of i * n + j: (i, j). A
     cell grid whose cells hold their bodies contiguously (a counting sort), searched by
     `_gather_pairs`: a dense grid over the bodies' bounding box where it has at most
     DENSE_CELLS cells a body (a body's 3 x 3 x 3 cells are then 9 runs of consecutive cells:
@@ -79,16 +84,15 @@ def build_pairs(P, Bd, n, dim, reach_pad):
     while True:
         count = _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, keys)
         if count >= 0:
-            found = keys[:count].copy()  # (not a view holding the whole search buffer)
             rows = np.empty(count, np.int64)
             partners = np.empty(count, np.int64)
             i = 0
             for k in range(count):  # (keys ascend: no division)
-                while found[k] >= (i + 1) * n:
+                while keys[k] >= (i + 1) * n:
                     i += 1
                 rows[k] = i
-                partners[k] = found[k] - i * n
-            return found, rows, partners
+                partners[k] = keys[k] - i * n
+            return rows, partners
         # Out of room: start again with twice as much (rare; growing in the search loop would
         # count references to `keys` at every cell visited, which cost more than the search).
         keys = np.empty(2 * keys.shape[0], np.int64)
@@ -160,7 +164,7 @@ def _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, span, de
 
 @jit
 def carry_history(old_keys, old_hist, new_keys):
-    """History rows of the new pair list: the old pair's where it was listed, else zero."""
+    """History rows of the new wall list: the old contact's where it was listed, else zero."""
     hist = np.zeros((new_keys.shape[0], NH))
     for k in range(new_keys.shape[0]):
         hist[k, H_IV] = -1.0
@@ -172,6 +176,66 @@ def carry_history(old_keys, old_hist, new_keys):
             for c in range(NH):
                 hist[k, c] = old_hist[a, c]
     return hist
+
+
+@jit_inline
+def _match(PI, PJ, PS, HS, a, key, n):
+    """The old list's row a advanced to the first pair at or past `key`; and the slot of the
+    contact it holds for that key if engaged (else -1). Returns (a, slot)."""
+    while a < PI.shape[0] and PI[a] * n + PJ[a] < key:
+        a += 1
+    if a < PI.shape[0] and PI[a] * n + PJ[a] == key and PS[a] >= 0 and HS[PS[a], H_ON] != 0.0:
+        return a, PS[a]
+    return a, np.int64(-1)
+
+
+@jit
+def carry_slots(PI, PJ, PS, HS, NI, NJ, n):
+    """The new pair list's (NI, NJ) slots and history table: the contacts engaged in the old list
+    (PI, PJ, PS, HS) that the new one lists, packed into its first rows in the new list's order,
+    then room for a slot for every new pair (left unset and so not resident: `take_slot` starts
+    a row when it takes it). Returns (slots, table)."""
+    a, e = 0, 0
+    for k in range(NI.shape[0]):  # count first: no table of every pair even for a moment
+        a, s = _match(PI, PJ, PS, HS, a, NI[k] * n + NJ[k], n)
+        e += s >= 0
+    NS = np.empty(NI.shape[0], np.int64)
+    table = np.empty((e + NI.shape[0], NH))
+    a, e = 0, 0
+    for k in range(NI.shape[0]):
+        a, s = _match(PI, PJ, PS, HS, a, NI[k] * n + NJ[k], n)
+        NS[k] = -1
+        if s >= 0:
+            for c in range(NH):
+                table[e, c] = HS[s, c]
+            NS[k] = e
+            e += 1
+    return NS, table
+
+
+@jit
+def slot_regions(PS, HS, KB):
+    """Where each share of the pair list (pairs KB[r]..KB[r + 1]) takes its new contacts' slots:
+    from the table's row `carried + KB[r]` on (`carry_slots` left a slot a pair after the carried
+    contacts), so that threads take slots without meeting."""
+    carried = HS.shape[0] - PS.shape[0]
+    bump = np.empty(KB.shape[0] - 1, np.int64)
+    for r in range(bump.shape[0]):
+        bump[r] = carried + KB[r]
+    return bump
+
+
+@jit_inline
+def take_slot(PS, BUMP, KB, k):
+    """Pair k's slot: its own if it has one, else the next free row of its share's region (its
+    row's columns are then set by whoever opens the contact)."""
+    if PS[k] < 0:
+        r = 0
+        while KB[r + 1] <= k:
+            r += 1
+        PS[k] = BUMP[r]
+        BUMP[r] += 1
+    return PS[k]
 
 
 @jit
@@ -202,7 +266,7 @@ def wall_list(X, Bd, WP, WL, WH, n, skin):
 @jit
 def periodic_pairs(P, Bd, n, dim, reach_pad, box):
     """`build_pairs` in a periodic box: the pairs whose nearest images' gap is within reach_pad
-    (`broad.image_pairs`), as (keys ascending, i, j)."""
+    (`broad.image_pairs`), in ascending order of i * n + j: (i, j)."""
     pairs = image_pairs(P, Bd[:, B_R].copy(), n, dim, box, reach_pad)
     keys = np.empty(pairs.shape[0], np.int64)
     for k in range(pairs.shape[0]):
@@ -213,20 +277,24 @@ def periodic_pairs(P, Bd, n, dim, reach_pad, box):
     for k in range(keys.shape[0]):
         rows[k] = keys[k] // n
         partners[k] = keys[k] - rows[k] * n
-    return keys, rows, partners
+    return rows, partners
 
 
 @jit
-def rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST, box):
-    """Fresh neighbour lists (pairs as keys i * n + j and as (i, j); body-wall pairs, `wall_list`),
-    the listed pairs' and wall contacts' history carried over. In a periodic box (`box`) a pair
-    is listed at its nearest images: the force pass meets it there."""
+def rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box):
+    """Fresh neighbour lists: pairs (i, j) and their slots in a fresh history table
+    (`carry_slots`), one region for their new contacts' slots (KB, BUMP: `slot_regions`); and
+    body-wall pairs (`wall_list`); the engaged contacts' history carried over. In a periodic box
+    (`box`) a pair is listed at its nearest images: the force pass meets it there. Returns (PI,
+    PJ, PS, HS, KB, BUMP, WL, WH)."""
     if box[BOX_ANY] != 0.0:
-        fresh, PI, PJ = periodic_pairs(X, Bd, n, dim, skin, box)
+        NI, NJ = periodic_pairs(X, Bd, n, dim, skin, box)
     else:
-        fresh, PI, PJ = build_pairs(X, Bd, n, dim, skin)
-    hist = carry_history(keys, hist, fresh)
+        NI, NJ = build_pairs(X, Bd, n, dim, skin)
+    NS, table = carry_slots(PI, PJ, PS, HS, NI, NJ, n)
+    KB = np.zeros(2, np.int64)
+    KB[1] = NI.shape[0]
     X0[:, :] = X
     ST[S_BUILDS] += 1
     WL, WH = wall_list(X, Bd, WP, WL, WH, n, skin)
-    return fresh, PI, PJ, hist, WL, WH
+    return NI, NJ, NS, table, KB, slot_regions(NS, table, KB), WL, WH

@@ -9,14 +9,22 @@ from collide.engine.numerics import grow
 
 
 @jit
-def stored(hist, WH):
-    """The energy the tangential springs hold: 1/2 k_t |xi|^2 each."""
+def stored(PS, HS, WH):
+    """The energy the tangential springs hold: 1/2 k_t |xi|^2 each, the pairs' (history rows HS
+    at slots PS) in the list's order, then the wall contacts'."""
     total = 0.0
-    for H in (hist, WH):
-        for k in range(H.shape[0]):
-            hx, hy, hz = H[k, H_XI], H[k, H_XI + 1], H[k, H_XI + 2]
-            total += 0.5 * H[k, H_KT] * (hx * hx + hy * hy + hz * hz)
+    for k in range(PS.shape[0]):
+        if PS[k] >= 0:
+            total += _spring(HS, PS[k])
+    for k in range(WH.shape[0]):
+        total += _spring(WH, k)
     return total
+
+
+@jit_inline
+def _spring(H, k):
+    hx, hy, hz = H[k, H_XI], H[k, H_XI + 1], H[k, H_XI + 2]
+    return 0.5 * H[k, H_KT] * (hx * hx + hy * hy + hz * hz)
 
 
 @jit_inline
@@ -49,12 +57,12 @@ def frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, free):
 
 
 @jit
-def energy_row(EP, nep, t, WK, hist, WH, n):
+def energy_row(EP, nep, t, WK, PS, HS, WH, n):
     """The energy parts at t: work of damping, friction and rolling, and what the springs hold.
     Returns (EP, nep)."""
     EP = grow(EP, nep)
     EP[nep, EP_T] = t
     for c in range(3):
         EP[nep, EP_DAMP + c] = work_total(WK, n, c)
-    EP[nep, EP_STORED] = stored(hist, WH)
+    EP[nep, EP_STORED] = stored(PS, HS, WH)
     return EP, nep + 1

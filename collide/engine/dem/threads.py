@@ -61,6 +61,7 @@ from collide.engine.dem.layout import (
     S_CONTACTS,
 )
 from collide.engine.dem.loop import _step_length
+from collide.engine.dem.neighbours import take_slot
 from collide.engine.dem.verlet import _drift_body, _half_kick, kinetic_parts
 from collide.engine.jit import jit, jit_inline
 
@@ -174,6 +175,24 @@ def _end(hist, k, record, STT, row):
 
 
 @jit_inline
+def _begin_pair(PS, HS, KB, BUMP, k, record, STT, row):
+    """`_begin` for listed pair k, whose history is row PS[k] of HS (a slot taken if it has none:
+    `neighbours.take_slot`). Returns (its slot, whether it opened)."""
+    s = PS[k]
+    if s >= 0 and HS[s, H_ON] != 0.0:
+        return s, False
+    s = take_slot(PS, BUMP, KB, k)
+    HS[s, H_ON] = 0.0  # (a slot just taken holds nothing yet)
+    return s, _begin(HS, s, record, STT, row)
+
+
+@jit_inline
+def _end_pair(PS, HS, k, record, STT, row):
+    """`_end` for listed pair k (one never engaged since the lists were built has no slot)."""
+    return PS[k] >= 0 and _end(HS, PS[k], record, STT, row)
+
+
+@jit_inline
 def _engaged(STT, row, delta, fn):
     STT[row, ST_ENG] += 1.0
     STT[row, ST_DEEP] = max(STT[row, ST_DEEP], delta)
@@ -181,21 +200,22 @@ def _engaged(STT, row, delta, fn):
 
 
 @jit
-def cross_pass(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out, box):
+def cross_pass(X, V, W, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row,
+               out, box):
     """Thread `row`'s cross pairs (slots s0..s1) into XB, their states into SF (a pair in a
     periodic box at its nearest images). Two copies, the nearest-image test folded away in the
     one without (as `forces.forces`)."""
     if box[BOX_ANY] != 0.0:
-        _cross(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out, box,
-               True)
+        _cross(X, V, W, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row,
+               out, box, True)
     else:
-        _cross(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out, box,
-               False)
+        _cross(X, V, W, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row,
+               out, box, False)
 
 
 @jit_inline
-def _cross(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out, box,
-           periodic):
+def _cross(X, V, W, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out,
+           box, periodic):
     for s in range(s0, s1):
         k = cross[s]
         i, j = PI[k], PJ[k]
@@ -208,20 +228,21 @@ def _cross(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, dt, t, record, s0, s1, cros
         reach = Bd[i, B_R] + Bd[j, B_R]
         d2 = dx * dx + dy * dy + dz * dz
         if d2 >= reach * reach:
-            if _end(hist, k, record, STT, row):
+            if _end_pair(PS, HS, k, record, STT, row):
                 SF[s] = CLOSED
             continue
         dist = math.sqrt(d2)
         inv = 1.0 / dist
         delta = reach - dist
-        SF[s] = OPENED if _begin(hist, k, record, STT, row) else ENGAGED
+        hs, opened = _begin_pair(PS, HS, KB, BUMP, k, record, STT, row)
+        SF[s] = OPENED if opened else ENGAGED
         XB[s, :, :] = -0.0
         fn = contact_into(X, V, W, XB[s, :, XF:XF + 3], XB[s, :, XT:XT + 3], XB[s, :, XTR:XTR + 3], XB[s, :, XPT:],
-                          Bd, i, j, 0, 1, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j], hist, k, fl, dt,
+                          Bd, i, j, 0, 1, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j], HS, hs, fl, dt,
                           out)
         _engaged(STT, row, delta, fn)
         if record:
-            _peak(hist, k, t, delta, fn, out)
+            _peak(HS, hs, t, delta, fn, out)
 
 
 @jit_inline
@@ -239,20 +260,20 @@ def _take(XB, s, side, F, T, PT, a):
 
 
 @jit
-def own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd, row,
-             inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box):
+def own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record,
+             bd, row, inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box):
     """Thread `row`'s bodies' forces (`_own`), in two copies as `cross_pass`."""
     if box[BOX_ANY] != 0.0:
-        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd, row,
-             inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, True)
+        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record,
+             bd, row, inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, True)
     else:
-        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd, row,
-             inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, False)
+        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record,
+             bd, row, inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, False)
 
 
 @jit_inline
-def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd, row,
-         inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, periodic):
+def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd,
+         row, inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, periodic):
     """Thread `row`'s bodies' forces (bd: its body, pair, wall and slot starts, then ends), after
     every thread's `cross_pass`. Events (pairs: 2 k, + 1 if closed; walls: 2 m, + 1) go to EVP
     from the thread's first pair and EVW from its first wall contact, if recorded."""
@@ -286,21 +307,22 @@ def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav
         reach = Bd[i, B_R] + Bd[j, B_R]
         d2 = dx * dx + dy * dy + dz * dz
         if d2 >= reach * reach:
-            if _end(hist, k, record, STT, row) and record:
+            if _end_pair(PS, HS, k, record, STT, row) and record:
                 EVP[k0 + nw] = 2 * k + 1
                 nw += 1
             continue
         dist = math.sqrt(d2)
         inv = 1.0 / dist
-        if _begin(hist, k, record, STT, row) and record:
+        hs, opened = _begin_pair(PS, HS, KB, BUMP, k, record, STT, row)
+        if opened and record:
             EVP[k0 + nw] = 2 * k
             nw += 1
         delta = reach - dist
         fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j],
-                           hist, k, fl, dt, out)
+                           HS, hs, fl, dt, out)
         _engaged(STT, row, delta, fn)
         if record:
-            _peak(hist, k, t, delta, fn, out)
+            _peak(HS, hs, t, delta, fn, out)
     STT[row, ST_EVP] = nw
     STT[row, ST_EVW] = _walls(X, V, W, F, T, PT, Bd, MAT, WL, WH, WP, wtabs, fl, dt, t, record, m0, m1, STT, row,
                               EVW, out)
@@ -330,7 +352,7 @@ def _walls(X, V, W, F, T, PT, Bd, MAT, WL, WH, WP, wtabs, fl, dt, t, record, m0,
 
 
 @jit
-def events(EVP, EVW, kb, wb, STT, PI, PJ, WL, hist, WH, IV, niv, REC, nrec, t, FG):
+def events(EVP, EVW, kb, wb, STT, PI, PJ, WL, PS, HS, WH, IV, niv, REC, nrec, t, FG):
     """The recorded contacts' starts and ends of a step, in the one-thread pass's order (pairs
     by key, then walls): interval rows, and closed phases' peaks (IV and REC have room).
     Returns (niv, nrec)."""
@@ -342,9 +364,9 @@ def events(EVP, EVW, kb, wb, STT, PI, PJ, WL, hist, WH, IV, niv, REC, nrec, t, F
             for q in range(first, first + count):
                 if table == 0:
                     e = EVP[q]
-                    k = e >> 1
-                    i, j = PI[k], PJ[k]
-                    H = hist
+                    k = PS[e >> 1]
+                    i, j = PI[e >> 1], PJ[e >> 1]
+                    H = HS
                 else:
                     e = EVW[q]
                     k, i, j = WL[e >> 1, 0], WL[e >> 1, 1], -1 - WL[e >> 1, 2]
@@ -462,9 +484,9 @@ def _figures(S, ST, FG, t, record):
 
 
 @jit
-def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl,
-              fp, rolling, ST, FG, IV, REC, RB, kb, wb, cross, inc_start, inc_slot, XB, SF, EVP, EVW, EB, STT, PM,
-              outs, CTL):
+def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS, BUMP, WL, WH, WP, tabs, wtabs,
+              grav, fl, fp, rolling, ST, FG, IV, REC, RB, kb, wb, cross, inc_start, inc_slot, XB, SF, EVP, EVW, EB,
+              STT, PM, outs, CTL):
     """Thread r's part of the run's steps (every thread runs it at once, with the same control
     flow, meeting at `barrier`), from the state in CTL until the run needs what only the driver
     does (`dem_threads`: coasting, rebuilding the lists, recording a frame, growing IV and REC)
@@ -515,11 +537,11 @@ def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, hist, 
         fuse_ok = not last and h_next > 0.0 and rest <= 0.0 and steps < fl[F_MAXSTEPS]
         S = STT[p]
         S[r, :] = 0.0
-        cross_pass(X, V, W, Bd, MAT, PI, PJ, hist, tabs, fl, h, t, record, RB[r, 6], RB[r, 7], cross, XB, SF, S, r,
-                   outs[r], box)
+        cross_pass(X, V, W, Bd, MAT, PI, PJ, PS, HS, kb, BUMP, tabs, fl, h, t, record, RB[r, 6], RB[r, 7], cross, XB,
+                   SF, S, r, outs[r], box)
         barrier_wait(barrier)
-        own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav, fl, h, t, record, RB[r],
-                 r, inc_start, inc_slot, XB, SF, S, EVP, EVW, outs[r], box)
+        own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, kb, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, h, t,
+                 record, RB[r], r, inc_start, inc_slot, XB, SF, S, EVP, EVW, outs[r], box)
         kick_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, 0.5 * h, 0.5 * h_next, h_next, lo, hi, rolling, spin, planar,
                    True, fuse_ok and S[r, ST_ENG] > 0.0, EB, S, r)
         barrier_wait(barrier)
@@ -535,7 +557,7 @@ def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, hist, 
         if r == 0:
             _figures(S, ST, FG, t, record)
             if record:
-                niv, nrec = events(EVP, EVW, kb, wb, S, PI, PJ, WL, hist, WH, IV, niv, REC, nrec, t, FG)
+                niv, nrec = events(EVP, EVW, kb, wb, S, PI, PJ, WL, PS, HS, WH, IV, niv, REC, nrec, t, FG)
                 CTL[C_NIV], CTL[C_NREC] = niv, nrec
             if engaged:
                 FG[G_TOUCH] += h
