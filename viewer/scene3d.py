@@ -191,7 +191,6 @@ class SceneDrawer:
         self._floor: tuple[np.ndarray, np.ndarray] | None = None  # (point, unit normal) of the floor
         self._opacity: dict[int, float] = {}
         self._rings: dict[int, viser.SceneNodeHandle] = {}
-        self._light_shadows: bool | None = None
         self._fill_light: viser.SceneNodeHandle | None = None
         self.frame: Frame | None = None
         self.eye: np.ndarray | None = None  # the camera's position, for the overlays
@@ -213,10 +212,7 @@ class SceneDrawer:
         extent = float(max(hi[0] - lo[0], hi[1] - lo[1], 4 * r_max))
         walls = list(view.walls)
         self.many = view.n_bodies > FEW_BODIES
-        # A shadow map up to DETAILED_BODIES (switching it recompiles every material's shaders:
-        # seconds under software GL, so not between a few bodies and a rack of sixteen).
-        if self._light_shadows is not (view.n_bodies <= DETAILED_BODIES):
-            self._light_shadows = view.n_bodies <= DETAILED_BODIES
+        if self._fill_light is None:
             self._configure_lights()
         self._floor = None
         if not planar:
@@ -283,17 +279,16 @@ class SceneDrawer:
         self._opacity = {}
 
     def _configure_lights(self) -> None:
-        """Above DETAILED_BODIES: no shadow map (each frame would draw every sphere twice; under
-        software GL that doubled a frame's time; their blob shadows give the depth). Every scene: no
-        environment map, a hemisphere light instead. The map's lighting, sampled at every pixel
-        of every sphere, was 60 % of a pile's frame under software GL; switched per scene, each
-        switch recompiled every material's shaders (seconds there), so it is set once."""
+        """Once per client: no shadow map and no environment map, a hemisphere light instead.
+        The shadow map (viser's three cascades of 1024 x 1024, sampled at every lit pixel) was
+        half of break-3d's frame under software GL, and the floor's blob shadows give the depth
+        it gave; the environment map's lighting was 60 % of a pile's frame there. Set once:
+        switching either recompiles every material's shaders (seconds under software GL)."""
         scene = self.scene
-        scene.configure_default_lights(True, cast_shadow=bool(self._light_shadows))
-        if self._fill_light is None:
-            scene.configure_environment_map(None)
-            self._fill_light = scene.add_light_hemisphere("/lights/fill", sky_color=FILL_SKY,
-                                                          ground_color=FILL_GROUND, intensity=FILL_INTENSITY)
+        scene.configure_default_lights(True, cast_shadow=False)
+        scene.configure_environment_map(None)
+        self._fill_light = scene.add_light_hemisphere("/lights/fill", sky_color=FILL_SKY, ground_color=FILL_GROUND,
+                                                      intensity=FILL_INTENSITY)
 
     def _show_ground(self, centre: np.ndarray, half: float, cell: float, z: float) -> None:
         # Lines only: a plane filling the view (viser's grid shader, or any lit surface) costs
@@ -475,7 +470,7 @@ class SceneDrawer:
             base = f"/bodies/{i}"
             frame = scene.add_frame(base, show_axes=False)
             sphere = scene.add_mesh_simple(f"{base}/sphere", compressed_sphere(r, [], SUBDIVISIONS), faces,
-                                           color=colour, flat_shading=False, cast_shadow=view.dim == 3)
+                                           color=colour, flat_shading=False, cast_shadow=False)
             if view.dim < 3:
                 # The undeformed circle in the plane of the centres, as the report's figures draw
                 # it: an overlay, placed each frame (`_show_rings`).
