@@ -69,6 +69,11 @@ CHAIN_SEGMENTS = 6  # sides of a force chain's cylinder (thin: six read as round
 WALL_KEEP = 0.03  # of the scene's extent: walls that moved less are not sent again
 MIN_ARROW = 0.08  # arrows shorter than this many radii are not drawn (no heads on round-off)
 COLOUR_MODES = ("body", "speed", "kinetic energy", "contacts")
+SPIN_DOT = np.array([np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4)])  # where the spin dot sits (unit sphere)
+FEW_DOT, MANY_DOT = 0.16, 0.22  # the spin dot's radius in the sphere's
+# The undeformed shell's radius in the sphere's: a hair inside it, so that it shows only where the
+# sphere is flattened (at the sphere's own radius the two surfaces fought for the same pixels).
+SHELL = 0.998
 
 
 @dataclass
@@ -90,6 +95,19 @@ def _segments(path: np.ndarray) -> np.ndarray:
     if len(path) < 2:
         path = np.repeat(path[:1], 2, axis=0)
     return np.stack((path[:-1], path[1:]), axis=1)
+
+
+def _mixed(colours: np.ndarray, mix, f: float) -> np.ndarray:
+    """Each colour (N, 3) through `mix` (colours.lighter or darker) by f."""
+    return np.array([mix(tuple(int(c) for c in rgb), f) for rgb in colours], np.uint8).reshape(-1, 3)
+
+
+def _linear(colours: np.ndarray) -> np.ndarray:
+    """sRGB colours (..., 3) as the linear values a line's per-vertex colours are read as (three.js
+    converts a node's single colour from sRGB, not per-vertex ones): the same colour on screen."""
+    c = np.asarray(colours, float) / 255.0
+    lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return np.round(255.0 * lin).astype(np.uint8)
 
 
 def _periodic(view: object) -> bool:
@@ -173,6 +191,7 @@ class SceneDrawer:
         self._velocity_scale = 1.0
         self._momentum_scale = 1.0
         self._compressed: set[int] = set()
+        self._shells: np.ndarray | None = None  # which shells are shown (`_show_shells`)
         self._arrows = {key: ArrowSet(scene, f"/contact/{key}", colour) for key, colour in
                         (("normal", NORMAL_COLOUR), ("friction", FRICTION_COLOUR))}
         self._vectors = {key: ArrowSet(scene, f"/vectors/{key}", colour) for key, colour in
@@ -180,8 +199,9 @@ class SceneDrawer:
         self._point = None
         self._com = None
         self._com_path = None
-        self._past: list = []
-        self._paths: list = []
+        self._past: list = []  # one node: every body's path so far
+        self._paths: list = []  # one node: every body's whole path
+        self._past_counts: tuple | None = None  # segments per body in `_past` (its colours follow)
         self._shape: tuple | None = None
         self._ground_key: tuple | None = None
         self._walls_drawn: list | None = None  # the wall boxes sent: (centre, wxyz, dims), is floor
@@ -239,23 +259,23 @@ class SceneDrawer:
             self._show_ground(centre, half, cell, ground)
             self._ground_key = ground_key
         self._show_walls(view, walls, lo, hi, extent, r_max, planar)
-        # Paths: the whole run faint, the part already travelled in the body's colour.
-        colours = body_colours(view.n_bodies)
+        # Paths: the whole run faint, the part already travelled in the body's colour; all bodies'
+        # in one node each (per-segment colours: two nodes for a dozen balls, not 24).
         trails = self.options.trails and view.paths is not None and not self.many
-        if trails and len(self._paths) == view.n_bodies:
-            for i in range(view.n_bodies):
-                self._paths[i].points = _segments(view.paths[i]).astype(np.float32)
-                self._past[i].points = _segments(view.paths[i][:2]).astype(np.float32)
-        elif trails:
-            self._clear_paths()
-            for i in range(view.n_bodies):
-                colour = tuple(int(c) for c in colours[i])
-                self._paths.append(scene.add_line_segments(
-                    f"/paths/{i}/all", _segments(view.paths[i]), lighter(colour, 0.6), thickness=1.5,
-                    thickness_units="screen"))
-                self._past.append(scene.add_line_segments(
-                    f"/paths/{i}/past", _segments(view.paths[i][:2]), colour, thickness=3.0,
-                    thickness_units="screen"))
+        if trails:
+            colours = body_colours(view.n_bodies)
+            pieces = [_segments(path) for path in view.paths]
+            points = np.concatenate(pieces).astype(np.float32)
+            faint = _linear(_mixed(colours, lighter, 0.6))
+            lines = np.concatenate([np.broadcast_to(c, (len(piece), 2, 3)) for piece, c in zip(pieces, faint)])
+            if self._paths:
+                self._paths[0].colors, self._paths[0].points = lines, points
+            else:
+                self._paths = [scene.add_line_segments("/paths/all", points, lines, thickness=1.5,
+                                                       thickness_units="screen")]
+                self._past = [scene.add_line_segments("/paths/past", points[:1], lines[:1], thickness=3.0,
+                                                      thickness_units="screen")]
+            self._past_counts = None
         else:
             self._clear_paths()
         if shape != self._shape:
@@ -451,44 +471,55 @@ class SceneDrawer:
         self._paths, self._past = [], []
 
     def _build_bodies(self, view: ViewRun) -> None:
-        scene = self.scene
         for body in self._bodies:
             body["frame"].remove()
         for handle in self._batch.values():
             handle.remove()
         self._bodies, self._batch, self._chain_capacity = [], {}, 0
-        self._compressed = set()
+        self._compressed, self._shells = set(), None
         colours = body_colours(view.n_bodies)
         self._colours = colours
         if self.many:
             self._build_batch(view, colours)
             return
-        _, faces = unit_sphere(SUBDIVISIONS)
-        for i in range(view.n_bodies):
-            r = float(view.radius[i])
-            colour = tuple(int(c) for c in colours[i])
-            base = f"/bodies/{i}"
-            frame = scene.add_frame(base, show_axes=False)
-            sphere = scene.add_mesh_simple(f"{base}/sphere", compressed_sphere(r, [], SUBDIVISIONS), faces,
-                                           color=colour, flat_shading=False, cast_shadow=False)
-            if view.dim < 3:
-                # The undeformed circle in the plane of the centres, as the report's figures draw
-                # it: an overlay, placed each frame (`_show_rings`).
-                outline = None
-            else:
-                outline = scene.add_mesh_simple(f"{base}/outline", unit_sphere(SUBDIVISIONS)[0] * r, faces,
-                                                color=lighter(colour, 0.2), opacity=0.35, cast_shadow=False,
-                                                visible=False)
-            spin = scene.add_frame(f"{base}/spin", show_axes=False)
-            if view.dim > 1:
-                ring_v, ring_f = torus(1.004 * r, 0.075 * r)
-                scene.add_mesh_simple(f"{base}/spin/stripe", ring_v, ring_f, color=darker(colour, 0.35),
-                                      cast_shadow=False)
-                dot = np.array([np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4)]) * r
-                scene.add_icosphere(f"{base}/spin/dot", radius=0.16 * r, color=(255, 255, 255),
-                                    position=tuple(dot), subdivisions=2, cast_shadow=False)
-            self._bodies.append({"frame": frame, "sphere": sphere, "outline": outline, "spin": spin, "r": r})
+        self._build_few(view, colours)
         self._add_shadows(view)
+
+    def _build_few(self, view: ViewRun, colours: np.ndarray) -> None:
+        """A mesh for each sphere (its own vertices: it flattens where it presses), placed at its
+        centre; what every sphere has alike is one instanced mesh for all of them: the spin
+        stripes, the spin dots and the undeformed shells (3D). Fewer scene nodes: the browser
+        builds a scene of four balls in a third of the messages and draw calls."""
+        scene = self.scene
+        n = view.n_bodies
+        _, faces = unit_sphere(SUBDIVISIONS)
+        for i in range(n):
+            r = float(view.radius[i])
+            sphere = scene.add_mesh_simple(f"/bodies/{i}", compressed_sphere(r, [], SUBDIVISIONS), faces,
+                                           color=tuple(int(c) for c in colours[i]), flat_shading=False,
+                                           cast_shadow=False)
+            self._bodies.append({"frame": sphere, "sphere": sphere, "r": r})
+        ident = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+        zeros = np.zeros((n, 3))
+        if view.dim == 3:
+            # The undeformed sphere, a pale shell round each sphere in contact (the others' at
+            # zero size). In 1D and 2D a ring overlay shows it (`_show_rings`).
+            verts, _ = unit_sphere(SUBDIVISIONS)
+            self._batch["shells"] = scene.add_batched_meshes_simple(
+                "/bodies/shells", verts, faces, batched_wxyzs=ident, batched_positions=zeros,
+                batched_scales=np.zeros(n, np.float32), batched_colors=_mixed(colours, lighter, 0.2), opacity=0.35,
+                lod="off", cast_shadow=False, receive_shadow=False, visible=False)
+        if view.dim > 1:
+            ring_v, ring_f = torus(1.004, 0.075)
+            self._batch["stripes"] = scene.add_batched_meshes_simple(
+                "/bodies/stripes", ring_v, ring_f, batched_wxyzs=ident, batched_positions=zeros,
+                batched_scales=view.radius.astype(np.float32), batched_colors=_mixed(colours, darker, 0.35), lod="off",
+                cast_shadow=False, receive_shadow=False)
+            dv, df = unit_sphere(2)
+            self._batch["dots"] = scene.add_batched_meshes_simple(
+                "/bodies/dots", dv, df, batched_wxyzs=ident, batched_positions=zeros,
+                batched_scales=(FEW_DOT * view.radius).astype(np.float32), batched_colors=(255, 255, 255),
+                lod="off", cast_shadow=False, receive_shadow=False)
 
     def _build_batch(self, view: ViewRun, colours: np.ndarray) -> None:
         scene = self.scene
@@ -505,7 +536,7 @@ class SceneDrawer:
             dv, df = unit_sphere(0 if coarse else 1)
             self._batch["dots"] = scene.add_batched_meshes_simple(
                 "/bodies/dots", dv, df, batched_wxyzs=ident, batched_positions=zeros,
-                batched_scales=(0.22 * view.radius).astype(np.float32), batched_colors=(255, 255, 255),
+                batched_scales=(MANY_DOT * view.radius).astype(np.float32), batched_colors=(255, 255, 255),
                 lod="off", cast_shadow=False, receive_shadow=False)
         self._add_shadows(view)
 
@@ -563,13 +594,27 @@ class SceneDrawer:
         self._show_com(frame)
         self._show_images(frame)
         if self._past:
-            k = int(np.searchsorted(view.path_times, frame.t, side="right"))
-            for i, past in enumerate(self._past):
-                path = np.concatenate((view.paths[i][:k], frame.positions[i][None]), axis=0)
-                segments = view.trail_breaks(_segments(path)) if _periodic(view) else _segments(path)
-                past.points = (segments if len(segments) else _segments(path[-1:])).astype(np.float32)
+            self._show_past(frame)
         self._apply_clip(frame)
         self.look.frame_shown(frame)
+
+    def _show_past(self, frame: Frame) -> None:
+        """Each body's path up to the time shown, in its colour (colours resent when the number of
+        segments per body changes)."""
+        view = self.view
+        k = int(np.searchsorted(view.path_times, frame.t, side="right"))
+        pieces = []
+        for i in range(view.n_bodies):
+            path = np.concatenate((view.paths[i][:k], frame.positions[i][None]), axis=0)
+            segments = view.trail_breaks(_segments(path)) if _periodic(view) else _segments(path)
+            pieces.append(segments if len(segments) else _segments(path[-1:]))
+        counts = tuple(len(piece) for piece in pieces)
+        past = self._past[0]
+        if counts != self._past_counts:
+            colours = _linear(body_colours(view.n_bodies))
+            past.colors = np.repeat(colours, counts, axis=0)[:, None, :].repeat(2, axis=1)
+            self._past_counts = counts
+        past.points = np.concatenate(pieces).astype(np.float32)
 
     def _apply_clip(self, frame: Frame) -> None:
         """Hide the bodies the clip plane hides (`self._hidden`), whichever way they are drawn:
@@ -582,7 +627,8 @@ class SceneDrawer:
         shown = (~hidden).astype(np.float32)
         was, self._clipped = self._clipped, bool(hidden.any())
         if self._clipped or was:  # once nothing is hidden, the full sizes are sent back once
-            for key, size in (("spheres", 1.0), ("dots", 0.22)):
+            dot = MANY_DOT if self.many else FEW_DOT
+            for key, size in (("spheres", 1.0), ("dots", dot), ("stripes", 1.0)):
                 batch = self._batch.get(key)
                 if batch is not None:
                     batch.batched_scales = (size * view.radius * shown).astype(np.float32)
@@ -638,23 +684,46 @@ class SceneDrawer:
         recolour = not np.array_equal(colours, self._colours)
         self._colours = colours
         for i, body in enumerate(self._bodies):
-            body["frame"].position = tuple(frame.positions[i])
-            body["spin"].wxyz = tuple(frame.wxyz[i])
+            body["sphere"].position = tuple(frame.positions[i])
             if recolour:
                 body["sphere"].color = tuple(int(c) for c in colours[i])
             if i in cuts:
                 body["sphere"].vertices = compressed_sphere(body["r"], cuts[i], SUBDIVISIONS).astype(np.float32)
-                if body["outline"] is not None:
-                    body["outline"].visible = True
-                self._compressed.add(i)
             elif i in self._compressed:
                 body["sphere"].vertices = compressed_sphere(body["r"], [], SUBDIVISIONS).astype(np.float32)
-                if body["outline"] is not None:
-                    body["outline"].visible = False
-                self._compressed.discard(i)
+        self._compressed = set(cuts)
+        self._show_spin(frame)
+        self._show_shells(frame)
         if self.view is not None and self.view.dim < 3:
             self._show_rings(frame, set(cuts))
         self._show_shadows(frame)
+
+    def _show_spin(self, frame: Frame) -> None:
+        """The stripes and dots that turn with each sphere (2D, 3D)."""
+        stripes, dots = self._batch.get("stripes"), self._batch.get("dots")
+        if stripes is None or dots is None or self.view is None:
+            return
+        stripes.batched_positions = frame.positions.astype(np.float32)
+        stripes.batched_wxyzs = frame.wxyz.astype(np.float32)
+        offset = rotate(frame.wxyz, SPIN_DOT) * self.view.radius[:, None]
+        dots.batched_positions = (frame.positions + offset).astype(np.float32)
+
+    def _show_shells(self, frame: Frame) -> None:
+        """The pale undeformed shell round each sphere in contact that the clip plane leaves (3D)."""
+        shells = self._batch.get("shells")
+        if shells is None or self.view is None:
+            return
+        shown = np.zeros(len(frame.positions), bool)
+        shown[list(self._compressed)] = True
+        if len(self._hidden) == len(shown):
+            shown &= ~self._hidden
+        if shown.any():
+            shells.batched_positions = frame.positions.astype(np.float32)
+            if self._shells is None or not np.array_equal(shown, self._shells):
+                shells.batched_scales = (SHELL * self.view.radius * shown).astype(np.float32)
+                self._shells = shown
+        if shells.visible != bool(shown.any()):
+            shells.visible = bool(shown.any())
 
     def _show_rings(self, frame: Frame, pressed: set[int]) -> None:
         """The undeformed outline of each sphere in contact (an overlay: see the docstring)."""
@@ -694,8 +763,7 @@ class SceneDrawer:
             self._opacity[-1] = opacity
         dots = self._batch.get("dots")
         if dots is not None:
-            dot = np.array([np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4)])
-            offset = rotate(frame.wxyz, dot) * view.radius[:, None]
+            offset = rotate(frame.wxyz, SPIN_DOT) * view.radius[:, None]
             dots.batched_positions = (frame.positions + offset).astype(np.float32)
         self._show_shadows(frame)
         if chains:
