@@ -207,8 +207,8 @@ class Session:
             if label is not None and label in self.panel.picker.options:
                 self.panel.picker.value = label
         # What the scene's runs cost is known from its own run only (chooses previews and
-        # background runs).
-        self.live.full_cost = run.result.wall_time_s if run is not None else None
+        # background runs): this one, or the scene's last in this tab.
+        self.live.full_cost = run.result.wall_time_s if run is not None else self.live.costs.get(scene.name)
         if run is not None:
             self._show_view(ViewRun(run, origin="live run"), refit=True)
         else:
