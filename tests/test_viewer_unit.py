@@ -986,3 +986,44 @@ def test_a_few_balls_are_drawn_as_one_mesh_each_and_shared_instanced_markers():
         assert np.array_equal(colours[ends, 0], _linear(body_colours(view.n_bodies)))
     finally:
         server.stop()
+
+
+def test_many_bodies_above_the_point_count_are_drawn_as_points(monkeypatch):
+    """Level of detail: above POINT_BODIES bodies ("auto") one point each, at its centre and in
+    the colour mode's colour, the panel's legend saying so; the clip plane drops the points it
+    hides; "spheres" draws them as instanced spheres again, and "points" below the count."""
+    import viser
+
+    import viewer.scene3d as scene3d
+    from viewer.frames import settling_pile
+
+    run = settling_pile(120, duration=0.2, fps=10)
+    monkeypatch.setattr(scene3d, "POINT_BODIES", 100)
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        drawer = scene3d.SceneDrawer(server.scene)
+        drawer.show_run(run)
+        frame = run.frame(0.1)
+        drawer.show_frame(frame)
+        assert drawer.points and set(drawer._batch) == {"points"}
+        points = drawer._batch["points"]
+        assert np.allclose(points.points, frame.positions, atol=1e-6)
+        assert "120 bodies drawn as points" in drawer.legend() and "force chains:" not in drawer.legend()
+        drawer.set_options(colour_by="speed")
+        assert np.array_equal(points.colors, drawer.body_colours()) and len(np.unique(points.colors, axis=0)) > 1
+        drawer.look.clip.on, drawer.look.clip.axis, drawer.look.clip.offset = True, 0, 0.0
+        drawer.show_frame(frame)
+        kept = frame.positions[:, 0] <= 0.0
+        assert 0 < kept.sum() < len(kept)
+        assert np.allclose(points.points, frame.positions[kept], atol=1e-6) and len(points.colors) == kept.sum()
+        drawer.look.clip.on = False
+        drawer.set_options(bodies="spheres")
+        drawer.show_run(run)
+        drawer.show_frame(frame)
+        assert not drawer.points and "spheres" in drawer._batch and "points" not in drawer._batch
+        monkeypatch.setattr(scene3d, "POINT_BODIES", 1000)
+        drawer.set_options(bodies="points")
+        drawer.show_run(run)
+        assert drawer.points and "points" in drawer._batch
+    finally:
+        server.stop()

@@ -69,6 +69,11 @@ CHAIN_SEGMENTS = 6  # sides of a force chain's cylinder (thin: six read as round
 WALL_KEEP = 0.03  # of the scene's extent: walls that moved less are not sent again
 MIN_ARROW = 0.08  # arrows shorter than this many radii are not drawn (no heads on round-off)
 COLOUR_MODES = ("body", "speed", "kinetic energy", "contacts")
+# Level of detail: above POINT_BODIES bodies ("auto") each is one point, sized by the median radius
+# (viser's point clouds take one size): a hundred thousand 80-face spheres are eight million
+# triangles a frame, which software GL draws in seconds; their chains and blob shadows as many.
+POINT_BODIES = 20_000
+BODY_DRAWINGS = ("auto", "spheres", "points")
 SPIN_DOT = np.array([np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4)])  # where the spin dot sits (unit sphere)
 FEW_DOT, MANY_DOT = 0.16, 0.22  # the spin dot's radius in the sphere's
 # The undeformed shell's radius in the sphere's: a hair inside it, so that it shows only where the
@@ -88,6 +93,7 @@ class DrawOptions:
     colour_by: str = "body"
     chains: bool = True
     shadows: bool = True
+    bodies: str = "auto"  # BODY_DRAWINGS: spheres or points (auto: points above POINT_BODIES)
 
 
 def _segments(path: np.ndarray) -> np.ndarray:
@@ -182,6 +188,7 @@ class SceneDrawer:
         self.view: ViewRun | None = None
         self.options = DrawOptions()
         self.many = False
+        self.points = False  # many bodies drawn as points (level of detail)
         self._bodies: list[dict] = []
         self._batch: dict[str, viser.SceneNodeHandle] = {}
         self._chain_capacity = 0
@@ -232,6 +239,8 @@ class SceneDrawer:
         extent = float(max(hi[0] - lo[0], hi[1] - lo[1], 4 * r_max))
         walls = list(view.walls)
         self.many = view.n_bodies > FEW_BODIES
+        self.points = self.many and (self.options.bodies == "points" or (
+            self.options.bodies == "auto" and view.n_bodies > POINT_BODIES))
         if self._fill_light is None:
             self._configure_lights()
         self._floor = None
@@ -240,7 +249,7 @@ class SceneDrawer:
             floors = [(p, n) for p, n in walls if float(np.dot(n, up)) > 0.95]
             if floors:
                 self._floor = max(floors, key=lambda w: float(w[0][2]))
-        shape = (view.dim, view.n_bodies, tuple(np.round(view.radius, 12)), len(walls), self.many)
+        shape = (view.dim, view.n_bodies, tuple(np.round(view.radius, 12)), len(walls), self.many, self.points)
         # Ground: a table top with grid lines, under the spheres (1D, 2D), on the floor when the
         # scene has one, else under the whole scene. (viser's own grid shader costs most of a
         # frame under software rendering.)
@@ -375,7 +384,12 @@ class SceneDrawer:
             return ""
         r_mm = float(view.radius.max()) * 1e3
         lines = []
-        if self.options.forces and view.max_normal_force > 0 and (self.options.chains or not self.many):
+        if self.points:
+            lines.append(f"{view.n_bodies:,} bodies drawn as points, sized by the median radius (level of detail: "
+                         f"'draw bodies as' switches to spheres; auto above {POINT_BODIES:,} bodies); no force "
+                         "chains or shadows")
+        if self.options.forces and view.max_normal_force > 0 and (self.options.chains or not self.many) and \
+                not self.points:
             # The peak is the run's (the JSON summary's max_normal_force): no arrow is longer.
             what = (f"force chains: normal force between centres, thicker = stronger, thickest "
                     f"{view.max_normal_force:.4g} N peak") if self.many else \
@@ -454,6 +468,10 @@ class SceneDrawer:
         if np.array_equal(colours, self._colours):
             return
         self._colours = colours
+        if self.points:
+            shown = ~self._hidden if len(self._hidden) == len(colours) else np.ones(len(colours), bool)
+            self._batch["points"].colors = colours[shown]
+            return
         if self.many:
             spheres = self._batch.get("spheres")
             if spheres is not None:
@@ -524,6 +542,11 @@ class SceneDrawer:
     def _build_batch(self, view: ViewRun, colours: np.ndarray) -> None:
         scene = self.scene
         n = view.n_bodies
+        if self.points:
+            self._batch["points"] = scene.add_point_cloud(
+                "/bodies/points", np.zeros((n, 3), np.float32), colours, point_size=float(2 * np.median(view.radius)),
+                point_shape="circle", precision="float32")
+            return
         coarse = n > DETAILED_BODIES
         verts, faces = unit_sphere(1 if coarse else 2)
         ident = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
@@ -745,7 +768,20 @@ class SceneDrawer:
                 self._rings[i] = self.scene.add_line_segments(f"/overlay/ring{i}", segs, colour, thickness=2.0,
                                                               thickness_units="screen")
 
+    def _show_points(self, frame: Frame) -> None:
+        """Many bodies as points: the ones the clip plane leaves, in the colour mode's colours."""
+        points = self._batch["points"]
+        shown = ~self._hidden if len(self._hidden) == len(frame.positions) else np.ones(len(frame.positions), bool)
+        colours = self._frame_colours(frame)
+        if not np.array_equal(colours, self._colours) or self._clipped or shown.sum() != len(points.points):
+            points.colors = colours[shown]
+            self._colours = colours
+        points.points = frame.positions[shown].astype(np.float32)
+
     def _show_batch(self, frame: Frame) -> None:
+        if self.points:
+            self._show_points(frame)
+            return
         view = self.view
         spheres = self._batch["spheres"]
         positions = frame.positions.astype(np.float32)
