@@ -79,6 +79,10 @@ FEW_DOT, MANY_DOT = 0.16, 0.22  # the spin dot's radius in the sphere's
 # The undeformed shell's radius in the sphere's: a hair inside it, so that it shows only where the
 # sphere is flattened (at the sphere's own radius the two surfaces fought for the same pixels).
 SHELL = 0.998
+# Blob shadows: dark at the floor, fading as the sphere rises. The fade is in the colour (towards
+# the floor's, under one opacity): per-instance opacities made viser's client build the batch's
+# material and instanced mesh anew at every frame that sent them.
+FLOOR_COLOUR, SHADOW_COLOUR, SHADOW_OPACITY = (222, 224, 228), (60, 60, 70), 0.45
 
 
 @dataclass
@@ -114,6 +118,17 @@ def _linear(colours: np.ndarray) -> np.ndarray:
     c = np.asarray(colours, float) / 255.0
     lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
     return np.round(255.0 * lin).astype(np.uint8)
+
+
+def _shadow_colours(strength: np.ndarray) -> np.ndarray:
+    """Blob shadows' colours (N, 3) at `strength` (N,) of a shadow at the floor (1): the colour
+    that, at SHADOW_OPACITY over the floor, shows what the shadow's colour at that share of
+    SHADOW_OPACITY showed. Blended as the client blends, in linear values (instance colours are
+    read as linear, the floor's single colour as sRGB)."""
+    floor = _linear(np.array(FLOOR_COLOUR)) / 255.0
+    dark = np.array(SHADOW_COLOUR) / 255.0
+    mix = floor + (dark - floor) * np.clip(strength, 0.0, 1.0)[:, None]
+    return np.round(255.0 * mix).astype(np.uint8)
 
 
 def _periodic(view: object) -> bool:
@@ -199,6 +214,7 @@ class SceneDrawer:
         self._momentum_scale = 1.0
         self._compressed: set[int] = set()
         self._shells: np.ndarray | None = None  # which shells are shown (`_show_shells`)
+        self._shadow_colours: np.ndarray | None = None  # the blob shadows' colours sent
         self._arrows = {key: ArrowSet(scene, f"/contact/{key}", colour) for key, colour in
                         (("normal", NORMAL_COLOUR), ("friction", FRICTION_COLOUR))}
         self._vectors = {key: ArrowSet(scene, f"/vectors/{key}", colour) for key, colour in
@@ -372,7 +388,7 @@ class SceneDrawer:
             c, wxyz, dims = spec[:3], spec[3:7], spec[7:]
             # Walls other than the floor are glass: the sides of a bin stand between the camera
             # and the pile (at 0.85 opaque they hid it and its force chains).
-            self.scene.add_box(f"/world/walls/{k}", color=(222, 224, 228) if is_floor else (150, 158, 170),
+            self.scene.add_box(f"/world/walls/{k}", color=FLOOR_COLOUR if is_floor else (150, 158, 170),
                                dimensions=tuple(dims), position=tuple(c), wxyz=tuple(wxyz),
                                opacity=None if is_floor else (0.85 if planar else 0.2), cast_shadow=False,
                                receive_shadow=True)
@@ -573,8 +589,8 @@ class SceneDrawer:
         self._batch["shadows"] = self.scene.add_batched_meshes_simple(
             "/bodies/shadows", dv, df, batched_wxyzs=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
             batched_positions=np.zeros((n, 3)), batched_scales=view.radius.astype(np.float32),
-            batched_colors=(60, 60, 70), batched_opacities=np.full(n, 0.35, np.float32), opacity=1.0, lod="off",
-            cast_shadow=False, receive_shadow=False)
+            batched_colors=SHADOW_COLOUR, opacity=SHADOW_OPACITY, lod="off", cast_shadow=False, receive_shadow=False)
+        self._shadow_colours = None
 
     def _remove_com(self) -> None:
         if self._com is not None:
@@ -852,7 +868,10 @@ class SceneDrawer:
         # A blob shadow shrinks and fades as the sphere rises: how far up it is reads at once.
         lift = np.maximum(height - view.radius, 0.0) / view.radius
         shadows.batched_scales = (view.radius / (1 + 0.15 * lift)).astype(np.float32)
-        shadows.batched_opacities = (0.45 / (1 + 0.5 * lift)).astype(np.float32)
+        colours = _shadow_colours(1 / (1 + 0.5 * lift))
+        if self._shadow_colours is None or not np.array_equal(colours, self._shadow_colours):
+            shadows.batched_colors = colours
+            self._shadow_colours = colours
 
     def _show_chains(self, frame: Frame) -> None:
         """Force chains: a cylinder from each body's centre to the other's (or to the wall), its
