@@ -944,9 +944,9 @@ def test_a_few_balls_are_drawn_as_one_mesh_each_and_shared_instanced_markers():
     and one line node holds every ball's path so far, in its own colour, up to where it is."""
     import viser
 
-    from viewer.colours import body_colours
+    from viewer.colours import as_linear, body_colours
     from viewer.geometry import rotate
-    from viewer.scene3d import SHELL, SPIN_DOT, SceneDrawer, _linear
+    from viewer.scene3d import SHELL, SPIN_DOT, SceneDrawer
 
     # Without the table (no floor, no gravity): only the balls that collide touch.
     scene = replace(load_scene("break-3d"), walls=[], gravity=None)
@@ -983,7 +983,7 @@ def test_a_few_balls_are_drawn_as_one_mesh_each_and_shared_instanced_markers():
         assert len(points) == len(colours) == sum(drawer._past_counts)
         ends = np.cumsum(drawer._past_counts) - 1
         assert np.allclose(points[ends, 1], frame.positions, atol=1e-6)
-        assert np.array_equal(colours[ends, 0], _linear(body_colours(view.n_bodies)))
+        assert np.array_equal(colours[ends, 0], as_linear(body_colours(view.n_bodies)))
     finally:
         server.stop()
 
@@ -1027,3 +1027,15 @@ def test_many_bodies_above_the_point_count_are_drawn_as_points(monkeypatch):
         assert drawer.points and "points" in drawer._batch
     finally:
         server.stop()
+
+
+def test_a_blob_shadow_fades_towards_the_floor_in_its_colour():
+    """A shadow at full strength is its own colour; at none, the floor's (in the linear values
+    the client reads instance colours as); halfway, halfway between in those values."""
+    from viewer.colours import as_linear, faded
+
+    dark, floor = (60, 60, 70), (222, 224, 228)
+    out = faded(dark, floor, np.array([1.0, 0.0, 0.5, 2.0]))
+    assert np.array_equal(out[0], dark) and np.array_equal(out[3], dark)
+    assert np.array_equal(out[1], as_linear(np.array(floor)))
+    assert np.allclose(out[2], 0.5 * (np.array(dark) + as_linear(np.array(floor))), atol=1)

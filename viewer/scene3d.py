@@ -31,7 +31,7 @@ import viser
 
 from collide.periodic import nearest_image
 from viewer.clip import BodyLook, links_shown
-from viewer.colours import body_colours, colour_map, darker, legend_html, lighter
+from viewer.colours import as_linear, body_colours, colour_map, darker, faded, legend_html, lighter, mixed
 from viewer.geometry import (
     compressed_sphere,
     cylinder,
@@ -105,30 +105,6 @@ def _segments(path: np.ndarray) -> np.ndarray:
     if len(path) < 2:
         path = np.repeat(path[:1], 2, axis=0)
     return np.stack((path[:-1], path[1:]), axis=1)
-
-
-def _mixed(colours: np.ndarray, mix, f: float) -> np.ndarray:
-    """Each colour (N, 3) through `mix` (colours.lighter or darker) by f."""
-    return np.array([mix(tuple(int(c) for c in rgb), f) for rgb in colours], np.uint8).reshape(-1, 3)
-
-
-def _linear(colours: np.ndarray) -> np.ndarray:
-    """sRGB colours (..., 3) as the linear values a line's per-vertex colours are read as (three.js
-    converts a node's single colour from sRGB, not per-vertex ones): the same colour on screen."""
-    c = np.asarray(colours, float) / 255.0
-    lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-    return np.round(255.0 * lin).astype(np.uint8)
-
-
-def _shadow_colours(strength: np.ndarray) -> np.ndarray:
-    """Blob shadows' colours (N, 3) at `strength` (N,) of a shadow at the floor (1): the colour
-    that, at SHADOW_OPACITY over the floor, shows what the shadow's colour at that share of
-    SHADOW_OPACITY showed. Blended as the client blends, in linear values (instance colours are
-    read as linear, the floor's single colour as sRGB)."""
-    floor = _linear(np.array(FLOOR_COLOUR)) / 255.0
-    dark = np.array(SHADOW_COLOUR) / 255.0
-    mix = floor + (dark - floor) * np.clip(strength, 0.0, 1.0)[:, None]
-    return np.round(255.0 * mix).astype(np.uint8)
 
 
 def _periodic(view: object) -> bool:
@@ -291,7 +267,7 @@ class SceneDrawer:
             colours = body_colours(view.n_bodies)
             pieces = [_segments(path) for path in view.paths]
             points = np.concatenate(pieces).astype(np.float32)
-            faint = _linear(_mixed(colours, lighter, 0.6))
+            faint = as_linear(mixed(colours, lighter, 0.6))
             lines = np.concatenate([np.broadcast_to(c, (len(piece), 2, 3)) for piece, c in zip(pieces, faint)])
             if self._paths:
                 self._paths[0].colors, self._paths[0].points = lines, points
@@ -541,13 +517,13 @@ class SceneDrawer:
             verts, _ = unit_sphere(SUBDIVISIONS)
             self._batch["shells"] = scene.add_batched_meshes_simple(
                 "/bodies/shells", verts, faces, batched_wxyzs=ident, batched_positions=zeros,
-                batched_scales=np.zeros(n, np.float32), batched_colors=_mixed(colours, lighter, 0.2), opacity=0.35,
+                batched_scales=np.zeros(n, np.float32), batched_colors=mixed(colours, lighter, 0.2), opacity=0.35,
                 lod="off", cast_shadow=False, receive_shadow=False, visible=False)
         if view.dim > 1:
             ring_v, ring_f = torus(1.004, 0.075)
             self._batch["stripes"] = scene.add_batched_meshes_simple(
                 "/bodies/stripes", ring_v, ring_f, batched_wxyzs=ident, batched_positions=zeros,
-                batched_scales=view.radius.astype(np.float32), batched_colors=_mixed(colours, darker, 0.35), lod="off",
+                batched_scales=view.radius.astype(np.float32), batched_colors=mixed(colours, darker, 0.35), lod="off",
                 cast_shadow=False, receive_shadow=False)
             dv, df = unit_sphere(2)
             self._batch["dots"] = scene.add_batched_meshes_simple(
@@ -650,7 +626,7 @@ class SceneDrawer:
         counts = tuple(len(piece) for piece in pieces)
         past = self._past[0]
         if counts != self._past_counts:
-            colours = _linear(body_colours(view.n_bodies))
+            colours = as_linear(body_colours(view.n_bodies))
             past.colors = np.repeat(colours, counts, axis=0)[:, None, :].repeat(2, axis=1)
             self._past_counts = counts
         past.points = np.concatenate(pieces).astype(np.float32)
@@ -868,7 +844,7 @@ class SceneDrawer:
         # A blob shadow shrinks and fades as the sphere rises: how far up it is reads at once.
         lift = np.maximum(height - view.radius, 0.0) / view.radius
         shadows.batched_scales = (view.radius / (1 + 0.15 * lift)).astype(np.float32)
-        colours = _shadow_colours(1 / (1 + 0.5 * lift))
+        colours = faded(SHADOW_COLOUR, FLOOR_COLOUR, 1 / (1 + 0.5 * lift))
         if self._shadow_colours is None or not np.array_equal(colours, self._shadow_colours):
             shadows.batched_colors = colours
             self._shadow_colours = colours
