@@ -937,16 +937,14 @@ def test_contact_sliders_stay_live_where_some_contact_uses_them():
     assert default_used(parse_scene(raw), "restitution")  # b on the floor: m2 has none
 
 
-def test_a_few_balls_are_drawn_as_one_mesh_each_and_shared_instanced_markers():
-    """break-3d's four balls: one mesh per sphere at its centre, and one instanced mesh each for
-    the spin stripes, the spin dots and the undeformed shells; the dots sit on each sphere where
-    its orientation turns the marker point, the shells show round the spheres in contact only,
-    and one line node holds every ball's path so far, in its own colour, up to where it is."""
+def test_a_few_balls_paths_are_two_nodes_and_shells_show_in_contact():
+    """break-3d's four balls: every ball's whole path in one line node and its path so far in
+    another, each segment in its ball's colour, the one so far ending at the ball; the pale
+    undeformed shell shows round the spheres in contact only."""
     import viser
 
     from viewer.colours import as_linear, body_colours
-    from viewer.geometry import rotate
-    from viewer.scene3d import SHELL, SPIN_DOT, SceneDrawer
+    from viewer.scene3d import SceneDrawer
 
     # Without the table (no floor, no gravity): only the balls that collide touch.
     scene = replace(load_scene("break-3d"), walls=[], gravity=None)
@@ -956,8 +954,8 @@ def test_a_few_balls_are_drawn_as_one_mesh_each_and_shared_instanced_markers():
         drawer = SceneDrawer(server.scene)
         drawer.show_run(view)
         assert not drawer.many and len(drawer._bodies) == view.n_bodies
-        assert set(drawer._batch) == {"stripes", "dots", "shells"}
         assert len(drawer._paths) == 1 and len(drawer._past) == 1
+
         def touching(frame) -> np.ndarray:
             out = np.zeros(view.n_bodies, bool)
             for c in frame.contacts:
@@ -968,15 +966,9 @@ def test_a_few_balls_are_drawn_as_one_mesh_each_and_shared_instanced_markers():
         times = np.concatenate([np.linspace(a, b, 50) for a, b in view.contact_windows])
         frame = next(f for f in map(view.frame, times) if touching(f).any() and not touching(f).all())
         drawer.show_frame(frame)
+        assert [body["outline"].visible for body in drawer._bodies] == list(touching(frame))
         for body, centre in zip(drawer._bodies, frame.positions):
-            assert np.allclose(body["sphere"].position, centre)
-        expected = frame.positions + rotate(frame.wxyz, SPIN_DOT) * view.radius[:, None]
-        assert np.allclose(drawer._batch["dots"].batched_positions, expected, atol=1e-7)
-        assert np.allclose(drawer._batch["stripes"].batched_wxyzs, frame.wxyz, atol=1e-6)
-        shells = drawer._batch["shells"]
-        assert shells.visible
-        assert np.allclose(np.asarray(shells.batched_scales).reshape(view.n_bodies, -1)[:, 0],
-                           SHELL * view.radius * touching(frame))
+            assert np.allclose(body["frame"].position, centre)
         # The paths so far: each ball's segments in its colour, the last ending at its centre.
         past = drawer._past[0]
         points, colours = np.asarray(past.points), np.asarray(past.colors)

@@ -76,9 +76,6 @@ POINT_BODIES = 20_000
 BODY_DRAWINGS = ("auto", "spheres", "points")
 SPIN_DOT = np.array([np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4)])  # where the spin dot sits (unit sphere)
 FEW_DOT, MANY_DOT = 0.16, 0.22  # the spin dot's radius in the sphere's
-# The undeformed shell's radius in the sphere's: a hair inside it, so that it shows only where the
-# sphere is flattened (at the sphere's own radius the two surfaces fought for the same pixels).
-SHELL = 0.998
 # Blob shadows: dark at the floor, fading as the sphere rises. The fade is in the colour (towards
 # the floor's, under one opacity): per-instance opacities made viser's client build the batch's
 # material and instanced mesh anew at every frame that sent them.
@@ -189,7 +186,6 @@ class SceneDrawer:
         self._velocity_scale = 1.0
         self._momentum_scale = 1.0
         self._compressed: set[int] = set()
-        self._shells: np.ndarray | None = None  # which shells are shown (`_show_shells`)
         self._shadow_colours: np.ndarray | None = None  # the blob shadows' colours sent
         self._arrows = {key: ArrowSet(scene, f"/contact/{key}", colour) for key, colour in
                         (("normal", NORMAL_COLOUR), ("friction", FRICTION_COLOUR))}
@@ -486,7 +482,7 @@ class SceneDrawer:
         for handle in self._batch.values():
             handle.remove()
         self._bodies, self._batch, self._chain_capacity = [], {}, 0
-        self._compressed, self._shells = set(), None
+        self._compressed = set()
         colours = body_colours(view.n_bodies)
         self._colours = colours
         if self.many:
@@ -496,40 +492,30 @@ class SceneDrawer:
         self._add_shadows(view)
 
     def _build_few(self, view: ViewRun, colours: np.ndarray) -> None:
-        """A mesh for each sphere (its own vertices: it flattens where it presses), placed at its
-        centre; what every sphere has alike is one instanced mesh for all of them: the spin
-        stripes, the spin dots and the undeformed shells (3D). Fewer scene nodes: the browser
-        builds a scene of four balls in a third of the messages and draw calls."""
+        """A mesh for each sphere (its own vertices: it flattens where it presses), its stripe, dot
+        and undeformed shell: plain meshes, one material kind with the spheres' (an instanced
+        mesh of them needed shaders of its own, compiled anew at each pick under software GL)."""
         scene = self.scene
-        n = view.n_bodies
         _, faces = unit_sphere(SUBDIVISIONS)
-        for i in range(n):
+        for i in range(view.n_bodies):
             r = float(view.radius[i])
-            sphere = scene.add_mesh_simple(f"/bodies/{i}", compressed_sphere(r, [], SUBDIVISIONS), faces,
-                                           color=tuple(int(c) for c in colours[i]), flat_shading=False,
-                                           cast_shadow=False)
-            self._bodies.append({"frame": sphere, "sphere": sphere, "r": r})
-        ident = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
-        zeros = np.zeros((n, 3))
-        if view.dim == 3:
-            # The undeformed sphere, a pale shell round each sphere in contact (the others' at
-            # zero size). In 1D and 2D a ring overlay shows it (`_show_rings`).
-            verts, _ = unit_sphere(SUBDIVISIONS)
-            self._batch["shells"] = scene.add_batched_meshes_simple(
-                "/bodies/shells", verts, faces, batched_wxyzs=ident, batched_positions=zeros,
-                batched_scales=np.zeros(n, np.float32), batched_colors=mixed(colours, lighter, 0.2), opacity=0.35,
-                lod="off", cast_shadow=False, receive_shadow=False, visible=False)
-        if view.dim > 1:
-            ring_v, ring_f = torus(1.004, 0.075)
-            self._batch["stripes"] = scene.add_batched_meshes_simple(
-                "/bodies/stripes", ring_v, ring_f, batched_wxyzs=ident, batched_positions=zeros,
-                batched_scales=view.radius.astype(np.float32), batched_colors=mixed(colours, darker, 0.35), lod="off",
-                cast_shadow=False, receive_shadow=False)
-            dv, df = unit_sphere(2)
-            self._batch["dots"] = scene.add_batched_meshes_simple(
-                "/bodies/dots", dv, df, batched_wxyzs=ident, batched_positions=zeros,
-                batched_scales=(FEW_DOT * view.radius).astype(np.float32), batched_colors=(255, 255, 255),
-                lod="off", cast_shadow=False, receive_shadow=False)
+            colour = tuple(int(c) for c in colours[i])
+            base = f"/bodies/{i}"
+            frame = scene.add_frame(base, show_axes=False)
+            sphere = scene.add_mesh_simple(f"{base}/sphere", compressed_sphere(r, [], SUBDIVISIONS), faces,
+                                           color=colour, flat_shading=False, cast_shadow=False)
+            # The undeformed sphere (3D; in 1D and 2D a ring overlay shows it: `_show_rings`).
+            outline = None if view.dim < 3 else scene.add_mesh_simple(
+                f"{base}/outline", unit_sphere(SUBDIVISIONS)[0] * r, faces, color=lighter(colour, 0.2), opacity=0.35,
+                cast_shadow=False, visible=False)
+            spin = scene.add_frame(f"{base}/spin", show_axes=False)
+            if view.dim > 1:
+                ring_v, ring_f = torus(1.004 * r, 0.075 * r)
+                scene.add_mesh_simple(f"{base}/spin/stripe", ring_v, ring_f, color=darker(colour, 0.35),
+                                      cast_shadow=False)
+                scene.add_icosphere(f"{base}/spin/dot", radius=FEW_DOT * r, color=(255, 255, 255),
+                                    position=tuple(SPIN_DOT * r), subdivisions=2, cast_shadow=False)
+            self._bodies.append({"frame": frame, "sphere": sphere, "outline": outline, "spin": spin, "r": r})
 
     def _build_batch(self, view: ViewRun, colours: np.ndarray) -> None:
         scene = self.scene
@@ -642,8 +628,7 @@ class SceneDrawer:
         shown = (~hidden).astype(np.float32)
         was, self._clipped = self._clipped, bool(hidden.any())
         if self._clipped or was:  # once nothing is hidden, the full sizes are sent back once
-            dot = MANY_DOT if self.many else FEW_DOT
-            for key, size in (("spheres", 1.0), ("dots", dot), ("stripes", 1.0)):
+            for key, size in (("spheres", 1.0), ("dots", MANY_DOT)):
                 batch = self._batch.get(key)
                 if batch is not None:
                     batch.batched_scales = (size * view.radius * shown).astype(np.float32)
@@ -699,46 +684,18 @@ class SceneDrawer:
         recolour = not np.array_equal(colours, self._colours)
         self._colours = colours
         for i, body in enumerate(self._bodies):
-            body["sphere"].position = tuple(frame.positions[i])
+            body["frame"].position = tuple(frame.positions[i])
+            body["spin"].wxyz = tuple(frame.wxyz[i])
             if recolour:
                 body["sphere"].color = tuple(int(c) for c in colours[i])
-            if i in cuts:
-                body["sphere"].vertices = compressed_sphere(body["r"], cuts[i], SUBDIVISIONS).astype(np.float32)
-            elif i in self._compressed:
-                body["sphere"].vertices = compressed_sphere(body["r"], [], SUBDIVISIONS).astype(np.float32)
+            if i in cuts or i in self._compressed:
+                body["sphere"].vertices = compressed_sphere(body["r"], cuts.get(i, []), SUBDIVISIONS).astype(np.float32)
+                if body["outline"] is not None:
+                    body["outline"].visible = i in cuts
         self._compressed = set(cuts)
-        self._show_spin(frame)
-        self._show_shells(frame)
         if self.view is not None and self.view.dim < 3:
             self._show_rings(frame, set(cuts))
         self._show_shadows(frame)
-
-    def _show_spin(self, frame: Frame) -> None:
-        """The stripes and dots that turn with each sphere (2D, 3D)."""
-        stripes, dots = self._batch.get("stripes"), self._batch.get("dots")
-        if stripes is None or dots is None or self.view is None:
-            return
-        stripes.batched_positions = frame.positions.astype(np.float32)
-        stripes.batched_wxyzs = frame.wxyz.astype(np.float32)
-        offset = rotate(frame.wxyz, SPIN_DOT) * self.view.radius[:, None]
-        dots.batched_positions = (frame.positions + offset).astype(np.float32)
-
-    def _show_shells(self, frame: Frame) -> None:
-        """The pale undeformed shell round each sphere in contact that the clip plane leaves (3D)."""
-        shells = self._batch.get("shells")
-        if shells is None or self.view is None:
-            return
-        shown = np.zeros(len(frame.positions), bool)
-        shown[list(self._compressed)] = True
-        if len(self._hidden) == len(shown):
-            shown &= ~self._hidden
-        if shown.any():
-            shells.batched_positions = frame.positions.astype(np.float32)
-            if self._shells is None or not np.array_equal(shown, self._shells):
-                shells.batched_scales = (SHELL * self.view.radius * shown).astype(np.float32)
-                self._shells = shown
-        if shells.visible != bool(shown.any()):
-            shells.visible = bool(shown.any())
 
     def _show_rings(self, frame: Frame, pressed: set[int]) -> None:
         """The undeformed outline of each sphere in contact (an overlay: see the docstring)."""
