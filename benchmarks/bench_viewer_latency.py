@@ -2,7 +2,7 @@
 scene; and a 1 000-sphere run replayed frame by frame.
 
     python benchmarks/bench_viewer_latency.py [--repeats 9] [--no-browser] [--replay FILE.rrd | --synthetic N]
-                                              [--seconds 10] [--only latency|replay]
+                                              [--seconds 10] [--only latency|replay|many|lod]
 
 Starts the viewer in-process (127.0.0.1, any free port), opens it in headless Chromium
 (Debian's /usr/bin/chromium through Playwright) unless --no-browser.
@@ -23,6 +23,10 @@ per scene (medians, milliseconds):
   preview  how many of the changes were answered by a preview first
   sim      the first run's simulate() wall time;  prepare  its ViewRun (sampling, plots, residuals)
   draw     its scene + plot + table + status messages
+
+Level of detail (`--only lod --synthetic N`, default 100 000): a synthetic pile of N spheres (one
+second of frames at 30 a second) shown as `collide view` shows frames: how it is drawn (points
+above 20 000 bodies), the time until the page shows it, the server's peak memory.
 
 Replay: a real recording (`--replay`, default recordings/gas-box.rrd when it exists: 1 000
 spheres, 78 506 steps; `collide run gas-box` writes it), opened as `collide view FILE` opens
@@ -332,6 +336,50 @@ def bench_many(repeats: int, changes: int) -> None:
           f"({recs['size MB'][0]:.1f} MB); opened -> page shows it: {med(recs['open'])} ({spread(recs['open'])})")
 
 
+def bench_lod(n: int, seconds: float = 1.0, fps: float = 30.0) -> None:
+    """A synthetic pile of n spheres (`seconds` of frames at `fps`) shown in headless Chromium:
+    how it is drawn (level of detail: points above scene3d.POINT_BODIES), the time from
+    show_frames to the page showing it, the server's resident and peak memory (this process:
+    the frames, their view and the scene sent), and a frame moved by the player."""
+    import resource
+    import tempfile
+
+    from playwright.sync_api import sync_playwright
+
+    t0 = time.perf_counter()
+    run = settling_pile(n, duration=seconds, fps=fps)
+    made = time.perf_counter() - t0
+    with tempfile.TemporaryDirectory() as tmp:
+        app = ViewerApp("demo-1d", port=0, recordings_dir=Path(tmp))
+        app.start()
+        try:
+            with sync_playwright() as p:
+                browser = launch(p)
+                page = browser.new_page(viewport={"width": 1280, "height": 800})
+                page.goto(app.url + "/?fixedDpr=0.5")
+                session = app.wait_for_session(1, timeout=120)[0]
+                shown(page, "demo-1d · ", "simulated in")
+                t0 = time.perf_counter()
+                session.show_frames(run)
+                shown(page, f"{n} bodies, {len(run.times)} frames", timeout=900)
+                opened = time.perf_counter() - t0
+                t0 = time.perf_counter()
+                session.seek(0.5 * (run.t0 + run.t1))
+                page.evaluate(FRAME_JS)
+                moved = time.perf_counter() - t0
+                drawn = "points" if session.drawer.points else "spheres"
+                page.screenshot(path=str(screenshot_dir() / f"bench-lod-{n}.png"))
+                browser.close()
+        finally:
+            app.stop()
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
+    load = "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg())
+    print(f"\nSynthetic pile of {n} spheres, {len(run.times)} frames ({made:.1f} s to make), headless Chromium "
+          f"(software GL, fixedDpr=0.5); {load}")
+    print(f"drawn as {drawn}; shown in the page {opened:.2f} s after show_frames; a seek drawn in {moved:.2f} s; "
+          f"server RSS now {rss_mb():.0f} MB, peak {peak:.0f} MB")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=9)
@@ -341,9 +389,14 @@ def main() -> None:
     parser.add_argument("--synthetic", type=int, default=None, metavar="N",
                         help="replay a synthetic pile of N spheres instead of a recording")
     parser.add_argument("--seconds", type=float, default=10.0)
-    parser.add_argument("--only", choices=("latency", "replay", "many"), default=None)
+    parser.add_argument("--only", choices=("latency", "replay", "many", "lod"), default=None)
     parser.add_argument("--changes", type=int, default=10, help="slider changes on the pile (--only many)")
     args = parser.parse_args()
+    if args.only == "lod":
+        if not CHROMIUM.exists():
+            parser.error(f"--only lod needs {CHROMIUM}")
+        bench_lod(args.synthetic or 100_000)
+        return
     if args.only == "many":
         if not CHROMIUM.exists():
             parser.error(f"--only many needs {CHROMIUM}")

@@ -87,3 +87,24 @@ def test_a_run_the_model_covers_is_shown_once_as_run_scene_returns_it(session, m
     assert view.run.error_method == reference.error_method == ["model"]
     assert np.array_equal(view.run.error_estimate, reference.error_estimate)
     assert view.result.warnings == reference.result.warnings
+
+
+def test_a_scene_picked_again_starts_from_its_last_cost(session, measurements):
+    """A scene's first pick in a tab draws its own run first (what it costs is unknown); picked
+    again after a run that took longer than the preview budget, it is drawn first from a coarse
+    preview, as a slider's move is, and its own run follows."""
+    from viewer.live import LONG_RUN_S, PREVIEW_BUDGET
+
+    shown = _shown(session, measurements)
+    session.load_scene("break-3d")
+    assert session.worker.wait_idle(300)
+    assert not shown[0][0].preview and session.live.costs["break-3d"] > 0
+    session.load_scene("demo-1d")
+    assert session.worker.wait_idle(120)
+    # As if its run had taken half a second here (a slower machine, or one under load).
+    session.live.costs["break-3d"] = 0.5 * (PREVIEW_BUDGET + LONG_RUN_S)
+    shown.clear()
+    session.load_scene("break-3d")
+    assert session.worker.wait_idle(300)
+    assert shown[0][0].preview and shown[0][0].scene.name == "break-3d"
+    assert not shown[-1][0].preview and not shown[-1][0].measuring

@@ -882,7 +882,9 @@ def test_a_new_run_of_the_same_scene_resends_only_what_changed(monkeypatch):
         paths = list(drawer._paths)
         drawer.show_run(views[1])
         assert added == [] and drawer._paths == paths
-        assert np.allclose(drawer._paths[0].points[-1, 1], views[1].paths[0][-1], atol=1e-6)
+        # One node holds every body's path, body 0's first: its last segment ends where body 0 does.
+        end0 = len(views[1].paths[0]) - 2
+        assert np.allclose(drawer._paths[0].points[end0, 1], views[1].paths[0][-1], atol=1e-6)
     finally:
         server.stop()
 
@@ -933,3 +935,99 @@ def test_contact_sliders_stay_live_where_some_contact_uses_them():
     assert not default_used(parse_scene(raw), "restitution")
     raw["wall"] = [{"point": [0, 0, 0], "normal": [0, 0, 1]}]
     assert default_used(parse_scene(raw), "restitution")  # b on the floor: m2 has none
+
+
+def test_a_few_balls_paths_are_two_nodes_and_shells_show_in_contact():
+    """break-3d's four balls: every ball's whole path in one line node and its path so far in
+    another, each segment in its ball's colour, the one so far ending at the ball; the pale
+    undeformed shell shows round the spheres in contact only."""
+    import viser
+
+    from viewer.colours import as_linear, body_colours
+    from viewer.scene3d import SceneDrawer
+
+    # Without the table (no floor, no gravity): only the balls that collide touch.
+    scene = replace(load_scene("break-3d"), walls=[], gravity=None)
+    view = ViewRun(run_scene(scene, integrator="dem", dt=2e-5))
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        drawer = SceneDrawer(server.scene)
+        drawer.show_run(view)
+        assert not drawer.many and len(drawer._bodies) == view.n_bodies
+        assert len(drawer._paths) == 1 and len(drawer._past) == 1
+
+        def touching(frame) -> np.ndarray:
+            out = np.zeros(view.n_bodies, bool)
+            for c in frame.contacts:
+                out[[c.i] + ([c.j] if c.j is not None else [])] = True
+            return out
+
+        # A time when some balls touch and some do not.
+        times = np.concatenate([np.linspace(a, b, 50) for a, b in view.contact_windows])
+        frame = next(f for f in map(view.frame, times) if touching(f).any() and not touching(f).all())
+        drawer.show_frame(frame)
+        assert [body["outline"].visible for body in drawer._bodies] == list(touching(frame))
+        for body, centre in zip(drawer._bodies, frame.positions):
+            assert np.allclose(body["frame"].position, centre)
+        # The paths so far: each ball's segments in its colour, the last ending at its centre.
+        past = drawer._past[0]
+        points, colours = np.asarray(past.points), np.asarray(past.colors)
+        assert len(points) == len(colours) == sum(drawer._past_counts)
+        ends = np.cumsum(drawer._past_counts) - 1
+        assert np.allclose(points[ends, 1], frame.positions, atol=1e-6)
+        assert np.array_equal(colours[ends, 0], as_linear(body_colours(view.n_bodies)))
+    finally:
+        server.stop()
+
+
+def test_many_bodies_above_the_point_count_are_drawn_as_points(monkeypatch):
+    """Level of detail: above POINT_BODIES bodies ("auto") one point each, at its centre and in
+    the colour mode's colour, the panel's legend saying so; the clip plane drops the points it
+    hides; "spheres" draws them as instanced spheres again, and "points" below the count."""
+    import viser
+
+    import viewer.scene3d as scene3d
+    from viewer.frames import settling_pile
+
+    run = settling_pile(120, duration=0.2, fps=10)
+    monkeypatch.setattr(scene3d, "POINT_BODIES", 100)
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        drawer = scene3d.SceneDrawer(server.scene)
+        drawer.show_run(run)
+        frame = run.frame(0.1)
+        drawer.show_frame(frame)
+        assert drawer.points and set(drawer._batch) == {"points"}
+        points = drawer._batch["points"]
+        assert np.allclose(points.points, frame.positions, atol=1e-6)
+        assert "120 bodies drawn as points" in drawer.legend() and "force chains:" not in drawer.legend()
+        drawer.set_options(colour_by="speed")
+        assert np.array_equal(points.colors, drawer.body_colours()) and len(np.unique(points.colors, axis=0)) > 1
+        drawer.look.clip.on, drawer.look.clip.axis, drawer.look.clip.offset = True, 0, 0.0
+        drawer.show_frame(frame)
+        kept = frame.positions[:, 0] <= 0.0
+        assert 0 < kept.sum() < len(kept)
+        assert np.allclose(points.points, frame.positions[kept], atol=1e-6) and len(points.colors) == kept.sum()
+        drawer.look.clip.on = False
+        drawer.set_options(bodies="spheres")
+        drawer.show_run(run)
+        drawer.show_frame(frame)
+        assert not drawer.points and "spheres" in drawer._batch and "points" not in drawer._batch
+        monkeypatch.setattr(scene3d, "POINT_BODIES", 1000)
+        drawer.set_options(bodies="points")
+        drawer.show_run(run)
+        assert drawer.points and "points" in drawer._batch
+    finally:
+        server.stop()
+
+
+def test_a_blob_shadow_fades_towards_the_floor_in_its_colour():
+    """A shadow at full strength is its own colour; at none, the floor's (in the linear values
+    the client reads instance colours as); halfway, halfway between in those values."""
+    from viewer.colours import as_linear, faded
+
+    dark, floor = (60, 60, 70), (222, 224, 228)
+    out = faded(dark, floor, np.array([1.0, 0.0, 0.5, 2.0]))
+    assert np.array_equal(out[0], dark) and np.array_equal(out[3], dark)
+    assert np.array_equal(out[1], as_linear(np.array(floor)))
+    assert np.allclose(out[2], 0.5 * (np.array(dark) + as_linear(np.array(floor))), atol=1)

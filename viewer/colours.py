@@ -47,6 +47,28 @@ def darker(c: tuple[int, int, int], f: float = 0.45) -> tuple[int, int, int]:
     return tuple(int(x * f) for x in c)  # type: ignore[return-value]
 
 
+def mixed(colours: np.ndarray, mix, f: float) -> np.ndarray:
+    """Each colour (N, 3) through `mix` (lighter or darker) by f."""
+    return np.array([mix(tuple(int(c) for c in rgb), f) for rgb in colours], np.uint8).reshape(-1, 3)
+
+
+def as_linear(colours: np.ndarray) -> np.ndarray:
+    """sRGB colours (..., 3) as the linear values a line's or an instance's own colours are read
+    as (three.js converts a node's single colour from sRGB, not those): the same colour on screen."""
+    c = np.asarray(colours, float) / 255.0
+    lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return np.round(255.0 * lin).astype(np.uint8)
+
+
+def faded(colour: tuple[int, int, int], ground: tuple[int, int, int], strength: np.ndarray) -> np.ndarray:
+    """Instance colours (N, 3) that, at one opacity over `ground` (a node's single colour),
+    show `colour` at `strength` (N,; 0 to 1) of that opacity: a fade kept in the colours. Mixed
+    as the client blends, in linear values (instance colours are read as linear)."""
+    floor = as_linear(np.array(ground)) / 255.0
+    mix = floor + (np.array(colour) / 255.0 - floor) * np.clip(strength, 0.0, 1.0)[:, None]
+    return np.round(255.0 * mix).astype(np.uint8)
+
+
 def legend_html(title: str, lo: float, hi: float, unit: str, *, integer: bool = False) -> str:
     """A horizontal colour bar with its end values, for the GUI."""
     stops = ", ".join(hex_colour(c) for c in _VIRIDIS.astype(int))

@@ -218,6 +218,9 @@ class LiveRuns:
         # s: what the scene's runs cost, known from its own run only (chooses previews and
         # background runs)
         self.full_cost = initial_cost
+        # s: each scene's last run in this tab, by name: a scene picked again starts from it (a
+        # coarse preview first when its run is slow, as a slider's move does)
+        self.costs: dict[str, float] = {}
         self.timings: deque[dict[str, float]] = deque(maxlen=200)  # per drawn run, for benchmarks
         self.worker: LatestWorker[Request] = LatestWorker(self._job, on_error=self._job_failed, name=name)
         self.runner = BackgroundRunner()  # long runs (many bodies) in a child process
@@ -304,7 +307,7 @@ class LiveRuns:
                 run = run_scene(scene, record=True)
             t_run = lap()
             if preview is None:
-                self.full_cost = t_run
+                self.full_cost = self.costs[scene.name] = t_run
             view = ViewRun(run, origin="live run", preview=preview is not None, measuring=measuring)
             t_view = lap()
         except (SceneError, RunError) as exc:
@@ -363,7 +366,7 @@ class LiveRuns:
             return None
         finally:
             self._stop_button.visible = False
-        self.full_cost = run.result.wall_time_s
+        self.full_cost = self.costs[name] = run.result.wall_time_s
         show(f"*{name}: run done in {run.result.wall_time_s:.1f} s; preparing the view...*")
         return run
 

@@ -20,7 +20,7 @@ from viewer import files
 from viewer.config import SessionConfig
 from viewer.params import AUTO, Controls, Settings, check_settings, dt_choice, parse_dt_choice
 from viewer.plots import Plots
-from viewer.scene3d import COLOUR_MODES, DrawOptions
+from viewer.scene3d import BODY_DRAWINGS, COLOUR_MODES, POINT_BODIES, DrawOptions
 
 SPEEDS = ["auto", "0.001x", "0.003x", "0.01x", "0.03x", "0.1x", "0.3x", "1x"]
 TYPING_SETTLE = 0.5  # s without a keystroke before a typed value is read
@@ -103,6 +103,9 @@ class Panel:
                                             hint="normal forces as links between centres (many bodies)")
         self.show_shadows = gui.add_checkbox("shadows", initial_value=opts.shadows, visible=False,
                                              hint="each sphere's shadow on the floor")
+        self.draw_as = gui.add_dropdown("draw bodies as", list(BODY_DRAWINGS), initial_value=opts.bodies,
+                                        visible=False, hint=f"auto: spheres up to {POINT_BODIES:,} bodies, "
+                                                            "points (one per body, sized by the radius) above")
         self.legend = gui.add_markdown("")
         self.colour_legend = gui.add_html("")
 
@@ -110,7 +113,7 @@ class Panel:
         """The Show folder's controls by `DrawOptions` field."""
         return {"forces": self.show_forces, "velocity": self.show_velocity, "momentum": self.show_momentum,
                 "com": self.show_com, "trails": self.show_trails, "colour_by": self.colour_by,
-                "chains": self.show_chains, "shadows": self.show_shadows}
+                "chains": self.show_chains, "shadows": self.show_shadows, "bodies": self.draw_as}
 
     def _scene(self, gui: viser.GuiApi, config: SessionConfig) -> None:
         self.picker = gui.add_dropdown("scene", [c.label for c in config.scene_choices],

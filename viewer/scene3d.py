@@ -31,7 +31,7 @@ import viser
 
 from collide.periodic import nearest_image
 from viewer.clip import BodyLook, links_shown
-from viewer.colours import body_colours, colour_map, darker, legend_html, lighter
+from viewer.colours import as_linear, body_colours, colour_map, darker, faded, legend_html, lighter, mixed
 from viewer.geometry import (
     compressed_sphere,
     cylinder,
@@ -69,6 +69,17 @@ CHAIN_SEGMENTS = 6  # sides of a force chain's cylinder (thin: six read as round
 WALL_KEEP = 0.03  # of the scene's extent: walls that moved less are not sent again
 MIN_ARROW = 0.08  # arrows shorter than this many radii are not drawn (no heads on round-off)
 COLOUR_MODES = ("body", "speed", "kinetic energy", "contacts")
+# Level of detail: above POINT_BODIES bodies ("auto") each is one point, sized by the median radius
+# (viser's point clouds take one size): a hundred thousand 80-face spheres are eight million
+# triangles a frame, which software GL draws in seconds; their chains and blob shadows as many.
+POINT_BODIES = 20_000
+BODY_DRAWINGS = ("auto", "spheres", "points")
+SPIN_DOT = np.array([np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4)])  # where the spin dot sits (unit sphere)
+FEW_DOT, MANY_DOT = 0.16, 0.22  # the spin dot's radius in the sphere's
+# Blob shadows: dark at the floor, fading as the sphere rises. The fade is in the colour (towards
+# the floor's, under one opacity): per-instance opacities made viser's client build the batch's
+# material and instanced mesh anew at every frame that sent them.
+FLOOR_COLOUR, SHADOW_COLOUR, SHADOW_OPACITY = (222, 224, 228), (60, 60, 70), 0.45
 
 
 @dataclass
@@ -83,6 +94,7 @@ class DrawOptions:
     colour_by: str = "body"
     chains: bool = True
     shadows: bool = True
+    bodies: str = "auto"  # BODY_DRAWINGS: spheres or points (auto: points above POINT_BODIES)
 
 
 def _segments(path: np.ndarray) -> np.ndarray:
@@ -164,6 +176,7 @@ class SceneDrawer:
         self.view: ViewRun | None = None
         self.options = DrawOptions()
         self.many = False
+        self.points = False  # many bodies drawn as points (level of detail)
         self._bodies: list[dict] = []
         self._batch: dict[str, viser.SceneNodeHandle] = {}
         self._chain_capacity = 0
@@ -173,6 +186,7 @@ class SceneDrawer:
         self._velocity_scale = 1.0
         self._momentum_scale = 1.0
         self._compressed: set[int] = set()
+        self._shadow_colours: np.ndarray | None = None  # the blob shadows' colours sent
         self._arrows = {key: ArrowSet(scene, f"/contact/{key}", colour) for key, colour in
                         (("normal", NORMAL_COLOUR), ("friction", FRICTION_COLOUR))}
         self._vectors = {key: ArrowSet(scene, f"/vectors/{key}", colour) for key, colour in
@@ -180,8 +194,9 @@ class SceneDrawer:
         self._point = None
         self._com = None
         self._com_path = None
-        self._past: list = []
-        self._paths: list = []
+        self._past: list = []  # one node: every body's path so far
+        self._paths: list = []  # one node: every body's whole path
+        self._past_counts: tuple | None = None  # segments per body in `_past` (its colours follow)
         self._shape: tuple | None = None
         self._ground_key: tuple | None = None
         self._walls_drawn: list | None = None  # the wall boxes sent: (centre, wxyz, dims), is floor
@@ -191,7 +206,6 @@ class SceneDrawer:
         self._floor: tuple[np.ndarray, np.ndarray] | None = None  # (point, unit normal) of the floor
         self._opacity: dict[int, float] = {}
         self._rings: dict[int, viser.SceneNodeHandle] = {}
-        self._light_shadows: bool | None = None
         self._fill_light: viser.SceneNodeHandle | None = None
         self.frame: Frame | None = None
         self.eye: np.ndarray | None = None  # the camera's position, for the overlays
@@ -213,10 +227,9 @@ class SceneDrawer:
         extent = float(max(hi[0] - lo[0], hi[1] - lo[1], 4 * r_max))
         walls = list(view.walls)
         self.many = view.n_bodies > FEW_BODIES
-        # A shadow map up to DETAILED_BODIES (switching it recompiles every material's shaders:
-        # seconds under software GL, so not between a few bodies and a rack of sixteen).
-        if self._light_shadows is not (view.n_bodies <= DETAILED_BODIES):
-            self._light_shadows = view.n_bodies <= DETAILED_BODIES
+        self.points = self.many and (self.options.bodies == "points" or (
+            self.options.bodies == "auto" and view.n_bodies > POINT_BODIES))
+        if self._fill_light is None:
             self._configure_lights()
         self._floor = None
         if not planar:
@@ -224,7 +237,7 @@ class SceneDrawer:
             floors = [(p, n) for p, n in walls if float(np.dot(n, up)) > 0.95]
             if floors:
                 self._floor = max(floors, key=lambda w: float(w[0][2]))
-        shape = (view.dim, view.n_bodies, tuple(np.round(view.radius, 12)), len(walls), self.many)
+        shape = (view.dim, view.n_bodies, tuple(np.round(view.radius, 12)), len(walls), self.many, self.points)
         # Ground: a table top with grid lines, under the spheres (1D, 2D), on the floor when the
         # scene has one, else under the whole scene. (viser's own grid shader costs most of a
         # frame under software rendering.)
@@ -243,23 +256,23 @@ class SceneDrawer:
             self._show_ground(centre, half, cell, ground)
             self._ground_key = ground_key
         self._show_walls(view, walls, lo, hi, extent, r_max, planar)
-        # Paths: the whole run faint, the part already travelled in the body's colour.
-        colours = body_colours(view.n_bodies)
+        # Paths: the whole run faint, the part already travelled in the body's colour; all bodies'
+        # in one node each (per-segment colours: two nodes for a dozen balls, not 24).
         trails = self.options.trails and view.paths is not None and not self.many
-        if trails and len(self._paths) == view.n_bodies:
-            for i in range(view.n_bodies):
-                self._paths[i].points = _segments(view.paths[i]).astype(np.float32)
-                self._past[i].points = _segments(view.paths[i][:2]).astype(np.float32)
-        elif trails:
-            self._clear_paths()
-            for i in range(view.n_bodies):
-                colour = tuple(int(c) for c in colours[i])
-                self._paths.append(scene.add_line_segments(
-                    f"/paths/{i}/all", _segments(view.paths[i]), lighter(colour, 0.6), thickness=1.5,
-                    thickness_units="screen"))
-                self._past.append(scene.add_line_segments(
-                    f"/paths/{i}/past", _segments(view.paths[i][:2]), colour, thickness=3.0,
-                    thickness_units="screen"))
+        if trails:
+            colours = body_colours(view.n_bodies)
+            pieces = [_segments(path) for path in view.paths]
+            points = np.concatenate(pieces).astype(np.float32)
+            faint = as_linear(mixed(colours, lighter, 0.6))
+            lines = np.concatenate([np.broadcast_to(c, (len(piece), 2, 3)) for piece, c in zip(pieces, faint)])
+            if self._paths:
+                self._paths[0].colors, self._paths[0].points = lines, points
+            else:
+                self._paths = [scene.add_line_segments("/paths/all", points, lines, thickness=1.5,
+                                                       thickness_units="screen")]
+                self._past = [scene.add_line_segments("/paths/past", points[:1], lines[:1], thickness=3.0,
+                                                      thickness_units="screen")]
+            self._past_counts = None
         else:
             self._clear_paths()
         if shape != self._shape:
@@ -283,17 +296,16 @@ class SceneDrawer:
         self._opacity = {}
 
     def _configure_lights(self) -> None:
-        """Above DETAILED_BODIES: no shadow map (each frame would draw every sphere twice; under
-        software GL that doubled a frame's time; their blob shadows give the depth). Every scene: no
-        environment map, a hemisphere light instead. The map's lighting, sampled at every pixel
-        of every sphere, was 60 % of a pile's frame under software GL; switched per scene, each
-        switch recompiled every material's shaders (seconds there), so it is set once."""
+        """Once per client: no shadow map and no environment map, a hemisphere light instead.
+        The shadow map (viser's three cascades of 1024 x 1024, sampled at every lit pixel) was
+        half of break-3d's frame under software GL, and the floor's blob shadows give the depth
+        it gave; the environment map's lighting was 60 % of a pile's frame there. Set once:
+        switching either recompiles every material's shaders (seconds under software GL)."""
         scene = self.scene
-        scene.configure_default_lights(True, cast_shadow=bool(self._light_shadows))
-        if self._fill_light is None:
-            scene.configure_environment_map(None)
-            self._fill_light = scene.add_light_hemisphere("/lights/fill", sky_color=FILL_SKY,
-                                                          ground_color=FILL_GROUND, intensity=FILL_INTENSITY)
+        scene.configure_default_lights(True, cast_shadow=False)
+        scene.configure_environment_map(None)
+        self._fill_light = scene.add_light_hemisphere("/lights/fill", sky_color=FILL_SKY, ground_color=FILL_GROUND,
+                                                      intensity=FILL_INTENSITY)
 
     def _show_ground(self, centre: np.ndarray, half: float, cell: float, z: float) -> None:
         # Lines only: a plane filling the view (viser's grid shader, or any lit surface) costs
@@ -348,7 +360,7 @@ class SceneDrawer:
             c, wxyz, dims = spec[:3], spec[3:7], spec[7:]
             # Walls other than the floor are glass: the sides of a bin stand between the camera
             # and the pile (at 0.85 opaque they hid it and its force chains).
-            self.scene.add_box(f"/world/walls/{k}", color=(222, 224, 228) if is_floor else (150, 158, 170),
+            self.scene.add_box(f"/world/walls/{k}", color=FLOOR_COLOUR if is_floor else (150, 158, 170),
                                dimensions=tuple(dims), position=tuple(c), wxyz=tuple(wxyz),
                                opacity=None if is_floor else (0.85 if planar else 0.2), cast_shadow=False,
                                receive_shadow=True)
@@ -360,7 +372,12 @@ class SceneDrawer:
             return ""
         r_mm = float(view.radius.max()) * 1e3
         lines = []
-        if self.options.forces and view.max_normal_force > 0 and (self.options.chains or not self.many):
+        if self.points:
+            lines.append(f"{view.n_bodies:,} bodies drawn as points, sized by the median radius (level of detail: "
+                         f"'draw bodies as' switches to spheres; auto above {POINT_BODIES:,} bodies); no force "
+                         "chains or shadows")
+        if self.options.forces and view.max_normal_force > 0 and (self.options.chains or not self.many) and \
+                not self.points:
             # The peak is the run's (the JSON summary's max_normal_force): no arrow is longer.
             what = (f"force chains: normal force between centres, thicker = stronger, thickest "
                     f"{view.max_normal_force:.4g} N peak") if self.many else \
@@ -439,6 +456,10 @@ class SceneDrawer:
         if np.array_equal(colours, self._colours):
             return
         self._colours = colours
+        if self.points:
+            shown = ~self._hidden if len(self._hidden) == len(colours) else np.ones(len(colours), bool)
+            self._batch["points"].colors = colours[shown]
+            return
         if self.many:
             spheres = self._batch.get("spheres")
             if spheres is not None:
@@ -456,7 +477,6 @@ class SceneDrawer:
         self._paths, self._past = [], []
 
     def _build_bodies(self, view: ViewRun) -> None:
-        scene = self.scene
         for body in self._bodies:
             body["frame"].remove()
         for handle in self._batch.values():
@@ -468,6 +488,14 @@ class SceneDrawer:
         if self.many:
             self._build_batch(view, colours)
             return
+        self._build_few(view, colours)
+        self._add_shadows(view)
+
+    def _build_few(self, view: ViewRun, colours: np.ndarray) -> None:
+        """A mesh for each sphere (its own vertices: it flattens where it presses), its stripe, dot
+        and undeformed shell: plain meshes, one material kind with the spheres' (an instanced
+        mesh of them needed shaders of its own, compiled anew at each pick under software GL)."""
+        scene = self.scene
         _, faces = unit_sphere(SUBDIVISIONS)
         for i in range(view.n_bodies):
             r = float(view.radius[i])
@@ -475,29 +503,28 @@ class SceneDrawer:
             base = f"/bodies/{i}"
             frame = scene.add_frame(base, show_axes=False)
             sphere = scene.add_mesh_simple(f"{base}/sphere", compressed_sphere(r, [], SUBDIVISIONS), faces,
-                                           color=colour, flat_shading=False, cast_shadow=view.dim == 3)
-            if view.dim < 3:
-                # The undeformed circle in the plane of the centres, as the report's figures draw
-                # it: an overlay, placed each frame (`_show_rings`).
-                outline = None
-            else:
-                outline = scene.add_mesh_simple(f"{base}/outline", unit_sphere(SUBDIVISIONS)[0] * r, faces,
-                                                color=lighter(colour, 0.2), opacity=0.35, cast_shadow=False,
-                                                visible=False)
+                                           color=colour, flat_shading=False, cast_shadow=False)
+            # The undeformed sphere (3D; in 1D and 2D a ring overlay shows it: `_show_rings`).
+            outline = None if view.dim < 3 else scene.add_mesh_simple(
+                f"{base}/outline", unit_sphere(SUBDIVISIONS)[0] * r, faces, color=lighter(colour, 0.2), opacity=0.35,
+                cast_shadow=False, visible=False)
             spin = scene.add_frame(f"{base}/spin", show_axes=False)
             if view.dim > 1:
                 ring_v, ring_f = torus(1.004 * r, 0.075 * r)
                 scene.add_mesh_simple(f"{base}/spin/stripe", ring_v, ring_f, color=darker(colour, 0.35),
                                       cast_shadow=False)
-                dot = np.array([np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4)]) * r
-                scene.add_icosphere(f"{base}/spin/dot", radius=0.16 * r, color=(255, 255, 255),
-                                    position=tuple(dot), subdivisions=2, cast_shadow=False)
+                scene.add_icosphere(f"{base}/spin/dot", radius=FEW_DOT * r, color=(255, 255, 255),
+                                    position=tuple(SPIN_DOT * r), subdivisions=2, cast_shadow=False)
             self._bodies.append({"frame": frame, "sphere": sphere, "outline": outline, "spin": spin, "r": r})
-        self._add_shadows(view)
 
     def _build_batch(self, view: ViewRun, colours: np.ndarray) -> None:
         scene = self.scene
         n = view.n_bodies
+        if self.points:
+            self._batch["points"] = scene.add_point_cloud(
+                "/bodies/points", np.zeros((n, 3), np.float32), colours, point_size=float(2 * np.median(view.radius)),
+                point_shape="circle", precision="float32")
+            return
         coarse = n > DETAILED_BODIES
         verts, faces = unit_sphere(1 if coarse else 2)
         ident = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
@@ -510,7 +537,7 @@ class SceneDrawer:
             dv, df = unit_sphere(0 if coarse else 1)
             self._batch["dots"] = scene.add_batched_meshes_simple(
                 "/bodies/dots", dv, df, batched_wxyzs=ident, batched_positions=zeros,
-                batched_scales=(0.22 * view.radius).astype(np.float32), batched_colors=(255, 255, 255),
+                batched_scales=(MANY_DOT * view.radius).astype(np.float32), batched_colors=(255, 255, 255),
                 lod="off", cast_shadow=False, receive_shadow=False)
         self._add_shadows(view)
 
@@ -524,8 +551,8 @@ class SceneDrawer:
         self._batch["shadows"] = self.scene.add_batched_meshes_simple(
             "/bodies/shadows", dv, df, batched_wxyzs=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
             batched_positions=np.zeros((n, 3)), batched_scales=view.radius.astype(np.float32),
-            batched_colors=(60, 60, 70), batched_opacities=np.full(n, 0.35, np.float32), opacity=1.0, lod="off",
-            cast_shadow=False, receive_shadow=False)
+            batched_colors=SHADOW_COLOUR, opacity=SHADOW_OPACITY, lod="off", cast_shadow=False, receive_shadow=False)
+        self._shadow_colours = None
 
     def _remove_com(self) -> None:
         if self._com is not None:
@@ -568,13 +595,27 @@ class SceneDrawer:
         self._show_com(frame)
         self._show_images(frame)
         if self._past:
-            k = int(np.searchsorted(view.path_times, frame.t, side="right"))
-            for i, past in enumerate(self._past):
-                path = np.concatenate((view.paths[i][:k], frame.positions[i][None]), axis=0)
-                segments = view.trail_breaks(_segments(path)) if _periodic(view) else _segments(path)
-                past.points = (segments if len(segments) else _segments(path[-1:])).astype(np.float32)
+            self._show_past(frame)
         self._apply_clip(frame)
         self.look.frame_shown(frame)
+
+    def _show_past(self, frame: Frame) -> None:
+        """Each body's path up to the time shown, in its colour (colours resent when the number of
+        segments per body changes)."""
+        view = self.view
+        k = int(np.searchsorted(view.path_times, frame.t, side="right"))
+        pieces = []
+        for i in range(view.n_bodies):
+            path = np.concatenate((view.paths[i][:k], frame.positions[i][None]), axis=0)
+            segments = view.trail_breaks(_segments(path)) if _periodic(view) else _segments(path)
+            pieces.append(segments if len(segments) else _segments(path[-1:]))
+        counts = tuple(len(piece) for piece in pieces)
+        past = self._past[0]
+        if counts != self._past_counts:
+            colours = as_linear(body_colours(view.n_bodies))
+            past.colors = np.repeat(colours, counts, axis=0)[:, None, :].repeat(2, axis=1)
+            self._past_counts = counts
+        past.points = np.concatenate(pieces).astype(np.float32)
 
     def _apply_clip(self, frame: Frame) -> None:
         """Hide the bodies the clip plane hides (`self._hidden`), whichever way they are drawn:
@@ -587,7 +628,7 @@ class SceneDrawer:
         shown = (~hidden).astype(np.float32)
         was, self._clipped = self._clipped, bool(hidden.any())
         if self._clipped or was:  # once nothing is hidden, the full sizes are sent back once
-            for key, size in (("spheres", 1.0), ("dots", 0.22)):
+            for key, size in (("spheres", 1.0), ("dots", MANY_DOT)):
                 batch = self._batch.get(key)
                 if batch is not None:
                     batch.batched_scales = (size * view.radius * shown).astype(np.float32)
@@ -647,16 +688,11 @@ class SceneDrawer:
             body["spin"].wxyz = tuple(frame.wxyz[i])
             if recolour:
                 body["sphere"].color = tuple(int(c) for c in colours[i])
-            if i in cuts:
-                body["sphere"].vertices = compressed_sphere(body["r"], cuts[i], SUBDIVISIONS).astype(np.float32)
+            if i in cuts or i in self._compressed:
+                body["sphere"].vertices = compressed_sphere(body["r"], cuts.get(i, []), SUBDIVISIONS).astype(np.float32)
                 if body["outline"] is not None:
-                    body["outline"].visible = True
-                self._compressed.add(i)
-            elif i in self._compressed:
-                body["sphere"].vertices = compressed_sphere(body["r"], [], SUBDIVISIONS).astype(np.float32)
-                if body["outline"] is not None:
-                    body["outline"].visible = False
-                self._compressed.discard(i)
+                    body["outline"].visible = i in cuts
+        self._compressed = set(cuts)
         if self.view is not None and self.view.dim < 3:
             self._show_rings(frame, set(cuts))
         self._show_shadows(frame)
@@ -681,7 +717,20 @@ class SceneDrawer:
                 self._rings[i] = self.scene.add_line_segments(f"/overlay/ring{i}", segs, colour, thickness=2.0,
                                                               thickness_units="screen")
 
+    def _show_points(self, frame: Frame) -> None:
+        """Many bodies as points: the ones the clip plane leaves, in the colour mode's colours."""
+        points = self._batch["points"]
+        shown = ~self._hidden if len(self._hidden) == len(frame.positions) else np.ones(len(frame.positions), bool)
+        colours = self._frame_colours(frame)
+        if not np.array_equal(colours, self._colours) or self._clipped or shown.sum() != len(points.points):
+            points.colors = colours[shown]
+            self._colours = colours
+        points.points = frame.positions[shown].astype(np.float32)
+
     def _show_batch(self, frame: Frame) -> None:
+        if self.points:
+            self._show_points(frame)
+            return
         view = self.view
         spheres = self._batch["spheres"]
         positions = frame.positions.astype(np.float32)
@@ -699,8 +748,7 @@ class SceneDrawer:
             self._opacity[-1] = opacity
         dots = self._batch.get("dots")
         if dots is not None:
-            dot = np.array([np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4)])
-            offset = rotate(frame.wxyz, dot) * view.radius[:, None]
+            offset = rotate(frame.wxyz, SPIN_DOT) * view.radius[:, None]
             dots.batched_positions = (frame.positions + offset).astype(np.float32)
         self._show_shadows(frame)
         if chains:
@@ -753,7 +801,10 @@ class SceneDrawer:
         # A blob shadow shrinks and fades as the sphere rises: how far up it is reads at once.
         lift = np.maximum(height - view.radius, 0.0) / view.radius
         shadows.batched_scales = (view.radius / (1 + 0.15 * lift)).astype(np.float32)
-        shadows.batched_opacities = (0.45 / (1 + 0.5 * lift)).astype(np.float32)
+        colours = faded(SHADOW_COLOUR, FLOOR_COLOUR, 1 / (1 + 0.5 * lift))
+        if self._shadow_colours is None or not np.array_equal(colours, self._shadow_colours):
+            shadows.batched_colors = colours
+            self._shadow_colours = colours
 
     def _show_chains(self, frame: Frame) -> None:
         """Force chains: a cylinder from each body's centre to the other's (or to the wall), its

@@ -109,6 +109,7 @@ class Session:
     colour_by = _Via("panel")
     show_chains = _Via("panel")
     show_shadows = _Via("panel")
+    draw_as = _Via("panel")
     picker = _Via("panel")
     balls = _Via("panel")
     integrator = _Via("panel")
@@ -207,8 +208,8 @@ class Session:
             if label is not None and label in self.panel.picker.options:
                 self.panel.picker.value = label
         # What the scene's runs cost is known from its own run only (chooses previews and
-        # background runs).
-        self.live.full_cost = run.result.wall_time_s if run is not None else None
+        # background runs): this one, or the scene's last in this tab.
+        self.live.full_cost = run.result.wall_time_s if run is not None else self.live.costs.get(scene.name)
         if run is not None:
             self._show_view(ViewRun(run, origin="live run"), refit=True)
         else:
@@ -247,18 +248,22 @@ class Session:
 
     def set_show(self, **options: Any) -> None:
         """What the 3D view shows (the Show folder): forces, velocity, momentum, com, trails,
-        colour_by, chains, shadows. Keeps the folder's controls in step."""
+        colour_by, chains, shadows, bodies (drawn as "auto", "spheres" or "points"). Keeps the
+        folder's controls in step."""
         handles = self.panel.show_handles()
         with self._lock:
-            trails = "trails" in options and options["trails"] != self.drawer.options.trails
+            # Paths and the way bodies are drawn are built with the run's fixed parts.
+            rebuild = any(key in options and options[key] != getattr(self.drawer.options, key)
+                          for key in ("trails", "bodies"))
             for key, value in options.items():
                 if handles[key].value != value:
                     handles[key].value = value
             with self.client.atomic():
                 self.drawer.set_options(**options)
-                if trails and self.player.view is not None:
+                if rebuild and self.player.view is not None:
                     self.drawer.show_run(self.player.view)
                     self.player.draw_frame(cursor=False)
+                    self.panel.show_chains.visible = self.drawer.many and not self.drawer.points
                 self.panel.legend.content = self.drawer.legend()
                 self.panel.colour_legend.content = self.drawer.colour_legend()
 
@@ -376,7 +381,8 @@ class Session:
                 self.drawer.show_run(view)
                 panel.plots.show_run(view, player.t, self._window(view))
                 player.set_sliders(view)
-                panel.show_chains.visible = self.drawer.many
+                panel.show_chains.visible = self.drawer.many and not self.drawer.points
+                panel.draw_as.visible = self.drawer.many
                 panel.show_shadows.visible = self.drawer._floor is not None
                 player.draw_frame(cursor=False)
                 self._show_status()
