@@ -130,3 +130,45 @@ assert rgb_to_hsv(1.0, 0.0, 0.0) == (0.0, 1.0, 1.0) and type(module).__name__ ==
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120,
                           env=dict(os.environ, COLLIDE_JIT="0"))
     assert done.returncode == 0, done.stderr
+
+
+PUT_OFF = """
+import json, sys
+sys.argv = ["collide", "run", "billiards-break", "--no-record", "--set", "duration=0.01"]
+from cli.main import main
+try:
+    main()
+except SystemExit:
+    pass
+state = lambda name: type(sys.modules[name]).__name__ if name in sys.modules else "absent"
+before = {name: state(name) for name in ("numba.np.arrayobj", "yaml", "scipy")}
+from collide.engine import jit
+kernels = [k for name, m in list(sys.modules.items()) if name.startswith("collide.engine")
+           for k in vars(m).values() if isinstance(k, jit._Kernel)]
+made = sorted({k.__qualname__ for k in kernels if k._dispatcher is not None})
+import numpy as np
+from numba import njit
+
+@njit
+def filled(n):
+    out = np.empty(n)
+    out[:] = 2.0
+    return out.sum()
+
+print(json.dumps({"kernels": len({id(k) for k in kernels}), "made": made, "before": before,
+                  "compiled": filled(3), "after": state("numba.np.arrayobj")}))
+"""
+
+
+def test_a_compiled_run_makes_and_imports_only_what_it_calls():
+    """collide.engine.jit: a run that loads its kernels from the cache makes numba dispatchers
+    for the kernels it calls from Python only, leaves the numba modules that the kernels'
+    environments name unloaded, and imports neither yaml nor scipy with numba; a compile later in
+    the same process loads those modules first and works."""
+    done = subprocess.run([sys.executable, "-c", PUT_OFF], cwd=ROOT, capture_output=True, text=True, timeout=600,
+                          env={**os.environ, "COLLIDE_JIT": "1"})
+    assert done.returncode == 0, done.stderr
+    found = json.loads(done.stdout.strip().splitlines()[-1])
+    assert "simulate" in found["made"] and len(found["made"]) <= 10 < found["kernels"]
+    assert found["before"] == {"numba.np.arrayobj": "_LazyModule", "yaml": "absent", "scipy": "absent"}
+    assert found["compiled"] == 6.0 and found["after"] == "module"
