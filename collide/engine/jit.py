@@ -6,8 +6,30 @@ from __future__ import annotations
 import functools
 import importlib.util
 import os
+import sys
+import threading
 
 from collide.engine import tier
+
+# Imported by numba's own import only to read a .numba_config.yaml (yaml, 0.015 s of CPU) and to
+# check that scipy is 1.0 or later (0.008 s; collide's tests ask for 1.10).
+NUMBA_OPTIONAL = ("yaml", "scipy")
+
+
+def _import_numba_without_optional() -> None:
+    """Import numba as if NUMBA_OPTIONAL were not installed (None in sys.modules stops an
+    import), and leave them importable. Not when the working folder has a .numba_config.yaml,
+    the only file numba reads with yaml."""
+    if "numba" in sys.modules or os.path.isfile(".numba_config.yaml"):
+        return
+    blocked = [name for name in NUMBA_OPTIONAL if name not in sys.modules]
+    sys.modules.update(dict.fromkeys(blocked))
+    try:
+        import numba  # noqa: F401
+    finally:
+        for name in blocked:
+            if sys.modules.get(name, 0) is None:
+                del sys.modules[name]
 
 
 @functools.cache
@@ -49,10 +71,78 @@ def _set_up_target_to_compile_only() -> None:
 
     def load_additional_registries(self) -> None:
         _skip_blas_probe()
+        while _PUT_OFF:  # before numba imports them by name, which would not load them
+            _PUT_OFF.pop().__spec__  # noqa: B018 - an attribute loads the module
         set_up(self)
 
     caching.Cache.load_overload = load_overload
     cpu.CPUContext.load_additional_registries = load_additional_registries
+
+
+# numba modules that cached kernels' environments name, put off (`_load_environments_lazily`)
+# until the compiler target is set up.
+_PUT_OFF: list = []
+# numba modules that register machine-code symbols when imported (the string hash's secrets):
+# imported whenever an environment names them, as the kernels' code may use the symbols.
+_IMPORTED_FOR_SYMBOLS = ("numba.cpython.hashing",)
+
+
+def _load_environments_lazily() -> None:
+    """A cached kernel holds an environment (a module's globals, which only object-mode code
+    reads) for each function compiled into it, numba's own among them, and numba imports each
+    such module to take its globals when it loads the kernel: numba's array, string and maths
+    lowerings, 0.05 s of CPU, most of the loading. A numba module not imported yet is put in
+    sys.modules to load at its first use (`tier._load_when_used`) and the environment gets its
+    globals' dict, which is the module's own once it loads; setting the compiler up loads such
+    modules first, so that their lowerings register as they would have."""
+    from numba.core import environment
+
+    def _rebuild_env(modname, consts, env_name):
+        env = environment.lookup_environment(env_name)
+        if env is not None:
+            return env
+        env = environment.Environment(_globals_of(modname))
+        env.consts[:] = consts
+        env.env_name = env_name
+        environment.Environment._memo[env_name] = env
+        return env
+
+    # Pickled by name as numba's own, so that the cache's files stay the same.
+    _rebuild_env.__module__, _rebuild_env.__qualname__ = environment.__name__, "_rebuild_env"
+    environment._rebuild_env = _rebuild_env
+
+
+def _globals_of(name: str) -> dict:
+    """The globals of module `name`, a numba module not imported yet being put off (`_PUT_OFF`)."""
+    module = sys.modules.get(name)
+    if module is None and name.startswith("numba.") and name not in _IMPORTED_FOR_SYMBOLS:
+        tier._load_when_used(name)
+        module = sys.modules.get(name)
+        if module is not None:
+            _PUT_OFF.append(module)
+    if module is None:
+        module = importlib.import_module(name)
+    return object.__getattribute__(module, "__dict__")  # not `module.__dict__`, which would load it
+
+
+def _type_arrays_without_numpy_ma() -> None:
+    """numba checks that an array it types is no masked array, which imports numpy.ma (0.01 s of
+    CPU) at a run's first kernel call. An array of numpy's own type is none: typed as numba
+    would, without the check."""
+    import numpy as np
+    from numba.core import types
+    from numba.core.typing.typeof import typeof_impl
+    from numba.np import numpy_support
+
+    checked = typeof_impl.dispatch(np.ndarray)
+
+    def typeof_array(val, c):
+        if type(val) is not np.ndarray or val.dtype.kind not in "biufc":
+            return checked(val, c)
+        dtype = numpy_support.from_dtype(val.dtype)
+        return types.Array(dtype, val.ndim, numpy_support.map_layout(val), readonly=not val.flags.writeable)
+
+    typeof_impl.register(np.ndarray, typeof_array)
 
 
 def _parse_bitcode_when_linked() -> None:
@@ -267,13 +357,14 @@ def _one_signature(options: dict):
     callee again for each value and each mix of constant and variable arguments (52 extra
     compiles, 15 s of the compile's 181 s of CPU, measured). The optimiser still folds a
     constant into an inlined callee; a called one tests it at run time (kernel times unchanged,
-    measured)."""
+    measured). Each kernel's dispatcher is made when first needed (`_Kernel`)."""
     from numba import njit
     from numba.core import types
 
     compile_for = njit(**options)
+    part = bool(options.get("no_cpython_wrapper"))
 
-    def decorate(function):
+    def make(function):
         dispatcher = compile_for(function)
         typed = dispatcher.get_call_template
 
@@ -281,11 +372,53 @@ def _one_signature(options: dict):
             return typed(tuple(types.unliteral(a) for a in args), {k: types.unliteral(v) for k, v in kws.items()})
 
         dispatcher.get_call_template = get_call_template
-        if options.get("no_cpython_wrapper"):
+        if part:
             _called_from_kernels_only(dispatcher)
         return dispatcher
 
+    def decorate(function):
+        return _Kernel(function, make, part)
+
     return decorate
+
+
+class _Kernel:
+    """A kernel whose numba dispatcher is made when something first needs it: numba typing a
+    call to it from a kernel being compiled (it asks for `_numba_type_`), a call from Python, or
+    any of the dispatcher's attributes. Making the engine's 230 dispatchers at import was a sixth
+    of a compiled run's start (each inspects its function and tests its cache folder by writing
+    a file), and a run that loads its kernels from the cache needs only the few it calls from
+    Python; the others' code is in those kernels' machine code."""
+
+    _making = threading.RLock()
+
+    def __init__(self, function, make, part: bool) -> None:
+        functools.update_wrapper(self, function)
+        self.py_func = function
+        self._make = make
+        self._part = part
+        self._dispatcher = None
+
+    def dispatcher(self):
+        """numba's dispatcher of this kernel (made once)."""
+        if self._dispatcher is None:
+            with self._making:
+                if self._dispatcher is None:
+                    self._dispatcher = self._make(self.py_func)
+        return self._dispatcher
+
+    def __getattr__(self, name: str):
+        if name.startswith("__") or name in ("_dispatcher", "_make", "_part", "py_func"):
+            raise AttributeError(name)  # probes (copy, pickle, inspect) make no dispatcher
+        return getattr(self.dispatcher(), name)
+
+    def __call__(self, *args, **kwargs):
+        if self._part:  # a part has no entry from Python: it runs as Python (`_called_from_kernels_only`)
+            return self.py_func(*args, **kwargs)
+        return self.dispatcher()(*args, **kwargs)
+
+    def __repr__(self) -> str:
+        return f"<kernel {self.__module__}.{self.__qualname__}>"
 
 
 def _called_from_kernels_only(dispatcher) -> None:
@@ -306,9 +439,12 @@ def _called_from_kernels_only(dispatcher) -> None:
 
 
 if tier.COMPILED:
+    _import_numba_without_optional()
     from numba import config
 
     _set_up_target_to_compile_only()
+    _load_environments_lazily()
+    _type_arrays_without_numpy_ma()
     _parse_bitcode_when_linked()
     _compile_only_what_runs()
     _compile_entries_when_called()
