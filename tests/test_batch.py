@@ -480,10 +480,11 @@ def test_sigkill_at_random_moments_then_resume_equals_uninterrupted(tmp_path: Pa
 
 
 def test_batch_says_the_engine_loading_apart_from_the_runs(tmp_path: Path) -> None:
-    """Loading the compiled engine (a process's one-time cost, 0.3-1.5 s) is not spread over the
-    runs: the 20 runs of demo-bonus add up to well under the total less half the loading (spread,
-    they would add up to the total). Not a closer comparison: the runs' sum against the total
-    less loading moved by 70 % with two test suites on the machine's two cores."""
+    """Loading the compiled engine (a process's one-time cost: 0.02-0.05 s now that kernels load
+    when first called, more on a slow disk) is measured and not spread over the runs: the 20 runs
+    of demo-bonus add up to well under the total less half the loading (spread, they would add up
+    to the total). Not a closer comparison: the runs' sum against the total less loading moved by
+    70 % with two test suites on the machine's two cores."""
     from collide.engine import tier
 
     if not COLLIDE.exists() or not tier.compiled_ready():
@@ -496,7 +497,7 @@ def test_batch_says_the_engine_loading_apart_from_the_runs(tmp_path: Path) -> No
                       r"compiled engine\), 0 failed$", out.stdout, re.M)
     assert found, out.stdout
     total, each, load = (float(x) for x in found.groups())
-    assert load > 0.05 and each * 1e-3 * 20 < total - 0.5 * load
+    assert load > 0 and each * 1e-3 * 20 < total - 0.5 * load
 
 
 def test_a_sweep_too_large_for_memory_is_refused_before_it_is_built() -> None:

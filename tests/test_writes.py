@@ -107,6 +107,37 @@ def test_batch_record_past_the_limit_keeps_rows_and_resume_records(tmp_path: Pat
     assert len(whole_rows(summary)) == 3
 
 
+# Fifty writes past a file-size limit in one process: each must end in its error.
+REPEATED_FAILURES = """
+import resource, signal, sys
+from collide.output import OutputError
+from collide.recording import write_recording
+from collide.run import run_scene
+from collide.scene import load_scene
+run = run_scene(load_scene("demo-bonus"))
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, 100_000))
+for n in range(int(sys.argv[2])):
+    try:
+        write_recording(run, f"{sys.argv[1]}/x{n}.rrd")
+    except OutputError as exc:
+        assert "file too large" in str(exc), exc
+    else:
+        raise SystemExit("a write past the limit succeeded")
+print("done")
+"""
+
+
+def test_writes_past_the_limit_over_and_over_never_block(tmp_path: Path) -> None:
+    """Rerun's own file sink blocked for good, now and then, in the flush after a failed write
+    (one CI run waited its 600 s; in one process, about one failing write in 30): collide has Rerun
+    encode in memory and writes the file itself (collide.recording.stream)."""
+    out = subprocess.run([sys.executable, "-c", REPEATED_FAILURES, str(tmp_path), "50"], capture_output=True,
+                         text=True, timeout=300, cwd=ROOT, env=dict(os.environ, COLLIDE_JIT="0"))
+    assert out.returncode == 0 and out.stdout.strip() == "done", out.stderr[-2000:]
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_writer_failing_inside_rerun_is_one_line(tmp_path: Path, bonus: object,
                                                   monkeypatch: pytest.MonkeyPatch) -> None:
     # Rerun reports a failed write as a RuntimeError from Rust (or only in its log: then the

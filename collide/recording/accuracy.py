@@ -13,6 +13,7 @@ import rerun.blueprint as rrb
 from collide.output import OutputError, write_atomic
 from collide.recording.integrity import _messages
 from collide.recording.spec import APP_ID
+from collide.recording.stream import rrd_file
 
 
 def write_accuracy_recording(wp: Any, path: Path) -> Path:
@@ -34,8 +35,7 @@ def _write_accuracy(wp: Any, tmp: Path) -> None:
     blueprint = rrb.Blueprint(rrb.Horizontal(
         rrb.TimeSeriesView(origin="/accuracy", name="log10 error against run time"),
         rrb.TextDocumentView(origin="/table", name="table")))
-    try:
-        rec.save(tmp, default_blueprint=blueprint)
+    with rrd_file(rec, tmp, blueprint):
         lines = ["| integrator | omega dt | dt (s) | steps | run time (s) | error |", "|---|---|---|---|---|---|"]
         for p in wp.points:
             err = "refused" if p.error is None else f"{p.error:.3e}"
@@ -51,6 +51,3 @@ def _write_accuracy(wp: Any, tmp: Path) -> None:
             rec.send_columns(f"/accuracy/{name}",
                              indexes=[rr.TimeColumn("run_time", duration=[p.wall_time_s for p in pts])],
                              columns=rr.Scalars.columns(scalars=[math.log10(p.error) for p in pts]))
-        rec.flush()
-    finally:
-        rec.disconnect()

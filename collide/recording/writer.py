@@ -35,6 +35,7 @@ from collide.recording.spec import (
     checksum,
     collide_version,
 )
+from collide.recording.stream import rrd_file
 from collide.run import SceneRun
 
 MANY_BODIES = 24  # from this many bodies on, one instanced entity draws them all
@@ -78,9 +79,9 @@ def write_recording(run: SceneRun, path: Path, *, stride: int = 1, fps: float = 
     step is stored exactly whatever these are.
 
     The file appears under its final name only once whole: written beside it, its bytes checked
-    against the integrity record (`_check_written`), synced, then renamed. A write that fails (a
-    full disk; Rerun's writer only logs its errors) is an `OutputError` naming the file and the
-    cause, and leaves nothing under either name.
+    against the integrity record (`check`), synced, then renamed. A write that fails (a full disk,
+    a file-size limit) is an `OutputError` naming the file and the cause, and leaves nothing under
+    either name.
     """
     if run.result.batch_size != 1:
         run = run.member(0)
@@ -218,8 +219,7 @@ class _Writer(_Drawing):
     def _send_all(self, path: Path) -> None:
         self.rows = self.calls = 0
         self.rec = rr.RecordingStream(APP_ID, recording_id=uuid.uuid4(), send_properties=False)
-        try:
-            self.rec.save(path, default_blueprint=self.blueprint())
+        with rrd_file(self.rec, path, self.blueprint()):
             self.rec.send_recording_name(self.scene.name)
             self._write_static()
             self._write_bodies()
@@ -230,13 +230,10 @@ class _Writer(_Drawing):
             if self.seal:
                 # Last, a slot for the SHA-256 of the whole file: filled in once Rerun closed it.
                 self._static(INTEGRITY, rr.AnyValues(sha256=self.placeholder))
-            self.rec.flush()
-        finally:
-            self.rec.disconnect()
 
     def check(self, path: Path) -> None:
         """The file on disk is whole: Rerun's framing complete to its footer and every byte as
-        sealed (Rerun logs its write errors, never raises them: this is where a full disk shows)."""
+        sealed (a write that failed without an error is refused here)."""
         try:
             data = path.read_bytes()
         except OSError as exc:
