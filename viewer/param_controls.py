@@ -55,7 +55,8 @@ class ParamControls:
         self.controls = controls
         self.values = dict(values or controls.defaults())
         self._clear()
-        bodies = [g for g in controls.groups() if g != "contact"]
+        groups = controls.groups()
+        bodies = [g for g in groups if g != "contact"]
         with self._parent:
             self._folder = gui.add_folder(None)
             with self._folder:
@@ -69,7 +70,7 @@ class ParamControls:
                     for group in bodies:
                         folder = gui.add_folder(group, expand_by_default=len(bodies) <= EXPANDED_BODIES)
                         self._fill_group(group, folder)
-                if "contact" in controls.groups():
+                if "contact" in groups:
                     self._fill_group("contact", gui.add_folder("contact"))
 
     def show_note(self, text: str) -> None:
