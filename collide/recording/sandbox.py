@@ -63,7 +63,6 @@ _IDLE_READERS = 1  # reader processes kept warm between reads
 # MB: a reader that grew past this reading a large file is stopped, not kept: an idle reader
 # held what it last read (360 MB after a 1 000-sphere pile; a fresh one is about 160 MB)
 _IDLE_MAX_MB = 250
-_WARM_DELAY_S = 3.0  # after a grown reader is stopped, until a fresh one starts in its place
 
 
 def _send_message(stream: Any, obj: Any) -> None:
@@ -205,18 +204,6 @@ def _give_back(reader: _Reader) -> None:
             _idle.append(reader)
             return
     reader.stop()
-    # A fresh reader waits in its place: the next read skips its start (1-2 s of interpreter
-    # and imports, most of reopening a 1 000-sphere recording). Started a little later, when
-    # the caller has shown what was read (the start competes with it for the CPU).
-    timer = threading.Timer(_WARM_DELAY_S, _warm_reader)
-    timer.daemon = True
-    timer.start()
-
-
-def _warm_reader() -> None:
-    with _idle_lock:
-        if len(_idle) < _IDLE_READERS:
-            _idle.append(_Reader())
 
 
 def read_recording_safely(path: str | Path, *, timeout_s: float = SAFE_TIMEOUT_S,
