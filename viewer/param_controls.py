@@ -1,6 +1,6 @@
 """The Parameters folder: a text box and a slider for every parameter the scene uses, grouped per
-body (open folders for a few bodies, closed ones for more, a body picker for many) and for the
-contact. The slider drags; the box reads exactly what is typed, `1e-7` included, or refuses it
+body (open folders for a few bodies, closed ones for more, a body picker for many bodies or many
+parameters) and for the contact. The slider drags; the box reads exactly what is typed, `1e-7` included, or refuses it
 with a notice at the top of the panel.
 """
 
@@ -18,6 +18,10 @@ from viewer.params import Controls, Param, TypedValueError, format_value, read_t
 
 EXPANDED_BODIES = 4  # up to this many bodies: one open folder each
 FOLDED_BODIES = 12  # up to this many: one closed folder each; beyond: a body picker
+# Also a body picker beyond this many body parameters in all (break-3d's four balls have 44): each
+# is a box and a slider the browser builds anew at every scene pick, half a second of the first
+# frame for break-3d's 54 parameters under software rendering and load.
+PICKED_PARAMS = 24
 
 
 class ParamControls:
@@ -51,11 +55,13 @@ class ParamControls:
         self.controls = controls
         self.values = dict(values or controls.defaults())
         self._clear()
-        bodies = [g for g in controls.groups() if g != "contact"]
+        groups = controls.groups()
+        bodies = [g for g in groups if g != "contact"]
         with self._parent:
             self._folder = gui.add_folder(None)
             with self._folder:
-                if len(bodies) > FOLDED_BODIES:
+                body_params = sum(p.group != "contact" for p in controls.params)
+                if len(bodies) > FOLDED_BODIES or (len(bodies) > 1 and body_params > PICKED_PARAMS):
                     self._body_picker = gui.add_dropdown(f"body (of {len(bodies)})", bodies, initial_value=bodies[0])
                     self._body_picker.on_update(self._on_body_picked)
                     self._body_folder = gui.add_folder(bodies[0])
@@ -64,7 +70,7 @@ class ParamControls:
                     for group in bodies:
                         folder = gui.add_folder(group, expand_by_default=len(bodies) <= EXPANDED_BODIES)
                         self._fill_group(group, folder)
-                if "contact" in controls.groups():
+                if "contact" in groups:
                     self._fill_group("contact", gui.add_folder("contact"))
 
     def show_note(self, text: str) -> None:

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import viser
+from viser import _messages
 
 from collide.periodic import nearest_image
 from viewer.clip import BodyLook, links_shown
@@ -95,6 +96,15 @@ class DrawOptions:
     chains: bool = True
     shadows: bool = True
     bodies: str = "auto"  # BODY_DRAWINGS: spheres or points (auto: points above POINT_BODIES)
+
+
+def send_pose(scene: viser.SceneApi, node: viser.SceneNodeHandle) -> None:
+    """Send a node's pose even where it is viser's default (no turn, at the origin), which viser
+    leaves unsent: a browser that drew a node of the same name before (removed with its parent,
+    then added again) keeps that node's pose (the pile's first side wall lay flat, as break-3d's
+    floor of the same name had)."""
+    scene._queue_scene_message(_messages.SetOrientationMessage(node.name, tuple(float(x) for x in node.wxyz)))
+    scene._queue_scene_message(_messages.SetPositionMessage(node.name, tuple(float(x) for x in node.position)))
 
 
 def _segments(path: np.ndarray) -> np.ndarray:
@@ -360,10 +370,11 @@ class SceneDrawer:
             c, wxyz, dims = spec[:3], spec[3:7], spec[7:]
             # Walls other than the floor are glass: the sides of a bin stand between the camera
             # and the pile (at 0.85 opaque they hid it and its force chains).
-            self.scene.add_box(f"/world/walls/{k}", color=FLOOR_COLOUR if is_floor else (150, 158, 170),
-                               dimensions=tuple(dims), position=tuple(c), wxyz=tuple(wxyz),
-                               opacity=None if is_floor else (0.85 if planar else 0.2), cast_shadow=False,
-                               receive_shadow=True)
+            box = self.scene.add_box(f"/world/walls/{k}", color=FLOOR_COLOUR if is_floor else (150, 158, 170),
+                                     dimensions=tuple(dims), position=tuple(c), wxyz=tuple(wxyz),
+                                     opacity=None if is_floor else (0.85 if planar else 0.2), cast_shadow=False,
+                                     receive_shadow=True)
+            send_pose(self.scene, box)
 
     def legend(self) -> str:
         """What the colours and arrow lengths mean, for the GUI."""
