@@ -11,16 +11,17 @@ one thread by default: the barriers cost more than the split saves.
 
 from __future__ import annotations
 
-import ctypes
 import functools
 import math
 import os
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from collide.engine.broad import NBOX
+from collide.engine.dem import barrier
 from collide.engine.dem import layout as dk
 from collide.engine.dem import threads as par
 from collide.engine.dem.flight import may_meet
@@ -35,6 +36,10 @@ from collide.stepper import THREADS_VARIABLE  # (a batch's cap on its threads, a
 # Bodies from which a run takes every core by default (below, one thread: the hand-offs cost
 # more than the split saves), measured with benchmarks/bench_dem.py --threads.
 THREADS_FROM = 4000
+# The last threaded run's figures (benchmarks/bench_dem.py shows them; of one of them if several
+# run at once): threads, seconds, seconds in the threads' shares (the rest is this driver's, on
+# one thread), and per thread the barrier's meetings, sleeps and cycles spent waiting (`barrier`).
+LAST_RUN: dict = {}
 
 
 def cores() -> int:
@@ -62,10 +67,12 @@ def _pool(workers: int) -> ThreadPoolExecutor:
 
 def _each(task, threads: int) -> None:
     """task(r) for every thread r, share 0 on this thread."""
+    start = time.perf_counter()
     futures = [_pool(threads - 1).submit(task, r) for r in range(1, threads)] if threads > 1 else []
     task(0)
     for future in futures:
         future.result()
+    LAST_RUN["parallel"] = LAST_RUN.get("parallel", 0.0) + time.perf_counter() - start
 
 
 class _Shares:
@@ -84,27 +91,15 @@ class _Shares:
         self.EB = np.zeros((n if rest else 0, 2))
 
 
-class Barrier:
-    """A pthread barrier for `threads` threads (the kernels wait at it by its address)."""
-
-    def __init__(self, threads: int):
-        self._libc = ctypes.CDLL(None)
-        self._buffer = ctypes.create_string_buffer(256)  # (a pthread_barrier_t is 32 bytes on x86-64)
-        if self._libc.pthread_barrier_init(self._buffer, None, threads) != 0:
-            raise OSError("pthread_barrier_init failed")
-        self.address = ctypes.addressof(self._buffer)
-
-    def close(self) -> None:
-        self._libc.pthread_barrier_destroy(self._buffer)
-
-
 def dem_run_threaded(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads: int):
     """`loop.dem_run` on `threads` threads: the same arguments and outputs, bit for bit."""
-    barrier = Barrier(threads)
-    try:
-        return _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier.address)
-    finally:
-        barrier.close()
+    meet = barrier.rows(threads)  # (kept alive here while the threads wait at it)
+    LAST_RUN.clear()
+    start = time.perf_counter()
+    out = _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, meet)
+    LAST_RUN.update(threads=threads, seconds=time.perf_counter() - start, meets=meet[:threads, barrier.W_MEETS].copy(),
+                    sleeps=meet[:threads, barrier.W_SLEEPS].copy(), waited=meet[:threads, barrier.W_CYCLES].copy())
+    return out
 
 
 def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
@@ -122,7 +117,7 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
     keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin,
                                          np.zeros(0, np.int64), np.zeros((0, dk.NH)), ST, box)
     scratch = np.zeros(4)
-    STT, PM, outs = np.zeros((2, threads, par.NST)), np.zeros((2, threads)), np.zeros((threads, 4))
+    STT, PM, outs = np.zeros((2, threads, par.NST_ROW)), np.zeros((2, threads)), np.zeros((threads, 16))  # (padded)
     most = PI.shape[0] + WL.shape[0]
     if record:
         IV, REC = grow(IV, most), grow(REC, most)
@@ -183,7 +178,7 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
 
 
 def _share(args: tuple, r: int) -> None:
-    par.run_share(r, *args)
+    par.run_share(r, args[0][r], *args[1:])  # (thread r's row of the barrier)
 
 
 def _recorded_step(state, C, IV, REC, KN, nkn, EP, nep):

@@ -21,13 +21,12 @@ bit for bit whatever the number of threads (tests/engine/dem/test_threads.py).
 
 from __future__ import annotations
 
-import ctypes
 import math
 
 import numpy as np
 
-from collide.engine import tier
 from collide.engine.broad import BOX_ANY, NBOX, nearest
+from collide.engine.dem.barrier import barrier_wait
 from collide.engine.dem.contact import contact_force, contact_into
 from collide.engine.dem.forces import _close, _peak
 from collide.engine.dem.geometry import wall_height
@@ -74,6 +73,9 @@ IDLE, ENGAGED, OPENED, CLOSED = 0, 1, 2, 3
 # energy, moved, whether it fused the kicks, events (pairs, walls).
 ST_ENG, ST_OPEN, ST_CLOSE, ST_DEEP, ST_STRONG, ST_E, ST_MOVED, ST_FUSED, ST_EVP, ST_EVW = range(10)
 NST = 10
+# A row's length in STT: padded to 192 bytes, so that no two threads' rows share a cache line
+# (each thread counts its contacts into its row as it goes).
+NST_ROW = 24
 
 
 @jit
@@ -259,9 +261,9 @@ def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, hist, WL, WH, WP, tabs, wtabs, grav
     lo, hi, k0, k1, m0, m1, s = bd[0], bd[1], bd[2], bd[3], bd[4], bd[5], bd[6]
     g0, g1, g2 = grav[0], grav[1], grav[2]
     nw = 0
+    T[lo:hi, :] = 0.0  # (one fill of the share's rows, as `forces.forces` fills all)
+    PT[lo:hi, :] = 0.0
     for a in range(lo, hi):
-        T[a, :] = 0.0
-        PT[a, :] = 0.0
         m = Bd[a, B_M]
         F[a, 0], F[a, 1], F[a, 2] = m * g0, m * g1, m * g2
         for q in range(inc_start[a], inc_start[a + 1]):
@@ -401,22 +403,6 @@ def energy_sum(EB, n):
         e += EB[a, 1]
     return e
 
-
-# The threads meet at a pthread barrier between passes (`dem_threads.Barrier` makes it): one
-# call of the C library's pthread_barrier_wait, a few microseconds, where a hand-off through
-# Python took a tenth of a millisecond, as long as a step of 1 000 spheres.
-_libc = ctypes.CDLL(None)
-HAVE_BARRIER = hasattr(_libc, "pthread_barrier_wait")  # (POSIX barriers: not on macOS; one thread there)
-if tier.COMPILED and HAVE_BARRIER:
-    import llvmlite.binding as llvm
-    from numba.core import types
-
-    llvm.add_symbol("pthread_barrier_wait", ctypes.cast(_libc.pthread_barrier_wait, ctypes.c_void_p).value)
-    barrier_wait = types.ExternalFunction("pthread_barrier_wait", types.int32(types.int64))  # (its address)
-else:
-    def barrier_wait(address: int) -> int:
-        """Interpreted: the same barrier through ctypes (which lets the GIL go while it waits)."""
-        return _libc.pthread_barrier_wait(ctypes.c_void_p(address))
 
 # The run's state between `run_share` calls (CTL): time, steps, whether the last step fused the
 # next one's opening kick and drift, the squared distance moved, the next frame's time, the
