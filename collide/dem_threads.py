@@ -20,14 +20,14 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from collide.engine.broad import NBOX
+from collide.engine.broad import BOX_ANY, NBOX
 from collide.engine.dem import barrier
 from collide.engine.dem import layout as dk
 from collide.engine.dem import threads as par
 from collide.engine.dem.flight import may_meet
 from collide.engine.dem.forces import forces
 from collide.engine.dem.loop import _any_rolling, _coast, _finish, _materials, _outputs, _step_length
-from collide.engine.dem.neighbours import rebuild
+from collide.engine.dem.neighbours import grid, pairs_range, rebuild, relist
 from collide.engine.dem.records import energy_row, frame
 from collide.engine.dem.verlet import kick, kinetic
 from collide.engine.numerics import grow
@@ -150,7 +150,7 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
             if over:
                 break
         elif reason == par.R_REBUILD:
-            keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST, box)
+            keys, PI, PJ, hist, WL, WH = _rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST, box, threads)
         elif reason == par.R_GROW:
             most = PI.shape[0] + WL.shape[0]
             IV, REC = grow(IV, int(C[par.C_NIV]) + most), grow(REC, int(C[par.C_NREC]) + most)
@@ -175,6 +175,24 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
     niv, nrec = int(C[par.C_NIV]), int(C[par.C_NREC])
     KN, nkn, REC, nrec = _finish(X, V, W, Qo, F, Bd, WK, hist, WH, PI, PJ, WL, t, record, ST, FG, KN, nkn, REC, nrec)
     return t, WK, KN[:nkn], REC[:nrec], IV[:niv], EP[:nep], ST, FG
+
+
+def _rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST, box, threads):
+    """`neighbours.rebuild`, its search for pairs (most of its time) split among the threads:
+    bodies in equal ranges, whose pairs, one range's after the other's, are the list that one
+    thread finds."""
+    if box[BOX_ANY] != 0.0:
+        return rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, keys, hist, ST, box)
+    cells, start, order, table, span, dense = grid(X, Bd, n, dim, skin)
+    parts: list = [None] * threads
+
+    def search(r: int) -> None:
+        parts[r] = pairs_range(X, Bd, n, dim, skin, cells, start, order, table, span, dense, n * r // threads,
+                               n * (r + 1) // threads)
+
+    _each(search, threads)
+    fresh, PI, PJ = (np.concatenate([part[c] for part in parts]) for c in range(3))
+    return relist(X, X0, Bd, WP, WL, WH, n, skin, keys, hist, ST, fresh, PI, PJ)
 
 
 def _share(args: tuple, r: int) -> None:
