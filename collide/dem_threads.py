@@ -2,11 +2,13 @@
 force pass and kicks split among the threads (`collide.engine.dem.threads`: every body's sums in
 the one-thread order, so the run is the same bit for bit whatever the number of threads).
 
-Every thread runs `threads.run_share` at once; they meet at a pthread barrier between the passes
-of a step (a few microseconds) and come back here only for what one thread does: coasting where
-nothing touches, rebuilding the neighbour lists (a few per cent of a settling box's time), the
-steps that record a frame, and growing the record tables. Below THREADS_FROM bodies a run takes
-one thread by default: the barriers cost more than the split saves.
+Every thread runs `threads.run_share` at once; they meet at a spinning barrier between the
+passes of a step (`collide.engine.dem.barrier`) and come back here only for what one thread
+does: coasting where nothing touches, the steps that record a frame, growing the record tables,
+and rebuilding the neighbour lists, whose search for pairs is split among the threads again
+(`_rebuild`). Where other work holds the cores and the threads mostly wait for each other, the
+run goes on on one thread for a while (`_Pace`). Below THREADS_FROM bodies a run takes one
+thread by default: the barriers cost more than the split saves.
 """
 
 from __future__ import annotations
@@ -38,7 +40,8 @@ from collide.stepper import THREADS_VARIABLE  # (a batch's cap on its threads, a
 THREADS_FROM = 4000
 # The last threaded run's figures (benchmarks/bench_dem.py shows them; of one of them if several
 # run at once): threads, seconds, seconds in the threads' shares (the rest is this driver's, on
-# one thread), and per thread the barrier's meetings, sleeps and cycles spent waiting (`barrier`).
+# one thread), stretches of steps it took on one thread (`_Pace`), and per thread the barrier's
+# meetings, sleeps and cycles spent waiting (`barrier`).
 LAST_RUN: dict = {}
 
 
@@ -93,16 +96,61 @@ class _Shares:
 
 def dem_run_threaded(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads: int):
     """`loop.dem_run` on `threads` threads: the same arguments and outputs, bit for bit."""
-    meet = barrier.rows(threads)  # (kept alive here while the threads wait at it)
     LAST_RUN.clear()
     start = time.perf_counter()
-    out = _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, meet)
-    LAST_RUN.update(threads=threads, seconds=time.perf_counter() - start, meets=meet[:threads, barrier.W_MEETS].copy(),
-                    sleeps=meet[:threads, barrier.W_SLEEPS].copy(), waited=meet[:threads, barrier.W_CYCLES].copy())
+    out = _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads)
+    LAST_RUN.update(threads=threads, seconds=time.perf_counter() - start)
     return out
 
 
-def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
+class _Crew:
+    """What the threads of one count share apart from the pair list's plan: the barrier, and
+    each thread's rows of figures (STT, PM) and scratch, padded (no two threads' rows in a cache
+    line)."""
+
+    def __init__(self, threads: int):
+        self.barrier = barrier.rows(threads)  # (kept alive here while the threads wait at it)
+        self.rows = (self.barrier, np.zeros((2, threads, par.NST_ROW)), np.zeros((2, threads)), np.zeros((threads, 16)))
+
+
+class _Pace:
+    """How many threads each stretch of steps between the driver's turns takes: all of them, or
+    one while all would be slower. Where other work holds the cores, the threads are seldom on
+    them at once and wait for each other at every barrier: a stretch at which they waited more
+    than half the time (more than WAITED of it, judged over at least MEETS meetings) is followed
+    by stretches on one thread, 1, then 2, 4... up to LONGEST while it lasts, then all threads
+    are tried again. The result is the same bit for bit whatever the threads."""
+
+    WAITED, MEETS, LONGEST = 0.5, 50, 64
+
+    def __init__(self, threads: int):
+        self.all, self.alone, self.backoff = threads, 0, 1
+        self.crews = {count: _Crew(count) for count in {1, threads}}
+
+    def next(self) -> int:
+        if self.alone > 0:
+            self.alone -= 1
+            return 1
+        return self.all
+
+    def run(self, task, use: int) -> None:
+        """task(r) on `use` threads, and whether the next stretches take one."""
+        rows = self.crews[use].barrier[:use]
+        meets, waited, start = rows[:, barrier.W_MEETS].sum(), rows[:, barrier.W_CYCLES].mean(), barrier.cycles()
+        _each(task, use)
+        span = barrier.cycles() - start
+        if use > 1 and rows[:, barrier.W_MEETS].sum() - meets >= self.MEETS * use:
+            if rows[:, barrier.W_CYCLES].mean() - waited > self.WAITED * span:
+                self.alone, self.backoff = self.backoff, min(2 * self.backoff, self.LONGEST)
+                LAST_RUN["alone"] = LAST_RUN.get("alone", 0) + self.alone
+            else:
+                self.backoff = 1
+        crew = self.crews[self.all].barrier[:self.all]
+        LAST_RUN.update(meets=crew[:, barrier.W_MEETS].copy(), sleeps=crew[:, barrier.W_SLEEPS].copy(),
+                        waited=crew[:, barrier.W_CYCLES].copy())
+
+
+def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads):
     n = X.shape[0]
     dim, spin, rest, skin = fl[dk.F_DIM], fl[dk.F_SPIN], fp[dk.P_REST], fp[dk.P_SKIN]
     box = fp[dk.P_BOX:dk.P_BOX + NBOX]
@@ -117,7 +165,7 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
     keys, PI, PJ, hist, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin,
                                          np.zeros(0, np.int64), np.zeros((0, dk.NH)), ST, box)
     scratch = np.zeros(4)
-    STT, PM, outs = np.zeros((2, threads, par.NST_ROW)), np.zeros((2, threads)), np.zeros((threads, 16))  # (padded)
+    pace = _Pace(threads)
     most = PI.shape[0] + WL.shape[0]
     if record:
         IV, REC = grow(IV, most), grow(REC, most)
@@ -131,15 +179,17 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
     C = np.zeros(par.NCTL)
     C[par.C_NEXT], C[par.C_PEAK], C[par.C_EVER] = fp[dk.P_FRAME], kinetic(V, W, Bd, n), engaged > 0
     C[par.C_ENGAGED], C[par.C_NIV], C[par.C_NREC] = engaged, niv, nrec
-    shares = None
+    shares: dict = {}
     while True:
-        if shares is None or shares.PI is not PI:
-            shares = _Shares(PI, PJ, WL, n, threads, bool(record), rest > 0.0)
-        s = shares
-        args = (barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl, fp,
+        use = pace.next()
+        if use not in shares or shares[use].PI is not PI:
+            shares[use] = _Shares(PI, PJ, WL, n, use, bool(record), rest > 0.0)
+        s = shares[use]
+        meet, STT, PM, outs = pace.crews[use].rows
+        args = (meet, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, hist, WL, WH, WP, tabs, wt, grav, fl, fp,
                 rolling, ST, FG, IV, REC, s.RB, s.kb, s.wb, s.cross, s.inc_start, s.inc_slot, s.XB, s.SF, s.EVP, s.EVW,
                 s.EB, STT, PM, outs, C)
-        _each(functools.partial(_share, args), threads)
+        pace.run(functools.partial(_share, args), use)
         reason, t = int(C[par.C_REASON]), C[par.C_T]
         C[par.C_STAY] = 0.0
         if reason == par.R_COAST:
