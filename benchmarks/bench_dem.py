@@ -132,7 +132,7 @@ def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
     collide.dem.run_members = timed
     times: dict[int, list[tuple[float, float]]] = {c: [] for c in counts}
     loads: dict[int, list[float]] = {c: [] for c in counts}
-    where: dict[int, list[tuple[float, float, float]]] = {c: [] for c in counts}
+    where: dict[int, list[tuple[float, float, float, int]]] = {c: [] for c in counts}
     steps = 0
     for _ in range(repeats):
         for count in counts:
@@ -146,7 +146,8 @@ def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
             if LAST_RUN:  # (a run on one thread takes the one-thread kernel)
                 waited = float(LAST_RUN["waited"].mean()) / rate
                 where[count].append((LAST_RUN["seconds"] - LAST_RUN["parallel"], waited,
-                                     float(LAST_RUN["sleeps"].mean()) / max(1, int(LAST_RUN["meets"][0]))))
+                                     float(LAST_RUN["sleeps"].mean()) / max(1, int(LAST_RUN["meets"][0])),
+                                     LAST_RUN.get("alone", 0)))
     collide.dem.run_members = real
     print(f"\n{spheres} spheres, {steps} steps, {repeats} runs each alternated, on {os.cpu_count()} cores\n")
     print("| threads | wall s (median; runs) | CPU s (median; runs) | load (1 min) at each run | "
@@ -164,13 +165,14 @@ def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
               f"{spheres * steps / cpu:.3g} | {base[0] / wall:.2f} | {base[1] / cpu:.2f} |")
     if any(where.values()):
         print("\nThreaded runs (medians): seconds on one thread in the driver (rebuilds, coasting, hand-offs), "
-              "seconds a thread waited at the barrier, share of meetings at which it slept\n")
-        print("| threads | driver s | waited s | slept |")
-        print("|---|---|---|---|")
+              "seconds a thread waited at the barrier, share of meetings at which it slept, stretches of steps "
+              "taken on one thread as the threads waited too long (`dem_threads._Pace`)\n")
+        print("| threads | driver s | waited s | slept | stretches on one thread |")
+        print("|---|---|---|---|---|")
         for count in counts:
             if where[count]:
-                serial, waited, slept = (statistics.median(x[c] for x in where[count]) for c in range(3))
-                print(f"| {count} | {serial:.3f} | {waited:.3f} | {slept:.1%} |")
+                serial, waited, slept, alone = (statistics.median(x[c] for x in where[count]) for c in range(4))
+                print(f"| {count} | {serial:.3f} | {waited:.3f} | {slept:.1%} | {alone:g} |")
 
 
 def main() -> None:
