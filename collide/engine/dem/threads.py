@@ -195,10 +195,21 @@ def _end_pair(PS, HS, k, record, STT, row):
 
 
 @jit_inline
-def _engaged(STT, row, delta, fn):
-    STT[row, ST_ENG] += 1.0
-    STT[row, ST_DEEP] = max(STT[row, ST_DEEP], delta)
-    STT[row, ST_STRONG] = max(STT[row, ST_STRONG], fn)
+def _engaged(tally, delta, fn):
+    """A pass's tally (engaged, deepest, strongest) with one more engaged contact: kept in locals
+    and written to the thread's row once a pass (`_keep`), as `forces.forces` keeps its own, not
+    read and written through the row at every contact."""
+    return tally[0] + 1.0, max(tally[1], delta), max(tally[2], fn)
+
+
+@jit_inline
+def _tally(STT, row):
+    return STT[row, ST_ENG], STT[row, ST_DEEP], STT[row, ST_STRONG]
+
+
+@jit_inline
+def _keep(STT, row, tally):
+    STT[row, ST_ENG], STT[row, ST_DEEP], STT[row, ST_STRONG] = tally[0], tally[1], tally[2]
 
 
 @jit
@@ -218,6 +229,7 @@ def cross_pass(X, V, W, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, reco
 @jit_inline
 def _cross(X, V, W, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out,
            box, periodic):
+    tally = _tally(STT, row)
     for s in range(s0, s1):
         k = cross[s]
         i, j = PI[k], PJ[k]
@@ -242,9 +254,10 @@ def _cross(X, V, W, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, record, 
         fn = contact_into(X, V, W, XB[s, :, XF:XF + 3], XB[s, :, XT:XT + 3], XB[s, :, XTR:XTR + 3], XB[s, :, XPT:],
                           Bd, i, j, 0, 1, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j], HS, hs, fl, dt,
                           out)
-        _engaged(STT, row, delta, fn)
+        tally = _engaged(tally, delta, fn)
         if record:
             _peak(HS, hs, t, delta, fn, out)
+    _keep(STT, row, tally)
 
 
 @jit_inline
@@ -295,6 +308,7 @@ def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs,
             a += 1
         if SF[inc_slot[q]] == ENGAGED or SF[inc_slot[q]] == OPENED:
             _take(XB, inc_slot[q], 1, F, T, PT, a)
+    tally = _tally(STT, row)
     for k in range(k0, k1):
         i, j = PI[k], PJ[k]
         if j >= hi:
@@ -327,9 +341,10 @@ def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs,
         delta = reach - dist
         fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j],
                            HS, hs, fl, dt, out)
-        _engaged(STT, row, delta, fn)
+        tally = _engaged(tally, delta, fn)
         if record:
             _peak(HS, hs, t, delta, fn, out)
+    _keep(STT, row, tally)
     STT[row, ST_EVP] = nw
     STT[row, ST_EVW] = _walls(X, V, W, F, T, PT, Bd, MAT, WL, WH, WP, wtabs, fl, dt, t, record, m0, m1, STT, row,
                               EVW, out)
@@ -339,6 +354,7 @@ def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs,
 def _walls(X, V, W, F, T, PT, Bd, MAT, WL, WH, WP, wtabs, fl, dt, t, record, m0, m1, STT, row, EVW, out):
     """Body-wall contacts m0..m1 (as `forces.forces`). Returns the events written to EVW."""
     nw = 0
+    tally = _tally(STT, row)
     for m in range(m0, m1):
         k, i, w = WL[m, 0], WL[m, 1], WL[m, 2]
         delta = Bd[i, B_R] - wall_height(X, WP, i, w)
@@ -352,9 +368,10 @@ def _walls(X, V, W, F, T, PT, Bd, MAT, WL, WH, WP, wtabs, fl, dt, t, record, m0,
             nw += 1
         fn = contact_force(X, V, W, F, T, PT, Bd, i, -1 - w, -WP[w, 3], -WP[w, 4], -WP[w, 5], delta, wtabs, MAT[i], 0,
                            WH, k, fl, dt, out)
-        _engaged(STT, row, delta, fn)
+        tally = _engaged(tally, delta, fn)
         if record:
             _peak(WH, k, t, delta, fn, out)
+    _keep(STT, row, tally)
     return nw
 
 
