@@ -29,7 +29,7 @@ from collide.engine.dem import threads as par
 from collide.engine.dem.flight import fly, free_time, may_meet
 from collide.engine.dem.forces import forces
 from collide.engine.dem.loop import _any_rolling, _at_end, _finish, _materials, _outputs, _step_length
-from collide.engine.dem.neighbours import grid, pairs_range, rebuild, relist, slot_regions
+from collide.engine.dem.neighbours import grid, keys_range, rebuild, relist, slot_regions, split_keys
 from collide.engine.dem.records import energy_row, frame
 from collide.engine.dem.verlet import kick, kinetic
 from collide.engine.numerics import grow
@@ -239,25 +239,36 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads):
 
 
 def _rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box, threads):
-    """`neighbours.rebuild`, its search for pairs (most of its time) split among the threads:
-    bodies in equal ranges, whose pairs, one range's after the other's, are the list that one
-    thread finds; the slots carried over on this thread (`neighbours.relist`). Returns (PI, PJ,
+    """`neighbours.rebuild`, its search for pairs (most of its time) split among the threads
+    (`_search`), the slots carried over on this thread (`neighbours.relist`). Returns (PI, PJ,
     PS, HS, WL, WH)."""
     if box[BOX_ANY] != 0.0:
         out = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box)
     else:
-        cells, start, order, table, span, dense = grid(X, Bd, n, dim, skin)
-        parts: list = [None] * threads
-
-        def search(r: int) -> None:
-            parts[r] = pairs_range(X, Bd, n, dim, skin, cells, start, order, table, span, dense, n * r // threads,
-                                   n * (r + 1) // threads)
-
-        _each(search, threads)
-        NI, NJ = (np.concatenate([part[c] for part in parts]) for c in range(2))
-        out = relist(X, X0, Bd, WP, WL, WH, n, skin, PI, PJ, PS, HS, ST, NI, NJ)
+        out = relist(X, X0, Bd, WP, WL, WH, n, skin, PI, PJ, PS, HS, ST, *_search(X, Bd, n, dim, skin, threads))
     PI, PJ, PS, HS, _, _, WL, WH = out
     return PI, PJ, PS, HS, WL, WH
+
+
+def _search(X, Bd, n, dim, skin, threads):
+    """`neighbours.build_pairs` with the bodies in equal ranges among the threads, whose keys, one
+    range's after the other's, are the list that one thread finds: (i, j). The grid and the
+    search buffers go when it returns, before the slots' table is made, as in `rebuild`."""
+    cells, start, order, table, span, dense = grid(X, Bd, n, dim, skin)
+    parts: list = [None] * threads
+
+    def search(r: int) -> None:
+        parts[r] = keys_range(X, Bd, n, dim, skin, cells, start, order, table, span, dense, n * r // threads,
+                              n * (r + 1) // threads)
+
+    _each(search, threads)
+    total = sum(count for _, count in parts)
+    NI, NJ = np.empty(total, np.int64), np.empty(total, np.int64)
+    at = 0
+    for r, (keys, count) in enumerate(parts):
+        split_keys(keys, count, n * r // threads, n, NI, NJ, at)
+        at += count
+    return NI, NJ
 
 
 def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, grav, fl, fp, t, ever, lists, ST, KN, nkn, threads):

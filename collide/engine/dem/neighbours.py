@@ -41,7 +41,11 @@ def build_pairs(P, Bd, n, dim, reach_pad):
     the search takes about half the time of a hashed grid's 27 cells, 1 000 spheres settling in
     a box), else the grid hashed into 8 n buckets (bodies spread far apart)."""
     cells, start, order, table, span, dense = grid(P, Bd, n, dim, reach_pad)
-    return pairs_range(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, 0, n)
+    keys, count = keys_range(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, 0, n)
+    rows = np.empty(count, np.int64)
+    partners = np.empty(count, np.int64)
+    split_keys(keys, count, 0, n, rows, partners, 0)
+    return rows, partners
 
 
 @jit
@@ -92,26 +96,30 @@ def grid(P, Bd, n, dim, reach_pad):
 
 
 @jit
-def pairs_range(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, first, last):
-    """The pairs (i, j) of `build_pairs` with i in first..last, from the cell `grid`: (i, j).
-    The pairs of consecutive ranges, put one after the other, are the whole list (the
-    driver of the threads gathers them so, `dem_threads`)."""
+def keys_range(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, first, last):
+    """The keys i * n + j of `build_pairs`'s pairs with i in first..last, ascending, in a buffer
+    (keys, count). The keys of consecutive ranges, put one after the other, are the whole list
+    (the driver of the threads searches so, `dem_threads`, then `split_keys` each range into one
+    list: no range's (i, j) beside the joined list's)."""
     keys = np.empty(8 * (last - first) + 16, np.int64)
     while True:
         count = _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, keys, first, last)
         if count >= 0:
-            rows = np.empty(count, np.int64)
-            partners = np.empty(count, np.int64)
-            i = first
-            for k in range(count):  # (keys ascend: no division)
-                while keys[k] >= (i + 1) * n:
-                    i += 1
-                rows[k] = i
-                partners[k] = keys[k] - i * n
-            return rows, partners
+            return keys, count
         # Out of room: start again with twice as much (rare; growing in the search loop would
         # count references to `keys` at every cell visited, which cost more than the search).
         keys = np.empty(2 * keys.shape[0], np.int64)
+
+
+@jit
+def split_keys(keys, count, first, n, rows, partners, at):
+    """keys[:count] (ascending, i from first on) as (i, j) into rows and partners from row at."""
+    i = first
+    for k in range(count):  # (keys ascend: no division)
+        while keys[k] >= (i + 1) * n:
+            i += 1
+        rows[at + k] = i
+        partners[at + k] = keys[k] - i * n
 
 
 @jit_inline
