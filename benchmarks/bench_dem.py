@@ -13,7 +13,9 @@
 3. With `--threads 1,2`: benchmarks/bench_liggghts.py's box (1 mm spheres from a lattice, in
    contact within the first steps) run on each number of threads in turn (COLLIDE_THREADS),
    repeats alternated, the kernel's wall time and the process's CPU time over it (every thread),
-   medians, the speedups against the first, and the load average before and after.
+   medians, the speed-up of wall time and the CPU efficiency (the first count's CPU time over
+   this one's) against the first, the load average at each run, and for the threaded runs the
+   time on one thread in the driver and the time each thread waited at the barrier.
 """
 
 from __future__ import annotations
@@ -97,11 +99,23 @@ def granular_box(n: int, steps: int) -> dict:
             "body": bodies, "wall": walls}
 
 
+def _cycle_rate() -> float:
+    """The barrier's cycle counter's ticks per second (`collide.engine.dem.barrier.cycles`)."""
+    from collide.engine.dem.barrier import cycles
+
+    c0, t0 = cycles(), time.perf_counter()
+    time.sleep(0.05)
+    return (cycles() - c0) / (time.perf_counter() - t0)
+
+
 def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
-    """The box on each thread count in turn, repeats alternated: wall and CPU medians."""
+    """The box on each thread count in turn, repeats alternated: wall and CPU medians, the CPU
+    efficiency (one thread's CPU over this count's: 1.0 when the threads waste nothing), the
+    load average at each run, and where the threaded runs' time went (`dem_threads.LAST_RUN`)."""
     import resource
 
     import collide.dem
+    from collide.dem_threads import LAST_RUN
 
     spent: list[tuple[float, float]] = []
     real = collide.dem.run_members
@@ -114,32 +128,51 @@ def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
                       after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime))
         return out
 
+    rate = _cycle_rate()
     collide.dem.run_members = timed
-    loads = [os.getloadavg()[0]]
     times: dict[int, list[tuple[float, float]]] = {c: [] for c in counts}
+    loads: dict[int, list[float]] = {c: [] for c in counts}
+    where: dict[int, list[tuple[float, float, float, int]]] = {c: [] for c in counts}
     steps = 0
     for _ in range(repeats):
         for count in counts:
             os.environ["COLLIDE_THREADS"] = str(count)
+            loads[count].append(os.getloadavg()[0])
+            LAST_RUN.clear()
             result = run_scene(scene, record=False).result
             assert result.threads == count
             times[count].append(spent[-1])
             steps = int(result.steps[0])
-        loads.append(os.getloadavg()[0])
+            if LAST_RUN:  # (a run on one thread takes the one-thread kernel)
+                waited = float(LAST_RUN["waited"].mean()) / rate
+                where[count].append((LAST_RUN["seconds"] - LAST_RUN["parallel"], waited,
+                                     float(LAST_RUN["sleeps"].mean()) / max(1, int(LAST_RUN["meets"][0])),
+                                     LAST_RUN.get("alone", 0)))
     collide.dem.run_members = real
-    print(f"\n{spheres} spheres, {steps} steps, {repeats} runs each alternated; load average (1 min) "
-          f"{', '.join(f'{x:.1f}' for x in loads)} on {os.cpu_count()} cores\n")
-    print("| threads | wall s (median; runs) | CPU s (median) | particle-steps/s wall | per CPU s | "
-          "speedup wall | speedup CPU rate |")
-    print("|---|---|---|---|---|---|---|")
+    print(f"\n{spheres} spheres, {steps} steps, {repeats} runs each alternated, on {os.cpu_count()} cores\n")
+    print("| threads | wall s (median; runs) | CPU s (median; runs) | load (1 min) at each run | "
+          "particle-steps/s wall | per CPU s | speedup wall | CPU efficiency |")
+    print("|---|---|---|---|---|---|---|---|")
     base = None
     for count in counts:
         wall = statistics.median(w for w, _ in times[count])
         cpu = statistics.median(c for _, c in times[count])
         base = base or (wall, cpu)
-        runs = ", ".join(f"{w:.2f}" for w, _ in times[count])
-        print(f"| {count} | {wall:.3f} ({runs}) | {cpu:.3f} | {spheres * steps / wall:.3g} | "
+        walls = ", ".join(f"{w:.2f}" for w, _ in times[count])
+        cpus = ", ".join(f"{c:.2f}" for _, c in times[count])
+        load = ", ".join(f"{x:.1f}" for x in loads[count])
+        print(f"| {count} | {wall:.3f} ({walls}) | {cpu:.3f} ({cpus}) | {load} | {spheres * steps / wall:.3g} | "
               f"{spheres * steps / cpu:.3g} | {base[0] / wall:.2f} | {base[1] / cpu:.2f} |")
+    if any(where.values()):
+        print("\nThreaded runs (medians): seconds on one thread in the driver (rebuilds, coasting, hand-offs), "
+              "seconds a thread waited at the barrier, share of meetings at which it slept, stretches of steps "
+              "taken on one thread as the threads waited too long (`dem_threads._Pace`)\n")
+        print("| threads | driver s | waited s | slept | stretches on one thread |")
+        print("|---|---|---|---|---|")
+        for count in counts:
+            if where[count]:
+                serial, waited, slept, alone = (statistics.median(x[c] for x in where[count]) for c in range(4))
+                print(f"| {count} | {serial:.3f} | {waited:.3f} | {slept:.1%} | {alone:g} |")
 
 
 def main() -> None:

@@ -266,7 +266,7 @@ def run_threads(n_bodies: int) -> int:
     """The threads one run of n_bodies steps on: COLLIDE_THREADS if set (`collide run
     --threads`), else every core from THREADS_FROM bodies and one below."""
     from collide.dem_threads import THREADS_FROM, THREADS_VARIABLE, cores
-    from collide.engine.dem.threads import HAVE_BARRIER
+    from collide.engine.dem.barrier import HAVE_BARRIER
 
     if not HAVE_BARRIER:
         return 1

@@ -2,31 +2,34 @@
 force pass and kicks split among the threads (`collide.engine.dem.threads`: every body's sums in
 the one-thread order, so the run is the same bit for bit whatever the number of threads).
 
-Every thread runs `threads.run_share` at once; they meet at a pthread barrier between the passes
-of a step (a few microseconds) and come back here only for what one thread does: coasting where
-nothing touches, rebuilding the neighbour lists (a few per cent of a settling box's time), the
-steps that record a frame, and growing the record tables. Below THREADS_FROM bodies a run takes
-one thread by default: the barriers cost more than the split saves.
+Every thread runs `threads.run_share` at once; they meet at a spinning barrier between the
+passes of a step (`collide.engine.dem.barrier`) and come back here only for what one thread
+does: coasting where nothing touches, the steps that record a frame, growing the record tables,
+and rebuilding the neighbour lists, whose search for pairs is split among the threads again
+(`_rebuild`). Where other work holds the cores and the threads mostly wait for each other, the
+run goes on on one thread for a while (`_Pace`). Below THREADS_FROM bodies a run takes one
+thread by default: the barriers cost more than the split saves.
 """
 
 from __future__ import annotations
 
-import ctypes
 import functools
 import math
 import os
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from collide.engine.broad import NBOX
+from collide.engine.broad import BOX_ANY, NBOX
+from collide.engine.dem import barrier
 from collide.engine.dem import layout as dk
 from collide.engine.dem import threads as par
-from collide.engine.dem.flight import may_meet
+from collide.engine.dem.flight import fly, free_time, may_meet
 from collide.engine.dem.forces import forces
-from collide.engine.dem.loop import _any_rolling, _coast, _finish, _materials, _outputs, _step_length
-from collide.engine.dem.neighbours import rebuild, slot_regions
+from collide.engine.dem.loop import _any_rolling, _at_end, _finish, _materials, _outputs, _step_length
+from collide.engine.dem.neighbours import grid, keys_range, rebuild, relist, slot_regions, split_keys
 from collide.engine.dem.records import energy_row, frame
 from collide.engine.dem.verlet import kick, kinetic
 from collide.engine.numerics import grow
@@ -35,6 +38,11 @@ from collide.stepper import THREADS_VARIABLE  # (a batch's cap on its threads, a
 # Bodies from which a run takes every core by default (below, one thread: the hand-offs cost
 # more than the split saves), measured with benchmarks/bench_dem.py --threads.
 THREADS_FROM = 4000
+# The last threaded run's figures (benchmarks/bench_dem.py shows them; of one of them if several
+# run at once): threads, seconds, seconds in the threads' shares (the rest is this driver's, on
+# one thread), stretches of steps it took on one thread (`_Pace`), and per thread the barrier's
+# meetings, sleeps and cycles spent waiting (`barrier`).
+LAST_RUN: dict = {}
 
 
 def cores() -> int:
@@ -62,22 +70,26 @@ def _pool(workers: int) -> ThreadPoolExecutor:
 
 def _each(task, threads: int) -> None:
     """task(r) for every thread r, share 0 on this thread."""
+    start = time.perf_counter()
     futures = [_pool(threads - 1).submit(task, r) for r in range(1, threads)] if threads > 1 else []
     task(0)
     for future in futures:
         future.result()
+    LAST_RUN["parallel"] = LAST_RUN.get("parallel", 0.0) + time.perf_counter() - start
 
 
 class _Shares:
     """The threads' shares of the current pair list (`threads.plan`) and their buffers; made as the
-    list is built, before any force pass on it (each share's region of new contacts' slots,
-    BUMP, starts empty)."""
+    list is built, before any force pass on it. New contacts take their slots from the regions
+    (SKB, BUMP: `neighbours.slot_regions`) of the list's shares among all threads, whatever
+    threads a stretch of steps takes (`_Pace`): one set of regions a list, so no slot is taken
+    twice (`slots`: the all-threads shares, whose regions these share; None for those)."""
 
-    def __init__(self, PI, PJ, PS, HS, WL, n: int, threads: int, record: bool, rest: bool):
+    def __init__(self, PI, PJ, PS, HS, WL, n: int, threads: int, record: bool, rest: bool, slots=None):
         self.PI = PI
         bounds, kb, wb, sb, self.cross, self.inc_start, self.inc_slot = par.plan(PI, PJ, WL, n, threads)
         self.kb, self.wb = kb, wb
-        self.BUMP = slot_regions(PS, HS, kb)
+        self.SKB, self.BUMP = (kb, slot_regions(PS, HS, kb)) if slots is None else (slots.SKB, slots.BUMP)
         self.RB = np.array([[bounds[r], bounds[r + 1], kb[r], kb[r + 1], wb[r], wb[r + 1], sb[r], sb[r + 1]]
                             for r in range(threads)], np.int64)
         self.XB = np.zeros((len(self.cross), 2, par.NX))
@@ -87,30 +99,63 @@ class _Shares:
         self.EB = np.zeros((n if rest else 0, 2))
 
 
-class Barrier:
-    """A pthread barrier for `threads` threads (the kernels wait at it by its address)."""
-
-    def __init__(self, threads: int):
-        self._libc = ctypes.CDLL(None)
-        self._buffer = ctypes.create_string_buffer(256)  # (a pthread_barrier_t is 32 bytes on x86-64)
-        if self._libc.pthread_barrier_init(self._buffer, None, threads) != 0:
-            raise OSError("pthread_barrier_init failed")
-        self.address = ctypes.addressof(self._buffer)
-
-    def close(self) -> None:
-        self._libc.pthread_barrier_destroy(self._buffer)
-
-
 def dem_run_threaded(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads: int):
     """`loop.dem_run` on `threads` threads: the same arguments and outputs, bit for bit."""
-    barrier = Barrier(threads)
-    try:
-        return _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier.address)
-    finally:
-        barrier.close()
+    LAST_RUN.clear()
+    start = time.perf_counter()
+    out = _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads)
+    LAST_RUN.update(threads=threads, seconds=time.perf_counter() - start)
+    return out
 
 
-def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
+class _Crew:
+    """What the threads of one count share apart from the pair list's plan: the barrier, and
+    each thread's rows of figures (STT, PM) and scratch, padded (no two threads' rows in a cache
+    line)."""
+
+    def __init__(self, threads: int):
+        self.barrier = barrier.rows(threads)  # (kept alive here while the threads wait at it)
+        self.rows = (self.barrier, np.zeros((2, threads, par.NST_ROW)), np.zeros((2, threads)), np.zeros((threads, 16)))
+
+
+class _Pace:
+    """How many threads each stretch of steps between the driver's turns takes: all of them, or
+    one while all would be slower. Where other work holds the cores, the threads are seldom on
+    them at once and wait for each other at every barrier: a stretch at which they waited more
+    than half the time (more than WAITED of it, judged over at least MEETS meetings) is followed
+    by stretches on one thread, 1, then 2, 4... up to LONGEST while it lasts, then all threads
+    are tried again. The result is the same bit for bit whatever the threads."""
+
+    WAITED, MEETS, LONGEST = 0.5, 50, 64
+
+    def __init__(self, threads: int):
+        self.all, self.alone, self.backoff = threads, 0, 1
+        self.crews = {count: _Crew(count) for count in {1, threads}}
+
+    def next(self) -> int:
+        if self.alone > 0:
+            self.alone -= 1
+            return 1
+        return self.all
+
+    def run(self, task, use: int) -> None:
+        """task(r) on `use` threads, and whether the next stretches take one."""
+        rows = self.crews[use].barrier[:use]
+        meets, waited, start = rows[:, barrier.W_MEETS].sum(), rows[:, barrier.W_CYCLES].mean(), barrier.cycles()
+        _each(task, use)
+        span = barrier.cycles() - start
+        if use > 1 and rows[:, barrier.W_MEETS].sum() - meets >= self.MEETS * use:
+            if rows[:, barrier.W_CYCLES].mean() - waited > self.WAITED * span:
+                self.alone, self.backoff = self.backoff, min(2 * self.backoff, self.LONGEST)
+                LAST_RUN["alone"] = LAST_RUN.get("alone", 0) + self.alone
+            else:
+                self.backoff = 1
+        crew = self.crews[self.all].barrier[:self.all]
+        LAST_RUN.update(meets=crew[:, barrier.W_MEETS].copy(), sleeps=crew[:, barrier.W_SLEEPS].copy(),
+                        waited=crew[:, barrier.W_CYCLES].copy())
+
+
+def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads):
     n = X.shape[0]
     dim, spin, rest, skin = fl[dk.F_DIM], fl[dk.F_SPIN], fp[dk.P_REST], fp[dk.P_SKIN]
     box = fp[dk.P_BOX:dk.P_BOX + NBOX]
@@ -125,14 +170,16 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
     none = np.zeros(0, np.int64)
     PI, PJ, PS, HS, _, _, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin, none, none,
                                            none, np.zeros((0, dk.NH)), ST, box)
-    shares = _Shares(PI, PJ, PS, HS, WL, n, threads, bool(record), rest > 0.0)
+    kept = (bool(record), rest > 0.0)  # (whether the shares keep events, bodies' energies)
+    shares = {threads: _Shares(PI, PJ, PS, HS, WL, n, threads, *kept)}
     scratch = np.zeros(4)
-    STT, PM, outs = np.zeros((2, threads, par.NST)), np.zeros((2, threads)), np.zeros((threads, 4))
+    pace = _Pace(threads)
     most = PI.shape[0] + WL.shape[0]
     if record:
         IV, REC = grow(IV, most), grow(REC, most)
-    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, shares.kb, shares.BUMP, WL, WH, WP, tabs,
-                                wt, grav, fl, 0.0, 0.0, n, FG, ST, IV, 0, REC, 0, record != 0, scratch, box)
+    slots = shares[threads]
+    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, slots.SKB, slots.BUMP, WL, WH, WP, tabs, wt,
+                                grav, fl, 0.0, 0.0, n, FG, ST, IV, 0, REC, 0, record != 0, scratch, box)
     if record:
         KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, 0.0, n, 0.0)
         EP = grow(EP, nep)
@@ -142,29 +189,33 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
     C[par.C_NEXT], C[par.C_PEAK], C[par.C_EVER] = fp[dk.P_FRAME], kinetic(V, W, Bd, n), engaged > 0
     C[par.C_ENGAGED], C[par.C_NIV], C[par.C_NREC] = engaged, niv, nrec
     while True:
-        if shares.PI is not PI:  # (the lists were rebuilt)
-            shares = _Shares(PI, PJ, PS, HS, WL, n, threads, bool(record), rest > 0.0)
-        s = shares
-        args = (barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS, s.BUMP, WL, WH, WP, tabs, wt, grav,
-                fl, fp, rolling, ST, FG, IV, REC, s.RB, s.kb, s.wb, s.cross, s.inc_start, s.inc_slot, s.XB, s.SF, s.EVP,
-                s.EVW, s.EB, STT, PM, outs, C)
-        _each(functools.partial(_share, args), threads)
+        if shares[threads].PI is not PI:  # (the lists were rebuilt)
+            shares = {threads: _Shares(PI, PJ, PS, HS, WL, n, threads, *kept)}
+        use = pace.next()
+        if use not in shares:
+            shares[use] = _Shares(PI, PJ, PS, HS, WL, n, use, *kept, slots=shares[threads])
+        s = shares[use]
+        meet, STT, PM, outs = pace.crews[use].rows
+        args = (meet, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS, s.SKB, s.BUMP, WL, WH, WP, tabs, wt,
+                grav, fl, fp, rolling, ST, FG, IV, REC, s.RB, s.kb, s.wb, s.cross, s.inc_start, s.inc_slot, s.XB, s.SF,
+                s.EVP, s.EVW, s.EB, STT, PM, outs, C)
+        pace.run(functools.partial(_share, args), use)
         reason, t = int(C[par.C_REASON]), C[par.C_T]
         C[par.C_STAY] = 0.0
         if reason == par.R_COAST:
-            over, t, PI, PJ, PS, HS, _, _, WL, WH, KN, nkn = _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp,
-                                                                     t, C[par.C_EVER] != 0.0, PI, PJ, PS, HS,
-                                                                     s.kb, s.BUMP, WL, ST, KN, nkn)
+            over, t, (PI, PJ, PS, HS, WL, WH), KN, nkn = _coast(X, X0, V, W, Qo, F, Bd, WK, WP, grav, fl, fp, t,
+                                                                 C[par.C_EVER] != 0.0, (PI, PJ, PS, HS, WL, WH), ST,
+                                                                 KN, nkn, threads)
             C[par.C_T], C[par.C_STAY] = t, 1.0
             if over:
                 break
         elif reason == par.R_REBUILD:
-            PI, PJ, PS, HS, _, _, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box)
+            PI, PJ, PS, HS, WL, WH = _rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box, threads)
         elif reason == par.R_GROW:
             most = PI.shape[0] + WL.shape[0]
             IV, REC = grow(IV, int(C[par.C_NIV]) + most), grow(REC, int(C[par.C_NREC]) + most)
         elif reason == par.R_RECORD:
-            state = (X, V, W, Qo, F, T, PT, Bd, MAT, PI, PJ, PS, HS, s.kb, s.BUMP, WL, WH, WP, tabs, wt, grav, fl, fp,
+            state = (X, V, W, Qo, F, T, PT, Bd, MAT, PI, PJ, PS, HS, s.SKB, s.BUMP, WL, WH, WP, tabs, wt, grav, fl, fp,
                      WK, rolling, ST, FG, scratch)
             over, IV, REC, KN, nkn, EP, nep = _recorded_step(state, C, IV, REC, KN, nkn, EP, nep)
             if over:
@@ -187,8 +238,64 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads, barrier):
     return t, WK, KN[:nkn], REC[:nrec], IV[:niv], EP[:nep], ST, FG
 
 
+def _rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box, threads):
+    """`neighbours.rebuild`, its search for pairs (most of its time) split among the threads
+    (`_search`), the slots carried over on this thread (`neighbours.relist`). Returns (PI, PJ,
+    PS, HS, WL, WH)."""
+    if box[BOX_ANY] != 0.0:
+        out = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box)
+    else:
+        out = relist(X, X0, Bd, WP, WL, WH, n, skin, PI, PJ, PS, HS, ST, *_search(X, Bd, n, dim, skin, threads))
+    PI, PJ, PS, HS, _, _, WL, WH = out
+    return PI, PJ, PS, HS, WL, WH
+
+
+def _search(X, Bd, n, dim, skin, threads):
+    """`neighbours.build_pairs` with the bodies in equal ranges among the threads, whose keys, one
+    range's after the other's, are the list that one thread finds: (i, j). The grid and the
+    search buffers go when it returns, before the slots' table is made, as in `rebuild`."""
+    cells, start, order, table, span, dense = grid(X, Bd, n, dim, skin)
+    parts: list = [None] * threads
+
+    def search(r: int) -> None:
+        parts[r] = keys_range(X, Bd, n, dim, skin, cells, start, order, table, span, dense, n * r // threads,
+                              n * (r + 1) // threads)
+
+    _each(search, threads)
+    total = sum(count for _, count in parts)
+    NI, NJ = np.empty(total, np.int64), np.empty(total, np.int64)
+    at = 0
+    for r, (keys, count) in enumerate(parts):
+        split_keys(keys, count, n * r // threads, n, NI, NJ, at)
+        at += count
+    return NI, NJ
+
+
+def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, grav, fl, fp, t, ever, lists, ST, KN, nkn, threads):
+    """`loop._coast` with its neighbour lists made by `_rebuild` (the pair search split among
+    the threads): where nothing touches, fly in closed form as far as no contact can begin.
+    Returns (whether the run is over, t, the lists (PI, PJ, PS, HS, WL, WH), KN, nkn)."""
+    n, dim, planar, spin, record = X.shape[0], fl[dk.F_DIM], fl[dk.F_DIM] < 3, fl[dk.F_SPIN], fl[dk.F_RECORD]
+    dt, t_end, skin = fp[dk.P_DT], fp[dk.P_TEND], fp[dk.P_SKIN]
+    box = fp[dk.P_BOX:dk.P_BOX + NBOX]
+    if not math.isfinite(t_end) and not may_meet(X, V, Bd, WP, grav, n, box):
+        return True, t, lists, KN, nkn
+    PI, PJ, PS, HS, WL, WH = lists = _rebuild(X, X0, Bd, WP, lists[4], lists[5], n, dim, skin, *lists[:4], ST, box,
+                                              threads)
+    tau = free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin, box)
+    if _at_end(t + tau, t_end):
+        tau = t_end - t
+    over = False
+    if tau > 2.0 * dt:
+        KN, nkn = fly(X, V, W, Qo, F, Bd, WK, grav, tau, t, n, spin, planar, record, KN, nkn)
+        t += tau
+        ST[dk.S_JUMPS] += 1
+        over = _at_end(t, t_end) or (not math.isfinite(t_end) and ever and not may_meet(X, V, Bd, WP, grav, n, box))
+    return over, t, lists, KN, nkn
+
+
 def _share(args: tuple, r: int) -> None:
-    par.run_share(r, *args)
+    par.run_share(r, args[0][r], *args[1:])  # (thread r's row of the barrier)
 
 
 def _recorded_step(state, C, IV, REC, KN, nkn, EP, nep):

@@ -26,6 +26,8 @@ UNMIRRORED = {
     "dem/forces.py": "no direct test: the force pass, through every DEM run",
     "dem/records.py": "no direct test: frames and energy parts, through the energy balances of tests/engine/dem/",
     "dem/loop.py": "the run loop: whole DEM runs (tests/test_contact_laws.py, tests/test_refusals.py)",
+    "dem/barrier.py": "the threads' meetings: tests/engine/dem/test_threads.py (runs on 2 and 3 threads meet at it "
+                      "twice a step and end with the one-thread run's bits; its meetings counted)",
 }
 
 

@@ -40,6 +40,18 @@ def build_pairs(P, Bd, n, dim, reach_pad):
     DENSE_CELLS cells a body (a body's 3 x 3 x 3 cells are then 9 runs of consecutive cells:
     the search takes about half the time of a hashed grid's 27 cells, 1 000 spheres settling in
     a box), else the grid hashed into 8 n buckets (bodies spread far apart)."""
+    cells, start, order, table, span, dense = grid(P, Bd, n, dim, reach_pad)
+    keys, count = keys_range(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, 0, n)
+    rows = np.empty(count, np.int64)
+    partners = np.empty(count, np.int64)
+    split_keys(keys, count, 0, n, rows, partners, 0)
+    return rows, partners
+
+
+@jit
+def grid(P, Bd, n, dim, reach_pad):
+    """`build_pairs`'s cell grid: each body's cell, the cells' starts in `order` (the bodies
+    sorted by cell), the table's size and span, and whether it is dense."""
     rmax = 0.0
     for i in range(n):
         rmax = max(rmax, Bd[i, B_R])
@@ -80,22 +92,34 @@ def build_pairs(P, Bd, n, dim, reach_pad):
     for i in range(n):
         order[fill[bucket[i]]] = i
         fill[bucket[i]] += 1
-    keys = np.empty(8 * n + 16, np.int64)
+    return cells, start, order, table, span, dense
+
+
+@jit
+def keys_range(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, first, last):
+    """The keys i * n + j of `build_pairs`'s pairs with i in first..last, ascending, in a buffer
+    (keys, count). The keys of consecutive ranges, put one after the other, are the whole list
+    (the driver of the threads searches so, `dem_threads`, then `split_keys` each range into one
+    list: no range's (i, j) beside the joined list's)."""
+    keys = np.empty(8 * (last - first) + 16, np.int64)
     while True:
-        count = _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, keys)
+        count = _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, keys, first, last)
         if count >= 0:
-            rows = np.empty(count, np.int64)
-            partners = np.empty(count, np.int64)
-            i = 0
-            for k in range(count):  # (keys ascend: no division)
-                while keys[k] >= (i + 1) * n:
-                    i += 1
-                rows[k] = i
-                partners[k] = keys[k] - i * n
-            return rows, partners
+            return keys, count
         # Out of room: start again with twice as much (rare; growing in the search loop would
         # count references to `keys` at every cell visited, which cost more than the search).
         keys = np.empty(2 * keys.shape[0], np.int64)
+
+
+@jit
+def split_keys(keys, count, first, n, rows, partners, at):
+    """keys[:count] (ascending, i from first on) as (i, j) into rows and partners from row at."""
+    i = first
+    for k in range(count):  # (keys ascend: no division)
+        while keys[k] >= (i + 1) * n:
+            i += 1
+        rows[at + k] = i
+        partners[at + k] = keys[k] - i * n
 
 
 @jit_inline
@@ -120,15 +144,16 @@ def _partners(P, Bd, i, n, reach_pad, order, first, last, cells, cx, cy, cz, has
 
 
 @jit
-def _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, keys):
-    """The pairs of `build_pairs` into keys, each body's partners gathered from the 3^dim cells
-    around it and sorted among themselves. Returns their number, or -1 if keys is too short."""
+def _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, span, dense, keys, first, last):
+    """The pairs of `build_pairs` whose i is in first..last into keys, each body's partners
+    gathered from the 3^dim cells around it and sorted among themselves. Returns their number,
+    or -1 if keys is too short."""
     count = 0
     reach = 1 if dim >= 1 else 0
     ry = 1 if dim >= 2 else 0
     rz = 1 if dim >= 3 else 0
-    for i in range(n):
-        first = count
+    for i in range(first, last):
+        row_start = count
         for ox in range(-reach, reach + 1):
             for oy in range(-ry, ry + 1):
                 cx, cy = cells[i, 0] + ox, cells[i, 1] + oy
@@ -152,10 +177,10 @@ def _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, span, de
                     count = _partners(P, Bd, i, n, reach_pad, order, start[h], start[h + 1], cells, cx, cy, cz, True,
                                       keys, count)
         # i's row ascending (a handful of partners: insertion sort).
-        for a in range(first + 1, count):
+        for a in range(row_start + 1, count):
             key = keys[a]
             at = a
-            while at > first and keys[at - 1] > key:
+            while at > row_start and keys[at - 1] > key:
                 keys[at] = keys[at - 1]
                 at -= 1
             keys[at] = key
@@ -291,6 +316,14 @@ def rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box):
         NI, NJ = periodic_pairs(X, Bd, n, dim, skin, box)
     else:
         NI, NJ = build_pairs(X, Bd, n, dim, skin)
+    return relist(X, X0, Bd, WP, WL, WH, n, skin, PI, PJ, PS, HS, ST, NI, NJ)
+
+
+@jit
+def relist(X, X0, Bd, WP, WL, WH, n, skin, PI, PJ, PS, HS, ST, NI, NJ):
+    """`rebuild` from the fresh pair list (NI, NJ): their slots and history table carried over
+    from the old list (PI, PJ, PS, HS: `carry_slots`), the body-wall pairs listed. Returns what
+    `rebuild` returns."""
     NS, table = carry_slots(PI, PJ, PS, HS, NI, NJ, n)
     KB = np.zeros(2, np.int64)
     KB[1] = NI.shape[0]

@@ -117,3 +117,26 @@ def test_threads_give_the_one_thread_run_bit_for_bit_in_a_periodic_box(record):
         got = dem_run_threaded(*mine, threads)
         for a, b in zip(one[:4] + expected, mine[:4] + got):
             assert np.asarray(a).tobytes() == np.asarray(b).tobytes()
+
+
+def test_a_run_that_changes_its_threads_between_stretches_gives_the_one_thread_run(monkeypatch):
+    """Where the threads mostly wait for each other (other work holds the cores), the driver goes
+    on on one thread for a while (`dem_threads._Pace`). Made to judge every stretch on two threads
+    as waiting too long, a run alternates between two threads and one, rebuilding its lists on
+    both kinds of stretch, and ends with the one-thread run's bits; the run reports its stretches
+    on one thread and the barrier's meetings."""
+    from collide.dem_threads import LAST_RUN, _Pace, dem_run_threaded
+    from collide.engine.dem.layout import S_BUILDS
+    from collide.engine.dem.loop import dem_run
+
+    monkeypatch.setattr(_Pace, "WAITED", -1.0)
+    monkeypatch.setattr(_Pace, "MEETS", 0)
+    args = _args(_box(64, True, 0.0, seed=3), True, 0.0)
+    one = _copy(args)
+    expected = dem_run(*one)
+    mine = _copy(args)
+    got = dem_run_threaded(*mine, 2)
+    for a, b in zip(one[:4] + expected, mine[:4] + got):
+        assert np.asarray(a).tobytes() == np.asarray(b).tobytes()
+    assert expected[6][S_BUILDS] > 4  # neighbour lists built: several stretches
+    assert LAST_RUN["alone"] > 0 and LAST_RUN["meets"][0] > 0
