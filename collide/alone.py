@@ -73,8 +73,10 @@ def law_rows(model: Model, b: int = 0) -> np.ndarray:
     zeta = float(damping_ratio(np.array(row[TABLE_REST]), model.hertz))
     params = impact.impact_params(hertz=model.hertz, mstar=float(model.mass[b, 0]), k=float(row[TABLE_K]),
                                   estar=float(row[TABLE_ESTAR]), rstar=float(model.radius[b, 0]), zeta=zeta)
-    rows = np.array(np.broadcast_to(params, (model.n_walls, params.size)))
-    rows.setflags(write=False)  # one type for every count of walls: the compiled kernel's (numba types read-only)
+    # One type for every count of walls, the compiled kernel's: C order (a copy of the broadcast
+    # keeps its strides, F order from two walls on) and read-only (numba types that apart).
+    rows = np.array(np.broadcast_to(params, (model.n_walls, params.size)), order="C")
+    rows.setflags(write=False)
     return rows
 
 

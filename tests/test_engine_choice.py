@@ -207,3 +207,20 @@ def test_two_walls_at_once_go_to_dem_or_are_refused():
     assert run.result.engine == "dem" and "another wall" in run.result.engine_reason
     with pytest.raises(RunError, match="another wall"):
         run_scene(parse_scene({**copy.deepcopy(CORNER), "integrator": "kahan6"}), record=False)
+
+
+def test_the_laws_have_one_kernel_type_for_any_count_of_walls():
+    """The sphere-alone kernel is compiled for the type of its law table once (the warm-up's
+    one wall): two walls or more gave an F-ordered copy, a second signature compiled in the run."""
+    import numba
+
+    from collide.alone import law_rows
+    from collide.run import compile_scenes
+
+    types = set()
+    for walls in (CORNER["wall"][:1], CORNER["wall"], CORNER["wall"] + [{"point": [0.5, 0.0], "normal": [-1.0, 0.0]}]):
+        model, _ = compile_scenes([parse_scene({**copy.deepcopy(CORNER), "wall": walls})])
+        rows = law_rows(model)
+        assert rows.shape[0] == len(walls) and rows.flags.c_contiguous and not rows.flags.writeable
+        types.add(numba.typeof(rows))
+    assert len(types) == 1
