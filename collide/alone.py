@@ -149,7 +149,9 @@ _LOADED: list[bool] = []
 
 
 def _load_compiled(*args) -> None:
-    """Load the compiled kernel from numba's cache before the clock starts (once a process)."""
+    """Load the compiled kernel from numba's cache before the clock starts (once a process).
+    The warm-up leaves it out (about 18 s of CPU, which took the first compile past its 90 s):
+    the first compiled run of a sphere alone compiles it here and caches it."""
     if _LOADED or not tier.COMPILED:
         return
     import numba

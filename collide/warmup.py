@@ -55,11 +55,6 @@ def warm() -> float:
                                  "velocity": [1.0, 0.0, -1.0]}],
                        "wall": [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]})
     run_scene(dem, record=True)
-    alone = parse_scene({"dim": 2, "duration": 0.5, "gravity": [0.0, -9.81],
-                         "contact": {"model": "hertz", "youngs_modulus": 1e8, "restitution": 0.5},
-                         "body": [{"name": "a", "mass": 1.0, "radius": 0.1, "position": [0.0, 0.2]}],
-                         "wall": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}]})
-    run_scene(alone, record=True)  # a sphere alone among walls (collide.engine.event.alone)
     return time.perf_counter() - started
 
 
