@@ -83,7 +83,7 @@ def _run(walls, position, velocity, t_end):
     G[0, layout.G_R], G[0, layout.G_M] = params[3], params[4]
     G[0, layout.G_IM] = 1.0 / params[4]
     WP = np.array(walls, dtype=float)
-    laws = np.array(np.broadcast_to(params, (len(walls), params.size)))
+    laws = np.array(np.broadcast_to(params, (len(walls), params.size)), order="C")
     laws.setflags(write=False)  # as collide.alone.law_rows gives them (the compiled signature)
     fl = np.zeros(layout.NFL, np.int64)
     fl[layout.FL_RECORD], fl[layout.FL_MAXSTEPS], fl[layout.FL_PLANAR] = 1, 10**6, 1
