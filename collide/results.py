@@ -51,6 +51,8 @@ class RunResult:
     attempts: np.ndarray | None = None  # (B,) whole steps tried from a step's start (events cost more than one)
     free_since: np.ndarray | None = None  # (B, N) when each body's last contact ended (0: none; the end: open)
     threads: int = 1  # the threads one DEM run stepped on (collide.dem.run_threads)
+    engine: str = ""  # which engine ran it ("event", "dem", "seed"; collide.alone.engine_choice)
+    engine_reason: str = ""  # and why
 
     @property
     def batch_size(self) -> int:
@@ -78,4 +80,5 @@ class RunResult:
                          select_state(self.final, index), self.integrator, pick(self.dt), pick(self.steps),
                          pick(self.jumps), self.wall_time_s, log, trajectories, list(self.warnings),
                          pick(self.dt_min), pick(self.windows), pick(self.dissipation), pick(self.closed_steps),
-                         pick(self.attempts), pick(self.free_since))
+                         pick(self.attempts), pick(self.free_since), engine=self.engine,
+                         engine_reason=self.engine_reason)

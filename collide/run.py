@@ -11,12 +11,14 @@ import numpy as np
 
 from collide import diagnostics as dg
 from collide import measure as measure_mod
+from collide.alone import TOL_FLOOR as ALONE_TOL_FLOOR
+from collide.alone import AloneError, alone_step, engine_choice, simulate_alone
 from collide.integrators import INTEGRATORS
 from collide.invariant import check_invariant
 from collide.limits import step_limit
 from collide.model import compile_scenes, reference_frequency, select_model, select_state
 from collide.results import RunResult
-from collide.scene import Scene, SceneError, dem_reason
+from collide.scene import Scene, SceneError, alone_blocker, dem_reason
 from collide.stepper import EDGE_TOL, Progress, RunError, approach_bound, simulate
 
 
@@ -235,12 +237,22 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     requested = [scene.dt if dt is None else dt for scene in scenes]
     auto_used = [step == "auto" for step in requested]
     needs = next((scene for scene in scenes if scene.needs_dem), None)
+    forced = integrator is not None or "integrator" in scenes[0].source
+    blocker = None
     if needs is not None and integ != "dem":
-        raise SceneError(f"integrator: '{integ}' runs the report's contact law only; {needs.name}'s "
-                         f"({dem_reason(needs)}) runs with --integrator dem")
+        blocker = alone_blocker(needs) or ("the report's update runs its contact law only" if integ == "seed" else
+                                           "a batch of them is DEM's" if len(scenes) > 1 else
+                                           "a given dt is DEM's (the event engine takes its steps from --tol)"
+                                           if not auto_used[0] else None)
+        if blocker is None:
+            return _run_alone(scenes[0], integ, model, state, float(tols[0]), record, max_steps, measure, forced)
+        if forced:
+            raise SceneError(f"integrator: '{integ}' cannot run {needs.name}'s contact law ({dem_reason(needs)}): "
+                             f"{blocker}; it runs with --integrator dem")
+        integ = "dem"
     if integ == "dem":
-        return _run_dem(scenes, model, state, requested, auto_used, tols, dt, record, max_steps, progress,
-                        measure)
+        run = _run_dem(scenes, model, state, requested, auto_used, tols, dt, record, max_steps, progress, measure)
+        return _engine(run, scenes[0], "dem", forced, blocker if needs is not None else None)
     check_tol_floor(integ, tols)
     round_off = check_stiffness(scenes, model, state, tols)
     omega = reference_frequency(model)
@@ -282,7 +294,8 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
                           omega_h=omega_h, progress=progress, resolved=np.where(auto_used, tols, estimate))
     check_finite(result, scenes)
     check_invariant(result)
-    run = SceneRun(list(scenes), result, dt, [float(x) for x in tols], estimate, auto_used, ["model"] * len(scenes))
+    run = _engine(SceneRun(list(scenes), result, dt, [float(x) for x in tols], estimate, auto_used,
+                           ["model"] * len(scenes)), scenes[0], integ, forced)
     if not measure:
         return run  # a measuring run: its caller judges it
     if len(scenes) == 1 and measure_mod.outside_model(run.result):
@@ -292,6 +305,60 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
             run.result.warnings.append(measure_mod.unmeasured_warning(run))
     run.result.warnings.extend(balance_warnings(run.result, scenes, np.maximum(tols, run.error_estimate),
                                                 auto_used))
+    return run
+
+
+def _engine(run: SceneRun, scene: Scene, integ: str, forced: bool, blocker: str | None = None) -> SceneRun:
+    """The run with its engine and why it ran there (the JSON's `engine`, `engine_reason`)."""
+    run.result.engine, run.result.engine_reason = engine_choice(scene, integ, forced, blocker)
+    return run
+
+
+def _run_alone(scene: Scene, integ: str, model, state, tol: float, record: bool, max_steps: int | None,
+               measure: bool, forced: bool) -> SceneRun:
+    """A sphere alone among walls under Hertz or a dashpot, in the event engine
+    (`collide.alone`); where it meets what only DEM takes (two walls at once), DEM runs it
+    instead, unless the event engine was asked for."""
+    from collide.dem import contact_time
+    from collide.engine.event.impact import steps_for
+
+    if scene.gravity is not None and scene.walls and scene.duration is None:
+        raise SceneError("duration: required when a scene has both gravity and walls (a bouncing sphere never stops)")
+    n_end, n_mid = steps_for(tol)
+    limit = step_limit([scene.duration], max_steps, 2 * n_end + n_mid)
+    try:
+        result = simulate_alone(model, state, tol=tol, duration=np.nan if scene.duration is None else scene.duration,
+                                tail=np.nan if scene.tail is None else scene.tail, record=record, max_steps=limit)
+    except AloneError as exc:
+        if forced:
+            raise RunError(f"{exc}; run it with --integrator dem") from None
+        try:
+            run = run_scenes([scene], integrator="dem", tol=tol, record=record, max_steps=max_steps, measure=measure)
+        except RunError as dem_exc:
+            raise RunError(f"in the event engine {exc}; in DEM instead: {dem_exc}") from None
+        run.result.engine_reason = (f"{dem_reason(scene)}: the fixed-step DEM kernel (first order), since in the "
+                                    f"event engine {exc}")
+        return run
+    result.integrator = integ
+    check_finite(result, [scene])
+    check_invariant(result)
+    run = _engine(SceneRun([scene], result, "auto", [tol], np.array([tol]), [True], ["model"]), scene, integ, forced)
+    if not measure:
+        return run
+    t_c = float(contact_time(model, state)[0][0]) if model.n_walls else math.inf
+    lasting = float(result.contacts.duration[0]) > measure_mod.LASTING_CONTACT * t_c
+    at_rest = not np.any(state.v)  # --tol is relative to the fastest initial speed: none to measure against
+    if measure_mod.outside_model(result, lasting) and at_rest:
+        result.warnings.append(measure_mod.unmeasured_warning(run, "every body starts at rest, and --tol is relative "
+                                                                   "to the fastest initial speed; each contact is "
+                                                                   "within it of its approach speed"))
+    elif measure_mod.outside_model(result, lasting):
+        rerun = measure_mod.Rerun(
+            run=lambda finer, steps: run_scenes([scene], integrator=integ, tol=finer, record=record, max_steps=steps,
+                                                measure=False),
+            step=lambda finer: alone_step(model, state, finer), floor=ALONE_TOL_FLOOR)
+        run = measure_mod.measured(run, rerun, limit)
+    run.result.warnings.extend(balance_warnings(run.result, [scene], np.maximum([tol], run.error_estimate), [True]))
     return run
 
 

@@ -539,11 +539,15 @@ def _parse_scene(raw: dict, default_name: str, progress: Progress) -> Scene:
                   gravity=gravity, duration=duration, tail=tail, tol=tol, rest=rest,
                   description=raw.get("description", ""), domain=domain, source=raw)
     if scene.needs_dem:
+        # The event engine where it runs these laws at full order (a sphere alone among walls),
+        # else the DEM kernel (collide.alone.engine_choice says which and why).
+        blocker = alone_blocker(scene)
         if "integrator" not in raw:
-            scene = replace(scene, integrator="dem")
-        elif integrator != "dem":
-            raise SceneError(f"integrator: {_shown(integrator)} runs the report's contact law only; this scene's "
-                             f"({dem_reason(scene)}) runs with integrator = 'dem'")
+            scene = replace(scene, integrator="dem" if blocker else DEFAULT_INTEGRATOR)
+        elif integrator == "seed" or (integrator != "dem" and blocker):
+            why = "the report's update runs its contact law only" if integrator == "seed" else blocker
+            raise SceneError(f"integrator: {_shown(integrator)} cannot run this scene's contact law "
+                             f"({dem_reason(scene)}): {why}; it runs with integrator = 'dem'")
     _check_sticky(scene)
     check_periodic(scene)
     if scene.contact.model == "hertz" and contact.youngs_modulus is None:
@@ -670,6 +674,28 @@ def dem_reason(scene: Scene) -> str:
             (m.rolling_friction or 0.0) == 0.0 for m in scene.materials):
         return "restitution below 1"
     return "rolling_friction"
+
+
+def alone_blocker(scene: Scene) -> str | None:
+    """Why the event engine cannot run a scene whose law goes beyond the report's (None: it can,
+    as a sphere alone among walls)."""
+    c = scene.contact
+    if c.tangential != "coulomb":
+        return "tangential springs are DEM's only"
+    rolling = [c.rolling_friction] + [m.rolling_friction or 0.0 for m in scene.materials] + \
+        [p.rolling_friction or 0.0 for p in scene.pairs]
+    if max(rolling) > 0.0:
+        return "rolling resistance is DEM's only"
+    if len(scene.bodies) != 1:
+        return (f"{len(scene.bodies)} spheres: contacts between spheres under these laws (inside an island) "
+                "are DEM's so far; the event engine takes a sphere alone among walls")
+    if scene.has_friction:
+        return "friction during a Hertz or damped contact is DEM's so far"
+    if scene.domain is not None and scene.domain.periodic:
+        return "a periodic box is DEM's for these laws"
+    if scene.rest is not None:
+        return "rest (an end when the motion dies down) is DEM's"
+    return None
 
 
 def _choice(table: dict, key: str, where: str, options: tuple[str, ...]) -> str:

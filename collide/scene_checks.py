@@ -275,7 +275,8 @@ def _apexes(scene: Scene, run) -> tuple[list[float], list[float], list[float]]:
     apexes, speeds, durations = [], [], []
     start = float(times[0])
     for begin, end in list(spans) + [(math.inf, math.inf)]:
-        inside = np.nonzero((times > start) & (times < begin))[0]
+        # (From the flight's first state on: an event run's knot where the contact ended.)
+        inside = np.nonzero((times >= start) & (times < begin))[0]
         if not len(inside) or not math.isfinite(start):
             break
         k = int(inside[len(inside) // 2])

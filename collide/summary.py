@@ -44,6 +44,10 @@ def run_summary(run: SceneRun, member: int = 0, bodies: bool = True) -> dict[str
         "scene": scene.name,
         "dim": scene.dim,
         "integrator": r.integrator,
+        # Which engine ran it and why (collide.alone.engine_choice): the event engine, the DEM
+        # kernel or the report's update.
+        "engine": r.engine or None,
+        "engine_reason": r.engine_reason or None,
         "dt": float(r.dt[member]),
         "dt_auto": bool(run.auto[member]) if run.auto is not None else scene.dt == "auto",
         "tol": run.tol[member] if run.tol is not None else scene.tol,

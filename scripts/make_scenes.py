@@ -7,7 +7,8 @@ this script does): `python scripts/make_scenes.py` writes them into collide/scen
 - gas-box: 1 000 spheres in a closed box (3D), random speeds, elastic.
 - break-3d: a cue ball rolling into three balls on a cloth-covered table (3D, gravity, DEM with
   materials: Hertz contacts, restitution, friction and rolling resistance on the cloth).
-- bounce: a rubber ball dropped on a floor with restitution 0.8 (heights fall by e^2 a bounce).
+- bounce: a rubber ball dropped on a floor with restitution 0.8 (heights fall by e^2 a bounce), in the
+  event engine (a sphere alone among walls).
 - pile: 1 000 spheres poured into a box settle to rest (Hertz, damping, tangential springs).
 - drop-pile (not a built-in, into tests/data/: the viewer's many-sphere screenshots and test):
   125 beads dropped in a 5x5x5 lattice into a bin (floor and four side walls) under gravity,
@@ -136,9 +137,10 @@ def _with_material(lines: list[str], material: str) -> list[str]:
 def bounce() -> str:
     r, height, e = 0.03, 1.0, 0.8
     lines = ['name = "bounce"',
-             'description = "A rubber ball dropped from 1 m onto a rigid floor, restitution 0.8 (Hertz, DEM): each '
-             'bounce peaks at e^2 = 0.64 of the last."',
-             "dim = 2", 'dt = "auto"', 'integrator = "dem"', "tol = 1e-2", "duration = 3.5",
+             'description = "A rubber ball dropped from 1 m onto a rigid floor, restitution 0.8 (Hertz): each '
+             'bounce peaks at e^2 = 0.64 of the last. A sphere alone among walls, so the event engine runs it at '
+             'full order."',
+             "dim = 2", 'dt = "auto"', "tol = 1e-2", "duration = 3.5",
              "gravity = [0.0, -9.81]", "", "[contact]", 'model = "hertz"', f"restitution = {e!r}", "",
              "[[material]]", 'name = "rubber"', "density = 1100.0", "youngs_modulus = 5e6", "poisson_ratio = 0.45", "",
              "[[body]]", 'name = "ball"', 'material = "rubber"', f"radius = {r!r}", f"position = [0.0, {height + r!r}]",

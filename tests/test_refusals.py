@@ -276,7 +276,8 @@ def test_a_run_with_no_duration_is_refused_at_its_step_limit_and_max_steps_moves
                          monkeypatch, capsys, tmp_path)
     assert code == 0 and f'"steps": {steps}' in out
     # With a duration the limit is said before the run (DEM: the steps are known).
-    code, out, err = _main(["run", "bounce", "--no-record", "--max-steps", "100"], monkeypatch, capsys, tmp_path)
+    code, out, err = _main(["run", "bounce", "--integrator", "dem", "--no-record", "--max-steps", "100"], monkeypatch,
+                           capsys, tmp_path)
     _one_line_error(code, out, err, "(limit 100)")
 
 

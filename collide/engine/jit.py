@@ -307,13 +307,13 @@ def _compile_entries_when_called() -> None:
         if not isinstance(entry, Entry):
             return add(self, cres)
         if entry.compiled is not None:
-            return add(self, cres._replace(entry_point=entry.compiled))
+            return add(self, _callable_as(cres, entry.compiled))
         # Not in the dispatcher's table: a call from Python asks numba's compile, which returns
         # this entry; once compiled it goes into the table.
         args = tuple(cres.signature.args)
 
         def ready(compiled) -> None:
-            done = cres._replace(entry_point=compiled)
+            done = _callable_as(cres, compiled)
             add(self, done)
             self._cache.save_overload(args, done)  # again, now with its machine code
 
@@ -322,6 +322,17 @@ def _compile_entries_when_called() -> None:
 
     cpu.CPUContext.get_executable = get_executable
     dispatcher.Dispatcher.add_overload = add_overload
+
+
+def _callable_as(cres, compiled):
+    """`cres` with its compiled entry in place of the Entry. numba finds the code of a call from
+    a kernel under the callee's entry point (the dispatcher's `overloads[args].entry_point`) in
+    its table of user functions, where the compile or cache load put it under the Entry: the
+    compiled entry is registered there too, or any kernel compiled later in the process that
+    calls this one fails with "No definition for lowering"."""
+    if not cres.objectmode:
+        cres.target_context.insert_user_function(compiled, cres.fndesc, [cres.library])
+    return cres._replace(entry_point=compiled)
 
 
 def _defines(library, name: str) -> bool:

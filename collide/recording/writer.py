@@ -288,6 +288,8 @@ class _Writer(_Drawing):
         method = getattr(run, "error_method", None)
         if method is not None:
             meta["error_method"] = str(method[0])
+        if r.engine:  # which engine ran it and why (collide.alone.engine_choice)
+            meta["engine"], meta["engine_reason"] = r.engine, r.engine_reason
         for field in ("first_start", "last_end", "duration", "max_overlap", "max_normal_force"):
             value = getattr(r.contacts, field)
             meta[f"contact_{field}"] = float("nan") if value is None else float(value[0])

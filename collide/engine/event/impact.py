@@ -44,9 +44,14 @@ LAND = 40  # secant passes landing a root at a step's end
 SWITCH = 0.25  # the ends' sigma phase reaches this part of the estimated largest overlap (measured:
 # 0.5 left Hertz's ends ten times the error at the same steps, 0.1 the middle)
 TIME, SIGMA = 0, 1  # the independent variable of a phase
-# What an impact returns (OUT columns).
+# What an impact returns (OUT columns); `contact` adds how it ended and the state at a stop.
 O_VOUT, O_TIME, O_DMAX, O_FMAX, O_WORK, O_STEPS, O_OK = 0, 1, 2, 3, 4, 5, 6
-NOUT = 7
+O_END, O_DELTA, O_U = 7, 8, 9
+NOUT = 10
+P_STOP = 8  # the law's parameters P: the time since touching at which `contact` stops (inf: none)
+P_SPEED = 9  # ... and the round-off of the approach speed (set by `contact` and `impact`)
+NP = 10
+ENDED, STOPPED, FAILED = 1.0, 2.0, 0.0  # O_END: separated, stopped at P_STOP, not answered
 
 
 @jit
@@ -70,8 +75,15 @@ def rhs(P, phase, x, y0, y1, y2):
         acc, _, gamma = law(P, y0, y1)
         return y1, acc, gamma * y1 * y1
     p = P[7]
-    delta = x ** p
-    jac = p * x ** (p - 1.0)  # d delta / d sigma
+    # delta = x^p and d delta / d sigma: by products for Hertz's 4 and the linear spring's 1 (a
+    # power with a float exponent cost more than the rest of an evaluation, measured)
+    if p == 4.0:
+        x2 = x * x
+        delta, jac = x2 * x2, 4.0 * x2 * x
+    elif p == 1.0:
+        delta, jac = x, 1.0
+    else:
+        delta, jac = x ** p, p * x ** (p - 1.0)
     acc, _, gamma = law(P, delta, y1)
     return jac / y1, acc * jac / y1, gamma * y1 * jac
 
@@ -94,9 +106,12 @@ def gl_step(P, phase, x, y0, y1, y2, h):
         n20, n21, n22 = rhs(P, phase, x + GL_C2 * h, y0 + h * (GL_A20 * k00 + GL_A21 * k10 + GL_A22 * k20),
                             y1 + h * (GL_A20 * k01 + GL_A21 * k11 + GL_A22 * k21),
                             y2 + h * (GL_A20 * k02 + GL_A21 * k12 + GL_A22 * k22))
-        # Each part's change relative to its own size (the parts have different units).
+        # Each part's change relative to its own size (the parts have different units; the rate's
+        # at least what the step makes of the pressing acceleration, which a ball held at rest
+        # balances: its rate is round-off of that, or of the approach speed).
         change = abs(h) * max((abs(n00 - k00) + abs(n10 - k10) + abs(n20 - k20)) / (abs(y0) + abs(h * f0) + 1e-300),
-                              (abs(n01 - k01) + abs(n11 - k11) + abs(n21 - k21)) / (abs(y1) + abs(h * f1) + 1e-300),
+                              (abs(n01 - k01) + abs(n11 - k11) + abs(n21 - k21))
+                              / (abs(y1) + abs(h * f1) + abs(h * P[6]) + P[P_SPEED]),
                               (abs(n02 - k02) + abs(n12 - k12) + abs(n22 - k22)) / (abs(y2) + abs(h * f2) + 1e-300))
         k00, k01, k02, k10, k11, k12, k20, k21, k22 = n00, n01, n02, n10, n11, n12, n20, n21, n22
         # Done at round-off: below it, or no longer shrinking near it.
@@ -113,7 +128,10 @@ def gl_step(P, phase, x, y0, y1, y2, h):
 @jit
 def watched(P, phase, x, y0, y1, which):
     """The watched function at a state: which 0, the overlap's rate; 1, the force's rate dF/dt
-    (Hertz's dashpot grows as delta^(1/4): gamma' = gamma / (4 delta))."""
+    (Hertz's dashpot grows as delta^(1/4): gamma' = gamma / (4 delta)); 2, the time past the
+    stop P_STOP."""
+    if which == 2:
+        return (x if phase == TIME else y0) - P[P_STOP]
     delta, u = (y0, y1) if phase == TIME else (x ** P[7], y1)
     if which == 0:
         return u
@@ -161,85 +179,133 @@ def land(P, phase, x, y0, y1, y2, h, which, g0, g1):
 
 
 @jit
-def watch_step(P, phase, x, y0, y1, y2, h, e0, e1, e2, peaks):
+def watch_step(P, phase, x, y0, y1, y2, h, e0, e1, e2, peaks, trail):
     """After a step from (x, y) to (x + h, e): the largest force so far at its end, and where the
     overlap's rate (peaks[0]: the largest overlap) or the force's rate (peaks[1]) changes sign
-    from + to - inside it, that peak landed. Returns ok."""
+    from + to - inside it, that peak landed and its state added to trail (in time order, before
+    the step's end that the caller adds). Returns ok."""
     peaks[1] = max(peaks[1], force_at(P, phase, x + h, e0, e1))
     if phase == SIGMA:
         peaks[0] = max(peaks[0], (x + h) ** P[7])
     else:
         peaks[0] = max(peaks[0], e0)
+    first = (math.inf, 0.0, 0.0, 0.0)
+    second = (math.inf, 0.0, 0.0, 0.0)
     for which in range(2):
         g0 = watched(P, phase, x, y0, y1, which)
         g1 = watched(P, phase, x + h, e0, e1, which)
         if g0 > 0.0 and g1 < 0.0:
-            lx, l0, l1, _, ok = land(P, phase, x, y0, y1, y2, h, which, g0, g1)
+            lx, l0, l1, l2, ok = land(P, phase, x, y0, y1, y2, h, which, g0, g1)
             if not ok:
                 return False
             if which == 0:
                 peaks[0] = max(peaks[0], l0 if phase == TIME else lx ** P[7])
             else:
                 peaks[1] = max(peaks[1], force_at(P, phase, lx, l0, l1))
+            state = (lx, l0, l1, l2) if phase == TIME else (l0, lx ** P[7], l1, l2)
+            if state[0] < first[0]:
+                first, second = state, first
+            else:
+                second = state
+    if first[0] < math.inf:
+        trail.append(first)
+    if second[0] < math.inf:
+        trail.append(second)
     return True
 
 
+# How a phase ended (`rise`, `middle`, `fall`).
+FAIL, DONE, STOP, TURNED = 0, 1, 2, 3
+
+
 @jit
-def rise(P, v_in, sigma1, n, peaks):
-    """The contact's start over sigma, from touching to delta = sigma1^p. Returns (t, u, work,
-    steps, ok); not ok where the approach slows below a quarter (the switch lies too deep)."""
+def stop_inside(P, phase, x, y0, y1, y2, h, e0):
+    """Whether a step from (x, y) of h passes the stop P_STOP: then the state there (landed on
+    it by secant steps), as (x, y0, y1, y2, ok, True); else (..., True, False)."""
+    t0 = x if phase == TIME else y0
+    t1 = x + h if phase == TIME else e0
+    if not t1 > P[P_STOP]:
+        return x, y0, y1, y2, True, False
+    lx, l0, l1, l2, ok = land(P, phase, x, y0, y1, y2, h, 2, t0 - P[P_STOP], t1 - P[P_STOP])
+    return lx, l0, l1, l2, ok, True
+
+
+@jit
+def rise(P, v_in, sigma1, n, peaks, trail):
+    """The contact's start over sigma, from touching to delta = sigma1^p (or the stop). Returns
+    (sigma, t, u, work, steps, how); FAIL where the approach slows below a quarter (the switch
+    lies too deep)."""
     h = sigma1 / n
     t, u, w = 0.0, v_in, 0.0
     for s in range(n):
         x = s * h
         e0, e1, e2, ok = gl_step(P, SIGMA, x, t, u, w, h)
         if not ok or not e1 > 0.25 * v_in:
-            return t, u, w, s, False
-        if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks):
-            return t, u, w, s, False
+            return x, t, u, w, s, FAIL
+        lx, l0, l1, l2, ok, stopped = stop_inside(P, SIGMA, x, t, u, w, h, e0)
+        if stopped:
+            if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, peaks, trail):
+                return x, t, u, w, s, FAIL
+            trail.append((P[P_STOP], lx ** P[7], l1, l2))
+            return lx, P[P_STOP], l1, l2, s + 1, STOP
+        if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks, trail):
+            return x, t, u, w, s, FAIL
         t, u, w = e0, e1, e2
-    return t, u, w, n, True
+        trail.append((t, (x + h) ** P[7], u, w))
+    return sigma1, t, u, w, n, DONE
 
 
 @jit
-def middle(P, t, delta1, u, w, h, limit, peaks):
-    """Over time from delta = delta1 (approaching) until delta is back below delta1 (separating),
-    ending at no less than half of it, within `limit` steps (else the contact does not end as an
-    impact: it comes to rest). Returns (t, delta, u, work, steps, ok)."""
-    d = delta1
+def middle(P, t, delta1, d, u, w, h, limit, peaks, trail):
+    """Over time from delta = d until delta is back below delta1 (separating), ending at no less
+    than half of it, or the stop, within `limit` steps. Returns (t, delta, u, work, steps, how);
+    FAIL where the limit is reached."""
     steps = 0
     size = h
     while steps < limit:
-        e0, e1, e2, ok = gl_step(P, TIME, t, d, u, w, h)
+        stopping = P[P_STOP] - t <= h
+        step = P[P_STOP] - t if stopping else h
+        e0, e1, e2, ok = gl_step(P, TIME, t, d, u, w, step)
         if not ok or (e1 < 0.0 and e0 < 0.5 * delta1):
             h *= 0.5  # too long a step for this part of the contact
             if h < 1e-12 * size:
                 break
             continue
         steps += 1
-        if not watch_step(P, TIME, t, d, u, w, h, e0, e1, e2, peaks):
+        if not watch_step(P, TIME, t, d, u, w, step, e0, e1, e2, peaks, trail):
             break
-        t, d, u, w = t + h, e0, e1, e2
+        t, d, u, w = P[P_STOP] if stopping else t + step, e0, e1, e2
+        trail.append((t, d, u, w))
         h = size
+        if stopping:
+            return t, d, u, w, steps, STOP
         if u < 0.0 and d < delta1:
-            return t, d, u, w, steps, True
-    return t, d, u, w, steps, False
+            return t, d, u, w, steps, DONE
+    return t, d, u, w, steps, FAIL
 
 
 @jit
-def fall(P, t, sigma, u, w, n, peaks):
-    """The contact's end over sigma, from delta = sigma^p (separating) to 0. Returns (t, u, work,
-    ok); not ok where the separation stops before the overlap is gone."""
+def fall(P, t, sigma, u, w, n, peaks, trail):
+    """The contact's end over sigma, from delta = sigma^p (separating) to 0, or the stop. Returns
+    (sigma, t, u, work, steps, how); TURNED (the state before the step that failed) where the
+    separation stops before the overlap is gone."""
     h = -sigma / n
     for s in range(n):
         x = sigma + s * h
         e0, e1, e2, ok = gl_step(P, SIGMA, x, t, u, w, h)
         if not ok or not e1 < 0.0:
-            return t, u, w, False
-        if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks):
-            return t, u, w, False
+            return x, t, u, w, s, TURNED
+        lx, l0, l1, l2, ok, stopped = stop_inside(P, SIGMA, x, t, u, w, h, e0)
+        if stopped:
+            if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, peaks, trail):
+                return x, t, u, w, s, TURNED
+            trail.append((P[P_STOP], lx ** P[7], l1, l2))
+            return lx, P[P_STOP], l1, l2, s + 1, STOP
+        if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks, trail):
+            return x, t, u, w, s, TURNED
         t, u, w = e0, e1, e2
-    return t, u, w, True
+        trail.append((t, 0.0 if s == n - 1 else (x + h) ** P[7], u, w))
+    return 0.0, t, u, w, n, DONE
 
 
 @jit
@@ -255,33 +321,89 @@ def estimate(P, v_in):
 
 
 @jit
-def impact(P, v_in, n_end, n_mid, out):
-    """One contact from touching at approach speed v_in > 0 to separating, n_end steps over sigma
-    at each end and steps of a contact time over n_mid between. out (NOUT): the speed of
-    separation, the contact time, the largest overlap and force, the dashpot's work, the steps
-    taken, and 1 where every part converged (0: the contact does not separate as the phases
-    need, or a step failed)."""
-    dmax, span = estimate(P, v_in)
-    peaks = [0.0, law(P, 0.0, v_in)[1]]
-    for c in range(NOUT):
-        out[c] = 0.0
+def start(P, v_in, n_end, peaks, trail):
+    """The rise, its switch to time steps at a quarter of the estimated largest overlap (halved
+    while the approach slows too much before it). Returns (delta1, sigma, t, u, work, steps,
+    how)."""
+    dmax, _ = estimate(P, v_in)
     frac = SWITCH
     for _ in range(10):
         peaks[0], peaks[1] = 0.0, law(P, 0.0, v_in)[1]
         delta1 = frac * dmax
-        t, u, w, s1, ok = rise(P, v_in, delta1 ** (1.0 / P[7]), n_end, peaks)
-        if ok:
-            break
+        while len(trail) > 0:  # a deeper switch's attempt
+            trail.pop()
+        x, t, u, w, s1, how = rise(P, v_in, delta1 ** (1.0 / P[7]), n_end, peaks, trail)
+        if how != FAIL:
+            return delta1, x, t, u, w, s1, how
         frac *= 0.5
-    if not ok:
-        return
-    t, d, u, w, s2, ok = middle(P, t, delta1, u, w, span / n_mid, 50 * n_mid, peaks)
-    if not ok:
-        return
-    t, u, w, ok = fall(P, t, d ** (1.0 / P[7]), u, w, n_end, peaks)
+    return delta1, x, t, u, w, s1, FAIL
+
+
+@jit
+def contact(P, v_in, n_end, n_mid, limit, out, trail):
+    """One contact from touching at approach speed v_in > 0 until it separates or P_STOP (time
+    since touching) comes, n_end steps over sigma at each end and steps of a contact time over
+    n_mid between, at most `limit` steps over time. A contact whose separation stops before the
+    overlap is gone (gravity holds a slow, damped ball) goes on over time. out (NOUT): the speed
+    of separation, the time, the largest overlap and force, the dashpot's work, the steps, O_OK,
+    and O_END (ENDED, STOPPED: O_DELTA and O_U the overlap and its rate at the stop; FAILED).
+    trail (a list, emptied first) gets (time, overlap, its rate, work) after every step taken."""
+    while len(trail) > 0:
+        trail.pop()
+    _, span = estimate(P, v_in)
+    P[P_SPEED] = 1e-300 + 1e-17 * v_in
+    peaks = [0.0, 0.0]
+    for c in range(NOUT):
+        out[c] = 0.0
+    delta1, x, t, u, w, steps, how = start(P, v_in, n_end, peaks, trail)
+    d = delta1 if how == DONE else x ** P[7]
+    ended = False
+    while how == DONE:
+        t, d, u, w, s2, how = middle(P, t, delta1, d, u, w, span / n_mid, limit - steps, peaks, trail)
+        steps += s2
+        if how != DONE:
+            break
+        x, t, u, w, s3, how = fall(P, t, d ** (1.0 / P[7]), u, w, n_end, peaks, trail)
+        steps += s3
+        d = x ** P[7]
+        if how == DONE:
+            ended = True
+            break
+        if how == TURNED:
+            # Held on the wall (or the separation too slow for sigma's steps): over time again,
+            # back to the end's sigma only if it goes on well below here.
+            delta1, how = 0.25 * d, DONE
     out[O_VOUT], out[O_TIME], out[O_DMAX], out[O_FMAX], out[O_WORK] = -u, t, peaks[0], peaks[1], w
-    out[O_STEPS] = s1 + s2 + n_end
-    out[O_OK] = 1.0 if ok else 0.0
+    out[O_STEPS] = steps
+    out[O_END] = ENDED if ended else (STOPPED if how == STOP else FAILED)
+    out[O_OK] = 1.0 if ended else 0.0
+    out[O_DELTA], out[O_U] = d, u
+
+
+@jit
+def impact(P, v_in, n_end, n_mid, out):
+    """One contact from touching at approach speed v_in > 0 to separating, n_end steps over sigma
+    at each end and steps of a contact time over n_mid between. out (NOUT): the speed of
+    separation, the contact time, the largest overlap and force, the dashpot's work, the steps
+    taken, and 1 where every part converged (0: the contact does not separate as an impact, or a
+    step failed)."""
+    _, span = estimate(P, v_in)
+    peaks = [0.0, 0.0]
+    for c in range(NOUT):
+        out[c] = 0.0
+    P[P_SPEED] = 1e-300 + 1e-17 * v_in
+    trail = [(0.0, 0.0, 0.0, 0.0)]  # (the states after each step: `contact`'s callers keep them)
+    delta1, x, t, u, w, s1, how = start(P, v_in, n_end, peaks, trail)
+    if how != DONE:
+        return
+    t, d, u, w, s2, how = middle(P, t, delta1, delta1, u, w, span / n_mid, 50 * n_mid, peaks, trail)
+    if how != DONE:
+        return
+    x, t, u, w, s3, how = fall(P, t, d ** (1.0 / P[7]), u, w, n_end, peaks, trail)
+    out[O_VOUT], out[O_TIME], out[O_DMAX], out[O_FMAX], out[O_WORK] = -u, t, peaks[0], peaks[1], w
+    out[O_STEPS] = s1 + s2 + s3
+    out[O_OK] = 1.0 if how == DONE else 0.0
+    out[O_END] = ENDED if how == DONE else FAILED
 
 
 def steps_for(tol: float) -> tuple[int, int]:
@@ -297,7 +419,8 @@ def impact_params(*, hertz: bool, mstar: float, k: float = 0.0, estar: float = 0
     """The law's parameters as `impact` takes them (P): the linear spring k, or Hertz with E* and
     R*; the dashpot's zeta (`collide.dem.damping_ratio`); m*; a constant acceleration pressing the
     contact (gravity's part along the normal into a wall)."""
-    return np.array([1.0 if hertz else 0.0, k, estar, rstar, mstar, zeta, accel, 4.0 if hertz else 1.0])
+    return np.array([1.0 if hertz else 0.0, k, estar, rstar, mstar, zeta, accel, 4.0 if hertz else 1.0, math.inf,
+                     0.0])
 
 
 def normal_impact(params: np.ndarray, v_in: float, tol: float) -> np.ndarray:

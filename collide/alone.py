@@ -1,0 +1,186 @@
+"""Which engine runs a scene, and a sphere alone among walls under the laws beyond the report's
+(Hertz, the restitution's dashpot) in the event engine (`collide.engine.event.alone`).
+
+The event engine locates every contact and steps it at the composition's order; for the
+report's linear spring it runs every scene. Its island step does not take Hertz or a dashpot
+yet, but a sphere alone among walls never forms an island: each contact is one normal contact
+(`collide.engine.event.impact`, order 6) between closed-form flights, so such a scene runs
+there at full order whatever its tolerance. Every other scene with these laws (two spheres or
+more, friction, tangential springs, rolling resistance, a periodic box) runs in the fixed-step,
+first-order DEM kernel (docs/method.md, "Which engine runs a scene").
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from collide.engine import layout, tier
+from collide.model import TABLE_ESTAR, TABLE_K, TABLE_REST, Model, State, select_model
+from collide.results import ContactLog, RunResult
+from collide.scene import Scene, alone_blocker, dem_reason
+from collide.stepper import (
+    RunError,
+    approach_bound,
+    contact_logs,
+    kernel_inputs,
+    last_contacts,
+    longest_contacts,
+    step_limit_error,
+)
+from collide.trajectory import Trajectory
+
+EVENT, DEM, SEED = "event", "dem", "seed"
+# The finest tolerance a sphere's contacts reach: each is solved to round-off (1e-16 of its
+# speeds, 1e-15 of the run's speed scale over ten bounces); a run at a tenth of it, its
+# measurement, stays above that (the built-in bounce at --tol 1e-11 measures 4e-12).
+TOL_FLOOR = 1e-13
+
+
+def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | None = None) -> tuple[str, str]:
+    """(engine, why) for a scene run with `integrator`; `forced`: the integrator was asked for
+    (the scene's `integrator` or --integrator), not chosen; `blocker`: why the event engine
+    could not take it (else `alone_blocker`'s)."""
+    if integrator == "dem":
+        if forced:
+            return DEM, "integrator 'dem' asked for: the fixed-step DEM kernel (first order)"
+        return DEM, (f"{dem_reason(scene)}, and {blocker or alone_blocker(scene)}: the fixed-step DEM kernel "
+                     "(first order)")
+    if integrator == "seed":
+        return SEED, "integrator 'seed' asked for: the report's own update on its fixed grid"
+    if scene.needs_dem:
+        return EVENT, (f"{dem_reason(scene)} with a sphere alone among walls: each contact at order 6 "
+                       "(Gauss-Legendre), its start and end located, flights in closed form")
+    return EVENT, (f"the report's contact law: every contact and friction mode change located, steps of "
+                   f"order {_order(integrator)} ({integrator})")
+
+
+def _order(integrator: str) -> int:
+    from collide.integrators import INTEGRATORS
+
+    return INTEGRATORS[integrator].order
+
+
+def law_rows(model: Model, b: int = 0) -> np.ndarray:
+    """The law of the sphere's contact with each wall (W, impact.NP) as impact.contact takes it:
+    a wall is rigid, so m* = m and R* = r (the DEM kernel's wall contact)."""
+    from collide.dem import damping_ratio
+    from collide.engine.event import impact
+
+    row = model.wall_table[b, int(model.material[b, 0])]
+    zeta = float(damping_ratio(np.array(row[TABLE_REST]), model.hertz))
+    params = impact.impact_params(hertz=model.hertz, mstar=float(model.mass[b, 0]), k=float(row[TABLE_K]),
+                                  estar=float(row[TABLE_ESTAR]), rstar=float(model.radius[b, 0]), zeta=zeta)
+    # One type for every count of walls, the compiled kernel's: C order (a copy of the broadcast
+    # keeps its strides, F order from two walls on) and read-only (numba types that apart).
+    rows = np.array(np.broadcast_to(params, (model.n_walls, params.size)), order="C")
+    rows.setflags(write=False)
+    return rows
+
+
+def contact_tol(model: Model, state: State, tol: float) -> float:
+    """The tolerance of each contact (relative to its approach speed) for a run's tol (relative
+    to the fastest initial speed, docs/method.md): tol times that speed over the fastest approach
+    the scene allows (a ball thrown at 0.3 m/s along a floor lands at 4.4 m/s from 1 m)."""
+    speed = float(np.sqrt((state.v[0] ** 2).sum(-1)).max())
+    approach = float(approach_bound(model, state)[0])
+    return tol * min(1.0, speed / approach) if speed > 0.0 and approach > 0.0 else tol
+
+
+def alone_step(model: Model, state: State, tol: float) -> float:
+    """The time step of a contact's middle at tol: the shortest contact time the scene can
+    produce over the steps per contact time (`impact.steps_for`); the ends step over sigma."""
+    from collide import dem
+    from collide.engine.event import impact
+
+    if not model.n_walls:
+        return math.inf
+    t_c, _, _ = dem.contact_time(model, state)
+    return float(t_c[0]) / impact.steps_for(contact_tol(model, state, tol))[1]
+
+
+def check_tol(tol: float) -> None:
+    if tol < TOL_FLOOR:
+        raise RunError(f"--tol {tol:.3g} is finer than a sphere's contacts reach (about {TOL_FLOOR:.0e}: each is "
+                       "solved to round-off); use a looser --tol")
+
+
+def simulate_alone(model: Model, state: State, *, tol: float, duration: float, tail: float, record: bool,
+                   max_steps: int) -> RunResult:
+    """Run one scene of one sphere among walls (a batch of one) in the event engine."""
+    from collide.engine.event import alone, impact
+
+    check_tol(tol)
+    G, WP, grav = kernel_inputs(model, state)
+    fl = np.zeros(int(layout.NFL), np.int64)
+    fl[layout.FL_SPIN], fl[layout.FL_PLANAR] = model.spin_dim > 0, model.dim < 3
+    fl[layout.FL_RECORD], fl[layout.FL_MAXSTEPS], fl[layout.FL_DIM] = record, max_steps, model.dim
+    fp = np.zeros(int(layout.NFP))
+    fp[layout.FP_TEND] = duration if math.isfinite(duration) else math.inf
+    fp[layout.FP_TAIL] = tail
+    ends = np.array(impact.steps_for(contact_tol(model, state, tol)), np.int64)
+    laws = law_rows(model)
+    _load_compiled(G[0], WP, laws, grav[0], fl, fp, ends)  # loading is not simulating
+    started = time.perf_counter()
+    t, knots, recs, ivals, st, fg = alone.alone_run(G[0], WP, laws, grav[0], fl, fp, ends)
+    wall_time = time.perf_counter() - started
+    _check(model, st, fg, t, open_ended=not math.isfinite(duration))
+    from collide.stepper import unpack_state
+
+    final = State(np.array([t]), *unpack_state(model, G[:1]), state.work + G[:1, :, layout.G_WK].sum(-1))
+    t_final = np.array([t])
+    logs = contact_logs([ivals], t_final)
+    log = ContactLog(logs[:, 0], logs[:, 1], logs[:, 2], np.array([fg[layout.F_MAX_OVERLAP]]),
+                     np.array([st[layout.S_CONTACTS]]), np.array([fg[layout.F_MAX_FORCE]]),
+                     longest_contacts(model, [ivals], t_final))
+    dt = alone_step(model, state, tol)
+    trajectories = [Trajectory(knots, recs, ivals, select_model(model, 0))] if record else None
+    return RunResult(model=model, initial=state, final=final, integrator="impact", dt=np.array([dt]),
+                     steps=np.array([st[layout.S_STEPS]]), jumps=np.array([st[layout.S_JUMPS]]),
+                     wall_time_s=wall_time, contacts=log, trajectories=trajectories, warnings=[],
+                     dt_min=np.array([fg[layout.F_DT_MIN] if math.isfinite(fg[layout.F_DT_MIN]) else dt]),
+                     windows=np.zeros(1, np.int64), closed_steps=np.zeros(1, np.int64),
+                     attempts=np.array([st[layout.S_STEPS]]), free_since=last_contacts([ivals], t_final, 1))
+
+
+_LOADED: list[bool] = []
+
+
+def _load_compiled(*args) -> None:
+    """Load the compiled kernel from numba's cache before the clock starts (once a process).
+    The warm-up leaves it out (about 18 s of CPU, which took the first compile past its 90 s):
+    the first compiled run of a sphere alone compiles it here and caches it."""
+    if _LOADED or not tier.COMPILED:
+        return
+    import numba
+
+    from collide.engine.event import alone
+
+    with tier.loading():
+        alone.alone_run.compile(tuple(numba.typeof(a) for a in args))
+    _LOADED.append(True)
+
+
+def _check(model: Model, st: np.ndarray, fg: np.ndarray, t: float, open_ended: bool) -> None:
+    """Turn the kernel's status into a RunError naming the cause (AloneError where the DEM kernel
+    can take the scene instead)."""
+    from collide.engine.event import alone
+
+    status = int(st[layout.S_STATUS])
+    at = f"t = {fg[layout.F_STATUS_T]:.6g} s"
+    if status == layout.OK:
+        return
+    if status == layout.MAXSTEPS:
+        raise step_limit_error(int(st[layout.S_STEPS]), t, open_ended)
+    wall = int(fg[layout.F_STATUS_A])
+    if status == alone.ALONE_WALLS:
+        raise AloneError(f"the sphere's contact with wall {wall} at {at} comes within reach of another wall: "
+                         "two contacts at once under these laws are DEM's so far")
+    raise AloneError(f"the sphere's contact with wall {wall} at {at} could not be integrated (its steps did not "
+                     "converge)")
+
+
+class AloneError(RunError):
+    """A sphere alone among walls met what the event engine cannot take at full order yet."""

@@ -1,0 +1,282 @@
+"""A sphere alone among walls under the laws beyond the report's (Hertz, the restitution's dashpot):
+`alone_run` flies it in closed form from wall to wall and takes each contact whole from
+`impact.contact` at full order. It returns what `run.simulate` returns, so a run reads it the
+same way.
+
+With no friction the normal motion at a flat wall does not depend on the tangential one: during
+a contact the sphere moves along the wall as in free flight (under gravity's part along it) and
+along the normal as the 1-DOF contact, and its spin stays. A contact that does not separate
+(gravity holds a slow, damped ball) goes on over time to the run's end. Two walls touched at
+once are not this case: the run stops with ALONE_WALLS (its caller runs the DEM kernel or
+refuses), as it does with ALONE_FAILED where a contact's steps did not converge.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from collide.engine.event.impact import (
+    ENDED,
+    NOUT,
+    O_DELTA,
+    O_DMAX,
+    O_END,
+    O_FMAX,
+    O_STEPS,
+    O_TIME,
+    O_U,
+    O_VOUT,
+    O_WORK,
+    P_STOP,
+    STOPPED,
+    contact,
+    law,
+)
+from collide.engine.flight import bring, touch_time, turn
+from collide.engine.jit import jit
+from collide.engine.layout import (
+    CN_IVALS,
+    CN_KNOTS,
+    CN_RECS,
+    F_DT_MIN,
+    F_MAX_FORCE,
+    F_MAX_OVERLAP,
+    F_STATUS_A,
+    F_STATUS_T,
+    FL_MAXSTEPS,
+    FL_PLANAR,
+    FL_RECORD,
+    FL_SPIN,
+    FP_TAIL,
+    FP_TEND,
+    G_Q,
+    G_R,
+    G_S,
+    G_TB,
+    G_V,
+    G_W,
+    G_WK,
+    K_AN,
+    MAXSTEPS,
+    NF,
+    NK,
+    NR,
+    NS,
+    OK,
+    R_DELTA,
+    R_FN,
+    R_I,
+    R_J,
+    R_T,
+    S_CONTACTS,
+    S_JUMPS,
+    S_STATUS,
+    S_STEPS,
+    V_END,
+    V_I,
+    V_J,
+    V_START,
+)
+from collide.engine.numerics import grow
+from collide.engine.records import add_knot, tail_after
+
+ALONE_WALLS, ALONE_FAILED = 16, 17  # S_STATUS: a second wall within a contact; a contact not answered
+NO_BOX = np.zeros(4)
+
+
+@jit
+def next_wall(G, WP, grav, t):
+    """The first wall the sphere's free flight from t touches: (time from t, wall; inf, -1)."""
+    best, wall = math.inf, -1
+    for w in range(WP.shape[0]):
+        tau = touch_time(G, 0, -1 - w, t, WP, grav, NO_BOX)
+        if tau < best:
+            best, wall = tau, w
+    return best, wall
+
+
+@jit
+def clear_of(WP, w, s, vt, gt, span, depth):
+    """Whether a contact on wall w from position s (touching it), moving along it at vt under gt
+    for span seconds and pressed in by at most depth, stays clear of every other wall."""
+    for o in range(WP.shape[0]):
+        if o == w:
+            continue
+        n_o = WP[o, 3:6]
+        gap = (s[0] - WP[o, 0]) * n_o[0] + (s[1] - WP[o, 1]) * n_o[1] + (s[2] - WP[o, 2]) * n_o[2]
+        rate = vt[0] * n_o[0] + vt[1] * n_o[1] + vt[2] * n_o[2]
+        acc = gt[0] * n_o[0] + gt[1] * n_o[1] + gt[2] * n_o[2]
+        lowest = min(gap, gap + rate * span + 0.5 * acc * span * span)
+        if acc > 0.0 and 0.0 < -rate / acc < span:
+            lowest = min(lowest, gap - 0.5 * rate * rate / acc)
+        tilt = abs(WP[w, 3] * n_o[0] + WP[w, 4] * n_o[1] + WP[w, 5] * n_o[2])
+        if lowest - depth * tilt <= 0.0:  # (gap: of the centre; the radius is added by the caller)
+            return False
+    return True
+
+
+@jit
+def add_record(RC, CNT, t, w, delta, fn):
+    RC = grow(RC, CNT[CN_RECS])
+    r = CNT[CN_RECS]
+    for c in range(NR):
+        RC[r, c] = 0.0
+    RC[r, R_T], RC[r, R_I], RC[r, R_J], RC[r, R_DELTA], RC[r, R_FN] = t, 0.0, -1.0 - w, delta, fn
+    CNT[CN_RECS] += 1
+    return RC
+
+
+@jit
+def knot(KN, CNT, G, t, free, acc, a_next):
+    """A knot of the sphere's state in G at t: arriving under acc, leaving under a_next."""
+    KN = add_knot(KN, CNT, t, 0, free, G, 0, G_S, G_V, G_W, G_Q, acc, G[0, G_WK])
+    for d in range(3):
+        KN[CNT[CN_KNOTS] - 1, K_AN + d] = a_next[d]
+    return KN
+
+
+@jit
+def place(G, X, n, s0, vt, gt, tau, delta, u, fl):
+    """X's row 0: the sphere of G (at the contact's touch) tau later, pressed delta into the wall
+    of normal n at the rate u (along the wall as in free flight, its spin kept)."""
+    for c in range(G.shape[1]):
+        X[0, c] = G[0, c]
+    for d in range(3):
+        X[0, G_S + d] = s0[d] + vt[d] * tau + 0.5 * gt[d] * tau * tau - delta * n[d]
+        X[0, G_V + d] = vt[d] + gt[d] * tau - u * n[d]
+    if fl[FL_SPIN]:
+        turn(X[0, G_Q:G_Q + 4], X[0, G_W], X[0, G_W + 1], X[0, G_W + 2], tau, fl[FL_PLANAR])
+
+
+@jit
+def contact_knots(KN, RC, CNT, G, X, P, n, s0, vt, gt, t, w, trail, ended, grav, fl):
+    """A knot and a contact record after every step of the contact on wall w touched at t (G's
+    state then), from its trail; the last knot of a contact that ended starts a free flight."""
+    acc = np.empty(3)
+    for k in range(len(trail)):
+        tau, delta, u, work = trail[k]
+        place(G, X, n, s0, vt, gt, tau, delta, u, fl)
+        X[0, G_WK] = G[0, G_WK] + work
+        fn = law(P, delta, u)[1]
+        for d in range(3):
+            acc[d] = grav[d] + fn / P[4] * n[d]
+        last = ended and k == len(trail) - 1
+        KN = knot(KN, CNT, X, t + tau, 1.0 if last else 0.0, acc, grav if last else acc)
+        RC = add_record(RC, CNT, t + tau, w, delta, fn)
+    return KN, RC
+
+
+@jit
+def take_contact(G, WP, LAW, grav, fl, w, t, t_end, ends, steps_left, out, trail, bufs, CNT):
+    """The contact on wall w touched at t (G's base state there): the base state moved to its end
+    (or t_end), knots and records of its steps where recording. Returns (end time, ok, clear,
+    knots, records)."""
+    KN, RC = bufs
+    n = WP[w, 3:6].copy()
+    vn = G[0, G_V] * n[0] + G[0, G_V + 1] * n[1] + G[0, G_V + 2] * n[2]
+    gn = grav[0] * n[0] + grav[1] * n[1] + grav[2] * n[2]
+    vt = np.empty(3)
+    gt = np.empty(3)
+    s0 = np.empty(3)
+    for d in range(3):
+        vt[d] = G[0, G_V + d] - vn * n[d]
+        gt[d] = grav[d] - gn * n[d]
+        s0[d] = G[0, G_S + d]
+    P = LAW[w].copy()
+    P[6] = -gn  # gravity pressing the contact
+    P[P_STOP] = t_end - t
+    contact(P, -vn, ends[0], ends[1], steps_left, out, trail)
+    if out[O_END] != ENDED and out[O_END] != STOPPED:
+        return t, False, True, KN, RC
+    span = out[O_TIME]
+    clear = clear_of_radius(WP, w, s0, vt, gt, span, out[O_DMAX], G[0, G_R])
+    ended = out[O_END] == ENDED
+    X = np.empty((1, G.shape[1]))
+    if fl[FL_RECORD]:
+        KN, RC = contact_knots(KN, RC, CNT, G, X, P, n, s0, vt, gt, t, w, trail, ended, grav, fl)
+    place(G, X, n, s0, vt, gt, span, 0.0 if ended else out[O_DELTA], -out[O_VOUT] if ended else out[O_U], fl)
+    for c in range(G.shape[1]):
+        G[0, c] = X[0, c]
+    G[0, G_TB] = t + span if ended else t_end
+    G[0, G_WK] += out[O_WORK]
+    return G[0, G_TB], True, clear, KN, RC
+
+
+@jit
+def clear_of_radius(WP, w, s, vt, gt, span, depth, radius):
+    """`clear_of` for a sphere of this radius centred at s."""
+    moved = np.empty((WP.shape[0], 6))
+    for o in range(WP.shape[0]):
+        for d in range(3):
+            moved[o, d] = WP[o, d] + radius * WP[o, 3 + d]  # each wall moved out by the radius
+            moved[o, 3 + d] = WP[o, 3 + d]
+    return clear_of(moved, w, s, vt, gt, span, depth)
+
+
+@jit
+def alone_run(G, WP, LAW, grav, fl, fp, ends):
+    """Run the sphere of G (one row) among the walls WP, the law of its contact with wall w in
+    LAW[w] (impact.impact_params' P), from time 0 to fp[FP_TEND] (or, with none, until it leaves
+    every wall for good, and fp[FP_TAIL] or the usual tail after). ends: the steps over sigma
+    at each end of a contact and per contact time between (impact.steps_for). Returns (final
+    time, knots, records, intervals, counters, figures) as `run.simulate`."""
+    KN = np.empty((16, NK))
+    RC = np.empty((16, NR))
+    IV = np.empty((16, 4))
+    CNT = np.zeros(4, np.int64)
+    ST = np.zeros(NS, np.int64)
+    FG = np.zeros(NF)
+    FG[F_DT_MIN] = math.inf
+    record = fl[FL_RECORD]
+    out = np.zeros(NOUT)
+    trail = [(0.0, 0.0, 0.0, 0.0)]
+    a_in = np.empty(3)
+    t_end = fp[FP_TEND]
+    t = 0.0
+    if record:
+        KN = knot(KN, CNT, G, 0.0, 1.0, grav, grav)
+    while ST[S_STATUS] == OK:
+        tau, w = next_wall(G, WP, grav, t)
+        if not t + tau < t_end:
+            break
+        t += tau
+        bring(G, 0, t, grav, fl)
+        ST[S_JUMPS] += 1
+        v_in = -(G[0, G_V] * WP[w, 3] + G[0, G_V + 1] * WP[w, 4] + G[0, G_V + 2] * WP[w, 5])
+        f0 = law(LAW[w], 0.0, v_in)[1]
+        for d in range(3):
+            a_in[d] = grav[d] + f0 / LAW[w, 4] * WP[w, 3 + d]
+        if record:
+            KN = knot(KN, CNT, G, t, 0.0, grav, a_in)
+            RC = add_record(RC, CNT, t, w, 0.0, f0)
+        IV = grow(IV, CNT[CN_IVALS])
+        row = CNT[CN_IVALS]
+        IV[row, V_I], IV[row, V_J], IV[row, V_START], IV[row, V_END] = 0.0, -1.0 - w, t, t_end
+        CNT[CN_IVALS] += 1
+        ST[S_CONTACTS] += 1
+        start = t
+        t, ok, clear, KN, RC = take_contact(G, WP, LAW, grav, fl, w, t, t_end, ends, fl[FL_MAXSTEPS] - ST[S_STEPS],
+                                            out, trail, (KN, RC), CNT)
+        ST[S_STEPS] += int(out[O_STEPS])
+        FG[F_MAX_OVERLAP] = max(FG[F_MAX_OVERLAP], out[O_DMAX])
+        FG[F_MAX_FORCE] = max(FG[F_MAX_FORCE], out[O_FMAX])
+        FG[F_DT_MIN] = min(FG[F_DT_MIN], out[O_TIME] / max(out[O_STEPS], 1.0))
+        if not ok or not clear:
+            ST[S_STATUS] = ALONE_FAILED if not ok else ALONE_WALLS
+            if not ok and ST[S_STEPS] >= fl[FL_MAXSTEPS]:
+                ST[S_STATUS] = MAXSTEPS
+            FG[F_STATUS_T], FG[F_STATUS_A] = start, w
+            break
+        if out[O_END] == ENDED:
+            IV[row, V_END] = t
+        if not t < t_end:
+            break
+    if t < t_end and ST[S_STATUS] == OK:
+        t = t_end if t_end < math.inf else (IV[CNT[CN_IVALS] - 1, V_END] if CNT[CN_IVALS] else 0.0) + \
+            tail_after(fp[FP_TAIL], IV, CNT)
+        bring(G, 0, t, grav, fl)
+        if record:
+            KN = knot(KN, CNT, G, t, 1.0, grav, grav)
+    return t, KN[:CNT[CN_KNOTS]].copy(), RC[:CNT[CN_RECS]].copy(), IV[:CNT[CN_IVALS]].copy(), ST, FG
