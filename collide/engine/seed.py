@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from collide.engine.broad import NO_BOX, near_pairs
+from collide.engine.broad import NBOX, near_pairs
 from collide.engine.flight import account_contacts, bring, meets_again, next_contact, positions_at, speed_scales, turn
 from collide.engine.jit import jit
 from collide.engine.layout import (
@@ -208,6 +208,9 @@ def seed_run(G, tables, WP, grav, fl, fp):
     g3 = np.zeros(3)
     for d in range(3):
         g3[d] = grav[d]
+    # No periodic box, as an array of the type the event engine passes (the module's NO_BOX is a
+    # read-only constant in a kernel: a second compile of the broad phase and of free flight).
+    box = np.zeros(NBOX)
     knot_of = np.zeros(n, np.int64)
     if record:
         for i in range(n):
@@ -228,7 +231,7 @@ def seed_run(G, tables, WP, grav, fl, fp):
         margin = np.zeros(n)
         for i in range(n):
             margin[i] = math.sqrt(V[i, 0] ** 2 + V[i, 1] ** 2 + V[i, 2] ** 2) * dt + 1e-12 * G[i, G_R]
-        pairs = near_pairs(P, G[:, G_R], margin, n, dim, NO_BOX)
+        pairs = near_pairs(P, G[:, G_R], margin, n, dim, box)
         for i in range(n):
             bring(G, i, t, grav, fl)
         top, RC = seed_forces(G, pairs, WP, grav, tables, fl, force, facc, alp, RC, CNT, t + dt)
@@ -307,10 +310,10 @@ def seed_run(G, tables, WP, grav, fl, fp):
         positions_at(G, n, t, grav, P, V)
         account_contacts(IV, CNT, parent, count, seen)
         scale = speed_scales(V, n, parent)
-        tau = next_contact(G, P, V, n, t, WP, grav, dim, math.inf, YES, fp[FP_SLOW], scale, NO_BOX)
+        tau = next_contact(G, P, V, n, t, WP, grav, dim, math.inf, YES, fp[FP_SLOW], scale, box)
         tail = math.ceil(tail_after(fp[FP_TAIL], IV, CNT) / dt) * dt if t_end == math.inf else 0.0
         if (tau < math.inf and t_end == math.inf and CNT[CN_IVALS] > 0 and fp[FP_END_SLOW] > 0.0
-                and not meets_again(G, P, V, n, t, WP, grav, count, fp[FP_SLOW], fp[FP_END_SLOW], tail, scale, NO_BOX)):
+                and not meets_again(G, P, V, n, t, WP, grav, count, fp[FP_SLOW], fp[FP_END_SLOW], tail, scale, box)):
             tau = math.inf  # closes slower than the run resolves: the step's error (as `windows`)
         if tau == math.inf and t_end == math.inf:
             t_end = t + tail
