@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from collide.engine import layout, tier
+from collide.engine import jit, layout, tier
 from collide.model import TABLE_ESTAR, TABLE_K, TABLE_REST, Model, State, select_model
 from collide.results import ContactLog, RunResult
 from collide.scene import Scene, alone_blocker, dem_reason
@@ -159,7 +159,7 @@ def _load_compiled(*args) -> None:
     from collide.engine.event import alone
 
     with tier.loading():
-        alone.alone_run.compile(tuple(numba.typeof(a) for a in args))
+        jit.compile_with_entry(alone.alone_run, tuple(numba.typeof(a) for a in args))
     _LOADED.append(True)
 
 

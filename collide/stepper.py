@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from collide.engine import layout, tier
+from collide.engine import jit, layout, tier
 from collide.engine.event import run as event_run
 from collide.errors import RunError
 from collide.integrators import INTEGRATORS, Integrator
@@ -476,7 +476,7 @@ def _load_compiled(events: bool, *args) -> None:
     types = tuple(numba.typeof(a) for a in (args if events else (args[0], args[1], args[2], args[3], args[5],
                                                                   args[6])))
     with tier.loading():
-        kernel.compile(types)
+        jit.compile_with_entry(kernel, types)
     _LOADED.add(events)
 
 

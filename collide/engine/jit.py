@@ -288,13 +288,16 @@ def _compile_entries_when_called() -> None:
 
         def __call__(self, *args, **kwargs):
             if self.compiled is None:
-                with global_compiler_lock:
-                    if self.compiled is None:
-                        compiled = executable(*self.made)
-                        if self.ready is not None:
-                            self.ready(compiled)
-                        self.compiled = compiled
+                self.make()
             return self.compiled(*args, **kwargs)
+
+        def make(self) -> None:
+            with global_compiler_lock:
+                if self.compiled is None:
+                    compiled = executable(*self.made)
+                    if self.ready is not None:
+                        self.ready(compiled)
+                    self.compiled = compiled
 
     def get_executable(self, library, fndesc, env):
         compiled = library._finalized and "_not_compiled" not in library.__dict__
@@ -322,6 +325,15 @@ def _compile_entries_when_called() -> None:
 
     cpu.CPUContext.get_executable = get_executable
     dispatcher.Dispatcher.add_overload = add_overload
+
+
+def compile_with_entry(kernel, types: tuple) -> None:
+    """Compile (or load) `kernel` for `types` with its entry from Python ready now, not at the
+    first call (which a run makes inside its clock)."""
+    kernel.compile(types)
+    make = getattr(kernel.overloads[tuple(types)].entry_point, "make", None)
+    if make is not None:
+        make()
 
 
 def _callable_as(cres, compiled):
