@@ -1,7 +1,9 @@
 """Compile the engine's kernels into numba's on-disk cache: `python -m collide.warmup`.
 
 Runs every entry point once on a tiny scene of each kind it can be called for, so that every
-signature a run uses is compiled; then marks the cache ready (`tier.compiled_ready`). It also
+signature a run uses is compiled, but for the kernels of runs that are rare and cheap to compile
+on their own: the seed integrator's (`seed_run`, about 5 s of CPU) and a sphere alone's
+(`alone_run`, about 18 s), compiled and cached by their first compiled run; then marks the cache ready (`tier.compiled_ready`). It also
 writes the bytecode cache of collide's Python modules (`write_bytecode`). The first
 `collide` command after install starts this in the background by itself (`tier.start_compile`,
 which hands it the compile lock); run by hand (`collide engine --compile`, the test script) it
@@ -47,7 +49,6 @@ def warm() -> float:
               {"name": "b", "mass": 1.0, "radius": 0.1, "position": [0.3, 0.05], "velocity": [0.0, 0.0]}]
     scene = parse_scene({"dim": 2, "contact": {"k": 1e4, "mu": 0.3}, "body": bodies})
     run_scene(scene, record=True)
-    run_scene(scene, integrator="seed", dt=1e-4, record=True)
     dem = parse_scene({"dim": 3, "dt": 1e-6, "duration": 2e-3,
                        "contact": {"model": "hertz", "youngs_modulus": 1e8, "restitution": 0.5, "mu": 0.3,
                                    "tangential": "spring", "rolling_friction": 0.01},
