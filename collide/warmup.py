@@ -3,11 +3,12 @@
 Runs every entry point once on a tiny scene of each kind it can be called for, so that every
 signature a run uses is compiled, but for the kernels of runs that are rare and cheap to compile
 on their own: the seed integrator's (`seed_run`, about 5 s of CPU) and a sphere alone's
-(`alone_run`, about 18 s), compiled and cached by their first compiled run; then marks the cache ready (`tier.compiled_ready`). It also
-writes the bytecode cache of collide's Python modules (`write_bytecode`). The first
-`collide` command after install starts this in the background by itself (`tier.start_compile`,
-which hands it the compile lock); run by hand (`collide engine --compile`, the test script) it
-takes the lock itself, waiting for a compile that is running rather than compile beside it.
+(`alone_run`, about 18 s), compiled and cached by their first compiled run; then marks the cache
+ready (`tier.compiled_ready`). It also writes the bytecode cache of collide's Python modules
+(`write_bytecode`). The first `collide` command after install starts this in the background by
+itself (`tier.start_compile`, which hands it the compile lock); run by hand (`collide engine
+--compile`, the test script) it takes the lock itself, waiting for a compile that is
+running rather than compile beside it.
 
 While it runs it records how many functions it has compiled (`collide engine` shows that as a
 fraction of the last compile's count); a failure is recorded with its cause in one line.
