@@ -205,12 +205,9 @@ def seed_run(G, tables, WP, grav, fl, fp):
     facc = np.zeros((n, 3))
     alp = np.zeros((n, 3))
     acc = np.zeros((n, 3))
-    g3 = np.zeros(3)
+    g3, box = np.zeros(3), np.zeros(NBOX)  # no box, writable as the event engine's (NO_BOX: a 2nd compile)
     for d in range(3):
         g3[d] = grav[d]
-    # No periodic box, as an array of the type the event engine passes (the module's NO_BOX is a
-    # read-only constant in a kernel: a second compile of the broad phase and of free flight).
-    box = np.zeros(NBOX)
     knot_of = np.zeros(n, np.int64)
     if record:
         for i in range(n):
