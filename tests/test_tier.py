@@ -116,3 +116,40 @@ def test_the_engine_sources_list_is_kept_until_any_collide_source_changes(tmp_pa
         assert tier.engine_sources() == sources
     finally:
         os.utime(edited, ns=(stat.st_atime_ns, stat.st_mtime_ns))
+
+
+# A load that takes longer than the notice's threshold (a compile), then a quick one (a cache load).
+SLOW_THEN_QUICK = ("import time\n"
+                   "from collide.engine import tier\n"
+                   "with tier.loading():\n    time.sleep(tier.SLOW_LOAD_NOTICE_S + 0.5)\n"
+                   "with tier.loading():\n    pass\n"
+                   "print('loaded', file=__import__('sys').stderr)\n")
+
+
+def _stderr_at_a_terminal(code: str) -> str:
+    """What `code` writes to stderr when stderr is a terminal (a pseudo-terminal here)."""
+    import pty
+
+    leader, follower = pty.openpty()
+    done = subprocess.run([sys.executable, "-c", code], stderr=follower, stdout=subprocess.DEVNULL, timeout=60)
+    os.close(follower)
+    said = b""
+    try:
+        while chunk := os.read(leader, 4096):
+            said += chunk
+    except OSError:  # the terminal's other end closed: all is read
+        pass
+    os.close(leader)
+    assert done.returncode == 0
+    return said.decode()
+
+
+def test_a_slow_kernel_load_is_announced_at_a_terminal_once() -> None:
+    said = _stderr_at_a_terminal(SLOW_THEN_QUICK)
+    assert said.count("compiling the kernels this scene needs") == 1, said
+    assert "loaded" in said
+
+
+def test_a_slow_kernel_load_says_nothing_into_a_pipe() -> None:
+    done = subprocess.run([sys.executable, "-c", SLOW_THEN_QUICK], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stderr.strip() == "loaded", done.stderr

@@ -37,6 +37,7 @@ import os
 import re
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -438,14 +439,30 @@ if COMPILED and not _SELF_COMPILING:
 _loading = [0.0]
 
 
+# A kernel the warm-up leaves out (a sphere alone's, the seed's) compiles at its first run, for
+# seconds: a user at a terminal is told why the run waits.
+SLOW_LOAD_NOTICE_S = 1.0
+
+
 @contextmanager
 def loading() -> Iterator[None]:
-    """Time a kernel's loading (add it to `load_seconds`)."""
+    """Time a kernel's loading (add it to `load_seconds`); at a terminal, say so when it takes
+    long enough to be a compile."""
     started = time.perf_counter()
+    notice = threading.Timer(SLOW_LOAD_NOTICE_S, _say_compiling)
+    notice.daemon = True
+    if sys.stderr.isatty():
+        notice.start()
     try:
         yield
     finally:
+        notice.cancel()
         _loading[0] += time.perf_counter() - started
+
+
+def _say_compiling() -> None:
+    print("collide: compiling the kernels this scene needs, once (about 10 s; cached after)",
+          file=sys.stderr, flush=True)
 
 
 def load_seconds() -> float:
