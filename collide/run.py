@@ -345,7 +345,7 @@ def _run_alone(scene: Scene, integ: str, model, state, tol: float, record: bool,
     run = _engine(SceneRun([scene], result, "auto", [tol], np.array([tol]), [True], ["model"]), scene, integ, forced)
     if not measure:
         return run
-    t_c = float(contact_time(model, state)[0][0]) if model.n_walls else math.inf
+    t_c = float(contact_time(model, state)[0][0]) if model.n_walls or model.n_bodies > 1 else math.inf
     lasting = float(result.contacts.duration[0]) > measure_mod.LASTING_CONTACT * t_c
     at_rest = not np.any(state.v)  # --tol is relative to the fastest initial speed: none to measure against
     if measure_mod.outside_model(result, lasting) and at_rest:
