@@ -362,7 +362,8 @@ def full_order_rows(test: int, case: str, scene: Scene, expected: dict[str, floa
     steps = int(res.steps[0]) / max(int(res.contacts.count[0]), 1)
     rows.append(Row(test, case, "steps per contact", steps, FULL_STEPS, steps / FULL_STEPS, 1.0,
                     bool(res.engine == "event" and steps <= FULL_STEPS),
-                    f"{note} ({res.engine} engine); bar: at most {FULL_STEPS}"))
+                    f"{note}; steps per contact: at most {FULL_STEPS}" if res.engine == "event" else
+                    f"ran in the {res.engine} engine, not the event engine"))
     return rows
 
 

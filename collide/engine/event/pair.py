@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 
+from collide.engine.event.alone import add_record
 from collide.engine.event.impact import (
     ENDED,
     NOUT,
@@ -63,11 +64,6 @@ from collide.engine.layout import (
     NK,
     NR,
     NS,
-    R_DELTA,
-    R_FN,
-    R_I,
-    R_J,
-    R_T,
     S_CONTACTS,
     S_JUMPS,
     S_STATUS,
@@ -100,17 +96,6 @@ def pair_knots(KN, CNT, G, t, free, fn, n, grav):
             for d in range(3):
                 KN[CNT[CN_KNOTS] - 1, K_AN + d] = grav[d]  # leaving in free flight
     return KN
-
-
-@jit
-def add_pair_record(RC, CNT, t, delta, fn):
-    RC = grow(RC, CNT[CN_RECS])
-    r = CNT[CN_RECS]
-    for c in range(NR):
-        RC[r, c] = 0.0
-    RC[r, R_T], RC[r, R_I], RC[r, R_J], RC[r, R_DELTA], RC[r, R_FN] = t, 0.0, 1.0, delta, fn
-    CNT[CN_RECS] += 1
-    return RC
 
 
 @jit
@@ -189,7 +174,7 @@ def pair_run(G, LAW, grav, fl, fp, ends):
         f0 = law(P, 0.0, v_in)[1]
         if record:
             KN = pair_knots(KN, CNT, G, t, 0.0, f0, n, grav)
-            RC = add_pair_record(RC, CNT, t, 0.0, f0)
+            RC = add_record(RC, CNT, t, -2, 0.0, f0)  # (j = -1 - w: sphere 1)
         out = np.zeros(NOUT)
         trail = [(0.0, 0.0, 0.0, 0.0)]
         contact(P, v_in, ends[0], ends[1], fl[FL_MAXSTEPS], out, trail)
@@ -208,7 +193,7 @@ def pair_run(G, LAW, grav, fl, fp, ends):
                 fn = law(P, delta, u)[1]
                 last = ended and k == len(trail) - 1
                 KN = pair_knots(KN, CNT, X, t + tk, 1.0 if last else 0.0, fn, n, grav)
-                RC = add_pair_record(RC, CNT, t + tk, delta, fn)
+                RC = add_record(RC, CNT, t + tk, -2, delta, fn)
         span = out[O_TIME]
         place_pair(G, X, G, n, span, 0.0 if ended else out[O_DELTA], -out[O_VOUT] if ended else out[O_U], out[O_WORK],
                    grav, fl)
