@@ -165,7 +165,7 @@ def test_the_json_says_which_engine_ran_and_why(monkeypatch, capsys, tmp_path):
     assert trio["engine"] == "dem" and "3 spheres" in trio["engine_reason"]
     # Not head-on, the line of centres turns during the contact: DEM, with the cause.
     oblique = copy.deepcopy(PAIR)
-    oblique["body"][1]["position"] = [0.3, 0.05]
+    oblique["body"][1]["position"], oblique["duration"] = [0.3, 0.05], 0.2
     grazing = _json([_scene_file(tmp_path, oblique)], monkeypatch, capsys, tmp_path)
     assert grazing["engine"] == "dem" and "not head-on" in grazing["engine_reason"]
     report = _json(["demo-bonus"], monkeypatch, capsys, tmp_path)
