@@ -173,7 +173,8 @@ def test_cli_chung_ooi_json_and_plots(tmp_path):
                                               "--plots", str(tmp_path)])
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
-    assert data["passed"] and len(data["rows"]) == 6
+    # Two materials: three DEM rows and four full-order ones (three quantities, steps) each.
+    assert data["passed"] and len(data["rows"]) == 14
     assert (tmp_path / "test2.png").stat().st_size > 10_000
 
 
