@@ -50,6 +50,10 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
                      "(first order)")
     if integrator == "seed":
         return SEED, "integrator 'seed' asked for: the report's own update on its fixed grid"
+    if scene.needs_dem and len(scene.bodies) == 2:
+        return EVENT, (f"{dem_reason(scene)} with two spheres and no walls, no friction: their contact in the "
+                       "relative coordinate (reduced mass and radius, head-on) at order 6 (Gauss-Legendre), its "
+                       "start and end located, flights in closed form")
     if scene.needs_dem:
         return EVENT, (f"{dem_reason(scene)} with a sphere alone among walls: each contact at order 6 "
                        "(Gauss-Legendre), its start and end located, flights in closed form")
@@ -80,25 +84,50 @@ def law_rows(model: Model, b: int = 0) -> np.ndarray:
     return rows
 
 
-def contact_tol(model: Model, state: State, tol: float) -> float:
+def pair_row(model: Model, b: int = 0) -> np.ndarray:
+    """The law of two spheres' contact (impact.NP) in their relative coordinate: m* and R* the
+    reduced mass and radius, E*, k and the restitution from the pair table (the DEM kernel's)."""
+    from collide.dem import damping_ratio
+    from collide.engine.event import impact
+
+    m, r = model.mass[b, :2], model.radius[b, :2]
+    row = model.pair_table[b, int(model.material[b, 0]), int(model.material[b, 1])]
+    zeta = float(damping_ratio(np.array(row[TABLE_REST]), model.hertz))
+    params = impact.impact_params(hertz=model.hertz, mstar=float(m[0] * m[1] / (m[0] + m[1])), k=float(row[TABLE_K]),
+                                  estar=float(row[TABLE_ESTAR]), rstar=float(r[0] * r[1] / (r[0] + r[1])), zeta=zeta)
+    rows = params[None, :].copy()
+    rows.setflags(write=False)  # the type `law_rows` gives (one compiled signature)
+    return rows
+
+
+def contact_tol(model: Model, state: State, tol: float, duration: float = math.nan) -> float:
     """The tolerance of each contact (relative to its approach speed) for a run's tol (relative
     to the fastest initial speed, docs/method.md): tol times that speed over the fastest approach
-    the scene allows (a ball thrown at 0.3 m/s along a floor lands at 4.4 m/s from 1 m)."""
+    the scene allows (a ball thrown at 0.3 m/s along a floor lands at 4.4 m/s from 1 m), over
+    the chain's gain where gravity brings the sphere back for `duration`: an error d of a rebound
+    speed shifts every later contact by 2 d / g, and the velocity at the end by g times that; the
+    rebounds' speeds sum to at most g T / 2 (their flights fill at most the run), so the end's
+    velocity moves by up to 1 + g T / approach times one contact's error (measured: ten bounces
+    of a Hertz ball at e = 0.8 ended 6 to 9 times the contact's tolerance away from a run at a
+    thousandth of it without this, and so fell to the measurement's finer runs)."""
     speed = float(np.sqrt((state.v[0] ** 2).sum(-1)).max())
     approach = float(approach_bound(model, state)[0])
-    return tol * min(1.0, speed / approach) if speed > 0.0 and approach > 0.0 else tol
+    share = tol * min(1.0, speed / approach) if speed > 0.0 and approach > 0.0 else tol
+    if model.gravity is not None and model.n_walls and math.isfinite(duration) and approach > 0.0:
+        share /= 1.0 + float(np.linalg.norm(model.gravity[0])) * duration / approach
+    return share
 
 
-def alone_step(model: Model, state: State, tol: float) -> float:
+def alone_step(model: Model, state: State, tol: float, duration: float = math.nan) -> float:
     """The time step of a contact's middle at tol: the shortest contact time the scene can
     produce over the steps per contact time (`impact.steps_for`); the ends step over sigma."""
     from collide import dem
     from collide.engine.event import impact
 
-    if not model.n_walls:
+    if not model.n_walls and model.n_bodies < 2:
         return math.inf
     t_c, _, _ = dem.contact_time(model, state)
-    return float(t_c[0]) / impact.steps_for(contact_tol(model, state, tol))[1]
+    return float(t_c[0]) / impact.steps_for(contact_tol(model, state, tol, duration))[1]
 
 
 def check_tol(tol: float) -> None:
@@ -109,8 +138,9 @@ def check_tol(tol: float) -> None:
 
 def simulate_alone(model: Model, state: State, *, tol: float, duration: float, tail: float, record: bool,
                    max_steps: int) -> RunResult:
-    """Run one scene of one sphere among walls (a batch of one) in the event engine."""
-    from collide.engine.event import alone, impact
+    """Run one scene of one sphere among walls, or of two spheres and no walls (a batch of one),
+    in the event engine."""
+    from collide.engine.event import alone, impact, pair
 
     check_tol(tol)
     G, WP, grav = kernel_inputs(model, state)
@@ -120,11 +150,13 @@ def simulate_alone(model: Model, state: State, *, tol: float, duration: float, t
     fp = np.zeros(int(layout.NFP))
     fp[layout.FP_TEND] = duration if math.isfinite(duration) else math.inf
     fp[layout.FP_TAIL] = tail
-    ends = np.array(impact.steps_for(contact_tol(model, state, tol)), np.int64)
-    laws = law_rows(model)
-    _load_compiled(G[0], WP, laws, grav[0], fl, fp, ends)  # loading is not simulating
+    ends = np.array(impact.steps_for(contact_tol(model, state, tol, duration)), np.int64)
+    two = model.n_bodies == 2
+    args = (G[0], pair_row(model), grav[0], fl, fp, ends) if two else (G[0], WP, law_rows(model), grav[0], fl, fp, ends)
+    kernel = pair.pair_run if two else alone.alone_run
+    _load_compiled(kernel, args)  # loading is not simulating
     started = time.perf_counter()
-    t, knots, recs, ivals, st, fg = alone.alone_run(G[0], WP, laws, grav[0], fl, fp, ends)
+    t, knots, recs, ivals, st, fg = kernel(*args)
     wall_time = time.perf_counter() - started
     _check(model, st, fg, t, open_ended=not math.isfinite(duration))
     from collide.stepper import unpack_state
@@ -135,38 +167,37 @@ def simulate_alone(model: Model, state: State, *, tol: float, duration: float, t
     log = ContactLog(logs[:, 0], logs[:, 1], logs[:, 2], np.array([fg[layout.F_MAX_OVERLAP]]),
                      np.array([st[layout.S_CONTACTS]]), np.array([fg[layout.F_MAX_FORCE]]),
                      longest_contacts(model, [ivals], t_final))
-    dt = alone_step(model, state, tol)
+    dt = alone_step(model, state, tol, duration)
     trajectories = [Trajectory(knots, recs, ivals, select_model(model, 0))] if record else None
     return RunResult(model=model, initial=state, final=final, integrator="impact", dt=np.array([dt]),
                      steps=np.array([st[layout.S_STEPS]]), jumps=np.array([st[layout.S_JUMPS]]),
                      wall_time_s=wall_time, contacts=log, trajectories=trajectories, warnings=[],
                      dt_min=np.array([fg[layout.F_DT_MIN] if math.isfinite(fg[layout.F_DT_MIN]) else dt]),
                      windows=np.zeros(1, np.int64), closed_steps=np.zeros(1, np.int64),
-                     attempts=np.array([st[layout.S_STEPS]]), free_since=last_contacts([ivals], t_final, 1))
+                     attempts=np.array([st[layout.S_STEPS]]),
+                     free_since=last_contacts([ivals], t_final, model.n_bodies))
 
 
-_LOADED: list[bool] = []
+_LOADED: set = set()
 
 
-def _load_compiled(*args) -> None:
+def _load_compiled(kernel, args: tuple) -> None:
     """Load the compiled kernel from numba's cache before the clock starts (once a process).
     The warm-up leaves it out (about 18 s of CPU, which took the first compile past its 90 s):
     the first compiled run of a sphere alone compiles it here and caches it."""
-    if _LOADED or not tier.COMPILED:
+    if kernel in _LOADED or not tier.COMPILED:
         return
     import numba
 
-    from collide.engine.event import alone
-
     with tier.loading():
-        jit.compile_with_entry(alone.alone_run, tuple(numba.typeof(a) for a in args))
-    _LOADED.append(True)
+        jit.compile_with_entry(kernel, tuple(numba.typeof(a) for a in args))
+    _LOADED.add(kernel)
 
 
 def _check(model: Model, st: np.ndarray, fg: np.ndarray, t: float, open_ended: bool) -> None:
     """Turn the kernel's status into a RunError naming the cause (AloneError where the DEM kernel
     can take the scene instead)."""
-    from collide.engine.event import alone
+    from collide.engine.event import alone, pair
 
     status = int(st[layout.S_STATUS])
     at = f"t = {fg[layout.F_STATUS_T]:.6g} s"
@@ -174,6 +205,11 @@ def _check(model: Model, st: np.ndarray, fg: np.ndarray, t: float, open_ended: b
         return
     if status == layout.MAXSTEPS:
         raise step_limit_error(int(st[layout.S_STEPS]), t, open_ended)
+    if status == pair.PAIR_OBLIQUE:
+        raise AloneError(f"the spheres touch at {at} not head-on (moving across the line of their centres): the "
+                         "line turns during the contact, which is DEM's so far")
+    if status == pair.PAIR_FAILED:
+        raise AloneError(f"the spheres' contact at {at} could not be integrated (its steps did not converge)")
     wall = int(fg[layout.F_STATUS_A])
     if status == alone.ALONE_WALLS:
         raise AloneError(f"the sphere's contact with wall {wall} at {at} comes within reach of another wall: "

@@ -12,7 +12,7 @@ import numpy as np
 from collide import diagnostics as dg
 from collide import measure as measure_mod
 from collide.alone import TOL_FLOOR as ALONE_TOL_FLOOR
-from collide.alone import AloneError, alone_step, engine_choice, simulate_alone
+from collide.alone import AloneError, alone_step, contact_tol, engine_choice, simulate_alone
 from collide.integrators import INTEGRATORS
 from collide.invariant import check_invariant
 from collide.limits import step_limit
@@ -324,7 +324,7 @@ def _run_alone(scene: Scene, integ: str, model, state, tol: float, record: bool,
 
     if scene.gravity is not None and scene.walls and scene.duration is None:
         raise SceneError("duration: required when a scene has both gravity and walls (a bouncing sphere never stops)")
-    n_end, n_mid = steps_for(tol)
+    n_end, n_mid = steps_for(contact_tol(model, state, tol, math.nan if scene.duration is None else scene.duration))
     limit = step_limit([scene.duration], max_steps, 2 * n_end + n_mid)
     try:
         result = simulate_alone(model, state, tol=tol, duration=np.nan if scene.duration is None else scene.duration,
@@ -345,7 +345,7 @@ def _run_alone(scene: Scene, integ: str, model, state, tol: float, record: bool,
     run = _engine(SceneRun([scene], result, "auto", [tol], np.array([tol]), [True], ["model"]), scene, integ, forced)
     if not measure:
         return run
-    t_c = float(contact_time(model, state)[0][0]) if model.n_walls else math.inf
+    t_c = float(contact_time(model, state)[0][0]) if model.n_walls or model.n_bodies > 1 else math.inf
     lasting = float(result.contacts.duration[0]) > measure_mod.LASTING_CONTACT * t_c
     at_rest = not np.any(state.v)  # --tol is relative to the fastest initial speed: none to measure against
     if measure_mod.outside_model(result, lasting) and at_rest:
@@ -356,7 +356,8 @@ def _run_alone(scene: Scene, integ: str, model, state, tol: float, record: bool,
         rerun = measure_mod.Rerun(
             run=lambda finer, steps: run_scenes([scene], integrator=integ, tol=finer, record=record, max_steps=steps,
                                                 measure=False),
-            step=lambda finer: alone_step(model, state, finer), floor=ALONE_TOL_FLOOR)
+            step=lambda finer: alone_step(model, state, finer, math.nan if scene.duration is None else scene.duration),
+            floor=ALONE_TOL_FLOOR)
         run = measure_mod.measured(run, rerun, limit)
     run.result.warnings.extend(balance_warnings(run.result, [scene], np.maximum([tol], run.error_estimate), [True]))
     return run

@@ -678,7 +678,7 @@ def dem_reason(scene: Scene) -> str:
 
 def alone_blocker(scene: Scene) -> str | None:
     """Why the event engine cannot run a scene whose law goes beyond the report's (None: it can,
-    as a sphere alone among walls)."""
+    as a sphere alone among walls or two spheres and no walls)."""
     c = scene.contact
     if c.tangential != "coulomb":
         return "tangential springs are DEM's only"
@@ -686,9 +686,12 @@ def alone_blocker(scene: Scene) -> str | None:
         [p.rolling_friction or 0.0 for p in scene.pairs]
     if max(rolling) > 0.0:
         return "rolling resistance is DEM's only"
-    if len(scene.bodies) != 1:
+    if len(scene.bodies) == 2 and scene.walls:
+        return ("two spheres with walls: contacts between spheres under these laws among walls are DEM's so far; "
+                "the event engine takes a sphere alone among walls, or two spheres and no walls")
+    if len(scene.bodies) > 2:
         return (f"{len(scene.bodies)} spheres: contacts between spheres under these laws (inside an island) "
-                "are DEM's so far; the event engine takes a sphere alone among walls")
+                "are DEM's so far; the event engine takes a sphere alone among walls, or two spheres and no walls")
     if scene.has_friction:
         return "friction during a Hertz or damped contact is DEM's so far"
     if scene.domain is not None and scene.domain.periodic:

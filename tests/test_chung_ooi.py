@@ -36,13 +36,14 @@ def test_hertz_closed_form_matches_energy_and_johnsons_duration():
 
 
 def test_hertz_duration_constant_from_quadrature():
-    """2.868 is 2 int_0^1 dx / sqrt(1 - x^(5/2)) (= 2 x 1.4716) times (15/16)^(2/5): the
-    contact time in units of (m*^2 / (R* E*^2 v))^(1/5). Quadrature with x = 1 - s^2."""
-    s = np.linspace(0.0, 1.0, 200_001)[1:]
-    x = 1.0 - s**2
-    integrand = 2.0 * s / np.sqrt(1.0 - x**2.5)
-    half = np.trapezoid(integrand, s)
-    assert 2.0 * half * (15.0 / 16.0) ** 0.4 == pytest.approx(co.HERTZ_TIME, rel=2e-3)
+    """HERTZ_TIME (Johnson's 2.868) is 2 int_0^1 dx / sqrt(1 - x^(5/2)) (= 2 x 1.4716) times
+    (15/16)^(2/5): the contact time in units of (m*^2 / (R* E*^2 v))^(1/5), to round-off.
+    Adaptive quadrature with x = 1 - s^2 (a smooth integrand), not the Beta function."""
+    from scipy.integrate import quad
+
+    half, _ = quad(lambda s: 2.0 * s / math.sqrt(1.0 - (1.0 - s * s) ** 2.5), 0.0, 1.0, epsabs=0.0, epsrel=1e-13)
+    assert 2.0 * half * (15.0 / 16.0) ** 0.4 == pytest.approx(co.HERTZ_TIME, rel=1e-12)
+    assert co.HERTZ_TIME == pytest.approx(2.868, rel=1e-4)
 
 
 def test_effective_modulus_of_a_wall_is_the_sphere_alone():
@@ -113,7 +114,32 @@ def test_suite_tests_1_and_2_hertz_within_one_percent():
     _check(rows)
     rows2, _ = co.test2()
     _check(rows2)
-    assert {r.quantity for r in rows2} == {"delta_max (m)", "F_max (N)", "t_c (s)"}
+    assert {r.quantity for r in rows2} == {"delta_max (m)", "F_max (N)", "t_c (s)", "steps per contact"}
+    # Each also at full order in the event engine, at --tol 1e-8 within 1e-7 and 50 steps.
+    for got in (rows, rows2):
+        full = [r for r in got if "event engine" in r.note]
+        assert len(full) == 4 * len({r.case for r in got})
+        assert all(r.tolerance == (1.0 if r.quantity == "steps per contact" else 1e-7) for r in full)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_full_order_impacts_of_other_materials_sizes_and_speeds(seed):
+    """Tests 1 (head-on, unequal spheres) and 2 (on a plane) for random materials (E 1e6 to 1e12
+    Pa), radii (0.1 mm to 0.1 m) and speeds (1 mm/s to 100 m/s) at --tol 1e-8: within 1e-7 of
+    the closed forms in at most 50 steps, in the event engine."""
+    rng = np.random.default_rng(seed)
+    mats = [co.Material(f"m{i}", float(10 ** rng.uniform(6, 12)), float(rng.uniform(0.1, 0.45)),
+                        float(rng.uniform(500, 9000))) for i in range(2)]
+    radii = tuple(float(r) for r in 10 ** rng.uniform(-4, -1, 2))
+    speed = float(10 ** rng.uniform(-3, 2))
+    pair = co.pair_scene((mats[0], mats[1]), radii, ((0.0, speed), (0.0, -speed / 3)), full=True)
+    masses = [co.sphere_mass(m, r) for m, r in zip(mats, radii)]
+    mstar, rstar = masses[0] * masses[1] / sum(masses), radii[0] * radii[1] / sum(radii)
+    exp = co.hertz_impact(mstar, rstar, co.effective_modulus(mats[0], mats[1]), 4 * speed / 3)
+    wall = co.wall_scene(mats[0], radii[0], (0.0, -speed), full=True)
+    exp_wall = co.hertz_impact(masses[0], radii[0], co.effective_modulus(mats[0]), speed)
+    for rows in (co.full_order_rows(1, "random", pair, exp), co.full_order_rows(2, "random", wall, exp_wall)):
+        _check(rows)
 
 
 def test_suite_test_3_restitution_out_equals_in():
@@ -147,7 +173,8 @@ def test_cli_chung_ooi_json_and_plots(tmp_path):
                                               "--plots", str(tmp_path)])
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
-    assert data["passed"] and len(data["rows"]) == 6
+    # Two materials: three DEM rows and four full-order ones (three quantities, steps) each.
+    assert data["passed"] and len(data["rows"]) == 14
     assert (tmp_path / "test2.png").stat().st_size > 10_000
 
 

@@ -143,6 +143,8 @@ PAIR = {"dim": 2, "duration": 0.05, "tol": 1e-3,
         "contact": {"model": "hertz", "youngs_modulus": 1e8, "restitution": 0.7},
         "body": [{"name": "a", "mass": 1.0, "radius": 0.1, "position": [0.0, 0.0], "velocity": [1.0, 0.0]},
                  {"name": "b", "mass": 1.0, "radius": 0.1, "position": [0.3, 0.0]}]}
+# Three spheres under these laws: DEM's (two and no walls run in the event engine).
+TRIO = {**PAIR, "body": PAIR["body"] + [{"name": "c", "mass": 1.0, "radius": 0.1, "position": [0.6, 0.0]}]}
 
 
 def _scene_file(tmp_path, raw: dict) -> str:
@@ -158,7 +160,14 @@ def test_the_json_says_which_engine_ran_and_why(monkeypatch, capsys, tmp_path):
     assert alone["engine"] == "event" and "sphere alone among walls" in alone["engine_reason"]
     assert "model = 'hertz'" in alone["engine_reason"]
     pair = _json([_scene_file(tmp_path, PAIR)], monkeypatch, capsys, tmp_path)
-    assert pair["engine"] == "dem" and "2 spheres" in pair["engine_reason"]
+    assert pair["engine"] == "event" and "two spheres and no walls" in pair["engine_reason"]
+    trio = _json([_scene_file(tmp_path, TRIO)], monkeypatch, capsys, tmp_path)
+    assert trio["engine"] == "dem" and "3 spheres" in trio["engine_reason"]
+    # Not head-on, the line of centres turns during the contact: DEM, with the cause.
+    oblique = copy.deepcopy(PAIR)
+    oblique["body"][1]["position"], oblique["duration"] = [0.3, 0.05], 0.2
+    grazing = _json([_scene_file(tmp_path, oblique)], monkeypatch, capsys, tmp_path)
+    assert grazing["engine"] == "dem" and "not head-on" in grazing["engine_reason"]
     report = _json(["demo-bonus"], monkeypatch, capsys, tmp_path)
     assert report["engine"] == "event" and "the report's contact law" in report["engine_reason"]
 
@@ -169,13 +178,13 @@ def test_either_engine_may_be_forced(monkeypatch, capsys, tmp_path):
     event = _json(["bounce", "--set", "integrator='kahan6'", "--tol", "1e-6"], monkeypatch, capsys, tmp_path)
     assert event["engine"] == "event"
     # The event engine asked for where it cannot run the scene: one line with the cause.
-    code, out, err = _main(["run", _scene_file(tmp_path, PAIR), "--integrator", "kahan6", "--no-record"],
+    code, out, err = _main(["run", _scene_file(tmp_path, TRIO), "--integrator", "kahan6", "--no-record"],
                            monkeypatch, capsys, tmp_path)
-    _one_line_error(code, out, err, "2 spheres")
+    _one_line_error(code, out, err, "3 spheres")
     code, out, err = _main(["run", "bounce", "--integrator", "seed", "--no-record"], monkeypatch, capsys, tmp_path)
     _one_line_error(code, out, err, "the report's update runs its contact law only")
-    with pytest.raises(SceneError, match="2 spheres"):
-        parse_scene({**copy.deepcopy(PAIR), "integrator": "kahan6"})
+    with pytest.raises(SceneError, match="3 spheres"):
+        parse_scene({**copy.deepcopy(TRIO), "integrator": "kahan6"})
 
 
 def test_bad_input_is_refused_or_sent_where_it_runs(monkeypatch, capsys, tmp_path):
@@ -186,7 +195,7 @@ def test_bad_input_is_refused_or_sent_where_it_runs(monkeypatch, capsys, tmp_pat
     given = _json(["bounce", "--dt", "2e-5", "--set", "duration=0.5"], monkeypatch, capsys, tmp_path)
     assert given["engine"] == "dem" and "a given dt" in given["engine_reason"]
     # A tolerance DEM cannot reach, for a scene only DEM runs: the existing refusal, with its cause.
-    code, out, err = _main(["run", _scene_file(tmp_path, PAIR), "--tol", "1e-9", "--no-record"],
+    code, out, err = _main(["run", _scene_file(tmp_path, TRIO), "--tol", "1e-9", "--no-record"],
                            monkeypatch, capsys, tmp_path)
     assert code != 0 and "DEM steps per contact" in err and len(err.splitlines()) == 1
 

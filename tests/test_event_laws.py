@@ -102,3 +102,48 @@ def test_chung_ooi_hertz_impacts_at_tol_1e_8(case):
     assert out[im.O_TIME] == pytest.approx(tc, rel=1e-7)
     assert out[im.O_VOUT] == pytest.approx(v_rel, rel=1e-7)
     assert out[im.O_STEPS] <= 50
+
+
+@pytest.mark.parametrize("hertz, e, radius, density, drop", [
+    (True, 0.8, 0.03, 1100.0, 1.0), (True, 0.6, 0.01, 7800.0, 0.3), (True, 0.95, 0.1, 900.0, 2.0),
+    (False, 0.6, 0.03, 1100.0, 1.0), (False, 0.7, 0.05, 2500.0, 0.5), (False, 0.9, 0.005, 7800.0, 1.5)])
+def test_ten_bounces_as_collide_run_gives_them(hertz, e, radius, density, drop):
+    """A ball thrown down onto a floor, run as `collide run` runs it at --tol 1e-9 (its error measured):
+    the rebound speeds of ten successive bounces within 1e-8 (relative) of DOP853's chain of the
+    same 1-DOF law at rtol 1e-13, the flights between parabolas; the measured error within tol."""
+    from collide.engine import layout
+    from collide.run import run_scene
+    from collide.scene import parse_scene
+
+    g = 9.81
+    mass = 4.0 / 3.0 * math.pi * radius**3 * density
+    young, nu = 1e9, 0.3
+    zeta = float(damping_ratio(np.array(e), hertz))
+    # A linear spring with the Hertz contact's duration at the first impact.
+    _, hertz_time = im.estimate(im.impact_params(hertz=True, mstar=mass, estar=young / (1 - nu * nu), rstar=radius),
+                                math.sqrt(1.0 + 2 * g * drop))
+    k = mass * (math.pi / hertz_time) ** 2
+    params = im.impact_params(hertz=hertz, mstar=mass, k=k, estar=young / (1 - nu * nu), rstar=radius, zeta=zeta,
+                              accel=g)
+    # Thrown down at 1 m/s (--tol is relative to the fastest initial speed: a ball let go at rest has none).
+    v = math.sqrt(1.0 + 2 * g * drop)
+    expected, duration = [], (v - 1.0) / g
+    for bounce in range(10):
+        v, contact_time = reference_contact(params, v)
+        expected.append(v)
+        duration += contact_time + (2 * v / g if bounce < 9 else 0.5 * v / g)
+    contact = ({"model": "hertz", "youngs_modulus": young, "poisson_ratio": nu} if hertz else {"k": k})
+    raw = {"dim": 2, "duration": duration, "gravity": [0.0, -g], "contact": {**contact, "restitution": e},
+           "body": [{"name": "ball", "radius": radius, "mass": mass, "position": [0.0, radius + drop],
+                     "velocity": [0.0, -1.0]}],
+           "wall": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}]}
+    run = run_scene(parse_scene(raw), tol=1e-9)
+    assert run.result.engine == "event" and run.error_method[0] == "measured"
+    assert float(run.error_estimate[0]) <= 1e-9
+    traj = run.result.trajectory
+    knots = traj.knots
+    ends = traj.intervals[:, layout.V_END]
+    assert len(ends) == 10
+    got = [knots[(knots[:, layout.K_T] == end) & (knots[:, layout.K_FREE] == 1.0)][0, layout.K_V + 1] for end in ends]
+    assert np.abs(np.array(got) / np.array(expected) - 1.0).max() <= 1e-8
+

@@ -50,7 +50,8 @@ O_END, O_DELTA, O_U = 7, 8, 9
 NOUT = 10
 P_STOP = 8  # the law's parameters P: the time since touching at which `contact` stops (inf: none)
 P_SPEED = 9  # ... and the round-off of the approach speed (set by `contact` and `impact`)
-NP = 10
+P_WARM = 10  # ... and the last converged step (x, h, phase, kept, its 9 stages): `warm_start`
+NP = P_WARM + 13
 ENDED, STOPPED, FAILED = 1.0, 2.0, 0.0  # O_END: separated, stopped at P_STOP, not answered
 
 
@@ -89,12 +90,45 @@ def rhs(P, phase, x, y0, y1, y2):
 
 
 @jit
+def _lagrange(c, a, b, d):
+    """The quadratic through (GL_C0, a), (GL_C1, b), (GL_C2, d) at c."""
+    return (a * (c - GL_C1) * (c - GL_C2) / ((GL_C0 - GL_C1) * (GL_C0 - GL_C2))
+            + b * (c - GL_C0) * (c - GL_C2) / ((GL_C1 - GL_C0) * (GL_C1 - GL_C2))
+            + d * (c - GL_C0) * (c - GL_C1) / ((GL_C2 - GL_C0) * (GL_C2 - GL_C1)))
+
+
+@jit
+def warm_start(P, phase, x, h, f0, f1, f2):
+    """The first guess of a step's stages (k00, k01, k02, k10, ...): the last converged step's
+    stage polynomial (kept in P by `keep_stages`) where it is of this phase and near, its error
+    O(h^3) rather than the O(h) of the start's derivatives (f0, f1, f2), which are the guess
+    otherwise (measured: about 5 fixed-point passes a step instead of 7)."""
+    if P[P_WARM + 3] == 0.0 or P[P_WARM + 2] != phase or P[P_WARM + 1] == 0.0:
+        return f0, f1, f2, f0, f1, f2, f0, f1, f2
+    c0 = (x + GL_C0 * h - P[P_WARM]) / P[P_WARM + 1]
+    c1 = (x + GL_C1 * h - P[P_WARM]) / P[P_WARM + 1]
+    c2 = (x + GL_C2 * h - P[P_WARM]) / P[P_WARM + 1]
+    if not (abs(c0) <= 3.0 and abs(c2) <= 3.0):  # too far to extrapolate (a step after landing)
+        return f0, f1, f2, f0, f1, f2, f0, f1, f2
+    K = P[P_WARM + 4:P_WARM + 13]
+    return (_lagrange(c0, K[0], K[3], K[6]), _lagrange(c0, K[1], K[4], K[7]), _lagrange(c0, K[2], K[5], K[8]),
+            _lagrange(c1, K[0], K[3], K[6]), _lagrange(c1, K[1], K[4], K[7]), _lagrange(c1, K[2], K[5], K[8]),
+            _lagrange(c2, K[0], K[3], K[6]), _lagrange(c2, K[1], K[4], K[7]), _lagrange(c2, K[2], K[5], K[8]))
+
+
+@jit
+def keep_stages(P, phase, x, h, k00, k01, k02, k10, k11, k12, k20, k21, k22):
+    """Keep a converged step's stages in P for the next step's `warm_start`."""
+    P[P_WARM], P[P_WARM + 1], P[P_WARM + 2], P[P_WARM + 3] = x, h, phase, 1.0
+    K = P[P_WARM + 4:P_WARM + 13]
+    K[0], K[1], K[2], K[3], K[4], K[5], K[6], K[7], K[8] = k00, k01, k02, k10, k11, k12, k20, k21, k22
+
+
+@jit
 def gl_step(P, phase, x, y0, y1, y2, h):
     """One Gauss-Legendre step of h from (x, y); returns (y0, y1, y2, ok)."""
     f0, f1, f2 = rhs(P, phase, x, y0, y1, y2)
-    k00, k01, k02 = f0, f1, f2
-    k10, k11, k12 = f0, f1, f2
-    k20, k21, k22 = f0, f1, f2
+    k00, k01, k02, k10, k11, k12, k20, k21, k22 = warm_start(P, phase, x, h, f0, f1, f2)
     last = math.inf
     for _ in range(ITERATIONS):
         n00, n01, n02 = rhs(P, phase, x + GL_C0 * h, y0 + h * (GL_A00 * k00 + GL_A01 * k10 + GL_A02 * k20),
@@ -114,8 +148,11 @@ def gl_step(P, phase, x, y0, y1, y2, h):
                               / (abs(y1) + abs(h * f1) + abs(h * P[6]) + P[P_SPEED]),
                               (abs(n02 - k02) + abs(n12 - k12) + abs(n22 - k22)) / (abs(y2) + abs(h * f2) + 1e-300))
         k00, k01, k02, k10, k11, k12, k20, k21, k22 = n00, n01, n02, n10, n11, n12, n20, n21, n22
-        # Done at round-off: below it, or no longer shrinking near it.
-        if change <= 1e-16 or (change <= 1e-13 and change >= 0.5 * last):
+        # Done at round-off: below it, the next pass's change forecast below it from this pass's
+        # contraction (change / last), or no longer shrinking near it.
+        forecast = change <= 1e-8 and last < math.inf and change <= 0.5 * last and change * change <= 1e-16 * last
+        if change <= 1e-16 or forecast or (change <= 1e-13 and change >= 0.5 * last):
+            keep_stages(P, phase, x, h, k00, k01, k02, k10, k11, k12, k20, k21, k22)
             return (y0 + h * (GL_B0 * k00 + GL_B1 * k10 + GL_B2 * k20),
                     y1 + h * (GL_B0 * k01 + GL_B1 * k11 + GL_B2 * k21),
                     y2 + h * (GL_B0 * k02 + GL_B1 * k12 + GL_B2 * k22), True)
@@ -352,6 +389,7 @@ def contact(P, v_in, n_end, n_mid, limit, out, trail):
         trail.pop()
     _, span = estimate(P, v_in)
     P[P_SPEED] = 1e-300 + 1e-17 * v_in
+    P[P_WARM + 3] = 0.0
     peaks = [0.0, 0.0]
     for c in range(NOUT):
         out[c] = 0.0
@@ -392,6 +430,7 @@ def impact(P, v_in, n_end, n_mid, out):
     for c in range(NOUT):
         out[c] = 0.0
     P[P_SPEED] = 1e-300 + 1e-17 * v_in
+    P[P_WARM + 3] = 0.0
     trail = [(0.0, 0.0, 0.0, 0.0)]  # (the states after each step: `contact`'s callers keep them)
     delta1, x, t, u, w, s1, how = start(P, v_in, n_end, peaks, trail)
     if how != DONE:
@@ -419,8 +458,10 @@ def impact_params(*, hertz: bool, mstar: float, k: float = 0.0, estar: float = 0
     """The law's parameters as `impact` takes them (P): the linear spring k, or Hertz with E* and
     R*; the dashpot's zeta (`collide.dem.damping_ratio`); m*; a constant acceleration pressing the
     contact (gravity's part along the normal into a wall)."""
-    return np.array([1.0 if hertz else 0.0, k, estar, rstar, mstar, zeta, accel, 4.0 if hertz else 1.0, math.inf,
-                     0.0])
+    params = np.zeros(NP)
+    params[:P_WARM] = [1.0 if hertz else 0.0, k, estar, rstar, mstar, zeta, accel, 4.0 if hertz else 1.0, math.inf,
+                       0.0]
+    return params
 
 
 def normal_impact(params: np.ndarray, v_in: float, tol: float) -> np.ndarray:
