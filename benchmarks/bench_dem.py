@@ -15,7 +15,8 @@
    repeats alternated, the kernel's wall time and the process's CPU time over it (every thread),
    medians, the speed-up of wall time and the CPU efficiency (the first count's CPU time over
    this one's) against the first, the load average at each run, and for the threaded runs the
-   time on one thread in the driver and the time each thread waited at the barrier.
+   time on one thread in the driver, the time each thread waited at the barrier, the meetings a
+   step and the stretches taken on one thread (`--no-pace`: none, whatever the load).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import os
 os.environ.setdefault("COLLIDE_JIT", "1")  # time compiled kernels (waited for), not a fresh install's interpreted
 
 import argparse
+import math
 import statistics
 import time
 
@@ -144,10 +146,11 @@ def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
             times[count].append(spent[-1])
             steps = int(result.steps[0])
             if LAST_RUN:  # (a run on one thread takes the one-thread kernel)
-                waited = float(LAST_RUN["waited"].mean()) / rate
-                where[count].append((LAST_RUN["seconds"] - LAST_RUN["parallel"], waited,
+                waited = LAST_RUN["waited"] / rate
+                where[count].append((LAST_RUN["seconds"] - LAST_RUN["parallel"], float(waited.mean()),
                                      float(LAST_RUN["sleeps"].mean()) / max(1, int(LAST_RUN["meets"][0])),
-                                     LAST_RUN.get("alone", 0)))
+                                     LAST_RUN.get("alone", 0), int(LAST_RUN["meets"][0]) / max(1, steps),
+                                     ", ".join(f"{w:.3f}" for w in waited)))
     collide.dem.run_members = real
     print(f"\n{spheres} spheres, {steps} steps, {repeats} runs each alternated, on {os.cpu_count()} cores\n")
     print("| threads | wall s (median; runs) | CPU s (median; runs) | load (1 min) at each run | "
@@ -165,14 +168,16 @@ def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
               f"{spheres * steps / cpu:.3g} | {base[0] / wall:.2f} | {base[1] / cpu:.2f} |")
     if any(where.values()):
         print("\nThreaded runs (medians): seconds on one thread in the driver (rebuilds, coasting, hand-offs), "
-              "seconds a thread waited at the barrier, share of meetings at which it slept, stretches of steps "
-              "taken on one thread as the threads waited too long (`dem_threads._Pace`)\n")
-        print("| threads | driver s | waited s | slept | stretches on one thread |")
-        print("|---|---|---|---|---|")
+              "seconds a thread waited at the barrier (mean of the threads; each thread's, of the run with the "
+              "median mean), share of meetings at which it slept, meetings a step, stretches of steps taken on "
+              "one thread as the threads waited too long (`dem_threads._Pace`)\n")
+        print("| threads | driver s | waited s | each thread's | slept | meetings a step | stretches on one thread |")
+        print("|---|---|---|---|---|---|---|")
         for count in counts:
             if where[count]:
-                serial, waited, slept, alone = (statistics.median(x[c] for x in where[count]) for c in range(4))
-                print(f"| {count} | {serial:.3f} | {waited:.3f} | {slept:.1%} | {alone:g} |")
+                serial, waited, slept, alone, meets = (statistics.median(x[c] for x in where[count]) for c in range(5))
+                each = sorted(where[count], key=lambda x: x[1])[len(where[count]) // 2][5]
+                print(f"| {count} | {serial:.3f} | {waited:.3f} | {each} | {slept:.1%} | {meets:.2f} | {alone:g} |")
 
 
 def main() -> None:
@@ -182,6 +187,9 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=4000)
     parser.add_argument("--skip-errors", action="store_true")
     parser.add_argument("--threads", help="thread counts to compare, e.g. 1,2 (skips the error table)")
+    parser.add_argument("--no-pace", action="store_true",
+                        help="with --threads: every stretch of steps on all the threads, however long they wait "
+                             "(`dem_threads._Pace` off), for the threaded kernel's own CPU cost on a loaded machine")
     args = parser.parse_args()
     if args.threads:
         import sys
@@ -191,6 +199,10 @@ def main() -> None:
         from bench_liggghts import box_case, scene_toml  # the box LIGGGHTS runs too
 
         scene = parse_scene(tomllib.loads(scene_toml(box_case(args.steps, spheres=args.spheres))))
+        if args.no_pace:
+            from collide.dem_threads import _Pace
+
+            _Pace.WAITED = math.inf
         run_scene(scene, record=False)  # load (or compile) the kernels
         thread_scan(scene, [int(c) for c in args.threads.split(",")], args.repeats, args.spheres)
         return

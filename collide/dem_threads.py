@@ -26,9 +26,9 @@ from collide.engine.broad import BOX_ANY, NBOX
 from collide.engine.dem import barrier
 from collide.engine.dem import layout as dk
 from collide.engine.dem import threads as par
-from collide.engine.dem.flight import fly, free_time, may_meet
+from collide.engine.dem.flight import may_meet
 from collide.engine.dem.forces import forces
-from collide.engine.dem.loop import _any_rolling, _at_end, _finish, _materials, _outputs, _step_length
+from collide.engine.dem.loop import _any_rolling, _finish, _materials, _outputs, _step_length, flight, never_again
 from collide.engine.dem.neighbours import grid, keys_range, rebuild, relist, slot_regions, split_keys
 from collide.engine.dem.records import energy_row, frame
 from collide.engine.dem.verlet import kick, kinetic
@@ -273,24 +273,15 @@ def _search(X, Bd, n, dim, skin, threads):
 
 def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, grav, fl, fp, t, ever, lists, ST, KN, nkn, threads):
     """`loop._coast` with its neighbour lists made by `_rebuild` (the pair search split among
-    the threads): where nothing touches, fly in closed form as far as no contact can begin.
-    Returns (whether the run is over, t, the lists (PI, PJ, PS, HS, WL, WH), KN, nkn)."""
-    n, dim, planar, spin, record = X.shape[0], fl[dk.F_DIM], fl[dk.F_DIM] < 3, fl[dk.F_SPIN], fl[dk.F_RECORD]
-    dt, t_end, skin = fp[dk.P_DT], fp[dk.P_TEND], fp[dk.P_SKIN]
-    box = fp[dk.P_BOX:dk.P_BOX + NBOX]
-    if not math.isfinite(t_end) and not may_meet(X, V, Bd, WP, grav, n, box):
+    the threads), then the same flight (`loop.flight`). Returns (whether the run is over, t, the
+    lists (PI, PJ, PS, HS, WL, WH), KN, nkn)."""
+    if never_again(X, V, Bd, WP, grav, fp):
         return True, t, lists, KN, nkn
-    PI, PJ, PS, HS, WL, WH = lists = _rebuild(X, X0, Bd, WP, lists[4], lists[5], n, dim, skin, *lists[:4], ST, box,
-                                              threads)
-    tau = free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin, box)
-    if _at_end(t + tau, t_end):
-        tau = t_end - t
-    over = False
-    if tau > 2.0 * dt:
-        KN, nkn = fly(X, V, W, Qo, F, Bd, WK, grav, tau, t, n, spin, planar, record, KN, nkn)
-        t += tau
-        ST[dk.S_JUMPS] += 1
-        over = _at_end(t, t_end) or (not math.isfinite(t_end) and ever and not may_meet(X, V, Bd, WP, grav, n, box))
+    box = fp[dk.P_BOX:dk.P_BOX + NBOX]
+    lists = _rebuild(X, X0, Bd, WP, lists[4], lists[5], X.shape[0], fl[dk.F_DIM], fp[dk.P_SKIN], *lists[:4], ST, box,
+                     threads)
+    over, t, KN, nkn = flight(X, V, W, Qo, F, Bd, WK, WP, grav, fl, fp, t, ever, lists[0], lists[1], lists[4], ST, KN,
+                             nkn)
     return over, t, lists, KN, nkn
 
 

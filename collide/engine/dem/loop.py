@@ -105,15 +105,31 @@ def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, PI, PJ, PS
     """Where nothing touches: fly in closed form as far as no contact can begin (free flight is
     not stepped, as in the event engine), the neighbour lists made fresh for it. Returns
     (whether the run is over, t, the lists, KN, nkn)."""
-    n, dim, planar, spin, record = X.shape[0], fl[F_DIM], fl[F_DIM] < 3, fl[F_SPIN], fl[F_RECORD]
+    if never_again(X, V, Bd, WP, grav, fp):
+        return True, t, PI, PJ, PS, HS, KB, BUMP, WL, WH, KN, nkn
+    PI, PJ, PS, HS, KB, BUMP, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, X.shape[0], fl[F_DIM], fp[P_SKIN], PI, PJ, PS,
+                                               HS, ST, fp[P_BOX:P_BOX + NBOX])
+    over, t, KN, nkn = flight(X, V, W, Qo, F, Bd, WK, WP, grav, fl, fp, t, ever, PI, PJ, WL, ST, KN, nkn)
+    return over, t, PI, PJ, PS, HS, KB, BUMP, WL, WH, KN, nkn
+
+
+@jit
+def never_again(X, V, Bd, WP, grav, fp):
+    """Whether nothing touches and nothing ever can, with no end set: the run is over, whether or
+    not anything touched before (bodies moving apart from the start, with nothing ahead, would
+    be stepped on until the step limit)."""
+    return not math.isfinite(fp[P_TEND]) and not may_meet(X, V, Bd, WP, grav, X.shape[0], fp[P_BOX:P_BOX + NBOX])
+
+
+@jit
+def flight(X, V, W, Qo, F, Bd, WK, WP, grav, fl, fp, t, ever, PI, PJ, WL, ST, KN, nkn):
+    """Coasting's flight, the neighbour lists (PI, PJ, WL) fresh: as far as no contact can begin
+    (`flight.free_time`), if longer than two steps; the one-thread loop (`_coast`) and the
+    threads' driver (`dem_threads`) rebuild the lists each their own way, then fly here.
+    Returns (whether the run is over, t, KN, nkn)."""
+    n, planar, spin, record = X.shape[0], fl[F_DIM] < 3, fl[F_SPIN], fl[F_RECORD]
     dt, t_end, skin = fp[P_DT], fp[P_TEND], fp[P_SKIN]
     box = fp[P_BOX:P_BOX + NBOX]
-    # Nothing touches and nothing ever can (with no end set): the run is over, whether or not
-    # anything touched before (bodies moving apart from the start, with nothing ahead, stepped
-    # on until the step limit).
-    if not math.isfinite(t_end) and not may_meet(X, V, Bd, WP, grav, n, box):
-        return True, t, PI, PJ, PS, HS, KB, BUMP, WL, WH, KN, nkn
-    PI, PJ, PS, HS, KB, BUMP, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box)
     tau = free_time(X, V, Bd, PI, PJ, WL, WP, grav, n, skin, box)
     if _at_end(t + tau, t_end):
         tau = t_end - t
@@ -123,7 +139,7 @@ def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, PI, PJ, PS
         t += tau
         ST[S_JUMPS] += 1
         over = _at_end(t, t_end) or (not math.isfinite(t_end) and ever and not may_meet(X, V, Bd, WP, grav, n, box))
-    return over, t, PI, PJ, PS, HS, KB, BUMP, WL, WH, KN, nkn
+    return over, t, KN, nkn
 
 
 @jit
@@ -226,7 +242,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         fused = engaged != 0 and not last and not record_now and h_next > 0.0 and rest <= 0.0 and steps < fl[F_MAXSTEPS]
         if fused:
             kinetic_now, moved = kick_kick_drift(X, X0, V, W, Qo, F, T, PT, Bd, WK, 0.5 * h, 0.5 * h_next, h_next,
-                                                 n, rolling, spin, planar)
+                                                 0, n, rolling, spin, planar)
         else:
             kinetic_now = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, True)
         if engaged:

@@ -5,12 +5,13 @@ The bodies are split into contiguous ranges, one a thread, balanced by their lis
 pair (i, j), i < j, belongs to i's thread: the pair list is sorted by i, so a thread's pairs are
 one run of it). One step's forces take two passes:
 
-1. `cross_pass`: each thread works out its pairs whose j is another thread's (the "cross" pairs,
-   a few where the bodies are numbered in space, as a filled box) into a buffer, each body's
-   share apart, every element written once onto -0.0 (adding -0.0 changes nothing, not even a
-   zero's sign);
-2. `own_pass`, after every thread's first pass: each thread sets its bodies' forces to their
-   weight, adds the cross pairs' shares coming in from lower threads (in the order of their i),
+1. `weights` and `cross_pass`: each thread sets its bodies' forces to their weights (so that a
+   thread with no cross pairs of its own does that while the others work theirs out), then
+   works out its pairs whose j is another thread's (the "cross" pairs, a few where the bodies
+   are numbered in space, as a filled box) into a buffer, each body's share apart, every
+   element written once onto -0.0 (adding -0.0 changes nothing, not even a zero's sign);
+2. `own_pass`, after every thread's first pass: each thread adds the cross pairs' shares
+   coming in from lower threads (in the order of their i),
    then goes through its own pairs in the list's order (its cross pairs' i shares from the
    buffer) and its bodies' wall contacts, and kicks its bodies.
 
@@ -61,7 +62,7 @@ from collide.engine.dem.layout import (
 )
 from collide.engine.dem.loop import _step_length
 from collide.engine.dem.neighbours import take_slot
-from collide.engine.dem.verlet import _drift_body, _half_kick, kinetic_parts
+from collide.engine.dem.verlet import _drift_body, _half_kick, kick_kick_drift, kinetic_parts
 from collide.engine.jit import jit, jit_inline
 
 # A cross pair's buffer row, per side (0: i, 1: j): force (3), friction torque (3), rolling
@@ -260,6 +261,20 @@ def _cross(X, V, W, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, record, 
     _keep(STT, row, tally)
 
 
+@jit
+def weights(F, T, PT, Bd, grav, lo, hi):
+    """Bodies lo..hi's forces set to their weights, torques and parts to zero, as `forces.forces`
+    starts (one fill of the share's rows, as it fills all). Done before the cross pass, while a
+    thread with no cross pairs of its own would only wait for the others': the rows are read
+    again only by this thread's passes (the cross pass writes into XB)."""
+    g0, g1, g2 = grav[0], grav[1], grav[2]
+    T[lo:hi, :] = 0.0
+    PT[lo:hi, :] = 0.0
+    for a in range(lo, hi):
+        m = Bd[a, B_M]
+        F[a, 0], F[a, 1], F[a, 2] = m * g0, m * g1, m * g2
+
+
 @jit_inline
 def _take(XB, s, side, F, T, PT, a):
     """A cross pair's share for body a, added in the one-thread pass's order (friction torque,
@@ -275,32 +290,27 @@ def _take(XB, s, side, F, T, PT, a):
 
 
 @jit
-def own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record,
+def own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, fl, dt, t, record,
              bd, row, inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box):
     """Thread `row`'s bodies' forces (`_own`), in two copies as `cross_pass`."""
     if box[BOX_ANY] != 0.0:
-        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record,
+        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, fl, dt, t, record,
              bd, row, inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, True)
     else:
-        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record,
+        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, fl, dt, t, record,
              bd, row, inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, False)
 
 
 @jit_inline
-def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, record, bd,
+def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, fl, dt, t, record, bd,
          row, inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, periodic):
     """Thread `row`'s bodies' forces (bd: its body, pair, wall and slot starts, then ends), after
     every thread's `cross_pass`. Events (pairs: 2 k, + 1 if closed; walls: 2 m, + 1) go to EVP
     from the thread's first pair and EVW from its first wall contact, if recorded."""
     lo, hi, k0, k1, m0, m1, s = bd[0], bd[1], bd[2], bd[3], bd[4], bd[5], bd[6]
-    g0, g1, g2 = grav[0], grav[1], grav[2]
     nw = 0
-    T[lo:hi, :] = 0.0  # (one fill of the share's rows, as `forces.forces` fills all)
-    PT[lo:hi, :] = 0.0
-    for a in range(lo, hi):
-        m = Bd[a, B_M]
-        F[a, 0], F[a, 1], F[a, 2] = m * g0, m * g1, m * g2
-    # Then the cross pairs' shares coming in, body by body in the order of their i: a loop over
+    # The share's rows hold their weights (`weights`, before the cross pass); then the cross
+    # pairs' shares coming in, body by body in the order of their i: a loop over
     # them alone (a loop over every body, most with none, took a tenth of the pass).
     a = lo
     for q in range(inc_start[lo], inc_start[hi]):
@@ -411,11 +421,15 @@ def kick_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, lo, hi, ro
     kick h_open and drift h (if `fuse`), body by body as `verlet.kick_kick_drift` makes them. Into
     STT: the kinetic energy after the closing kick (each body's also into EB (N, 2) if it has
     rows), the largest squared distance from X0 after the drift, and whether it drifted. The
-    usual case (both kicks, no body's energy kept) in a copy of its own, its tests folded away
-    (with them tested body by body the pass took 7 % longer)."""
+    usual case (both kicks, no body's energy kept) is the one-thread loop's own pass
+    (`verlet.kick_kick_drift` on the share's range): a copy of it here, its tests folded in
+    another way, took 13 % longer."""
     if close and fuse and EB.shape[0] == 0:
-        _kicks(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, lo, hi, rolling, spin, planar, True, True, EB,
-               False, STT, row)
+        e, moved = kick_kick_drift(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, lo, hi, rolling, spin,
+                                   planar)
+        STT[row, ST_E] = e
+        STT[row, ST_FUSED] = 1.0
+        STT[row, ST_MOVED] = max(STT[row, ST_MOVED], moved)
     else:
         _kicks(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, lo, hi, rolling, spin, planar, close, fuse, EB,
                EB.shape[0] > 0, STT, row)
@@ -559,10 +573,11 @@ def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS
         fuse_ok = not last and h_next > 0.0 and rest <= 0.0 and steps < fl[F_MAXSTEPS]
         S = STT[p]
         S[r, :] = 0.0
+        weights(F, T, PT, Bd, grav, lo, hi)
         cross_pass(X, V, W, Bd, MAT, PI, PJ, PS, HS, SKB, BUMP, tabs, fl, h, t, record, RB[r, 6], RB[r, 7], cross, XB,
                    SF, S, r, outs[r], box)
         barrier_wait(barrier)
-        own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, SKB, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, h, t,
+        own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, SKB, BUMP, WL, WH, WP, tabs, wtabs, fl, h, t,
                  record, RB[r], r, inc_start, inc_slot, XB, SF, S, EVP, EVW, outs[r], box)
         kick_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, 0.5 * h, 0.5 * h_next, h_next, lo, hi, rolling, spin, planar,
                    True, fuse_ok and S[r, ST_ENG] > 0.0, EB, S, r)

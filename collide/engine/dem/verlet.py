@@ -83,14 +83,15 @@ def drift(X, X0, V, W, Qo, h, n, spin, planar):
 
 
 @jit
-def kick_kick_drift(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, n, rolling, spin, planar):
+def kick_kick_drift(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, lo, hi, rolling, spin, planar):
     """One step's closing half kick (h_close), the next step's opening half kick (h_open) and its
-    drift (h) in one pass over the bodies, each body's numbers as `kick`, `kick` and `drift` make
-    them (bit for bit): as three passes they took 1.2-1.3 times as long (1 000 bodies). Returns (the
-    kinetic energy between the kicks, as `kick` returns it; `drift`'s moved)."""
+    drift (h) in one pass over bodies lo..hi, each body's numbers as `kick`, `kick` and `drift`
+    make them (bit for bit): as three passes they took 1.2-1.3 times as long (1 000 bodies). The
+    one-thread loop and each thread's share (`threads.kick_share`) run this same pass. Returns (the
+    kinetic energy between the kicks, summed body by body as `kick` sums it; `drift`'s moved)."""
     e = 0.0
     moved = 0.0
-    for a in range(n):
+    for a in range(lo, hi):
         im, ii, spins = Bd[a, B_IM], Bd[a, B_II], Bd[a, B_II] > 0.0
         v0, v1, v2, w0, w1, w2 = _half_kick(WK, a, h_close, im, ii, spins, F, T, PT, rolling,
                                             V[a, 0], V[a, 1], V[a, 2], W[a, 0], W[a, 1], W[a, 2])
