@@ -62,10 +62,6 @@ FEW_BODIES = 12  # above this, instanced spheres
 # bodies each is an 80-face sphere (a quarter of the vertices; at a pile's size on screen still
 # round), its spin dot an icosahedron and its shadow an 8-sided disc.
 DETAILED_BODIES = 250
-# Above DETAILED_BODIES the spheres are lit with a three-band toon material instead of the
-# physically based one: under software GL a 1 000-sphere pile's frame costs about a quarter less
-# browser CPU (docs/performance.md), and banded shading still reads as round.
-MANY_MATERIAL = "toon3"
 FILL_SKY, FILL_GROUND, FILL_INTENSITY = (255, 255, 255), (150, 150, 160), 1.6  # instead of an environment map
 CHAIN_OPACITY = 0.3  # spheres while the force chains are shown
 CHAIN_BLOCK = 256  # the force chains' batch grows in blocks of this many links
@@ -549,7 +545,7 @@ class SceneDrawer:
         self._batch["spheres"] = scene.add_batched_meshes_simple(
             "/bodies/spheres", verts, faces, batched_wxyzs=ident, batched_positions=zeros,
             batched_scales=view.radius.astype(np.float32), batched_colors=colours, lod="off",
-            material=MANY_MATERIAL if coarse else "standard", cast_shadow=False, receive_shadow=False)
+            cast_shadow=False, receive_shadow=False)
         if view.dim > 1 and view.spin_dim:
             dv, df = unit_sphere(0 if coarse else 1)
             self._batch["dots"] = scene.add_batched_meshes_simple(
