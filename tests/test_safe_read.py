@@ -89,3 +89,22 @@ def test_reads_from_several_threads(good: Path) -> None:
         t.join(120)
     assert sorted(map(str, results))[-2:] == ["demo-bonus", "demo-bonus"]
     assert sum(isinstance(r, RecordingError) for r in results) == 1
+
+
+def test_a_grown_reader_is_replaced_by_a_fresh_one(good: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # A reader grown past _IDLE_MAX_MB is stopped (its memory is not held), and a fresh process
+    # takes its place at once, so the next read does not wait for Rerun's import.
+    from collide.recording import sandbox
+
+    sandbox.warm_reader()
+    with sandbox._idle_lock:
+        first = sandbox._idle[-1]
+    monkeypatch.setattr(sandbox, "_IDLE_MAX_MB", 0)  # every reader counts as grown
+    read_recording_safely(good)
+    assert first.proc.poll() is not None  # the one that read was stopped
+    with sandbox._idle_lock:
+        fresh = list(sandbox._idle)
+    assert len(fresh) == 1 and fresh[0] is not first and fresh[0].proc.poll() is None
+    monkeypatch.undo()
+    run = read_recording_safely(good)  # the fresh one reads
+    assert run.scene.name == "demo-bonus"

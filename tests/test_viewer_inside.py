@@ -256,3 +256,30 @@ def test_a_sphere_of_a_run_given_as_frames_reads_from_its_frame():
     assert report.position == pytest.approx(frame.positions[k])
     text = report_markdown(report)
     assert f"**{run.names[k]}** (body {k})" in text and "nan" not in text
+
+
+def test_a_new_run_of_the_same_bodies_keeps_the_chains_node_and_draws_its_own_links(pile):
+    """A slider change draws a new run of the same bodies: the force chains' batch is kept (not
+    built again in the page), and shows exactly the new frame's links, none of the old run's."""
+    import viser
+
+    from viewer.scene3d import SceneDrawer
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        drawer = SceneDrawer(server.scene)
+        drawer.show_run(pile)
+        drawer.show_frame(pile.frame(pile.t1))
+        chains = drawer._batch["chains"]
+        assert (np.asarray(chains.batched_scales, float)[:, 2] > 0).sum() > 0
+        drawer.show_run(pile)  # the same bodies again, shown from the start: no links yet
+        start = pile.frame(pile.t0)
+        drawer.show_frame(start)
+        assert drawer._batch["chains"] is chains
+        links = start.contact_links()
+        strong = links.force > 1e-9 * pile.max_normal_force
+        assert (np.asarray(chains.batched_scales, float)[:, 2] > 0).sum() == strong.sum()
+        drawer.set_options(forces=False)  # forces off: the batch goes
+        assert "chains" not in drawer._batch
+    finally:
+        server.stop()

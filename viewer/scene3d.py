@@ -296,7 +296,9 @@ class SceneDrawer:
         self._velocity_scale = 3.0 * r_max / max(view.max_speed, 1e-300)
         self._momentum_scale = 3.0 * r_max / max(view.max_momentum, 1e-300)
         self._colour_range = self._range_for(self.options.colour_by)
-        self._remove_contact_nodes()
+        # The force chains' batch stays for the next run of the same bodies (a slider change):
+        # removed, it had to be built again in the page and every sphere's colour resent.
+        self._remove_contact_nodes(keep_chains=self.many)
         self._remove_com()
         for arrows in self._vectors.values():
             arrows.clear()
@@ -573,12 +575,14 @@ class SceneDrawer:
             self._com_path.remove()
             self._com_path = None
 
-    def _remove_contact_nodes(self) -> None:
+    def _remove_contact_nodes(self, keep_chains: bool = False) -> None:
         for arrows in self._arrows.values():
             arrows.clear()
         if self._point is not None:
             self._point.remove()
             self._point = None
+        if keep_chains:
+            return
         chains = self._batch.pop("chains", None)
         if chains is not None:
             chains.remove()
