@@ -36,7 +36,7 @@ from viewer.config import SessionConfig
 from viewer.guard import guard_connections
 from viewer.live import MANY_BODIES
 from viewer.params import for_viewing
-from viewer.reading import read_untrusted, warm_reader
+from viewer.reading import read_untrusted
 from viewer.session import Session
 from viewer.state import ViewRun
 from viewer.tabs import Tabs
@@ -152,9 +152,6 @@ class ViewerApp:
         with contextlib.redirect_stdout(io.StringIO()):
             server = viser.ViserServer(host=self.host, port=self.port, label="collide view", verbose=False)
         self.server = server
-        if any(self.recordings_dir.glob("*.rrd")):
-            # A replay is likely: its reader process starts now, not when the file is picked.
-            warm_reader()
         server.gui.configure_theme(show_share_button=False, brand_color=(66, 133, 244))
         guard_connections(server)
         server.on_client_connect(self.tabs.connect)

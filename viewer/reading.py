@@ -12,7 +12,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from collide.recording import RecordingError, read_recording_safely
-from collide.recording.sandbox import warm_reader  # noqa: F401 (the viewer starts readers through here)
 from collide.run import SceneRun
 
 TIMEOUT_S = 60.0

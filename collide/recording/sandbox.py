@@ -211,7 +211,7 @@ def _give_back(reader: _Reader) -> None:
 
 def warm_reader() -> None:
     """Start a reader process now, if none is idle, so that the next `read_recording_safely`
-    finds it ready (a viewer calls this when it starts; it costs about 160 MB while idle)."""
+    finds it ready (about 160 MB while idle)."""
     with _idle_lock:
         if len(_idle) < _IDLE_READERS:
             _idle.append(_Reader())
