@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from collide.engine import jit, layout, tier
-from collide.model import TABLE_ESTAR, TABLE_K, TABLE_REST, Model, State, select_model
+from collide.model import TABLE_ESTAR, TABLE_K, TABLE_KTR, TABLE_MU, TABLE_REST, Model, State, select_model
 from collide.results import ContactLog, RunResult
 from collide.scene import Scene, alone_blocker, dem_reason
 from collide.stepper import (
@@ -51,8 +51,10 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
     if integrator == "seed":
         return SEED, "integrator 'seed' asked for: the report's own update on its fixed grid"
     if scene.needs_dem:
+        rubs = (", friction's stick and slip located, the tangential spring at the same order"
+                if scene.contact.tangential == "spring" and scene.has_friction else "")
         return EVENT, (f"{dem_reason(scene)} with a sphere alone among walls: each contact at order 6 "
-                       "(Gauss-Legendre), its start and end located, flights in closed form")
+                       f"(Gauss-Legendre), its start and end located{rubs}, flights in closed form")
     return EVENT, (f"the report's contact law: every contact and friction mode change located, steps of "
                    f"order {_order(integrator)} ({integrator})")
 
@@ -76,6 +78,17 @@ def law_rows(model: Model, b: int = 0) -> np.ndarray:
     # One type for every count of walls, the compiled kernel's: C order (a copy of the broadcast
     # keeps its strides, F order from two walls on) and read-only (numba types that apart).
     rows = np.array(np.broadcast_to(params, (model.n_walls, params.size)), order="C")
+    rows.setflags(write=False)
+    return rows
+
+
+def rub_rows(model: Model, b: int = 0) -> np.ndarray:
+    """Each wall's tangential spring as `alone.alone_run` takes it (W, 3): mu, k_t / k_n and its
+    root; mu 0 (no rubbing) without a spring."""
+    rows = np.zeros((model.n_walls, 3))
+    if model.tangential_spring and model.spin_dim:
+        row = model.wall_table[b, int(model.material[b, 0])]
+        rows[:] = row[TABLE_MU], row[TABLE_KTR], math.sqrt(row[TABLE_KTR])
     rows.setflags(write=False)
     return rows
 
@@ -121,10 +134,10 @@ def simulate_alone(model: Model, state: State, *, tol: float, duration: float, t
     fp[layout.FP_TEND] = duration if math.isfinite(duration) else math.inf
     fp[layout.FP_TAIL] = tail
     ends = np.array(impact.steps_for(contact_tol(model, state, tol)), np.int64)
-    laws = law_rows(model)
-    _load_compiled(G[0], WP, laws, grav[0], fl, fp, ends)  # loading is not simulating
+    laws, rubs = law_rows(model), rub_rows(model)
+    _load_compiled(G[0], WP, laws, rubs, grav[0], fl, fp, ends)  # loading is not simulating
     started = time.perf_counter()
-    t, knots, recs, ivals, st, fg = alone.alone_run(G[0], WP, laws, grav[0], fl, fp, ends)
+    t, knots, recs, ivals, st, fg = alone.alone_run(G[0], WP, laws, rubs, grav[0], fl, fp, ends)
     wall_time = time.perf_counter() - started
     _check(model, st, fg, t, open_ended=not math.isfinite(duration))
     from collide.stepper import unpack_state
@@ -178,6 +191,12 @@ def _check(model: Model, st: np.ndarray, fg: np.ndarray, t: float, open_ended: b
     if status == alone.ALONE_WALLS:
         raise AloneError(f"the sphere's contact with wall {wall} at {at} comes within reach of another wall: "
                          "two contacts at once under these laws are DEM's so far")
+    if status == alone.ALONE_HELD:
+        raise AloneError(f"the sphere's contact with wall {wall} at {at} does not separate (held on the wall, rolling "
+                         "or resting): such a contact with a tangential spring is DEM's so far")
+    if status == alone.ALONE_PLANE:
+        raise AloneError(f"the sphere's slip on wall {wall} at {at} is not along one line of the wall (spin about "
+                         "an axis along it, or gravity across it): such a contact is DEM's so far")
     raise AloneError(f"the sphere's contact with wall {wall} at {at} could not be integrated (its steps did not "
                      "converge)")
 
