@@ -81,7 +81,7 @@ NT = 8
 Y0, YU, YWN, YXI, YVT, YWB, YWT, YP, YTH = range(9)
 NY = 9
 STICK, SLIP = 0, 1
-SWITCHES = 16  # mode changes inside one step before the step counts as failed
+SWITCHES = 1000  # mode changes inside one step before the step counts as failed
 HELD, PLANE = 3.0, 4.0  # O_END beyond impact's: a contact that does not separate; not in one line
 _A = np.array([[GL_A00, GL_A01, GL_A02], [GL_A10, GL_A11, GL_A12], [GL_A20, GL_A21, GL_A22]])
 _B = np.array([GL_B0, GL_B1, GL_B2])
@@ -186,8 +186,12 @@ def watched(P, T, phase, mode, x, y, which):
     if gt > 0.0:
         return -T[T_S] * vc
     # c' = d/dt (mu F_n / k_t), F_n elastic alone here (no dashpot): Hertz's k_n' = k_n / (2 delta)
-    slope = kn / (2.0 * delta) if P[0] > 0.0 and delta > 0.0 else 0.0
-    rate = T[T_MU] * y[YU] * (kn - fn * slope / kn) / kt if kt > 0.0 else 0.0
+    # (at touching, kn = 0, its limit: F_n k_n' / k_n = k_n / 3)
+    if kt > 0.0:
+        slope = kn / (2.0 * delta) if P[0] > 0.0 else 0.0
+        rate = T[T_MU] * y[YU] * (kn - fn * slope / kn) / kt
+    else:
+        rate = T[T_MU] * y[YU] * (2.0 / 3.0 if P[0] > 0.0 else 1.0) / T[T_KTR]
     return -T[T_S] * vc - rate
 
 
@@ -202,7 +206,11 @@ def switch(P, T, phase, mode, x, y):
     T[T_S] = 1.0 if ft > 0.0 or (ft == 0.0 and vc < 0.0) else -1.0
     y[YXI] = slip_stretch(T[T_S] * cap, kt)
     if gt > 0.0 and T[T_S] * vc >= 0.0:
-        return STICK  # the point moves along the force: the dashpot's share holds it below the cap
+        # the point moves along the force: the dashpot's share may hold the spring below the cap
+        held = spring_trial(y[YXI], 0.0, 0.0, vc, 0.0, 0.0, kt, gt)[0]
+        if abs(held) <= cap:
+            return STICK
+        T[T_S] = 1.0 if held > 0.0 else -1.0
     return SLIP
 
 
