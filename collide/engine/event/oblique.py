@@ -157,7 +157,9 @@ def gl_step(P, T, phase, mode, x, y, h, e, ws, floors):
         for c in range(NY):
             d = abs(N[0, c] - K[0, c]) + abs(N[1, c] - K[1, c]) + abs(N[2, c] - K[2, c])
             floor = floors[c] + (abs(h * P[6]) if c == YU else 0.0)
-            change = max(change, abs(h) * d / (abs(y[c]) + abs(h * f0[c]) + floor))
+            part = abs(h) * d / (abs(y[c]) + abs(h * f0[c]) + floor)
+            if not part <= change:  # (NaN too: Hertz past the contact's end fails the step)
+                change = part
         for i in range(3):
             for c in range(NY):
                 K[i, c] = N[i, c]
