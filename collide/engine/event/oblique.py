@@ -70,6 +70,7 @@ from collide.engine.event.impact import (
     law,
 )
 from collide.engine.jit import jit
+from collide.engine.numerics import illinois
 
 # T, the spring's parameters: mu, k_t / k_n, its root, the sphere's mass, inertia and radius,
 # gravity along the line e, and the slip's sign s (set as the contact goes)
@@ -230,16 +231,7 @@ def land(P, T, phase, mode, x, y, h, which, g0, g1, e, ws, floors):
         g = watched(P, T, phase, mode, x + m, e, which)
         if g == 0.0 or abs(hi - lo) <= 4e-16 * abs(h):
             break
-        if (g > 0.0) == (glo > 0.0):
-            lo, glo = m, g
-            if side == -1:
-                ghi *= 0.5
-            side = -1
-        else:
-            hi, ghi = m, g
-            if side == 1:
-                glo *= 0.5
-            side = 1
+        lo, hi, glo, ghi, side = illinois(lo, hi, glo, ghi, side, m, g)
     # the mode's side of the root: a switch landed just past it would start the next mode early
     if which == 0 and watched(P, T, phase, mode, x + m, e, 0) < 0.0 and lo > 0.0:
         m = lo
