@@ -152,3 +152,20 @@ def test_oblique_impacts_match_dop853(case):
     ref_v, ref_w = reference(case)
     assert v[0] == pytest.approx(ref_v, abs=1e-8 * SPEED)
     assert w * R == pytest.approx(ref_w, abs=1e-8 * SPEED)
+
+
+def test_a_slip_off_one_line_goes_to_dem_with_its_cause():
+    """In 3D a ball spinning about the line it slides along (its contact point slips across it)
+    is not the one-line contact the event engine takes: chosen by itself the run goes to DEM and
+    says why; with the event engine asked for it is refused with that cause."""
+    from collide.errors import RunError
+
+    raw = _scene({"theta": 0.5, "spin": 0.0, "ratio": 0.5, "mu": 0.3, "model": "hertz", "e": 0.8}, 1e-3)
+    raw["dim"] = 3
+    body = raw["body"][0]
+    body["position"], body["velocity"], body["spin"] = [0.0, 0.0, R + 1e-5], [0.5, 0.0, -0.8], [50.0, 0.0, 0.0]
+    raw["wall"] = [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]
+    run = run_scene(parse_scene(copy.deepcopy(raw)), record=False)
+    assert run.result.engine == "dem" and "not along one line" in run.result.engine_reason
+    with pytest.raises(RunError, match="not along one line"):
+        run_scene(parse_scene({**copy.deepcopy(raw), "integrator": "kahan6"}), record=False)
