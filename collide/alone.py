@@ -194,6 +194,9 @@ def _check(model: Model, st: np.ndarray, fg: np.ndarray, t: float, open_ended: b
     if status == alone.ALONE_HELD:
         raise AloneError(f"the sphere's contact with wall {wall} at {at} does not separate (held on the wall, rolling "
                          "or resting): such a contact with a tangential spring is DEM's so far")
+    if status == alone.ALONE_CHATTER:
+        raise AloneError(f"the sphere's contact with wall {wall} at {at} alternates between stick and slip without "
+                         "end (a sliding mode of the spring's law, which the event engine does not take yet)")
     if status == alone.ALONE_PLANE:
         raise AloneError(f"the sphere's slip on wall {wall} at {at} is not along one line of the wall (spin about "
                          "an axis along it, or gravity across it): such a contact is DEM's so far")

@@ -37,12 +37,13 @@ def _scene(case: dict, tol: float) -> dict:
             "wall": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}]}
 
 
-def _run(case: dict, tol: float):
+def _run(case: dict, tol: float, event_only: bool = True):
     run = run_scene(parse_scene(copy.deepcopy(_scene(case, tol))), record=False)
     res = run.result
-    assert res.engine == "event", res.engine_reason
-    assert "stick and slip located" in res.engine_reason
-    return res.final.v[0, 0, :2].copy(), float(np.ravel(res.final.w[0])[-1]), float(np.max(run.error_estimate))
+    if event_only:
+        assert res.engine == "event", res.engine_reason
+        assert "stick and slip located" in res.engine_reason
+    return res.final.v[0, 0, :2].copy(), float(np.ravel(res.final.w[0])[-1]), float(np.max(run.error_estimate)), res
 
 
 def _cases(n: int, seed: int) -> list[dict]:
@@ -54,18 +55,28 @@ def _cases(n: int, seed: int) -> list[dict]:
 
 
 def test_random_oblique_impacts_agree_across_tolerances_and_their_error_holds():
-    """100 cases: the outcomes (rebound velocity, spin times the radius) at tol 1e-6 and 1e-9
-    within 1e-6 of the speed, and the 1e-6 run's difference from the 1e-9 run (its error, to the
-    1e-9 run's) at most 10 times its reported estimate."""
-    worst, worst_ratio = 0.0, 0.0
-    for case in _cases(100, seed=51):
-        v6, w6, est6 = _run(case, 1e-6)
-        v9, w9, _ = _run(case, 1e-9)
+    """130 cases, of which at least 100 run in the event engine at both tolerances: their outcomes
+    (rebound velocity, spin times the radius) at tol 1e-6 and 1e-9 within 1e-6 of the speed, and
+    the 1e-6 run's difference from the 1e-9 run at most 10 times its reported estimate. The rest
+    alternate between stick and slip without end at one of them (a sliding mode the event engine
+    does not take): those went to DEM and say so."""
+    worst, worst_ratio, counted, chattering = 0.0, 0.0, 0, 0
+    for case in _cases(130, seed=51):
+        v6, w6, est6, r6 = _run(case, 1e-6, event_only=False)
+        v9, w9, _, r9 = _run(case, 1e-9, event_only=False)
+        if "dem" in (r6.engine, r9.engine):
+            for res in (r6, r9):
+                assert res.engine == "event" or "alternates between stick and slip" in res.engine_reason
+            chattering += 1
+            continue
+        counted += 1
         diff = max(np.abs(v6 - v9).max(), abs(w6 - w9) * R) / SPEED
         worst, worst_ratio = max(worst, diff), max(worst_ratio, diff / est6)
         assert diff <= 1e-6, (case, diff)
         assert diff <= 10.0 * est6, (case, diff, est6)
-    print(f"worst difference {worst:.2e} of the speed, {worst_ratio:.2f} times the estimate")
+    print(f"{counted} cases in the event engine, {chattering} chattering (DEM); worst difference {worst:.2e} of "
+          f"the speed, {worst_ratio:.2f} times the estimate")
+    assert counted >= 100
 
 
 def reference(case: dict) -> tuple[float, float]:
@@ -148,7 +159,7 @@ def reference(case: dict) -> tuple[float, float]:
 def test_oblique_impacts_match_dop853(case):
     """A handful of cases (both laws, damped and not, sticking and sliding) against DOP853:
     velocity along the wall and spin times R within 1e-8 of the speed at tol 1e-10."""
-    v, w, _ = _run(case, 1e-10)
+    v, w, _, _ = _run(case, 1e-10)
     ref_v, ref_w = reference(case)
     assert v[0] == pytest.approx(ref_v, abs=1e-8 * SPEED)
     assert w * R == pytest.approx(ref_w, abs=1e-8 * SPEED)

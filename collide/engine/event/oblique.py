@@ -83,7 +83,10 @@ Y0, YU, YWN, YXI, YVT, YWB, YWT, YP, YTH = range(9)
 NY = 9
 STICK, SLIP = 0, 1
 SWITCHES = 1000  # mode changes inside one step before the step counts as failed
-HELD, PLANE = 3.0, 4.0  # O_END beyond impact's: a contact that does not separate; not in one line
+HELD, PLANE, CHATTER = 3.0, 4.0, 5.0  # O_END beyond impact's: a contact that does not separate; not in
+# one line; stick and slip alternating without end (a sliding mode of the DEM law's limit, not
+# taken as one yet)
+CHANGES = 64  # stick-slip changes in one contact beyond which it counts as CHATTER
 _A = np.array([[GL_A00, GL_A01, GL_A02], [GL_A10, GL_A11, GL_A12], [GL_A20, GL_A21, GL_A22]])
 _B = np.array([GL_B0, GL_B1, GL_B2])
 _C = np.array([GL_C0, GL_C1, GL_C2])
@@ -218,6 +221,16 @@ def switch(P, T, phase, mode, x, y):
 
 
 @jit
+def changed(P, T, phase, mode, x, y, count):
+    """`switch`, counting changes between stick and slip in count[1]: (mode, ok), ok False
+    beyond CHANGES."""
+    after = switch(P, T, phase, mode, x, y)
+    if after != mode:
+        count[1] += 1
+    return after, count[1] <= CHANGES
+
+
+@jit
 def land(P, T, phase, mode, x, y, h, which, g0, g1, e, ws, floors):
     """The step's length from (x, y) that puts the watched function (g0 at 0, g1 at h) at zero, by
     secant (Illinois) steps, its end state in e. Returns (length, ok)."""
@@ -275,7 +288,9 @@ def advance(P, T, phase, mode, x, end, y, ws, floors, trail, count):
         if g1 < 0.0:
             g0 = watched(P, T, phase, mode, x, y, 0)
             if g0 <= 0.0:  # the mode does not hold from here (at touch, or just switched): the other
-                mode = switch(P, T, phase, mode, x, y)
+                mode, ok = changed(P, T, phase, mode, x, y, count)
+                if not ok:
+                    return x, mode, 4
                 at_kink = False
                 continue
             h, ok = land(P, T, phase, mode, x, y, h, 0, g0, g1, e, ws, floors)
@@ -297,7 +312,9 @@ def advance(P, T, phase, mode, x, end, y, ws, floors, trail, count):
         if stopped:
             return x, mode, 2
         if switched:
-            mode = switch(P, T, phase, mode, x, y)
+            mode, ok = changed(P, T, phase, mode, x, y, count)
+            if not ok:
+                return x, mode, 4
         elif not kink:
             return end, mode, 0
         at_kink = kink
@@ -324,12 +341,14 @@ def first_mode(P, T, v_in, dmax, y):
 def sigma_steps(P, T, mode, x, end, n, y, ws, floors, trail, count, v_in):
     """n steps over sigma from x to end (the rise: failed where the approach slows below a
     quarter; the fall: turned where the separation stops). Returns (x, mode, how): how 0 done,
-    1 failed, 2 stopped, 3 turned."""
+    1 failed, 2 stopped, 3 turned, 4 chattering."""
     h = (end - x) / n
     start = x
     for s in range(n):
         x, mode, how = advance(P, T, SIGMA, mode, x, end if s == n - 1 else start + (s + 1) * h, y, ws, floors,
                                trail, count)
+        if how == 4:
+            return x, mode, 4
         if how == 1 or (h > 0.0 and not y[YU] > 0.25 * v_in):
             return x, mode, 1
         if h < 0.0 and not y[YU] < 0.0:
@@ -351,6 +370,8 @@ def middle(P, T, mode, t, delta1, h, limit, y, ws, floors, trail, count):
             save[c] = y[c]
         sign, kept = T[T_S], len(trail)
         x, after, how = advance(P, T, TIME, mode, t, t + h, y, ws, floors, trail, count)
+        if how == 4:
+            return t, mode, 4
         if how == 1 or (y[YU] < 0.0 and y[Y0] < 0.5 * delta1):
             for c in range(NY):  # too long a step for this part of the contact
                 y[c] = save[c]
@@ -387,7 +408,7 @@ def rub(P, T, v_in, n_end, n_mid, limit, out, trail, y):
     floors[YTH] = floors[YXI] / T[T_R]
     floors[YWN] = floors[YWT] = 1e-17 * T[T_M] * v_in * v_in
     y0 = y.copy()
-    count = np.zeros(1, np.int64)
+    count = np.zeros(2, np.int64)
     frac, how, delta1, mode, x = SWITCH, 1, 0.0, STICK, 0.0
     for _ in range(10):  # the rise, its switch to time steps halved while the approach slows too much
         while len(trail) > 0:
@@ -402,6 +423,7 @@ def rub(P, T, v_in, n_end, n_mid, limit, out, trail, y):
         if how != 1:
             break
         frac *= 0.5
+        count[1] = 0
     t, d = y[Y0], x ** P[7]
     if how == 0:
         y[Y0] = d
@@ -416,7 +438,7 @@ def rub(P, T, v_in, n_end, n_mid, limit, out, trail, y):
         d = x ** P[7]
     out[O_VOUT], out[O_TIME], out[O_WORK], out[O_STEPS] = -y[YU], t, y[YWN] + y[YWT], count[0]
     out[O_DELTA], out[O_U] = d, y[YU]
-    out[O_END] = (ENDED, FAILED, STOPPED, HELD)[how] if how < 4 else FAILED
+    out[O_END] = (ENDED, FAILED, STOPPED, HELD, CHATTER)[how]
     out[O_OK] = 1.0 if how == 0 else 0.0
 
 
