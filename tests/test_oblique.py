@@ -16,6 +16,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from collide.dem import damping_ratio
+from collide.errors import RunError
 from collide.run import run_scene
 from collide.scene import parse_scene
 
@@ -62,8 +63,13 @@ def test_random_oblique_impacts_agree_across_tolerances_and_their_error_holds():
     does not take): those went to DEM and say so."""
     worst, worst_ratio, counted, chattering = 0.0, 0.0, 0, 0
     for case in _cases(130, seed=51):
-        v6, w6, est6, r6 = _run(case, 1e-6, event_only=False)
-        v9, w9, _, r9 = _run(case, 1e-9, event_only=False)
+        try:
+            v6, w6, est6, r6 = _run(case, 1e-6, event_only=False)
+            v9, w9, _, r9 = _run(case, 1e-9, event_only=False)
+        except RunError as exc:  # DEM's refusal of the tolerance, after the event engine's cause
+            assert "alternates between stick and slip" in str(exc)
+            chattering += 1
+            continue
         if "dem" in (r6.engine, r9.engine):
             for res in (r6, r9):
                 assert res.engine == "event" or "alternates between stick and slip" in res.engine_reason
@@ -169,8 +175,6 @@ def test_a_slip_off_one_line_goes_to_dem_with_its_cause():
     """In 3D a ball spinning about the line it slides along (its contact point slips across it)
     is not the one-line contact the event engine takes: chosen by itself the run goes to DEM and
     says why; with the event engine asked for it is refused with that cause."""
-    from collide.errors import RunError
-
     raw = _scene({"theta": 0.5, "spin": 0.0, "ratio": 0.5, "mu": 0.3, "model": "hertz", "e": 0.8}, 1e-3)
     raw["dim"] = 3
     body = raw["body"][0]
