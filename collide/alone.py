@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from collide.engine import jit, layout, tier
-from collide.model import TABLE_ESTAR, TABLE_K, TABLE_REST, Model, State, select_model
+from collide.model import TABLE_ESTAR, TABLE_K, TABLE_KTR, TABLE_MU, TABLE_REST, Model, State, select_model
 from collide.results import ContactLog, RunResult
 from collide.scene import Scene, alone_blocker, dem_reason
 from collide.stepper import (
@@ -55,8 +55,10 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
                        "relative coordinate (reduced mass and radius, head-on) at order 6 (Gauss-Legendre), its "
                        "start and end located, flights in closed form")
     if scene.needs_dem:
+        rubs = (", friction's stick and slip located, the tangential spring at the same order"
+                if scene.contact.tangential == "spring" and scene.has_friction else "")
         return EVENT, (f"{dem_reason(scene)} with a sphere alone among walls: each contact at order 6 "
-                       "(Gauss-Legendre), its start and end located, flights in closed form")
+                       f"(Gauss-Legendre), its start and end located{rubs}, flights in closed form")
     return EVENT, (f"the report's contact law: every contact and friction mode change located, steps of "
                    f"order {_order(integrator)} ({integrator})")
 
@@ -97,6 +99,17 @@ def pair_row(model: Model, b: int = 0) -> np.ndarray:
                                   estar=float(row[TABLE_ESTAR]), rstar=float(r[0] * r[1] / (r[0] + r[1])), zeta=zeta)
     rows = params[None, :].copy()
     rows.setflags(write=False)  # the type `law_rows` gives (one compiled signature)
+    return rows
+
+
+def rub_rows(model: Model, b: int = 0) -> np.ndarray:
+    """Each wall's tangential spring as `alone.alone_run` takes it (W, 3): mu, k_t / k_n and its
+    root; mu 0 (no rubbing) without a spring."""
+    rows = np.zeros((model.n_walls, 3))
+    if model.tangential_spring and model.spin_dim:
+        row = model.wall_table[b, int(model.material[b, 0])]
+        rows[:] = row[TABLE_MU], row[TABLE_KTR], math.sqrt(row[TABLE_KTR])
+    rows.setflags(write=False)
     return rows
 
 
@@ -152,7 +165,8 @@ def simulate_alone(model: Model, state: State, *, tol: float, duration: float, t
     fp[layout.FP_TAIL] = tail
     ends = np.array(impact.steps_for(contact_tol(model, state, tol, duration)), np.int64)
     two = model.n_bodies == 2
-    args = (G[0], pair_row(model), grav[0], fl, fp, ends) if two else (G[0], WP, law_rows(model), grav[0], fl, fp, ends)
+    args = (G[0], pair_row(model), grav[0], fl, fp, ends) if two else \
+        (G[0], WP, law_rows(model), rub_rows(model), grav[0], fl, fp, ends)
     kernel = pair.pair_run if two else alone.alone_run
     _load_compiled(kernel, args)  # loading is not simulating
     started = time.perf_counter()
@@ -214,6 +228,15 @@ def _check(model: Model, st: np.ndarray, fg: np.ndarray, t: float, open_ended: b
     if status == alone.ALONE_WALLS:
         raise AloneError(f"the sphere's contact with wall {wall} at {at} comes within reach of another wall: "
                          "two contacts at once under these laws are DEM's so far")
+    if status == alone.ALONE_HELD:
+        raise AloneError(f"the sphere's contact with wall {wall} at {at} does not separate (held on the wall, rolling "
+                         "or resting): such a contact with a tangential spring is DEM's so far")
+    if status == alone.ALONE_CHATTER:
+        raise AloneError(f"the sphere's contact with wall {wall} at {at} alternates between stick and slip without "
+                         "end (a sliding mode of the spring's law, which the event engine does not take yet)")
+    if status == alone.ALONE_PLANE:
+        raise AloneError(f"the sphere's slip on wall {wall} at {at} is not along one line of the wall (spin about "
+                         "an axis along it, or gravity across it): such a contact is DEM's so far")
     raise AloneError(f"the sphere's contact with wall {wall} at {at} could not be integrated (its steps did not "
                      "converge)")
 

@@ -680,8 +680,6 @@ def alone_blocker(scene: Scene) -> str | None:
     """Why the event engine cannot run a scene whose law goes beyond the report's (None: it can,
     as a sphere alone among walls or two spheres and no walls)."""
     c = scene.contact
-    if c.tangential != "coulomb":
-        return "tangential springs are DEM's only"
     rolling = [c.rolling_friction] + [m.rolling_friction or 0.0 for m in scene.materials] + \
         [p.rolling_friction or 0.0 for p in scene.pairs]
     if max(rolling) > 0.0:
@@ -692,8 +690,10 @@ def alone_blocker(scene: Scene) -> str | None:
     if len(scene.bodies) > 2:
         return (f"{len(scene.bodies)} spheres: contacts between spheres under these laws (inside an island) "
                 "are DEM's so far; the event engine takes a sphere alone among walls, or two spheres and no walls")
-    if scene.has_friction:
-        return "friction during a Hertz or damped contact is DEM's so far"
+    if scene.has_friction and len(scene.bodies) == 2:
+        return "friction between two spheres under these laws is DEM's so far"
+    if scene.has_friction and c.tangential != "spring":
+        return "Coulomb friction with a dead band during a Hertz or damped contact is DEM's so far"
     if scene.domain is not None and scene.domain.periodic:
         return "a periodic box is DEM's for these laws"
     if scene.rest is not None:

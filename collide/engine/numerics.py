@@ -207,3 +207,17 @@ def first_root(e0, r0, curve):
 @jit_inline
 def dot3(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@jit_inline
+def illinois(lo, hi, glo, ghi, side, m, g):
+    """One Illinois update of a bracket [lo, hi] (values glo, ghi of opposite signs) with the
+    value g at its secant point m: the side g shares with glo moves to m, and the other side's
+    value is halved when the same side moved last. Returns (lo, hi, glo, ghi, side)."""
+    if (g > 0.0) == (glo > 0.0):
+        if side == -1:
+            ghi *= 0.5
+        return m, hi, g, ghi, -1
+    if side == 1:
+        glo *= 0.5
+    return lo, m, glo, g, 1

@@ -25,7 +25,7 @@ from collide.engine.dem.layout import (
 )
 from collide.engine.dem.normal import normal_elastic
 from collide.engine.dem.rolling import rolling_resistance
-from collide.engine.dem.tangential import coulomb_slip, tangential_spring
+from collide.engine.dem.tangential import coulomb_slip, friction_cap, spring_coefficients, tangential_spring
 from collide.engine.jit import jit_inline
 
 
@@ -68,11 +68,10 @@ def contact_into(X, V, W, F, T, TR, PT, Bd, i, j, oi, oj, nx, ny, nz, delta, tab
     mu = tabs[mi, mj, T_MU]
     if spin and (mu > 0.0 or tspring):
         if tspring:
-            sx, sy, sz, mode = tangential_spring(hist, k, nx, ny, nz, tx, ty, tz, tabs[mi, mj, T_KTR] * kn,
-                                                 gn * tabs[mi, mj, T_KTR_ROOT],
-                                                 mu * press, dt)
+            kt, gt = spring_coefficients(kn, gn, tabs[mi, mj, T_KTR], tabs[mi, mj, T_KTR_ROOT])
+            sx, sy, sz, mode = tangential_spring(hist, k, nx, ny, nz, tx, ty, tz, kt, gt, friction_cap(mu, fn), dt)
         else:
-            sx, sy, sz, mode = coulomb_slip(tx, ty, tz, mu * press, tabs[mi, mj, T_EPS])
+            sx, sy, sz, mode = coulomb_slip(tx, ty, tz, friction_cap(mu, fn), tabs[mi, mj, T_EPS])
         fx += sx
         fy += sy
         fz += sz

@@ -30,6 +30,7 @@ import numpy as np
 from collide.engine.dem.damping import dashpot
 from collide.engine.dem.normal import normal_elastic
 from collide.engine.jit import jit
+from collide.engine.numerics import illinois
 
 # Gauss-Legendre, three stages (order 6): nodes C, matrix A, weights B.
 _R15 = math.sqrt(15.0)
@@ -202,16 +203,7 @@ def land(P, phase, x, y0, y1, y2, h, which, g0, g1):
         best = (x + m, a0, a1, a2)
         if g == 0.0 or abs(hi - lo) <= 4e-16 * abs(h):
             break
-        if (g > 0.0) == (glo > 0.0):
-            lo, glo = m, g
-            if side == -1:
-                ghi *= 0.5
-            side = -1
-        else:
-            hi, ghi = m, g
-            if side == 1:
-                glo *= 0.5
-            side = 1
+        lo, hi, glo, ghi, side = illinois(lo, hi, glo, ghi, side, m, g)
     return best[0], best[1], best[2], best[3], True
 
 

@@ -76,7 +76,7 @@ from collide.engine.layout import (
 from collide.engine.numerics import grow
 from collide.engine.records import add_knot, tail_after
 
-PAIR_OBLIQUE, PAIR_FAILED = 18, 19  # S_STATUS: a contact not head-on; a contact not answered
+PAIR_OBLIQUE, PAIR_FAILED = 21, 22  # S_STATUS (after event/alone.py's): a contact not head-on; a contact not answered
 HEAD_ON = 1e-12  # relative velocity across the line of centres, over the approach speed, taken as none
 NO_BOX = np.zeros(4)
 NO_WALLS = np.zeros((0, 6))

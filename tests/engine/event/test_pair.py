@@ -74,3 +74,15 @@ def test_head_on_pairs_match_closed_forms_and_dop853(seed):
     across = (fv[1] - fv[0]) - rebound * n
     assert np.abs(across).max() <= 1e-12 * v_in
     assert int(res.steps[0]) <= 50
+
+
+def test_status_codes_of_the_event_kernels_are_distinct():
+    """`collide.alone._check` tells a run's stop by its status alone: a code shared by two kernels
+    would name the wrong cause (a sphere held on its wall read as two spheres not head-on)."""
+    from collide.engine import layout
+    from collide.engine.event import alone, pair
+
+    codes = [layout.OK, layout.NONFINITE, layout.ENERGY, layout.STALL, layout.MAXSTEPS, layout.SINGULAR,
+             alone.ALONE_WALLS, alone.ALONE_FAILED, alone.ALONE_HELD, alone.ALONE_PLANE, alone.ALONE_CHATTER,
+             pair.PAIR_OBLIQUE, pair.PAIR_FAILED]
+    assert len(set(codes)) == len(codes)

@@ -1,0 +1,475 @@
+"""A sphere's contact with a wall under friction with a tangential spring (Cundall-Strack; Mindlin's
+stiffness for Hertz), at full order: the normal contact of `impact` coupled with the spring, the
+slip of the contact point and the spin, each stick and slip located as an event.
+
+The force is the DEM kernel's (`collide.engine.dem.tangential`: `spring_coefficients`,
+`spring_trial`, `friction_cap`, `slip_stretch`), taken to the limit of a vanishing step:
+
+* stick: xi' = v_c, F = -k_t xi - gamma_t v_c, while |F| <= mu F_n;
+* slip: F = s mu F_n (s the slip's sign), the stretch the one that holds it alone
+  (xi = -F / k_t, as the DEM kernel keeps it). With a tangential dashpot the slip lasts while the
+  contact point slides against F (s v_c < 0); without one, while the stretch is pushed past the
+  cap: -s v_c > c' with c = mu F_n / k_t (the DEM kernel's update, its step to zero).
+
+Reaching the cap in stick is an event: the stretch is set to hold the capped force (the DEM
+kernel's rule), and the contact slips, or sticks on where the point moves along the force (the
+dashpot's share then lowers the force below the cap). Slip ending is an event too. Both are
+located by secant steps on the step's length, as `impact.land` lands a peak, so the composition
+keeps the step's order (Gauss-Legendre, three stages, order 6; over sigma = delta^(1/p) near the
+ends, as `impact` integrates Hertz's singular start and end).
+
+The tangential motion must stay in one line of the wall (the contact point's slip, the centre's
+velocity along the wall and gravity's part along it parallel, no spin about that line): always so
+in a 2D scene. In 3D a contact that is not such is DEM's so far (`PLANE`). A contact that does
+not separate (a ball held on the wall, rolling) is DEM's too (`HELD`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from collide.engine.dem.normal import normal_elastic
+from collide.engine.dem.tangential import friction_cap, slip_stretch, spring_coefficients, spring_trial
+from collide.engine.event.impact import (
+    ENDED,
+    FAILED,
+    GL_A00,
+    GL_A01,
+    GL_A02,
+    GL_A10,
+    GL_A11,
+    GL_A12,
+    GL_A20,
+    GL_A21,
+    GL_A22,
+    GL_B0,
+    GL_B1,
+    GL_B2,
+    GL_C0,
+    GL_C1,
+    GL_C2,
+    ITERATIONS,
+    LAND,
+    O_DELTA,
+    O_END,
+    O_OK,
+    O_STEPS,
+    O_TIME,
+    O_U,
+    O_VOUT,
+    O_WORK,
+    P_SPEED,
+    P_STOP,
+    SIGMA,
+    STOPPED,
+    SWITCH,
+    TIME,
+    estimate,
+    law,
+)
+from collide.engine.jit import jit
+from collide.engine.numerics import illinois
+
+# T, the spring's parameters: mu, k_t / k_n, its root, the sphere's mass, inertia and radius,
+# gravity along the line e, and the slip's sign s (set as the contact goes)
+T_MU, T_KTR, T_ROOT, T_M, T_I, T_R, T_G, T_S = range(8)
+NT = 8
+# y, the state: delta over time (the time over sigma), delta's rate, the dashpot's work, the
+# stretch xi, the centre's velocity along e, the spin about b = -N x e, friction's work, the
+# centre's way along e, the angle turned about b
+Y0, YU, YWN, YXI, YVT, YWB, YWT, YP, YTH = range(9)
+NY = 9
+STICK, SLIP = 0, 1
+SWITCHES = 1000  # mode changes inside one step before the step counts as failed
+HELD, PLANE, CHATTER = 3.0, 4.0, 5.0  # O_END beyond impact's: a contact that does not separate; not in
+# one line; stick and slip alternating without end (a sliding mode of the DEM law's limit, not
+# taken as one yet)
+CHANGES = 64  # stick-slip changes in one contact beyond which it counts as CHATTER
+_A = np.array([[GL_A00, GL_A01, GL_A02], [GL_A10, GL_A11, GL_A12], [GL_A20, GL_A21, GL_A22]])
+_B = np.array([GL_B0, GL_B1, GL_B2])
+_C = np.array([GL_C0, GL_C1, GL_C2])
+
+
+@jit
+def overlap(P, phase, x, y):
+    """(delta, d t / d x) at a state: over time x is t; over sigma delta = x^p."""
+    if phase == TIME:
+        return y[Y0], 1.0
+    p = P[7]
+    if p == 4.0:
+        x2 = x * x
+        return x2 * x2, 4.0 * x2 * x / y[YU]
+    if p == 1.0:
+        return x, 1.0 / y[YU]
+    return x ** p, p * x ** (p - 1.0) / y[YU]
+
+
+@jit
+def forces(P, T, mode, delta, y):
+    """(normal acceleration, F_n, gamma_n, friction F along e, contact point's slip v_c, k_t,
+    gamma_t, cap, k_n) at overlap delta: in stick the spring's force before the cap (so that a
+    step past the cap stays smooth and the event is found), in slip the cap."""
+    acc, fn, gamma = law(P, delta, y[YU])
+    if not math.isfinite(acc):
+        return acc, acc, acc, acc, acc, acc, acc, acc, acc
+    _, kn = normal_elastic(P[0] > 0.0, P[1], P[2], P[3], delta)
+    kt, gt = spring_coefficients(kn, gamma, T[T_KTR], T[T_ROOT])
+    cap = friction_cap(T[T_MU], fn)
+    vc = y[YVT] + (T[T_R] - delta) * y[YWB]
+    if mode == STICK:
+        f = spring_trial(y[YXI], 0.0, 0.0, vc, 0.0, 0.0, kt, gt)[0]
+    else:
+        f = T[T_S] * cap
+    return acc, fn, gamma, f, vc, kt, gt, cap, kn
+
+
+@jit
+def rhs(P, T, phase, mode, x, y, f):
+    """The derivatives of y over the phase's variable into f."""
+    delta, scale = overlap(P, phase, x, y)
+    acc, fn, gamma, ft, vc, kt, gt, cap, kn = forces(P, T, mode, delta, y)
+    u = y[YU]
+    f[Y0] = u if phase == TIME else scale
+    f[YU] = acc * scale
+    f[YWN] = gamma * u * u * scale
+    f[YXI] = vc * scale if mode == STICK else 0.0
+    f[YVT] = (ft / T[T_M] + T[T_G]) * scale
+    f[YWB] = (T[T_R] - delta) * ft / T[T_I] * scale
+    f[YWT] = -ft * vc * scale
+    f[YP] = y[YVT] * scale
+    f[YTH] = y[YWB] * scale
+
+
+@jit
+def gl_step(P, T, phase, mode, x, y, h, e, ws, floors):
+    """One Gauss-Legendre step of h from (x, y) into e (`impact.gl_step` for the vector y: each
+    part's change relative to its own size, round-off below floors). Returns ok."""
+    K, N, ys, f0 = ws[0:3], ws[3:6], ws[6], ws[7]
+    rhs(P, T, phase, mode, x, y, f0)
+    for i in range(3):
+        for c in range(NY):
+            K[i, c] = f0[c]
+    last = math.inf
+    for _ in range(ITERATIONS):
+        for i in range(3):
+            for c in range(NY):
+                ys[c] = y[c] + h * (_A[i, 0] * K[0, c] + _A[i, 1] * K[1, c] + _A[i, 2] * K[2, c])
+            rhs(P, T, phase, mode, x + _C[i] * h, ys, N[i])
+        change = 0.0
+        for c in range(NY):
+            d = abs(N[0, c] - K[0, c]) + abs(N[1, c] - K[1, c]) + abs(N[2, c] - K[2, c])
+            floor = floors[c] + (abs(h * P[6]) if c == YU else 0.0)
+            part = abs(h) * d / (abs(y[c]) + abs(h * f0[c]) + floor)
+            if not part <= change:  # (NaN too: Hertz past the contact's end fails the step)
+                change = part
+        for i in range(3):
+            for c in range(NY):
+                K[i, c] = N[i, c]
+        if change <= 1e-16 or (change <= 1e-13 and change >= 0.5 * last):
+            for c in range(NY):
+                e[c] = y[c] + h * (_B[0] * K[0, c] + _B[1] * K[1, c] + _B[2] * K[2, c])
+            return True
+        if not math.isfinite(change):
+            break
+        last = change
+    return False
+
+
+@jit
+def watched(P, T, phase, mode, x, y, which):
+    """which 0: the mode's own switch function (> 0 while it lasts); 1: the time past P_STOP; 2:
+    the normal force (where it changes sign the cap mu max(F_n, 0) has a kink)."""
+    if which == 1:
+        return (x if phase == TIME else y[Y0]) - P[P_STOP]
+    delta, _ = overlap(P, phase, x, y)
+    acc, fn, gamma, ft, vc, kt, gt, cap, kn = forces(P, T, mode, delta, y)
+    if which == 2:
+        return fn
+    if mode == STICK:
+        return cap - abs(ft)
+    if gt > 0.0:
+        return -T[T_S] * vc
+    # c' = d/dt (mu F_n / k_t), F_n elastic alone here (no dashpot): Hertz's k_n' = k_n / (2 delta)
+    # (at touching, kn = 0, its limit: F_n k_n' / k_n = k_n / 3)
+    if kt > 0.0:
+        slope = kn / (2.0 * delta) if P[0] > 0.0 else 0.0
+        rate = T[T_MU] * y[YU] * (kn - fn * slope / kn) / kt
+    else:
+        rate = T[T_MU] * y[YU] * (2.0 / 3.0 if P[0] > 0.0 else 1.0) / T[T_KTR]
+    return -T[T_S] * vc - rate
+
+
+@jit
+def switch(P, T, phase, mode, x, y):
+    """The mode after a located switch from `mode` at (x, y); sets the stretch and the slip's sign."""
+    delta, _ = overlap(P, phase, x, y)
+    acc, fn, gamma, ft, vc, kt, gt, cap, kn = forces(P, T, mode, delta, y)
+    if mode == SLIP:
+        y[YXI] = slip_stretch(T[T_S] * cap, kt)
+        return STICK
+    T[T_S] = 1.0 if ft > 0.0 or (ft == 0.0 and vc < 0.0) else -1.0
+    y[YXI] = slip_stretch(T[T_S] * cap, kt)
+    if gt > 0.0 and T[T_S] * vc >= 0.0:
+        # the point moves along the force: the dashpot's share may hold the spring below the cap
+        held = spring_trial(y[YXI], 0.0, 0.0, vc, 0.0, 0.0, kt, gt)[0]
+        if abs(held) <= cap:
+            return STICK
+        T[T_S] = 1.0 if held > 0.0 else -1.0
+    return SLIP
+
+
+@jit
+def changed(P, T, phase, mode, x, y, count):
+    """`switch`, counting changes between stick and slip in count[1]: (mode, ok), ok False
+    beyond CHANGES."""
+    after = switch(P, T, phase, mode, x, y)
+    if after != mode:
+        count[1] += 1
+    return after, count[1] <= CHANGES
+
+
+@jit
+def land(P, T, phase, mode, x, y, h, which, g0, g1, e, ws, floors):
+    """The step's length from (x, y) that puts the watched function (g0 at 0, g1 at h) at zero, by
+    secant (Illinois) steps, its end state in e. Returns (length, ok)."""
+    lo, hi, glo, ghi = 0.0, h, g0, g1
+    side = 0
+    m = h
+    for _ in range(LAND):
+        m = lo - glo * (hi - lo) / (ghi - glo)
+        if not gl_step(P, T, phase, mode, x, y, m, e, ws, floors):
+            return m, False
+        g = watched(P, T, phase, mode, x + m, e, which)
+        if g == 0.0 or abs(hi - lo) <= 4e-16 * abs(h):
+            break
+        lo, hi, glo, ghi, side = illinois(lo, hi, glo, ghi, side, m, g)
+    # the mode's side of the root: a switch landed just past it would start the next mode early
+    if which == 0 and watched(P, T, phase, mode, x + m, e, 0) < 0.0 and lo > 0.0:
+        m = lo
+        if not gl_step(P, T, phase, mode, x, y, m, e, ws, floors):
+            return m, False
+    return m, True
+
+
+@jit
+def keep(P, T, phase, mode, x, y, trail):
+    """The state after a step into the trail: (time, delta, rate, work, way, velocity, angle, spin,
+    F_n, F, mode)."""
+    delta, _ = overlap(P, phase, x, y)
+    acc, fn, gamma, ft, vc, kt, gt, cap, kn = forces(P, T, mode, delta, y)
+    trail.append((x if phase == TIME else y[Y0], delta, y[YU], y[YWN] + y[YWT], y[YP], y[YVT], y[YTH], y[YWB],
+                  fn, ft, 2.0 if mode == STICK else 1.0))
+
+
+@jit
+def advance(P, T, phase, mode, x, end, y, ws, floors, trail, count):
+    """Step y (in place) from x to end, each mode switch and each kink of the cap (F_n through
+    zero, where a damped force would pull) inside landed and the rest taken on from there; stops
+    at P_STOP. Returns (x, mode, how): how 0 done, 1 failed, 2 stopped."""
+    e = ws[8]
+    at_kink = False
+    for _ in range(SWITCHES):
+        h = end - x
+        if not gl_step(P, T, phase, mode, x, y, h, e, ws, floors):
+            return x, mode, 1
+        count[0] += 1
+        kink = False
+        if not at_kink:
+            n0, n1 = watched(P, T, phase, mode, x, y, 2), watched(P, T, phase, mode, x + h, e, 2)
+            if (n0 > 0.0 and n1 <= 0.0) or (n0 < 0.0 and n1 >= 0.0):
+                h, ok = land(P, T, phase, mode, x, y, h, 2, n0, n1, e, ws, floors)
+                if not ok:
+                    return x, mode, 1
+                kink = True
+        g1 = watched(P, T, phase, mode, x + h, e, 0)
+        switched = False
+        if g1 < 0.0:
+            g0 = watched(P, T, phase, mode, x, y, 0)
+            if g0 <= 0.0:  # the mode does not hold from here (at touch, or just switched): the other
+                mode, ok = changed(P, T, phase, mode, x, y, count)
+                if not ok:
+                    return x, mode, 4
+                at_kink = False
+                continue
+            h, ok = land(P, T, phase, mode, x, y, h, 0, g0, g1, e, ws, floors)
+            if not ok:
+                return x, mode, 1
+            switched, kink = True, False
+        stopped = False
+        t1 = x + h if phase == TIME else e[Y0]
+        if t1 > P[P_STOP]:
+            t0 = x if phase == TIME else y[Y0]
+            h, ok = land(P, T, phase, mode, x, y, h, 1, t0 - P[P_STOP], t1 - P[P_STOP], e, ws, floors)
+            if not ok:
+                return x, mode, 1
+            stopped = True
+        for c in range(NY):
+            y[c] = e[c]
+        x += h
+        keep(P, T, phase, mode, x, y, trail)
+        if stopped:
+            return x, mode, 2
+        if switched:
+            mode, ok = changed(P, T, phase, mode, x, y, count)
+            if not ok:
+                return x, mode, 4
+        elif not kink:
+            return end, mode, 0
+        at_kink = kink
+    return x, mode, 1
+
+
+@jit
+def first_mode(P, T, v_in, dmax, y):
+    """The mode at touching (xi = 0): the spring's force against the cap a little way in (both
+    vanish at touching under Hertz; their ratio settles at once)."""
+    d = 1e-8 * dmax
+    y[YU] = v_in
+    acc, fn, gamma, ft, vc, kt, gt, cap, kn = forces(P, T, STICK, d, y)
+    y[YXI] = vc * d / v_in
+    ft = spring_trial(y[YXI], 0.0, 0.0, vc, 0.0, 0.0, kt, gt)[0]
+    y[YXI] = 0.0
+    if abs(ft) <= cap:
+        return STICK
+    T[T_S] = -1.0 if vc > 0.0 else 1.0
+    return SLIP
+
+
+@jit
+def sigma_steps(P, T, mode, x, end, n, y, ws, floors, trail, count, v_in):
+    """n steps over sigma from x to end (the rise: failed where the approach slows below a
+    quarter; the fall: turned where the separation stops). Returns (x, mode, how): how 0 done,
+    1 failed, 2 stopped, 3 turned, 4 chattering."""
+    h = (end - x) / n
+    start = x
+    for s in range(n):
+        x, mode, how = advance(P, T, SIGMA, mode, x, end if s == n - 1 else start + (s + 1) * h, y, ws, floors,
+                               trail, count)
+        if how == 4:
+            return x, mode, 4
+        if how == 1 or (h > 0.0 and not y[YU] > 0.25 * v_in):
+            return x, mode, 1
+        if h < 0.0 and not y[YU] < 0.0:
+            return x, mode, 3
+        if how == 2:
+            return x, mode, 2
+    return x, mode, 0
+
+
+@jit
+def middle(P, T, mode, t, delta1, h, limit, y, ws, floors, trail, count):
+    """Over time from y (delta in Y0) until delta is back below delta1 (separating), ending at no
+    less than half of it, or the stop, within `limit` steps (`impact.middle`). Returns (t, mode,
+    how) as `sigma_steps`."""
+    size = h
+    save = np.empty(NY)
+    while count[0] < limit:
+        for c in range(NY):
+            save[c] = y[c]
+        sign, kept = T[T_S], len(trail)
+        x, after, how = advance(P, T, TIME, mode, t, t + h, y, ws, floors, trail, count)
+        if how == 4:
+            return t, mode, 4
+        if how == 1 or (y[YU] < 0.0 and y[Y0] < 0.5 * delta1):
+            for c in range(NY):  # too long a step for this part of the contact
+                y[c] = save[c]
+            T[T_S] = sign
+            while len(trail) > kept:
+                trail.pop()
+            h *= 0.5
+            if h < 1e-12 * size:
+                return t, mode, 1
+            continue
+        t, mode, h = x, after, size
+        if how == 2:
+            return t, mode, 2
+        if y[YU] < 0.0 and y[Y0] < delta1:
+            return t, mode, 0
+    return t, mode, 1
+
+
+@jit
+def rub(P, T, v_in, n_end, n_mid, limit, out, trail, y):
+    """One contact from touching at approach speed v_in > 0 until it separates or P_STOP comes
+    (`impact.contact`'s steps: n_end over sigma at each end, a contact time over n_mid between),
+    with friction; y (NY) holds the tangential state at touching (YVT, YWB) and gets the state at
+    the end. out (impact's NOUT): the speed of separation, the time, the work of the dashpot and
+    friction, the steps, O_END (ENDED; STOPPED, with O_DELTA and O_U; FAILED; HELD); the peaks
+    are left to `impact.contact`. trail gets `keep`'s row after every step."""
+    dmax, span = estimate(P, v_in)
+    P[P_SPEED] = 1e-300 + 1e-17 * v_in
+    ws = np.zeros((9, NY))
+    floors = np.full(NY, 1e-300)
+    floors[YU] = floors[YVT] = P[P_SPEED]
+    floors[YWB] = P[P_SPEED] / T[T_R]
+    floors[YXI] = floors[YP] = P[P_SPEED] * span
+    floors[YTH] = floors[YXI] / T[T_R]
+    floors[YWN] = floors[YWT] = 1e-17 * T[T_M] * v_in * v_in
+    y0 = y.copy()
+    count = np.zeros(2, np.int64)
+    frac, how, delta1, mode, x = SWITCH, 1, 0.0, STICK, 0.0
+    for _ in range(10):  # the rise, its switch to time steps halved while the approach slows too much
+        while len(trail) > 0:
+            trail.pop()
+        for c in range(NY):
+            y[c] = y0[c]
+        mode = first_mode(P, T, v_in, dmax, y)
+        y[Y0], y[YU] = 0.0, v_in
+        delta1 = frac * dmax
+        x, mode, how = sigma_steps(P, T, mode, 0.0, delta1 ** (1.0 / P[7]), n_end, y, ws, floors, trail, count,
+                                   v_in)
+        if how != 1:
+            break
+        frac *= 0.5
+        count[1] = 0
+    t, d = y[Y0], x ** P[7]
+    if how == 0:
+        y[Y0] = d
+        t, mode, how = middle(P, T, mode, t, delta1, span / n_mid, limit, y, ws, floors, trail, count)
+        d = y[Y0]
+        if how == 0:
+            y[Y0] = t
+            x, mode, how = sigma_steps(P, T, mode, d ** (1.0 / P[7]), 0.0, n_end, y, ws, floors, trail, count,
+                                       v_in)
+            t, d = y[Y0], x ** P[7]
+    elif how == 2:
+        d = x ** P[7]
+    out[O_VOUT], out[O_TIME], out[O_WORK], out[O_STEPS] = -y[YU], t, y[YWN] + y[YWT], count[0]
+    out[O_DELTA], out[O_U] = d, y[YU]
+    out[O_END] = (ENDED, FAILED, STOPPED, HELD, CHATTER)[how]
+    out[O_OK] = 1.0 if how == 0 else 0.0
+
+
+@jit
+def frame(N, v, w, g, r):
+    """The line e of the wall (normal N, out of it) along which the contact's tangential motion
+    stays, b = -N x e the spin's axis, for a sphere at v spinning at w under g; ok False where
+    the motion is not in one line (module docstring)."""
+    vn, gn = v[0] * N[0] + v[1] * N[1] + v[2] * N[2], g[0] * N[0] + g[1] * N[1] + g[2] * N[2]
+    vt, gt, slip = np.empty(3), np.empty(3), np.empty(3)
+    for d in range(3):
+        vt[d], gt[d] = v[d] - vn * N[d], g[d] - gn * N[d]
+    wxn = np.array([N[1] * w[2] - N[2] * w[1], N[2] * w[0] - N[0] * w[2], N[0] * w[1] - N[1] * w[0]])  # w x -N
+    for d in range(3):
+        slip[d] = vt[d] + r * wxn[d]
+    e = np.zeros(3)
+    for cand in (slip, vt, gt):
+        size = math.sqrt((cand ** 2).sum())
+        if size > 0.0:
+            e = cand / size
+            break
+    if not e.any():  # head-on, no spin, no gravity along the wall: any line of it
+        axis = np.argmin(np.abs(N))
+        e[axis] = 1.0
+        e -= (e * N).sum() * N
+        e /= math.sqrt((e ** 2).sum())
+    b = np.array([N[2] * e[1] - N[1] * e[2], N[0] * e[2] - N[2] * e[0], N[1] * e[0] - N[0] * e[1]])
+    scale = math.sqrt((v ** 2).sum()) + r * math.sqrt((w ** 2).sum()) + 1e-300
+    off = 0.0
+    for vec, size in ((vt, scale), (gt, math.sqrt((g ** 2).sum()) + 1e-300), (slip, scale)):
+        along = (vec * e).sum()
+        off = max(off, math.sqrt(((vec - along * e) ** 2).sum()) / size)
+    off = max(off, r * abs((w * e).sum()) / scale)
+    return e, b, off <= 1e-12
