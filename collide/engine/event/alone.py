@@ -255,7 +255,7 @@ def take_rubbing(G, WP, LAW, TW, grav, fl, w, t, t_end, ends, steps_left, out, t
     y[YWB] = spin[0] * b[0] + spin[1] * b[1] + spin[2] * b[2]
     # Steps by the stick's frequency, sqrt(k_t / k_n (1 + m r^2 / I)) times the normal one's (an
     # order-6 error grows as its sixth power), and half as many again (measured: 100 random impacts
-    # at tol 1e-6 within 1e-6 of tol 1e-9, tests/test_oblique.py)
+    # at tol 1e-6 within 1e-6 of tol 1e-9, tests/engine/event/test_oblique.py)
     grow = 1.5 * max(1.0, math.sqrt(TW[w, 1] * (1.0 + G[0, G_M] * G[0, G_R] ** 2 / G[0, G_I])))
     rub(P, T, v_in, math.ceil(ends[0] * grow), math.ceil(ends[1] * grow), steps_left - steps, out, rubbed, y)
     out[O_DMAX], out[O_FMAX], out[O_STEPS] = dmax, fmax, out[O_STEPS] + steps

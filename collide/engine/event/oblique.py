@@ -70,7 +70,7 @@ from collide.engine.event.impact import (
     law,
 )
 from collide.engine.jit import jit
-from collide.engine.numerics import illinois
+from collide.engine.numerics import dot3, illinois
 
 # T, the spring's parameters: mu, k_t / k_n, its root, the sphere's mass, inertia and radius,
 # gravity along the line e, and the slip's sign s (set as the contact goes)
@@ -454,22 +454,35 @@ def frame(N, v, w, g, r):
     wxn = np.array([N[1] * w[2] - N[2] * w[1], N[2] * w[0] - N[0] * w[2], N[0] * w[1] - N[1] * w[0]])  # w x -N
     for d in range(3):
         slip[d] = vt[d] + r * wxn[d]
+    # Loops and dot3, not numpy's reductions: a cached kernel using those makes every process that
+    # loads it import numba's array maths (tests/test_startup.py).
     e = np.zeros(3)
     for cand in (slip, vt, gt):
-        size = math.sqrt((cand ** 2).sum())
+        size = math.sqrt(dot3(cand, cand))
         if size > 0.0:
-            e = cand / size
+            for d in range(3):
+                e[d] = cand[d] / size
             break
-    if not e.any():  # head-on, no spin, no gravity along the wall: any line of it
-        axis = np.argmin(np.abs(N))
+    if dot3(e, e) == 0.0:  # head-on, no spin, no gravity along the wall: any line of it
+        axis = 0
+        for d in range(1, 3):
+            if abs(N[d]) < abs(N[axis]):
+                axis = d
         e[axis] = 1.0
-        e -= (e * N).sum() * N
-        e /= math.sqrt((e ** 2).sum())
+        en = dot3(e, N)
+        for d in range(3):
+            e[d] -= en * N[d]
+        size = math.sqrt(dot3(e, e))
+        for d in range(3):
+            e[d] /= size
     b = np.array([N[2] * e[1] - N[1] * e[2], N[0] * e[2] - N[2] * e[0], N[1] * e[0] - N[0] * e[1]])
-    scale = math.sqrt((v ** 2).sum()) + r * math.sqrt((w ** 2).sum()) + 1e-300
+    scale = math.sqrt(dot3(v, v)) + r * math.sqrt(dot3(w, w)) + 1e-300
     off = 0.0
-    for vec, size in ((vt, scale), (gt, math.sqrt((g ** 2).sum()) + 1e-300), (slip, scale)):
-        along = (vec * e).sum()
-        off = max(off, math.sqrt(((vec - along * e) ** 2).sum()) / size)
-    off = max(off, r * abs((w * e).sum()) / scale)
+    for vec, size in ((vt, scale), (gt, math.sqrt(dot3(g, g)) + 1e-300), (slip, scale)):
+        along = dot3(vec, e)
+        across = 0.0
+        for d in range(3):
+            across += (vec[d] - along * e[d]) ** 2
+        off = max(off, math.sqrt(across) / size)
+    off = max(off, r * abs(dot3(w, e)) / scale)
     return e, b, off <= 1e-12
