@@ -219,26 +219,22 @@ def _check(model: Model, st: np.ndarray, fg: np.ndarray, t: float, open_ended: b
         return
     if status == layout.MAXSTEPS:
         raise step_limit_error(int(st[layout.S_STEPS]), t, open_ended)
-    if status == pair.PAIR_OBLIQUE:
-        raise AloneError(f"the spheres touch at {at} not head-on (moving across the line of their centres): the "
-                         "line turns during the contact, which is DEM's so far")
-    if status == pair.PAIR_FAILED:
-        raise AloneError(f"the spheres' contact at {at} could not be integrated (its steps did not converge)")
-    wall = int(fg[layout.F_STATUS_A])
-    if status == alone.ALONE_WALLS:
-        raise AloneError(f"the sphere's contact with wall {wall} at {at} comes within reach of another wall: "
-                         "two contacts at once under these laws are DEM's so far")
-    if status == alone.ALONE_HELD:
-        raise AloneError(f"the sphere's contact with wall {wall} at {at} does not separate (held on the wall, rolling "
-                         "or resting): such a contact with a tangential spring is DEM's so far")
-    if status == alone.ALONE_CHATTER:
-        raise AloneError(f"the sphere's contact with wall {wall} at {at} alternates between stick and slip without "
-                         "end (a sliding mode of the spring's law, which the event engine does not take yet)")
-    if status == alone.ALONE_PLANE:
-        raise AloneError(f"the sphere's slip on wall {wall} at {at} is not along one line of the wall (spin about "
-                         "an axis along it, or gravity across it): such a contact is DEM's so far")
-    raise AloneError(f"the sphere's contact with wall {wall} at {at} could not be integrated (its steps did not "
-                     "converge)")
+    stops = {
+        pair.PAIR_OBLIQUE: "the spheres touch at {at} not head-on (moving across the line of their centres): the "
+                           "line turns during the contact, which is DEM's so far",
+        pair.PAIR_FAILED: "the spheres' contact at {at} could not be integrated (its steps did not converge)",
+        alone.ALONE_WALLS: "the sphere's contact with wall {wall} at {at} comes within reach of another wall: "
+                           "two contacts at once under these laws are DEM's so far",
+        alone.ALONE_HELD: "the sphere's contact with wall {wall} at {at} does not separate (held on the wall, "
+                          "rolling or resting): such a contact with a tangential spring is DEM's so far",
+        alone.ALONE_CHATTER: "the sphere's contact with wall {wall} at {at} alternates between stick and slip "
+                             "without end (a sliding mode of the spring's law, which the event engine does not take "
+                             "yet)",
+        alone.ALONE_PLANE: "the sphere's slip on wall {wall} at {at} is not along one line of the wall (spin about "
+                           "an axis along it, or gravity across it): such a contact is DEM's so far",
+    }
+    failed = "the sphere's contact with wall {wall} at {at} could not be integrated (its steps did not converge)"
+    raise AloneError(stops.get(status, failed).format(wall=int(fg[layout.F_STATUS_A]), at=at))
 
 
 class AloneError(RunError):
