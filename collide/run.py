@@ -324,10 +324,11 @@ def _run_alone(scene: Scene, integ: str, model, state, tol: float, record: bool,
 
     if scene.gravity is not None and scene.walls and scene.duration is None:
         raise SceneError("duration: required when a scene has both gravity and walls (a bouncing sphere never stops)")
-    n_end, n_mid = steps_for(contact_tol(model, state, tol, math.nan if scene.duration is None else scene.duration))
+    duration = math.nan if scene.duration is None else scene.duration
+    n_end, n_mid = steps_for(contact_tol(model, state, tol, duration))
     limit = step_limit([scene.duration], max_steps, 2 * n_end + n_mid)
     try:
-        result = simulate_alone(model, state, tol=tol, duration=np.nan if scene.duration is None else scene.duration,
+        result = simulate_alone(model, state, tol=tol, duration=duration,
                                 tail=np.nan if scene.tail is None else scene.tail, record=record, max_steps=limit)
     except AloneError as exc:
         return _in_dem(scene, tol, record, max_steps, measure, forced, exc)
@@ -351,7 +352,7 @@ def _run_alone(scene: Scene, integ: str, model, state, tol: float, record: bool,
         rerun = measure_mod.Rerun(
             run=lambda finer, steps: run_scenes([scene], integrator=integ, tol=finer, record=record, max_steps=steps,
                                                 measure=False),
-            step=lambda finer: alone_step(model, state, finer, math.nan if scene.duration is None else scene.duration),
+            step=lambda finer: alone_step(model, state, finer, duration),
             floor=ALONE_TOL_FLOOR)
         run = measure_mod.measured(run, rerun, limit)
         if _rubs(scene) and (run.error_method[0] != "measured" or float(run.error_estimate[0]) > tol):
