@@ -70,6 +70,19 @@ def law(P, delta, u):
 
 
 @jit
+def overlap(P, x):
+    """delta = x^p at sigma = x: by products for Hertz's 4 and the linear spring's 1 (a power with
+    a float exponent cost more than the rest of an evaluation, measured)."""
+    p = P[7]
+    if p == 4.0:
+        x2 = x * x
+        return x2 * x2
+    if p == 1.0:
+        return x
+    return x ** p
+
+
+@jit
 def rhs(P, phase, x, y0, y1, y2):
     """The derivatives over the phase's variable x. TIME: y = (delta, u, work); SIGMA:
     y = (t, u, work) at delta = x^p."""
@@ -77,8 +90,7 @@ def rhs(P, phase, x, y0, y1, y2):
         acc, _, gamma = law(P, y0, y1)
         return y1, acc, gamma * y1 * y1
     p = P[7]
-    # delta = x^p and d delta / d sigma: by products for Hertz's 4 and the linear spring's 1 (a
-    # power with a float exponent cost more than the rest of an evaluation, measured)
+    # delta = x^p (`overlap`) and d delta / d sigma
     if p == 4.0:
         x2 = x * x
         delta, jac = x2 * x2, 4.0 * x2 * x
@@ -170,7 +182,7 @@ def watched(P, phase, x, y0, y1, which):
     stop P_STOP."""
     if which == 2:
         return (x if phase == TIME else y0) - P[P_STOP]
-    delta, u = (y0, y1) if phase == TIME else (x ** P[7], y1)
+    delta, u = (y0, y1) if phase == TIME else (overlap(P, x), y1)
     if which == 0:
         return u
     acc, _, gamma = law(P, delta, u)
@@ -182,7 +194,7 @@ def watched(P, phase, x, y0, y1, which):
 @jit
 def force_at(P, phase, x, y0, y1):
     """The normal force at a state."""
-    delta = y0 if phase == TIME else x ** P[7]
+    delta = y0 if phase == TIME else overlap(P, x)
     return law(P, delta, y1)[1]
 
 
@@ -215,7 +227,7 @@ def watch_step(P, phase, x, y0, y1, y2, h, e0, e1, e2, peaks, trail):
     the step's end that the caller adds). Returns ok."""
     peaks[1] = max(peaks[1], force_at(P, phase, x + h, e0, e1))
     if phase == SIGMA:
-        peaks[0] = max(peaks[0], (x + h) ** P[7])
+        peaks[0] = max(peaks[0], overlap(P, x + h))
     else:
         peaks[0] = max(peaks[0], e0)
     first = (math.inf, 0.0, 0.0, 0.0)
@@ -228,10 +240,10 @@ def watch_step(P, phase, x, y0, y1, y2, h, e0, e1, e2, peaks, trail):
             if not ok:
                 return False
             if which == 0:
-                peaks[0] = max(peaks[0], l0 if phase == TIME else lx ** P[7])
+                peaks[0] = max(peaks[0], l0 if phase == TIME else overlap(P, lx))
             else:
                 peaks[1] = max(peaks[1], force_at(P, phase, lx, l0, l1))
-            state = (lx, l0, l1, l2) if phase == TIME else (l0, lx ** P[7], l1, l2)
+            state = (lx, l0, l1, l2) if phase == TIME else (l0, overlap(P, lx), l1, l2)
             if state[0] < first[0]:
                 first, second = state, first
             else:
@@ -275,12 +287,12 @@ def rise(P, v_in, sigma1, n, peaks, trail):
         if stopped:
             if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, peaks, trail):
                 return x, t, u, w, s, FAIL
-            trail.append((P[P_STOP], lx ** P[7], l1, l2))
+            trail.append((P[P_STOP], overlap(P, lx), l1, l2))
             return lx, P[P_STOP], l1, l2, s + 1, STOP
         if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks, trail):
             return x, t, u, w, s, FAIL
         t, u, w = e0, e1, e2
-        trail.append((t, (x + h) ** P[7], u, w))
+        trail.append((t, overlap(P, x + h), u, w))
     return sigma1, t, u, w, n, DONE
 
 
@@ -328,12 +340,12 @@ def fall(P, t, sigma, u, w, n, peaks, trail):
         if stopped:
             if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, peaks, trail):
                 return x, t, u, w, s, TURNED
-            trail.append((P[P_STOP], lx ** P[7], l1, l2))
+            trail.append((P[P_STOP], overlap(P, lx), l1, l2))
             return lx, P[P_STOP], l1, l2, s + 1, STOP
         if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks, trail):
             return x, t, u, w, s, TURNED
         t, u, w = e0, e1, e2
-        trail.append((t, 0.0 if s == n - 1 else (x + h) ** P[7], u, w))
+        trail.append((t, 0.0 if s == n - 1 else overlap(P, x + h), u, w))
     return 0.0, t, u, w, n, DONE
 
 
@@ -386,7 +398,7 @@ def contact(P, v_in, n_end, n_mid, limit, out, trail):
     for c in range(NOUT):
         out[c] = 0.0
     delta1, x, t, u, w, steps, how = start(P, v_in, n_end, peaks, trail)
-    d = delta1 if how == DONE else x ** P[7]
+    d = delta1 if how == DONE else overlap(P, x)
     ended = False
     while how == DONE:
         t, d, u, w, s2, how = middle(P, t, delta1, d, u, w, span / n_mid, limit - steps, peaks, trail)
@@ -395,7 +407,7 @@ def contact(P, v_in, n_end, n_mid, limit, out, trail):
             break
         x, t, u, w, s3, how = fall(P, t, d ** (1.0 / P[7]), u, w, n_end, peaks, trail)
         steps += s3
-        d = x ** P[7]
+        d = overlap(P, x)
         if how == DONE:
             ended = True
             break
