@@ -171,10 +171,11 @@ def gl_step(P, phase, x, y0, y1, y2, h):
                               / (abs(y1) + abs(h * f1) + abs(h * P[6]) + P[P_SPEED]),
                               (abs(n02 - k02) + abs(n12 - k12) + abs(n22 - k22)) / (abs(y2) + abs(h * f2) + 1e-300))
         k00, k01, k02, k10, k11, k12, k20, k21, k22 = n00, n01, n02, n10, n11, n12, n20, n21, n22
-        # Done at round-off: below it, the next pass's change forecast below it from this pass's
-        # contraction (change / last), or no longer shrinking near it.
-        forecast = change <= 1e-8 and last < math.inf and change <= 0.5 * last and change * change <= P[P_CONVERGED] * last
-        if change <= P[P_CONVERGED] or forecast or (change <= 1e-13 and change >= 0.5 * last):
+        # Done below P_CONVERGED (`converged`), or with the next pass's change forecast below it from
+        # this pass's contraction (change / last), or no longer shrinking near round-off.
+        done = P[P_CONVERGED]
+        forecast = change <= 1e-8 and last < math.inf and change <= 0.5 * last and change * change <= done * last
+        if change <= done or forecast or (change <= 1e-13 and change >= 0.5 * last):
             keep_stages(P, phase, x, h, k00, k01, k02, k10, k11, k12, k20, k21, k22)
             return (y0 + h * (GL_B0 * k00 + GL_B1 * k10 + GL_B2 * k20),
                     y1 + h * (GL_B0 * k01 + GL_B1 * k11 + GL_B2 * k21),
