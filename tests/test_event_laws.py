@@ -147,3 +147,33 @@ def test_ten_bounces_as_collide_run_gives_them(hertz, e, radius, density, drop):
     got = [knots[(knots[:, layout.K_T] == end) & (knots[:, layout.K_FREE] == 1.0)][0, layout.K_V + 1] for end in ends]
     assert np.abs(np.array(got) / np.array(expected) - 1.0).max() <= 1e-8
 
+
+
+def test_a_measuring_run_that_becomes_the_answer_brings_its_trajectory(monkeypatch):
+    """The measurement's tighter runs record nothing (it compares final states); where one of them
+    becomes the answer (the run missed --tol), the answer still carries that run's trajectory: its
+    last knot is the answer's final state."""
+    import collide.measure as measure
+    from collide.engine import layout
+    from collide.run import run_scene
+    from collide.scene import parse_scene
+
+    raw = {"dim": 2, "duration": 0.8, "gravity": [0.0, -9.81], "contact": {"k": 1e5, "restitution": 0.7},
+           "body": [{"name": "ball", "radius": 0.02, "mass": 0.05, "position": [0.0, 0.3], "velocity": [0.2, 0.0]}],
+           "wall": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}]}
+    first = run_scene(parse_scene(raw), tol=1e-6)
+    assert first.result.trajectory is not None
+    calls = []
+    real = measure.outcome_distance
+
+    def missed_once(a, b, scene):  # the first comparison says the run missed --tol
+        calls.append(1)
+        return 1e-3 if len(calls) == 1 else real(a, b, scene)
+
+    monkeypatch.setattr(measure, "outcome_distance", missed_once)
+    run = run_scene(parse_scene(raw), tol=1e-6)
+    assert len(calls) >= 2 and run.error_method[0] == "measured"
+    assert not np.array_equal(run.result.final.v, first.result.final.v)  # the tighter run's answer
+    last = run.result.trajectory.knots[-1]
+    assert np.array_equal(last[layout.K_V:layout.K_V + 2], run.result.final.v[0, 0])
+    assert np.array_equal(last[layout.K_S:layout.K_S + 2], run.result.final.s[0, 0])
