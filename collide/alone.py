@@ -4,7 +4,7 @@
 The event engine locates every contact and steps it at the composition's order; for the
 report's linear spring it runs every scene. Its island step does not take Hertz or a dashpot
 yet, but a sphere alone among walls never forms an island: each contact is one normal contact
-(`collide.engine.event.impact`, order 6) between closed-form flights, so such a scene runs
+(`collide.engine.event.impact`, order 8) between closed-form flights, so such a scene runs
 there at full order whatever its tolerance. Every other scene with these laws (two spheres or
 more, friction, tangential springs, rolling resistance, a periodic box) runs in the fixed-step,
 first-order DEM kernel (docs/method.md, "Which engine runs a scene").
@@ -52,13 +52,13 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
         return SEED, "integrator 'seed' asked for: the report's own update on its fixed grid"
     if scene.needs_dem and len(scene.bodies) == 2:
         return EVENT, (f"{dem_reason(scene)} with two spheres and no walls, no friction: their contact in the "
-                       "relative coordinate (reduced mass and radius, head-on) at order 6 (Gauss-Legendre), its "
+                       "relative coordinate (reduced mass and radius, head-on) at order 8 (DOP853's Runge-Kutta), its "
                        "start and end located, flights in closed form")
     if scene.needs_dem:
-        rubs = (", friction's stick and slip located, the tangential spring at the same order"
+        rubs = (", friction's stick and slip located, the tangential spring at order 6 (Gauss-Legendre)"
                 if scene.contact.tangential == "spring" and scene.has_friction else "")
-        return EVENT, (f"{dem_reason(scene)} with a sphere alone among walls: each contact at order 6 "
-                       f"(Gauss-Legendre), its start and end located{rubs}, flights in closed form")
+        return EVENT, (f"{dem_reason(scene)} with a sphere alone among walls: each contact at order 8 "
+                       f"(DOP853's Runge-Kutta), its start and end located{rubs}, flights in closed form")
     return EVENT, (f"the report's contact law: every contact and friction mode change located, steps of "
                    f"order {_order(integrator)} ({integrator})")
 
@@ -153,7 +153,7 @@ def simulate_alone(model: Model, state: State, *, tol: float, duration: float, t
                    max_steps: int) -> RunResult:
     """Run one scene of one sphere among walls, or of two spheres and no walls (a batch of one),
     in the event engine."""
-    from collide.engine.event import alone, impact, pair
+    from collide.engine.event import alone, impact, oblique, pair
 
     check_tol(tol)
     G, WP, grav = kernel_inputs(model, state)
@@ -163,7 +163,8 @@ def simulate_alone(model: Model, state: State, *, tol: float, duration: float, t
     fp = np.zeros(int(layout.NFP))
     fp[layout.FP_TEND] = duration if math.isfinite(duration) else math.inf
     fp[layout.FP_TAIL] = tail
-    ends = np.array(impact.steps_for(contact_tol(model, state, tol, duration)), np.int64)
+    share = contact_tol(model, state, tol, duration)
+    ends = np.array(impact.steps_for(share) + oblique.rub_steps(share), np.int64)
     two = model.n_bodies == 2
     args = (G[0], pair_row(model), grav[0], fl, fp, ends) if two else \
         (G[0], WP, law_rows(model), rub_rows(model), grav[0], fl, fp, ends)

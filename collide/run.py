@@ -321,12 +321,13 @@ def _run_alone(scene: Scene, integ: str, model, state, tol: float, record: bool,
     instead, unless the event engine was asked for."""
     from collide.dem import contact_time
     from collide.engine.event.impact import steps_for
+    from collide.engine.event.oblique import rub_steps
 
     if scene.gravity is not None and scene.walls and scene.duration is None:
         raise SceneError("duration: required when a scene has both gravity and walls (a bouncing sphere never stops)")
     duration = math.nan if scene.duration is None else scene.duration
-    n_end, n_mid = steps_for(contact_tol(model, state, tol, duration))
-    limit = step_limit([scene.duration], max_steps, 2 * n_end + n_mid)
+    share = contact_tol(model, state, tol, duration)
+    limit = step_limit([scene.duration], max_steps, max(2 * n + m for n, m in (steps_for(share), rub_steps(share))))
     try:
         result = simulate_alone(model, state, tol=tol, duration=duration,
                                 tail=np.nan if scene.tail is None else scene.tail, record=record, max_steps=limit)

@@ -257,7 +257,7 @@ def take_rubbing(G, WP, LAW, TW, grav, fl, w, t, t_end, ends, steps_left, out, t
     # order-6 error grows as its sixth power), and half as many again (measured: 100 random impacts
     # at tol 1e-6 within 1e-6 of tol 1e-9, tests/engine/event/test_oblique.py)
     grow = 1.5 * max(1.0, math.sqrt(TW[w, 1] * (1.0 + G[0, G_M] * G[0, G_R] ** 2 / G[0, G_I])))
-    rub(P, T, v_in, math.ceil(ends[0] * grow), math.ceil(ends[1] * grow), steps_left - steps, out, rubbed, y)
+    rub(P, T, v_in, math.ceil(ends[2] * grow), math.ceil(ends[3] * grow), steps_left - steps, out, rubbed, y)
     out[O_DMAX], out[O_FMAX], out[O_STEPS] = dmax, fmax, out[O_STEPS] + steps
     if out[O_END] != ENDED and out[O_END] != STOPPED:
         return t, False, True, KN, RC, (ALONE_HELD if out[O_END] == HELD else
@@ -306,7 +306,8 @@ def alone_run(G, WP, LAW, TW, grav, fl, fp, ends):
     LAW[w] (impact.impact_params' P) and, where it rubs (a tangential spring with mu > 0), TW[w]
     (mu, k_t / k_n and its root; mu 0 where it does not), from time 0 to fp[FP_TEND] (or, with none, until it leaves
     every wall for good, and fp[FP_TAIL] or the usual tail after). ends: the steps over sigma
-    at each end of a contact and per contact time between (impact.steps_for). Returns (final
+    at each end of a contact and per contact time between (impact.steps_for), then those of a
+    rubbing contact (oblique.rub_steps). Returns (final
     time, knots, records, intervals, counters, figures) as `run.simulate`."""
     KN = np.empty((16, NK))
     RC = np.empty((16, NR))

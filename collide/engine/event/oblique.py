@@ -35,22 +35,6 @@ from collide.engine.dem.tangential import friction_cap, slip_stretch, spring_coe
 from collide.engine.event.impact import (
     ENDED,
     FAILED,
-    GL_A00,
-    GL_A01,
-    GL_A02,
-    GL_A10,
-    GL_A11,
-    GL_A12,
-    GL_A20,
-    GL_A21,
-    GL_A22,
-    GL_B0,
-    GL_B1,
-    GL_B2,
-    GL_C0,
-    GL_C1,
-    GL_C2,
-    ITERATIONS,
     LAND,
     O_DELTA,
     O_END,
@@ -87,9 +71,14 @@ HELD, PLANE, CHATTER = 3.0, 4.0, 5.0  # O_END beyond impact's: a contact that do
 # one line; stick and slip alternating without end (a sliding mode of the DEM law's limit, not
 # taken as one yet)
 CHANGES = 64  # stick-slip changes in one contact beyond which it counts as CHATTER
-_A = np.array([[GL_A00, GL_A01, GL_A02], [GL_A10, GL_A11, GL_A12], [GL_A20, GL_A21, GL_A22]])
-_B = np.array([GL_B0, GL_B1, GL_B2])
-_C = np.array([GL_C0, GL_C1, GL_C2])
+# Gauss-Legendre, three stages (order 6): nodes _C, matrix _A, weights _B.
+_R15 = math.sqrt(15.0)
+_A = np.array([[5.0 / 36.0, 2.0 / 9.0 - _R15 / 15.0, 5.0 / 36.0 - _R15 / 30.0],
+               [5.0 / 36.0 + _R15 / 24.0, 2.0 / 9.0, 5.0 / 36.0 - _R15 / 24.0],
+               [5.0 / 36.0 + _R15 / 30.0, 2.0 / 9.0 + _R15 / 15.0, 5.0 / 36.0]])
+_B = np.array([5.0 / 18.0, 4.0 / 9.0, 5.0 / 18.0])
+_C = np.array([0.5 - _R15 / 10.0, 0.5, 0.5 + _R15 / 10.0])
+ITERATIONS = 80  # fixed-point passes of a collocation step before it counts as failed
 
 
 @jit
@@ -144,8 +133,8 @@ def rhs(P, T, phase, mode, x, y, f):
 
 @jit
 def gl_step(P, T, phase, mode, x, y, h, e, ws, floors):
-    """One Gauss-Legendre step of h from (x, y) into e (`impact.gl_step` for the vector y: each
-    part's change relative to its own size, round-off below floors). Returns ok."""
+    """One Gauss-Legendre step of h from (x, y) into e (each part's change relative to its own
+    size, round-off below floors; its stages solved by fixed-point iteration). Returns ok."""
     K, N, ys, f0 = ws[0:3], ws[3:6], ws[6], ws[7]
     rhs(P, T, phase, mode, x, y, f0)
     for i in range(3):
@@ -486,3 +475,11 @@ def frame(N, v, w, g, r):
         off = max(off, math.sqrt(across) / size)
     off = max(off, r * abs(dot3(w, e)) / scale)
     return e, b, off <= 1e-12
+
+
+def rub_steps(tol: float) -> tuple[int, int]:
+    """`impact.steps_for` for `rub`'s order-6 steps (before the spring's factor in
+    `alone.take_rubbing`): error about 3e-3 / n^6."""
+    n = max(4, math.ceil((3e-3 / tol) ** (1.0 / 6.0)))
+    return n, 2 * n
+

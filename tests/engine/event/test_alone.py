@@ -16,6 +16,7 @@ from collide.dem import damping_ratio
 from collide.engine import layout
 from collide.engine.event import alone
 from collide.engine.event import impact as im
+from collide.engine.event.oblique import rub_steps
 from tests.test_event_laws import rubber_ball
 
 
@@ -91,7 +92,8 @@ def _run(walls, position, velocity, t_end):
     fp[layout.FP_TEND], fp[layout.FP_TAIL] = t_end, math.nan
     rubs = np.zeros((len(walls), 3))  # no tangential spring (collide.alone.rub_rows)
     rubs.setflags(write=False)
-    return alone.alone_run(G, WP, laws, rubs, np.array([0.0, -9.81, 0.0]), fl, fp, np.array(im.steps_for(1e-8)))
+    return alone.alone_run(G, WP, laws, rubs, np.array([0.0, -9.81, 0.0]), fl, fp,
+                           np.array(im.steps_for(1e-8) + rub_steps(1e-8)))
 
 
 def test_a_second_wall_within_reach_stops_the_run():

@@ -30,13 +30,14 @@ def hertz_errors(n, v=1.0):
                    out[im.O_TIME] / tc - 1])
 
 
-def test_hertz_impact_is_sixth_order():
+def test_hertz_impact_is_eighth_order():
     """Hertz's delta^1.5 has singular derivatives where the contact starts and ends; over
     sigma = delta^(1/4) there the step keeps its order: doubling the steps divides every error
-    (speed out, largest overlap and force, contact time) by at least 2^5."""
-    coarse, fine = hertz_errors(6), hertz_errors(12)
+    (speed out, largest overlap and force, contact time) by more than 100 (order 6 would give
+    64, order 8 256; measured 130 to 180 from 4 to 8 steps, still short of the asymptote)."""
+    coarse, fine = hertz_errors(4), hertz_errors(8)
     assert (coarse > 1e-10).all()  # still above round-off, so the ratio measures the order
-    assert (fine < coarse / 32.0).all(), (coarse, fine)
+    assert (fine < coarse / 100.0).all(), (coarse, fine)
 
 
 @pytest.mark.parametrize("e", [0.2, 0.5, 0.9, 1.0])
