@@ -126,11 +126,10 @@ def rhs(P, phase, x, y0, y1, y2):
 
 @jit
 def rk_step(P, phase, x, y0, y1, y2, h):
-    """One step of h from (x, y) by DOP853's order-8 solution, its stages written out (the
-    coefficients folded in: a loop over RK_A took 1.5 times as long, kernel time of ten bounces
-    measured); returns (y0, y1, y2,
-    ok), ok False where a stage is not finite (Hertz past the contact's end), so that the step
-    is taken shorter."""
+    """One step of h from (x, y) by DOP853's order-8 solution, its stages written out with the
+    coefficients folded in (a loop over RK_A took 1.5 times as long: kernel time of ten bounces).
+    Returns (y0, y1, y2, ok), ok False where a stage is not finite (Hertz past the contact's
+    end), so that the step is taken shorter."""
     k0 = rhs(P, phase, x, y0, y1, y2)
     k1 = rhs(P, phase, x + RK_C[1] * h,
              y0 + h * (RK_A[1, 0] * k0[0]),
