@@ -66,7 +66,8 @@ FILL_SKY, FILL_GROUND, FILL_INTENSITY = (255, 255, 255), (150, 150, 160), 1.6  #
 CHAIN_OPACITY = 0.3  # spheres while the force chains are shown
 CHAIN_BLOCK = 256  # the force chains' batch grows in blocks of this many links
 IMAGE_BLOCK = 64  # the periodic copies' batch grows in blocks of this many spheres
-CHAIN_SEGMENTS = 6  # sides of a force chain's cylinder (thin: six read as round)
+CHAIN_SEGMENTS = 3  # sides of a force chain's prism: thin, three read as round at a pile's size on screen (six cost
+# a fifth of a pile's frame in software GL)
 WALL_KEEP = 0.03  # of the scene's extent: walls that moved less are not sent again
 MIN_ARROW = 0.08  # arrows shorter than this many radii are not drawn (no heads on round-off)
 COLOUR_MODES = ("body", "speed", "kinetic energy", "contacts")
