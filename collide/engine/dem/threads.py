@@ -140,7 +140,7 @@ def plan(PI, PJ, WL, n, threads):
     return bounds, kb, wb, sb, ib, cross, inbound, starts
 
 
-@jit_inline
+@jit
 def _cuts(rows, bounds):
     """Where the ascending `rows` reach each of `bounds`."""
     cuts = np.empty(bounds.shape[0], np.int64)
