@@ -32,7 +32,8 @@ from collide.engine import tier
 from collide.engine.jit import jit, jit_inline
 
 # A thread's row (int64): the shared block's address, meetings, sleeps, cycles waited (at the
-# barrier and at flags), flags waited for, flags raised, the thread's number; then, in the next cache line (read by the
+# barrier and at flags), flags waited for (not raised when first looked at), flags raised, the
+# thread's number; then, in the next cache line (read by the
 # other threads), its flag and the threads asleep on it. Padded to 128 bytes so that no two
 # threads' rows share a cache line.
 W_BLOCK, W_MEETS, W_SLEEPS, W_CYCLES, W_FLAGWAITS, W_RAISED, W_INDEX = 0, 1, 2, 3, 4, 5, 6
@@ -140,21 +141,27 @@ if tier.COMPILED and HAVE_BARRIER:
             if _load(block, B_SLEEPERS) > 0:
                 _syscall(_FUTEX_CALL, block + 8 * B_GEN, _FUTEX_WAKE_PRIVATE, 2147483647, 0)
         else:
-            spin = _load(block, B_SPIN)
-            while _load(block, B_GEN) == gen:
-                if _cycles() - start < spin:
-                    _pause()
-                    continue
-                # Counted as a sleeper before the last look: the last thread either sees the
-                # count and wakes us, or has moved the generation on, which the futex sees.
-                _add(block, B_SLEEPERS, 1)
-                if _load(block, B_GEN) == gen:
-                    _syscall(_FUTEX_CALL, block + 8 * B_GEN, _FUTEX_WAIT_PRIVATE, gen & 0xFFFFFFFF, 0)
-                    own[W_SLEEPS] += 1
-                _add(block, B_SLEEPERS, -1)
+            _wait_while(block + 8 * B_GEN, block + 8 * B_SLEEPERS, gen, start, _load(block, B_SPIN), own)
         own[W_MEETS] += 1
         own[W_CYCLES] += _cycles() - start
         return 0
+
+    @jit_inline
+    def _wait_while(word, sleepers, value, start, spin, own):
+        """Wait while the int64 at address `word` holds `value`: spinning until `spin` cycles
+        from `start`, then asleep on it (a futex on its low 32 bits), counted in the int64 at
+        `sleepers` so that whoever changes it wakes the sleepers."""
+        while _load(word, 0) == value:
+            if _cycles() - start < spin:
+                _pause()
+                continue
+            # Counted as a sleeper before the last look: the thread that changes the word either
+            # sees the count and wakes us, or has changed it, which the futex sees.
+            _add(sleepers, 0, 1)
+            if _load(word, 0) == value:
+                _syscall(_FUTEX_CALL, word, _FUTEX_WAIT_PRIVATE, value & 0xFFFFFFFF, 0)
+                own[W_SLEEPS] += 1
+            _add(sleepers, 0, -1)
 
     @jit_inline
     def raise_flag(own):
@@ -170,23 +177,16 @@ if tier.COMPILED and HAVE_BARRIER:
     @jit_inline
     def wait_flag(own, other):
         """Wait until thread `other` has raised its flag as often as this thread has its own
-        (spinning, then asleep, as `barrier_wait`)."""
+        (spinning, then asleep, as `barrier_wait`); counted if it was not raised already."""
         block = own[W_BLOCK]
         row = _row(block, _load(block, B_THREADS), other)
+        seen = _load(row, W_FLAG)
+        if seen >= own[W_RAISED]:
+            return 0
         start = _cycles()
-        spin = _load(block, B_SPIN)
-        while True:
+        while seen < own[W_RAISED]:
+            _wait_while(row + 8 * W_FLAG, row + 8 * W_FLAGSLEEPERS, seen, start, _load(block, B_SPIN), own)
             seen = _load(row, W_FLAG)
-            if seen >= own[W_RAISED]:
-                break
-            if _cycles() - start < spin:
-                _pause()
-                continue
-            _add(row, W_FLAGSLEEPERS, 1)  # (before the last look: see `barrier_wait`)
-            if _load(row, W_FLAG) == seen:
-                _syscall(_FUTEX_CALL, row + 8 * W_FLAG, _FUTEX_WAIT_PRIVATE, seen & 0xFFFFFFFF, 0)
-                own[W_SLEEPS] += 1
-            _add(row, W_FLAGSLEEPERS, -1)
         own[W_FLAGWAITS] += 1
         own[W_CYCLES] += _cycles() - start
         return 0
@@ -240,6 +240,8 @@ else:
         row = _flag_row(own, other)
         start = time.perf_counter_ns()
         with _CONDITION:
+            if row[W_FLAG] >= own[W_RAISED]:
+                return 0
             while row[W_FLAG] < own[W_RAISED]:
                 _CONDITION.wait()
         own[W_FLAGWAITS] += 1

@@ -92,15 +92,9 @@ def _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, tabs, fl, dt, t
     deepest, strongest = FG[G_OVERLAP], FG[G_FORCE]
     for k in range(PI.shape[0]):
         i, j = PI[k], PJ[k]
-        dx = X[j, 0] - X[i, 0]
-        dy = X[j, 1] - X[i, 1]
-        dz = X[j, 2] - X[i, 2]
-        if periodic:
-            dx, dy, dz = nearest(dx, dy, dz, box)
-        reach = Bd[i, B_R] + Bd[j, B_R]
-        d2 = dx * dx + dy * dy + dz * dz
+        apart, dx, dy, dz, d2, reach = pair_gap(X, Bd, i, j, box, periodic)
         s = PS[k]
-        if d2 >= reach * reach:
+        if apart:
             if s >= 0 and HS[s, H_ON] != 0.0:
                 nrec = _close(HS, s, IV, t, FG, REC, nrec, i, j)
             continue
@@ -121,6 +115,21 @@ def _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, tabs, fl, dt, t
             _record(REC, nrec, t, i, j, delta, fn, out)
             nrec += 1
     return engaged, niv, nrec, deepest, strongest
+
+
+@jit_inline
+def pair_gap(X, Bd, i, j, box, periodic):
+    """Whether spheres i and j are apart (not where a position is not a number: the contact's
+    numbers then show it); the vector from i to j (at the nearest images if `periodic`), its
+    squared length and their radii's sum."""
+    dx = X[j, 0] - X[i, 0]
+    dy = X[j, 1] - X[i, 1]
+    dz = X[j, 2] - X[i, 2]
+    if periodic:
+        dx, dy, dz = nearest(dx, dy, dz, box)
+    reach = Bd[i, B_R] + Bd[j, B_R]
+    d2 = dx * dx + dy * dy + dz * dz
+    return d2 >= reach * reach, dx, dy, dz, d2, reach
 
 
 @jit_inline

@@ -29,10 +29,10 @@ import math
 
 import numpy as np
 
-from collide.engine.broad import BOX_ANY, NBOX, nearest
+from collide.engine.broad import BOX_ANY, NBOX
 from collide.engine.dem.barrier import barrier_wait, raise_flag, wait_flag
 from collide.engine.dem.contact import contact_force, contact_into
-from collide.engine.dem.forces import _close, _peak
+from collide.engine.dem.forces import _close, _peak, pair_gap
 from collide.engine.dem.geometry import wall_height
 from collide.engine.dem.layout import (
     B_II,
@@ -257,8 +257,8 @@ def _inbound(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, tabs, fl, dt,
         k = cross[s]
         i, j = PI[k], PJ[k]
         SF[s] = IDLE
-        engaged, dx, dy, dz, d2, reach = _gap(X, Bd, i, j, box, periodic)
-        if not engaged:
+        apart, dx, dy, dz, d2, reach = pair_gap(X, Bd, i, j, box, periodic)
+        if apart:
             if _end_pair(PS, HS, k, record, STT, row):
                 SF[s] = CLOSED
             continue
@@ -276,20 +276,6 @@ def _inbound(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, tabs, fl, dt,
         if record:
             _peak(HS, hs, t, delta, fn, out)
     _keep(STT, row, tally)
-
-
-@jit_inline
-def _gap(X, Bd, i, j, box, periodic):
-    """Whether spheres i and j overlap; the vector from i to j (at the nearest images if
-    `periodic`), its squared length and their radii's sum."""
-    dx = X[j, 0] - X[i, 0]
-    dy = X[j, 1] - X[i, 1]
-    dz = X[j, 2] - X[i, 2]
-    if periodic:
-        dx, dy, dz = nearest(dx, dy, dz, box)
-    reach = Bd[i, B_R] + Bd[j, B_R]
-    d2 = dx * dx + dy * dy + dz * dz
-    return d2 < reach * reach, dx, dy, dz, d2, reach
 
 
 @jit
@@ -359,8 +345,8 @@ def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs,
                 nw += 1
             s += 1
             continue
-        engaged, dx, dy, dz, d2, reach = _gap(X, Bd, i, j, box, periodic)
-        if not engaged:
+        apart, dx, dy, dz, d2, reach = pair_gap(X, Bd, i, j, box, periodic)
+        if apart:
             if _end_pair(PS, HS, k, record, STT, row) and record:
                 EVP[k0 + nw] = 2 * k + 1
                 nw += 1
