@@ -86,9 +86,10 @@ class _Shares:
     threads a stretch of steps takes (`_Pace`): one set of regions a list, so no slot is taken
     twice (`slots`: the all-threads shares, whose regions these share; None for those)."""
 
-    def __init__(self, PI, PJ, PS, HS, WL, n: int, threads: int, record: bool, rest: bool, slots=None):
+    def __init__(self, PI, PJ, PS, HS, WL, n: int, cut: np.ndarray, record: bool, rest: bool, slots=None):
         self.PI = PI
-        bounds, kb, wb, sb, ib, self.cross, self.inbound, starts = par.plan(PI, PJ, WL, n, threads)
+        threads = len(cut) - 1
+        bounds, kb, wb, sb, ib, self.cross, self.inbound, starts, self.work = par.plan(PI, PJ, WL, n, cut)
         self.kb, self.wb = kb, wb
         self.SBB, self.BUMP = (bounds, slot_regions(PS, HS, starts)) if slots is None else (slots.SBB, slots.BUMP)
         self.RB = np.array([[bounds[r], bounds[r + 1], kb[r], kb[r + 1], wb[r], wb[r + 1], sb[r], sb[r + 1], ib[r],
@@ -119,6 +120,31 @@ class _Crew:
         self.rows = (self.barrier, np.zeros((2, threads, par.NST_ROW)), np.zeros((2, threads)), np.zeros((threads, 16)))
 
 
+class _Balance:
+    """Where the bodies are cut among the threads (`threads.plan`): each thread's share of the
+    work in proportion to its speed, work done a cycle busy (not waiting), learned from the
+    stretches on all threads: a thread slowed by its share's contacts (the plan counts listed
+    pairs, not engaged ones), or by its core, is given less. The result is the same bit for bit
+    wherever the cuts fall."""
+
+    KEEP, LEAST = 0.5, 0.5  # the weight of what was learned before; the least speed against the mean
+
+    def __init__(self, threads: int):
+        self.speed = np.ones(threads)
+
+    def cut(self, threads: int) -> np.ndarray:
+        speed = self.speed if threads == len(self.speed) else np.ones(threads)
+        return np.concatenate(([0.0], np.cumsum(speed))) / speed.sum()
+
+    def learn(self, work: np.ndarray, busy: np.ndarray) -> None:
+        """A stretch's work (the plan's) and cycles busy, thread by thread."""
+        if len(work) != len(self.speed) or (work <= 0).any() or (busy <= 0).any():
+            return
+        speed = work / busy
+        speed = np.clip(speed / speed.mean(), self.LEAST, 1.0 / self.LEAST)
+        self.speed = self.KEEP * self.speed + (1.0 - self.KEEP) * speed / speed.mean()
+
+
 class _Pace:
     """How many threads each stretch of steps between the driver's turns takes: all of them, or
     one while all would be slower. Where other work holds the cores, the threads are seldom on
@@ -139,13 +165,17 @@ class _Pace:
             return 1
         return self.all
 
-    def run(self, task, use: int) -> None:
-        """task(r) on `use` threads, and whether the next stretches take one."""
+    def run(self, task, use: int, work: np.ndarray, balance: _Balance) -> None:
+        """task(r) on `use` threads, and whether the next stretches take one; the threads' busy
+        cycles (for `work`, their shares of it) to `balance`."""
         rows = self.crews[use].barrier[:use]
-        meets, waited, start = rows[:, barrier.W_MEETS].sum(), rows[:, barrier.W_CYCLES].mean(), barrier.cycles()
+        meets, each, start = rows[:, barrier.W_MEETS].sum(), rows[:, barrier.W_CYCLES].copy(), barrier.cycles()
+        waited = each.mean()
         _each(task, use)
         span = barrier.cycles() - start
         if use > 1 and rows[:, barrier.W_MEETS].sum() - meets >= self.MEETS * use:
+            balance.learn(work, span - (rows[:, barrier.W_CYCLES] - each))
+            LAST_RUN["speeds"] = balance.speed.copy()
             if rows[:, barrier.W_CYCLES].mean() - waited > self.WAITED * span:
                 self.alone, self.backoff = self.backoff, min(2 * self.backoff, self.LONGEST)
                 LAST_RUN["alone"] = LAST_RUN.get("alone", 0) + self.alone
@@ -172,7 +202,8 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads):
     PI, PJ, PS, HS, _, _, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin, none, none,
                                            none, np.zeros((0, dk.NH)), ST, box)
     kept = (bool(record), rest > 0.0)  # (whether the shares keep events, bodies' energies)
-    shares = {threads: _Shares(PI, PJ, PS, HS, WL, n, threads, *kept)}
+    balance = _Balance(threads)
+    shares = {threads: _Shares(PI, PJ, PS, HS, WL, n, balance.cut(threads), *kept)}
     scratch = np.zeros(4)
     pace = _Pace(threads)
     most = PI.shape[0] + WL.shape[0]
@@ -191,16 +222,16 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads):
     C[par.C_ENGAGED], C[par.C_NIV], C[par.C_NREC] = engaged, niv, nrec
     while True:
         if shares[threads].PI is not PI:  # (the lists were rebuilt)
-            shares = {threads: _Shares(PI, PJ, PS, HS, WL, n, threads, *kept)}
+            shares = {threads: _Shares(PI, PJ, PS, HS, WL, n, balance.cut(threads), *kept)}
         use = pace.next()
         if use not in shares:
-            shares[use] = _Shares(PI, PJ, PS, HS, WL, n, use, *kept, slots=shares[threads])
+            shares[use] = _Shares(PI, PJ, PS, HS, WL, n, balance.cut(use), *kept, slots=shares[threads])
         s = shares[use]
         meet, STT, PM, outs = pace.crews[use].rows
         args = (meet, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS, s.SBB, s.BUMP, WL, WH, WP, tabs, wt,
                 grav, fl, fp, rolling, ST, FG, IV, REC, s.RB, s.kb, s.wb, s.cross, s.inbound, s.XB, s.SF, s.EVP, s.EVW,
                 s.EB, STT, PM, outs, C)
-        pace.run(functools.partial(_share, args), use)
+        pace.run(functools.partial(_share, args), use, s.work, balance)
         reason, t = int(C[par.C_REASON]), C[par.C_T]
         C[par.C_STAY] = 0.0
         if reason == par.R_COAST:

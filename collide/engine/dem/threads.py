@@ -84,13 +84,15 @@ NST_ROW = 24
 
 
 @jit
-def plan(PI, PJ, WL, n, threads):
+def plan(PI, PJ, WL, n, cut):
     """The threads' shares of a pair list: body bounds, pair bounds (by i), wall bounds, bounds of
     each thread's cross-pair slots by i ("outgoing") and by j ("inbound"), each (threads + 1,);
     each slot's pair (in the list's order); the inbound slots, thread by thread, each thread's
-    in the list's order; and the slot regions' starts (`neighbours.slot_regions`: the pairs
-    whose j is in each share, before it). The bodies are split so that each thread has as many
-    bodies, pairs it works out (those whose j is its own) and wall contacts as the others."""
+    in the list's order; the slot regions' starts (`neighbours.slot_regions`: the pairs whose j
+    is in each share, before it); and each thread's work. A thread's work counts its bodies, the
+    pairs it works out (those whose j is its own) and its wall contacts; thread t's share of the
+    whole ends at the fraction cut[t + 1] (cut: (threads + 1,), from 0 to 1)."""
+    threads = cut.shape[0] - 1
     npairs, nwall = PI.shape[0], WL.shape[0]
     work = np.ones(n, np.int64)
     for k in range(npairs):
@@ -99,12 +101,14 @@ def plan(PI, PJ, WL, n, threads):
         work[WL[m, 1]] += 1
     total = n + npairs + nwall
     bounds = np.zeros(threads + 1, np.int64)
+    shares = np.zeros(threads, np.int64)
     t, acc = 1, 0
     for a in range(n):
-        while t < threads and acc * threads >= t * total:
+        while t < threads and acc >= cut[t] * total:
             bounds[t] = a
             t += 1
         acc += work[a]
+        shares[t - 1] += work[a]
     while t <= threads:
         bounds[t] = n
         t += 1
@@ -137,7 +141,7 @@ def plan(PI, PJ, WL, n, threads):
             inbound[fill[q]] = s
             fill[q] += 1
             s += 1
-    return bounds, kb, wb, sb, ib, cross, inbound, starts
+    return bounds, kb, wb, sb, ib, cross, inbound, starts, shares
 
 
 @jit
