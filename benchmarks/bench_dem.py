@@ -15,8 +15,9 @@
    repeats alternated, the kernel's wall time and the process's CPU time over it (every thread),
    medians, the speed-up of wall time and the CPU efficiency (the first count's CPU time over
    this one's) against the first, the load average at each run, and for the threaded runs the
-   time on one thread in the driver, the time each thread waited at the barrier, the meetings a
-   step and the stretches taken on one thread (`--no-pace`: none, whatever the load).
+   time on one thread in the driver, the time each thread waited at the barrier and at the other
+   threads' flags, the meetings and flag waits a step and the stretches taken on one thread
+   (`--no-pace`: none, whatever the load).
 """
 
 from __future__ import annotations
@@ -134,7 +135,7 @@ def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
     collide.dem.run_members = timed
     times: dict[int, list[tuple[float, float]]] = {c: [] for c in counts}
     loads: dict[int, list[float]] = {c: [] for c in counts}
-    where: dict[int, list[tuple[float, float, float, int]]] = {c: [] for c in counts}
+    where: dict[int, list[tuple]] = {c: [] for c in counts}
     steps = 0
     for _ in range(repeats):
         for count in counts:
@@ -147,9 +148,11 @@ def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
             steps = int(result.steps[0])
             if LAST_RUN:  # (a run on one thread takes the one-thread kernel)
                 waited = LAST_RUN["waited"] / rate
+                waits = int(LAST_RUN["meets"][0]) + float(LAST_RUN["flags"].mean())
                 where[count].append((LAST_RUN["seconds"] - LAST_RUN["parallel"], float(waited.mean()),
-                                     float(LAST_RUN["sleeps"].mean()) / max(1, int(LAST_RUN["meets"][0])),
+                                     float(LAST_RUN["sleeps"].mean()) / max(1.0, waits),
                                      LAST_RUN.get("alone", 0), int(LAST_RUN["meets"][0]) / max(1, steps),
+                                     float(LAST_RUN["flags"].sum()) / max(1, steps),
                                      ", ".join(f"{w:.3f}" for w in waited)))
     collide.dem.run_members = real
     print(f"\n{spheres} spheres, {steps} steps, {repeats} runs each alternated, on {os.cpu_count()} cores\n")
@@ -168,16 +171,20 @@ def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
               f"{spheres * steps / cpu:.3g} | {base[0] / wall:.2f} | {base[1] / cpu:.2f} |")
     if any(where.values()):
         print("\nThreaded runs (medians): seconds on one thread in the driver (rebuilds, coasting, hand-offs), "
-              "seconds a thread waited at the barrier (mean of the threads; each thread's, of the run with the "
-              "median mean), share of meetings at which it slept, meetings a step, stretches of steps taken on "
-              "one thread as the threads waited too long (`dem_threads._Pace`)\n")
-        print("| threads | driver s | waited s | each thread's | slept | meetings a step | stretches on one thread |")
-        print("|---|---|---|---|---|---|---|")
+              "seconds a thread waited at the barrier and at other threads' flags (mean of the threads; each "
+              "thread's, of the run with the median mean), share of waits at which it slept, barrier meetings a "
+              "step, flags waited for a step (all threads), stretches of steps taken on one thread as the threads "
+              "waited too long (`dem_threads._Pace`)\n")
+        print("| threads | driver s | waited s | each thread's | slept | meetings a step | flag waits a step | "
+              "stretches on one thread |")
+        print("|---|---|---|---|---|---|---|---|")
         for count in counts:
             if where[count]:
-                serial, waited, slept, alone, meets = (statistics.median(x[c] for x in where[count]) for c in range(5))
-                each = sorted(where[count], key=lambda x: x[1])[len(where[count]) // 2][5]
-                print(f"| {count} | {serial:.3f} | {waited:.3f} | {each} | {slept:.1%} | {meets:.2f} | {alone:g} |")
+                serial, waited, slept, alone, meets, flags = (statistics.median(x[c] for x in where[count])
+                                                              for c in range(6))
+                each = sorted(where[count], key=lambda x: x[1])[len(where[count]) // 2][6]
+                print(f"| {count} | {serial:.3f} | {waited:.3f} | {each} | {slept:.1%} | {meets:.2f} | {flags:.2f} | "
+                      f"{alone:g} |")
 
 
 def main() -> None:

@@ -2,13 +2,14 @@
 force pass and kicks split among the threads (`collide.engine.dem.threads`: every body's sums in
 the one-thread order, so the run is the same bit for bit whatever the number of threads).
 
-Every thread runs `threads.run_share` at once; they meet at a spinning barrier between the
-passes of a step (`collide.engine.dem.barrier`) and come back here only for what one thread
-does: coasting where nothing touches, the steps that record a frame, growing the record tables,
-and rebuilding the neighbour lists, whose search for pairs is split among the threads again
-(`_rebuild`). Where other work holds the cores and the threads mostly wait for each other, the
-run goes on on one thread for a while (`_Pace`). Below THREADS_FROM bodies a run takes one
-thread by default: the barriers cost more than the split saves.
+Every thread runs `threads.run_share` at once; they meet at a spinning barrier once a step (a
+thread that needs another's part of a step waits for its flag: `collide.engine.dem.barrier`),
+and come back here only for what one thread does: coasting where nothing touches, the steps
+that record a frame, growing the record tables, and rebuilding the neighbour lists, whose
+search for pairs is split among the threads again (`_rebuild`). Where other work holds the
+cores and the threads mostly wait for each other, the run goes on on one thread for a while
+(`_Pace`). Below THREADS_FROM bodies a run takes one thread by default: the meetings cost more
+than the split saves.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ THREADS_FROM = 4000
 # The last threaded run's figures (benchmarks/bench_dem.py shows them; of one of them if several
 # run at once): threads, seconds, seconds in the threads' shares (the rest is this driver's, on
 # one thread), stretches of steps it took on one thread (`_Pace`), and per thread the barrier's
-# meetings, sleeps and cycles spent waiting (`barrier`).
+# meetings, the flags it waited for, its sleeps and cycles spent waiting (`barrier`).
 LAST_RUN: dict = {}
 
 
@@ -81,18 +82,19 @@ def _each(task, threads: int) -> None:
 class _Shares:
     """The threads' shares of the current pair list (`threads.plan`) and their buffers; made as the
     list is built, before any force pass on it. New contacts take their slots from the regions
-    (SKB, BUMP: `neighbours.slot_regions`) of the list's shares among all threads, whatever
+    (SBB, BUMP: `neighbours.slot_regions`) of the list's shares among all threads, whatever
     threads a stretch of steps takes (`_Pace`): one set of regions a list, so no slot is taken
     twice (`slots`: the all-threads shares, whose regions these share; None for those)."""
 
-    def __init__(self, PI, PJ, PS, HS, WL, n: int, threads: int, record: bool, rest: bool, slots=None):
+    def __init__(self, PI, PJ, PS, HS, WL, n: int, cut: np.ndarray, record: bool, rest: bool, slots=None):
         self.PI = PI
-        bounds, kb, wb, sb, self.cross, self.inc_start, self.inc_slot = par.plan(PI, PJ, WL, n, threads)
+        threads = len(cut) - 1
+        bounds, kb, wb, sb, ib, self.cross, self.inbound, starts, self.work = par.plan(PI, PJ, WL, n, cut)
         self.kb, self.wb = kb, wb
-        self.SKB, self.BUMP = (kb, slot_regions(PS, HS, kb)) if slots is None else (slots.SKB, slots.BUMP)
-        self.RB = np.array([[bounds[r], bounds[r + 1], kb[r], kb[r + 1], wb[r], wb[r + 1], sb[r], sb[r + 1]]
-                            for r in range(threads)], np.int64)
-        self.XB = np.zeros((len(self.cross), 2, par.NX))
+        self.SBB, self.BUMP = (bounds, slot_regions(PS, HS, starts)) if slots is None else (slots.SBB, slots.BUMP)
+        self.RB = np.array([[bounds[r], bounds[r + 1], kb[r], kb[r + 1], wb[r], wb[r + 1], sb[r], sb[r + 1], ib[r],
+                             ib[r + 1]] for r in range(threads)], np.int64)
+        self.XB = np.zeros((len(self.cross), par.NX))
         self.SF = np.zeros(len(self.cross), np.int64)
         self.EVP = np.zeros(len(PI) if record else 0, np.int64)
         self.EVW = np.zeros(len(WL) if record else 0, np.int64)
@@ -118,6 +120,31 @@ class _Crew:
         self.rows = (self.barrier, np.zeros((2, threads, par.NST_ROW)), np.zeros((2, threads)), np.zeros((threads, 16)))
 
 
+class _Balance:
+    """Where the bodies are cut among the threads (`threads.plan`): each thread's share of the
+    work in proportion to its speed, work done a cycle busy (not waiting), learned from the
+    stretches on all threads: a thread slowed by its share's contacts (the plan counts listed
+    pairs, not engaged ones), or by its core, is given less. The result is the same bit for bit
+    wherever the cuts fall."""
+
+    KEEP, LEAST = 0.5, 0.5  # the weight of what was learned before; the least speed against the mean
+
+    def __init__(self, threads: int):
+        self.speed = np.ones(threads)
+
+    def cut(self, threads: int) -> np.ndarray:
+        speed = self.speed if threads == len(self.speed) else np.ones(threads)
+        return np.concatenate(([0.0], np.cumsum(speed))) / speed.sum()
+
+    def learn(self, work: np.ndarray, busy: np.ndarray) -> None:
+        """A stretch's work (the plan's) and cycles busy, thread by thread."""
+        if len(work) != len(self.speed) or (work <= 0).any() or (busy <= 0).any():
+            return
+        speed = work / busy
+        speed = np.clip(speed / speed.mean(), self.LEAST, 1.0 / self.LEAST)
+        self.speed = self.KEEP * self.speed + (1.0 - self.KEEP) * speed / speed.mean()
+
+
 class _Pace:
     """How many threads each stretch of steps between the driver's turns takes: all of them, or
     one while all would be slower. Where other work holds the cores, the threads are seldom on
@@ -138,21 +165,25 @@ class _Pace:
             return 1
         return self.all
 
-    def run(self, task, use: int) -> None:
-        """task(r) on `use` threads, and whether the next stretches take one."""
+    def run(self, task, use: int, work: np.ndarray, balance: _Balance) -> None:
+        """task(r) on `use` threads, and whether the next stretches take one; the threads' busy
+        cycles (for `work`, their shares of it) to `balance`."""
         rows = self.crews[use].barrier[:use]
-        meets, waited, start = rows[:, barrier.W_MEETS].sum(), rows[:, barrier.W_CYCLES].mean(), barrier.cycles()
+        meets, each, start = rows[:, barrier.W_MEETS].sum(), rows[:, barrier.W_CYCLES].copy(), barrier.cycles()
+        waited = each.mean()
         _each(task, use)
         span = barrier.cycles() - start
         if use > 1 and rows[:, barrier.W_MEETS].sum() - meets >= self.MEETS * use:
+            balance.learn(work, span - (rows[:, barrier.W_CYCLES] - each))
+            LAST_RUN["speeds"] = balance.speed.copy()
             if rows[:, barrier.W_CYCLES].mean() - waited > self.WAITED * span:
                 self.alone, self.backoff = self.backoff, min(2 * self.backoff, self.LONGEST)
                 LAST_RUN["alone"] = LAST_RUN.get("alone", 0) + self.alone
             else:
                 self.backoff = 1
         crew = self.crews[self.all].barrier[:self.all]
-        LAST_RUN.update(meets=crew[:, barrier.W_MEETS].copy(), sleeps=crew[:, barrier.W_SLEEPS].copy(),
-                        waited=crew[:, barrier.W_CYCLES].copy())
+        LAST_RUN.update(meets=crew[:, barrier.W_MEETS].copy(), flags=crew[:, barrier.W_FLAGWAITS].copy(),
+                        sleeps=crew[:, barrier.W_SLEEPS].copy(), waited=crew[:, barrier.W_CYCLES].copy())
 
 
 def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads):
@@ -171,14 +202,15 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads):
     PI, PJ, PS, HS, _, _, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin, none, none,
                                            none, np.zeros((0, dk.NH)), ST, box)
     kept = (bool(record), rest > 0.0)  # (whether the shares keep events, bodies' energies)
-    shares = {threads: _Shares(PI, PJ, PS, HS, WL, n, threads, *kept)}
+    balance = _Balance(threads)
+    shares = {threads: _Shares(PI, PJ, PS, HS, WL, n, balance.cut(threads), *kept)}
     scratch = np.zeros(4)
     pace = _Pace(threads)
     most = PI.shape[0] + WL.shape[0]
     if record:
         IV, REC = grow(IV, most), grow(REC, most)
     slots = shares[threads]
-    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, slots.SKB, slots.BUMP, WL, WH, WP, tabs, wt,
+    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, slots.SBB, slots.BUMP, WL, WH, WP, tabs, wt,
                                 grav, fl, 0.0, 0.0, n, FG, ST, IV, 0, REC, 0, record != 0, scratch, box)
     if record:
         KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, 0.0, n, 0.0)
@@ -190,16 +222,16 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads):
     C[par.C_ENGAGED], C[par.C_NIV], C[par.C_NREC] = engaged, niv, nrec
     while True:
         if shares[threads].PI is not PI:  # (the lists were rebuilt)
-            shares = {threads: _Shares(PI, PJ, PS, HS, WL, n, threads, *kept)}
+            shares = {threads: _Shares(PI, PJ, PS, HS, WL, n, balance.cut(threads), *kept)}
         use = pace.next()
         if use not in shares:
-            shares[use] = _Shares(PI, PJ, PS, HS, WL, n, use, *kept, slots=shares[threads])
+            shares[use] = _Shares(PI, PJ, PS, HS, WL, n, balance.cut(use), *kept, slots=shares[threads])
         s = shares[use]
         meet, STT, PM, outs = pace.crews[use].rows
-        args = (meet, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS, s.SKB, s.BUMP, WL, WH, WP, tabs, wt,
-                grav, fl, fp, rolling, ST, FG, IV, REC, s.RB, s.kb, s.wb, s.cross, s.inc_start, s.inc_slot, s.XB, s.SF,
-                s.EVP, s.EVW, s.EB, STT, PM, outs, C)
-        pace.run(functools.partial(_share, args), use)
+        args = (meet, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS, s.SBB, s.BUMP, WL, WH, WP, tabs, wt,
+                grav, fl, fp, rolling, ST, FG, IV, REC, s.RB, s.kb, s.wb, s.cross, s.inbound, s.XB, s.SF, s.EVP, s.EVW,
+                s.EB, STT, PM, outs, C)
+        pace.run(functools.partial(_share, args), use, s.work, balance)
         reason, t = int(C[par.C_REASON]), C[par.C_T]
         C[par.C_STAY] = 0.0
         if reason == par.R_COAST:
@@ -215,7 +247,7 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads):
             most = PI.shape[0] + WL.shape[0]
             IV, REC = grow(IV, int(C[par.C_NIV]) + most), grow(REC, int(C[par.C_NREC]) + most)
         elif reason == par.R_RECORD:
-            state = (X, V, W, Qo, F, T, PT, Bd, MAT, PI, PJ, PS, HS, s.SKB, s.BUMP, WL, WH, WP, tabs, wt, grav, fl, fp,
+            state = (X, V, W, Qo, F, T, PT, Bd, MAT, PI, PJ, PS, HS, s.SBB, s.BUMP, WL, WH, WP, tabs, wt, grav, fl, fp,
                      WK, rolling, ST, FG, scratch)
             over, IV, REC, KN, nkn, EP, nep = _recorded_step(state, C, IV, REC, KN, nkn, EP, nep)
             if over:
@@ -292,7 +324,7 @@ def _share(args: tuple, r: int) -> None:
 def _recorded_step(state, C, IV, REC, KN, nkn, EP, nep):
     """The rest of a step that records a frame, on this thread as `loop.dem_run` takes it (its
     opening kick and drift done). Returns (whether the run is over, IV, REC, KN, nkn, EP, nep)."""
-    (X, V, W, Qo, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wt, grav, fl, fp, WK, rolling, ST,
+    (X, V, W, Qo, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs, wt, grav, fl, fp, WK, rolling, ST,
      FG, scratch) = state
     n = X.shape[0]
     h, last = _step_length(C[par.C_T], fp[dk.P_DT], fp[dk.P_TEND])
@@ -304,7 +336,7 @@ def _recorded_step(state, C, IV, REC, KN, nkn, EP, nep):
         IV = grow(IV, niv + most)
     if nrec + most >= REC.shape[0]:
         REC = grow(REC, nrec + most)
-    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wt, grav, fl,
+    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs, wt, grav, fl,
                                 h, t, n, FG, ST, IV, niv, REC, nrec, True, scratch, fp[dk.P_BOX:dk.P_BOX + NBOX])
     kinetic_now = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, True)
     ever = C[par.C_EVER] != 0.0 or engaged > 0

@@ -1,6 +1,7 @@
-"""The barrier at which the DEM threads meet between the passes of a step (`threads.run_share`,
-two or three times a step): a thread that arrives early spins, and sleeps only if the others are
-long in coming.
+"""The barrier at which the DEM threads meet at the end of a step (`threads.run_share`), and the
+flags by which a thread tells the others that its part of the step's contacts between two
+threads' bodies is worked out: a thread that arrives early spins, and sleeps only if the others
+are long in coming.
 
 A step of 10 000 spheres takes about a fifth of a millisecond on each of two threads. At a
 barrier that puts the first thread to arrive to sleep at once (as the C library's pthread
@@ -13,7 +14,9 @@ work sleeps on a futex rather than hold a core that the partner may need.
 The barrier is a counter and a generation in a shared block, updated with atomic operations
 (numba intrinsics); each thread holds a row of its own (`barrier_wait`'s argument): the block's
 address, then its counts (meetings, sleeps, cycles spent waiting), in cache lines of its own.
-Interpreted, the same protocol runs on a condition variable.
+A flag is a count in its thread's row (`raise_flag`: how many steps' parts it has done), which
+another thread waits to reach its own count (`wait_flag`): a one-way meeting, the raiser never
+waits. Interpreted, the same protocol runs on a condition variable.
 """
 
 from __future__ import annotations
@@ -28,9 +31,13 @@ import numpy as np
 from collide.engine import tier
 from collide.engine.jit import jit, jit_inline
 
-# A thread's row (int64): the shared block's address, meetings, sleeps, cycles waited; padded to
-# 128 bytes so that no two threads' rows share a cache line.
-W_BLOCK, W_MEETS, W_SLEEPS, W_CYCLES = 0, 1, 2, 3
+# A thread's row (int64): the shared block's address, meetings, sleeps, cycles waited (at the
+# barrier and at flags), flags waited for (not raised when first looked at), flags raised, the
+# thread's number; then, in the next cache line (read by the
+# other threads), its flag and the threads asleep on it. Padded to 128 bytes so that no two
+# threads' rows share a cache line.
+W_BLOCK, W_MEETS, W_SLEEPS, W_CYCLES, W_FLAGWAITS, W_RAISED, W_INDEX = 0, 1, 2, 3, 4, 5, 6
+W_FLAG, W_FLAGSLEEPERS = 8, 9
 ROW = 16
 # The shared block: threads arrived, generation (the futex word: its low 32 bits), sleepers,
 # threads, cycles to spin before sleeping.
@@ -55,7 +62,13 @@ def rows(threads: int) -> np.ndarray:
     block = table[threads]
     block[B_THREADS], block[B_SPIN] = threads, SPIN_CYCLES
     table[:threads, W_BLOCK] = block.ctypes.data
+    table[:threads, W_INDEX] = np.arange(threads)
     return table
+
+
+def _row_address(block: int, threads: int, r: int) -> int:
+    """Thread r's row's address, from the shared block's (the table's last row)."""
+    return block - (threads - r) * ROW * 8
 
 
 if tier.COMPILED and HAVE_BARRIER:
@@ -128,21 +141,60 @@ if tier.COMPILED and HAVE_BARRIER:
             if _load(block, B_SLEEPERS) > 0:
                 _syscall(_FUTEX_CALL, block + 8 * B_GEN, _FUTEX_WAKE_PRIVATE, 2147483647, 0)
         else:
-            spin = _load(block, B_SPIN)
-            while _load(block, B_GEN) == gen:
-                if _cycles() - start < spin:
-                    _pause()
-                    continue
-                # Counted as a sleeper before the last look: the last thread either sees the
-                # count and wakes us, or has moved the generation on, which the futex sees.
-                _add(block, B_SLEEPERS, 1)
-                if _load(block, B_GEN) == gen:
-                    _syscall(_FUTEX_CALL, block + 8 * B_GEN, _FUTEX_WAIT_PRIVATE, gen & 0xFFFFFFFF, 0)
-                    own[W_SLEEPS] += 1
-                _add(block, B_SLEEPERS, -1)
+            _wait_while(block + 8 * B_GEN, block + 8 * B_SLEEPERS, gen, start, _load(block, B_SPIN), own)
         own[W_MEETS] += 1
         own[W_CYCLES] += _cycles() - start
         return 0
+
+    @jit_inline
+    def _wait_while(word, sleepers, value, start, spin, own):
+        """Wait while the int64 at address `word` holds `value`: spinning until `spin` cycles
+        from `start`, then asleep on it (a futex on its low 32 bits), counted in the int64 at
+        `sleepers` so that whoever changes it wakes the sleepers."""
+        while _load(word, 0) == value:
+            if _cycles() - start < spin:
+                _pause()
+                continue
+            # Counted as a sleeper before the last look: the thread that changes the word either
+            # sees the count and wakes us, or has changed it, which the futex sees.
+            _add(sleepers, 0, 1)
+            if _load(word, 0) == value:
+                _syscall(_FUTEX_CALL, word, _FUTEX_WAIT_PRIVATE, value & 0xFFFFFFFF, 0)
+                own[W_SLEEPS] += 1
+            _add(sleepers, 0, -1)
+
+    @jit_inline
+    def raise_flag(own):
+        """This thread's part of a step done: its flag raised to the count of its steps' parts,
+        any thread asleep on it woken."""
+        own[W_RAISED] += 1
+        row = _row(own[W_BLOCK], _load(own[W_BLOCK], B_THREADS), own[W_INDEX])
+        _store(row, W_FLAG, own[W_RAISED])
+        if _load(row, W_FLAGSLEEPERS) > 0:
+            _syscall(_FUTEX_CALL, row + 8 * W_FLAG, _FUTEX_WAKE_PRIVATE, 2147483647, 0)
+        return 0
+
+    @jit_inline
+    def wait_flag(own, other):
+        """Wait until thread `other` has raised its flag as often as this thread has its own
+        (spinning, then asleep, as `barrier_wait`); counted if it was not raised already."""
+        block = own[W_BLOCK]
+        row = _row(block, _load(block, B_THREADS), other)
+        seen = _load(row, W_FLAG)
+        if seen >= own[W_RAISED]:
+            return 0
+        start = _cycles()
+        while seen < own[W_RAISED]:
+            _wait_while(row + 8 * W_FLAG, row + 8 * W_FLAGSLEEPERS, seen, start, _load(block, B_SPIN), own)
+            seen = _load(row, W_FLAG)
+        own[W_FLAGWAITS] += 1
+        own[W_CYCLES] += _cycles() - start
+        return 0
+
+    @jit_inline
+    def _row(block, threads, r):
+        """Thread r's row's address (`_row_address`)."""
+        return block - (threads - r) * ROW * 8
 
     @jit
     def cycles():
@@ -167,6 +219,32 @@ else:
             while block[B_GEN] == gen:
                 _CONDITION.wait()
         own[W_MEETS] += 1
+        own[W_CYCLES] += time.perf_counter_ns() - start
+        return 0
+
+    def _flag_row(own: np.ndarray, r: int):
+        block = int(own[W_BLOCK])
+        threads = (ctypes.c_int64 * ROW).from_address(block)[B_THREADS]
+        return (ctypes.c_int64 * ROW).from_address(_row_address(block, threads, r))
+
+    def raise_flag(own: np.ndarray) -> int:
+        """Interpreted: `raise_flag` on the condition variable."""
+        with _CONDITION:
+            own[W_RAISED] += 1
+            own[W_FLAG] = own[W_RAISED]
+            _CONDITION.notify_all()
+        return 0
+
+    def wait_flag(own: np.ndarray, other: int) -> int:
+        """Interpreted: `wait_flag` on the condition variable."""
+        row = _flag_row(own, other)
+        start = time.perf_counter_ns()
+        with _CONDITION:
+            if row[W_FLAG] >= own[W_RAISED]:
+                return 0
+            while row[W_FLAG] < own[W_RAISED]:
+                _CONDITION.wait()
+        own[W_FLAGWAITS] += 1
         own[W_CYCLES] += time.perf_counter_ns() - start
         return 0
 

@@ -34,14 +34,17 @@ def contact_force(X, V, W, F, T, PT, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, 
     """Add contact (i, j)'s forces and torques (j < 0: a rigid wall along -n) to F, T, and by
     part to PT. n points from i into j; the law's coefficients are tabs[mi, mj]. Returns the normal
     force; `out` gets the friction force on i (3) and the mode."""
-    return contact_into(X, V, W, F, T, T, PT, Bd, i, j, i, j, nx, ny, nz, delta, tabs, mi, mj, hist, k, fl, dt, out)
+    return contact_into(X, V, W, F, T, T, PT, i, F, T, T, PT, j, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, hist, k,
+                        fl, dt, out)
 
 
 @jit_inline
-def contact_into(X, V, W, F, T, TR, PT, Bd, i, j, oi, oj, nx, ny, nz, delta, tabs, mi, mj, hist, k, fl, dt, out):
-    """`contact_force` adding i's and j's shares to rows oi and oj of F, T and PT, the rolling
-    torque to TR (the threaded force pass keeps a contact between two threads' bodies apart:
-    `collide.engine.dem.threads`), each element of each row receiving at most one addition."""
+def contact_into(X, V, W, Fi, Ti, TRi, PTi, oi, Fj, Tj, TRj, PTj, oj, Bd, i, j, nx, ny, nz, delta, tabs, mi, mj, hist,
+                 k, fl, dt, out):
+    """`contact_force` adding i's share to row oi of Fi, Ti and PTi (its rolling torque to TRi)
+    and j's to row oj of Fj, Tj, TRj and PTj: the threaded force pass keeps i's share of a
+    contact between two threads' bodies apart, each element of its row receiving at most one
+    addition (`collide.engine.dem.threads`)."""
     tspring, spin = fl[F_TSPRING], fl[F_SPIN]
     ri = Bd[i, B_R]
     if j >= 0:
@@ -75,41 +78,42 @@ def contact_into(X, V, W, F, T, TR, PT, Bd, i, j, oi, oj, nx, ny, nz, delta, tab
         fx += sx
         fy += sy
         fz += sz
-        friction_torque(T, PT, oi, oj, nx, ny, nz, ai, aj, sx, sy, sz)
+        friction_torque(Ti, PTi, oi, Tj, PTj, oj, nx, ny, nz, ai, aj, sx, sy, sz)
     roll = tabs[mi, mj, T_ROLL]
     if spin and roll > 0.0 and press > 0.0:
-        rolling_resistance(W, TR, PT, Bd, i, j, oi, oj, roll * rstar * press, dt)
-    F[oi, 0] += fx
-    F[oi, 1] += fy
-    F[oi, 2] += fz
+        rolling_resistance(W, TRi, PTi, oi, TRj, PTj, oj, Bd, i, j, roll * rstar * press, dt)
+    Fi[oi, 0] += fx
+    Fi[oi, 1] += fy
+    Fi[oi, 2] += fz
     dx, dy, dz = -damp * nx, -damp * ny, -damp * nz
-    PT[oi, PT_DAMP] += dx
-    PT[oi, PT_DAMP + 1] += dy
-    PT[oi, PT_DAMP + 2] += dz
+    PTi[oi, PT_DAMP] += dx
+    PTi[oi, PT_DAMP + 1] += dy
+    PTi[oi, PT_DAMP + 2] += dz
     if j >= 0:
-        F[oj, 0] -= fx
-        F[oj, 1] -= fy
-        F[oj, 2] -= fz
-        PT[oj, PT_DAMP] -= dx
-        PT[oj, PT_DAMP + 1] -= dy
-        PT[oj, PT_DAMP + 2] -= dz
+        Fj[oj, 0] -= fx
+        Fj[oj, 1] -= fy
+        Fj[oj, 2] -= fz
+        PTj[oj, PT_DAMP] -= dx
+        PTj[oj, PT_DAMP + 1] -= dy
+        PTj[oj, PT_DAMP + 2] -= dz
     out[0], out[1], out[2], out[3] = sx, sy, sz, mode
     return fn
 
 
 @jit_inline
-def friction_torque(T, PT, oi, oj, nx, ny, nz, ai, aj, sx, sy, sz):
+def friction_torque(Ti, PTi, oi, Tj, PTj, oj, nx, ny, nz, ai, aj, sx, sy, sz):
     """The friction force s on i (and -s on j) at the contact point: its torque a x s with
-    a = ai n on i, -aj n on j, and its share of PT (i's in row oi, j's in row oj; none for a wall, oj < 0)."""
+    a = ai n on i, -aj n on j, and its share of the parts (i's in row oi of Ti and PTi, j's in
+    row oj of Tj and PTj; none for a wall, oj < 0)."""
     cx, cy, cz = ny * sz - nz * sy, nz * sx - nx * sz, nx * sy - ny * sx
     for d, c in ((0, cx), (1, cy), (2, cz)):
-        T[oi, d] += ai * c
+        Ti[oi, d] += ai * c
         if oj >= 0:
-            T[oj, d] += aj * c
-    PT[oi, PT_FRIC] += sx
-    PT[oi, PT_FRIC + 1] += sy
-    PT[oi, PT_FRIC + 2] += sz
+            Tj[oj, d] += aj * c
+    PTi[oi, PT_FRIC] += sx
+    PTi[oi, PT_FRIC + 1] += sy
+    PTi[oi, PT_FRIC + 2] += sz
     if oj >= 0:
-        PT[oj, PT_FRIC] -= sx
-        PT[oj, PT_FRIC + 1] -= sy
-        PT[oj, PT_FRIC + 2] -= sz
+        PTj[oj, PT_FRIC] -= sx
+        PTj[oj, PT_FRIC + 1] -= sy
+        PTj[oj, PT_FRIC + 2] -= sz

@@ -30,11 +30,11 @@ from collide.engine.jit import jit, jit_inline
 
 
 @jit
-def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST,
+def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST,
            IV, niv, REC, nrec, record_now, out, box):
     """Forces and torques of every engaged contact (F, T, and by part PT) and the run's contact
     figures, over the listed pairs (PI, PJ; their history in HS at slots PS, new contacts' slots
-    taken from the regions KB, BUMP: `neighbours.take_slot`) and body-wall pairs (WL: rows
+    taken from the regions BB, BUMP: `neighbours.take_slot`) and body-wall pairs (WL: rows
     k = i * walls + w, i, w); wtabs is
     the wall table as (materials, 1, columns). IV and REC have room for every listed contact
     (the caller grows them); out is scratch (4,). Returns (engaged, niv, nrec): no array is made
@@ -51,12 +51,12 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tab
     # The pair pass in two copies, the nearest-image test folded away in the one without: a scene
     # with no periodic axis runs the pass it ran before periodic boundaries.
     if box[BOX_ANY] != 0.0:
-        engaged, niv, nrec, deepest, strongest = _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB,
+        engaged, niv, nrec, deepest, strongest = _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB,
                                                         BUMP, tabs, fl, dt, t, FG, ST, IV, niv, REC, nrec, record,
                                                         record_now, out, box,
                                                         True)
     else:
-        engaged, niv, nrec, deepest, strongest = _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB,
+        engaged, niv, nrec, deepest, strongest = _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB,
                                                         BUMP, tabs, fl, dt, t, FG, ST, IV, niv, REC, nrec, record,
                                                         record_now, out, box,
                                                         False)
@@ -84,7 +84,7 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tab
 
 
 @jit_inline
-def _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, FG, ST, IV, niv, REC, nrec, record,
+def _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, tabs, fl, dt, t, FG, ST, IV, niv, REC, nrec, record,
            record_now, out, box, periodic):
     """The listed pairs' part of `forces` (at the nearest images if `periodic`). Returns (engaged,
     niv, nrec, deepest overlap, strongest force)."""
@@ -92,15 +92,9 @@ def _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t
     deepest, strongest = FG[G_OVERLAP], FG[G_FORCE]
     for k in range(PI.shape[0]):
         i, j = PI[k], PJ[k]
-        dx = X[j, 0] - X[i, 0]
-        dy = X[j, 1] - X[i, 1]
-        dz = X[j, 2] - X[i, 2]
-        if periodic:
-            dx, dy, dz = nearest(dx, dy, dz, box)
-        reach = Bd[i, B_R] + Bd[j, B_R]
-        d2 = dx * dx + dy * dy + dz * dz
+        apart, dx, dy, dz, d2, reach = pair_gap(X, Bd, i, j, box, periodic)
         s = PS[k]
-        if d2 >= reach * reach:
+        if apart:
             if s >= 0 and HS[s, H_ON] != 0.0:
                 nrec = _close(HS, s, IV, t, FG, REC, nrec, i, j)
             continue
@@ -108,7 +102,7 @@ def _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t
         inv = 1.0 / dist
         delta = reach - dist
         if s < 0 or HS[s, H_ON] == 0.0:
-            s = take_slot(PS, BUMP, KB, k)
+            s = take_slot(PS, BUMP, BB, k, j)
             niv = _open(HS, s, IV, niv, i, j, t, FG, ST, record)
         engaged += 1
         fn = contact_force(X, V, W, F, T, PT, Bd, i, j, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j],
@@ -121,6 +115,21 @@ def _pairs(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t
             _record(REC, nrec, t, i, j, delta, fn, out)
             nrec += 1
     return engaged, niv, nrec, deepest, strongest
+
+
+@jit_inline
+def pair_gap(X, Bd, i, j, box, periodic):
+    """Whether spheres i and j are apart (not where a position is not a number: the contact's
+    numbers then show it); the vector from i to j (at the nearest images if `periodic`), its
+    squared length and their radii's sum."""
+    dx = X[j, 0] - X[i, 0]
+    dy = X[j, 1] - X[i, 1]
+    dz = X[j, 2] - X[i, 2]
+    if periodic:
+        dx, dy, dz = nearest(dx, dy, dz, box)
+    reach = Bd[i, B_R] + Bd[j, B_R]
+    d2 = dx * dx + dy * dy + dz * dz
+    return d2 >= reach * reach, dx, dy, dz, d2, reach
 
 
 @jit_inline

@@ -101,16 +101,16 @@ def _any_rolling(tabs, wtabs, spin):
 
 
 @jit
-def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, PI, PJ, PS, HS, KB, BUMP, WL, ST, KN, nkn):
+def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav, fl, fp, t, ever, PI, PJ, PS, HS, BB, BUMP, WL, ST, KN, nkn):
     """Where nothing touches: fly in closed form as far as no contact can begin (free flight is
     not stepped, as in the event engine), the neighbour lists made fresh for it. Returns
     (whether the run is over, t, the lists, KN, nkn)."""
     if never_again(X, V, Bd, WP, grav, fp):
-        return True, t, PI, PJ, PS, HS, KB, BUMP, WL, WH, KN, nkn
-    PI, PJ, PS, HS, KB, BUMP, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, X.shape[0], fl[F_DIM], fp[P_SKIN], PI, PJ, PS,
+        return True, t, PI, PJ, PS, HS, BB, BUMP, WL, WH, KN, nkn
+    PI, PJ, PS, HS, BB, BUMP, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, X.shape[0], fl[F_DIM], fp[P_SKIN], PI, PJ, PS,
                                                HS, ST, fp[P_BOX:P_BOX + NBOX])
     over, t, KN, nkn = flight(X, V, W, Qo, F, Bd, WK, WP, grav, fl, fp, t, ever, PI, PJ, WL, ST, KN, nkn)
-    return over, t, PI, PJ, PS, HS, KB, BUMP, WL, WH, KN, nkn
+    return over, t, PI, PJ, PS, HS, BB, BUMP, WL, WH, KN, nkn
 
 
 @jit
@@ -184,7 +184,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     rolling = _any_rolling(tabs, wtabs, spin)
     X0 = X.copy()
     none = np.zeros(0, np.int64)
-    PI, PJ, PS, HS, KB, BUMP, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin, none,
+    PI, PJ, PS, HS, BB, BUMP, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin, none,
                                                none, none, np.zeros((0, NH)), ST, box)
     t = 0.0
     scratch = np.zeros(4)
@@ -195,7 +195,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     if record:
         IV = grow(IV, niv + most)
         REC = grow(REC, nrec + most)
-    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wt, grav,
+    engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs, wt, grav,
                                 fl, 0.0, t, n, FG, ST, IV, niv, REC, nrec, record != 0, scratch, box)
     if record:
         KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
@@ -211,8 +211,8 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
     moved = 0.0
     while not last:
         if engaged == 0:
-            over, t, PI, PJ, PS, HS, KB, BUMP, WL, WH, KN, nkn = _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav,
-                                                                         fl, fp, t, ever, PI, PJ, PS, HS, KB, BUMP,
+            over, t, PI, PJ, PS, HS, BB, BUMP, WL, WH, KN, nkn = _coast(X, X0, V, W, Qo, F, Bd, WK, WP, WH, grav,
+                                                                         fl, fp, t, ever, PI, PJ, PS, HS, BB, BUMP,
                                                                          WL, ST, KN, nkn)
             if over:
                 break
@@ -223,7 +223,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, False)
             moved = drift(X, X0, V, W, Qo, h, n, spin, planar)
         if 4.0 * moved > skin * skin:
-            PI, PJ, PS, HS, KB, BUMP, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST,
+            PI, PJ, PS, HS, BB, BUMP, WL, WH = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST,
                                                        box)
         t = t + h
         steps += 1
@@ -233,7 +233,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             IV = grow(IV, niv + most)
         if record and nrec + most >= REC.shape[0]:  # a frame's records, or the peaks of phases that end
             REC = grow(REC, nrec + most)
-        engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wt,
+        engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs, wt,
                                     grav, fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now, scratch, box)
         # The closing kick and, where nothing before the next step reads the velocities at this
         # step's end (no frame to record, no free flight, no end or rest to test), the next

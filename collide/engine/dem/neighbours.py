@@ -239,24 +239,26 @@ def carry_slots(PI, PJ, PS, HS, NI, NJ, n):
 
 
 @jit
-def slot_regions(PS, HS, KB):
-    """Where each share of the pair list (pairs KB[r]..KB[r + 1]) takes its new contacts' slots:
-    from the table's row `carried + KB[r]` on (`carry_slots` left a slot a pair after the carried
+def slot_regions(PS, HS, starts):
+    """Where each share of the bodies takes its new contacts' slots: share r's pairs are those
+    whose second body is its own (`starts[r]` of them before its: `threads.plan`), from the
+    table's row `carried + starts[r]` on (`carry_slots` left a slot a pair after the carried
     contacts), so that threads take slots without meeting."""
     carried = HS.shape[0] - PS.shape[0]
-    bump = np.empty(KB.shape[0] - 1, np.int64)
+    bump = np.empty(starts.shape[0] - 1, np.int64)
     for r in range(bump.shape[0]):
-        bump[r] = carried + KB[r]
+        bump[r] = carried + starts[r]
     return bump
 
 
 @jit_inline
-def take_slot(PS, BUMP, KB, k):
-    """Pair k's slot: its own if it has one, else the next free row of its share's region (its
-    row's columns are then set by whoever opens the contact)."""
+def take_slot(PS, BUMP, BB, k, j):
+    """Pair k's slot: its own if it has one, else the next free row of the region of its second
+    body j's share (BB: the shares' body bounds; whoever works a pair out owns its j: `threads`),
+    its row's columns then set by whoever opens the contact."""
     if PS[k] < 0:
         r = 0
-        while KB[r + 1] <= k:
+        while BB[r + 1] <= j:
             r += 1
         PS[k] = BUMP[r]
         BUMP[r] += 1
@@ -308,10 +310,10 @@ def periodic_pairs(P, Bd, n, dim, reach_pad, box):
 @jit
 def rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box):
     """Fresh neighbour lists: pairs (i, j) and their slots in a fresh history table
-    (`carry_slots`), one region for their new contacts' slots (KB, BUMP: `slot_regions`); and
+    (`carry_slots`), one region for their new contacts' slots (BB, BUMP: `slot_regions`); and
     body-wall pairs (`wall_list`); the engaged contacts' history carried over. In a periodic box
     (`box`) a pair is listed at its nearest images: the force pass meets it there. Returns (PI,
-    PJ, PS, HS, KB, BUMP, WL, WH)."""
+    PJ, PS, HS, BB, BUMP, WL, WH)."""
     if box[BOX_ANY] != 0.0:
         NI, NJ = periodic_pairs(X, Bd, n, dim, skin, box)
     else:
@@ -325,9 +327,11 @@ def relist(X, X0, Bd, WP, WL, WH, n, skin, PI, PJ, PS, HS, ST, NI, NJ):
     from the old list (PI, PJ, PS, HS: `carry_slots`), the body-wall pairs listed. Returns what
     `rebuild` returns."""
     NS, table = carry_slots(PI, PJ, PS, HS, NI, NJ, n)
-    KB = np.zeros(2, np.int64)
-    KB[1] = NI.shape[0]
+    BB = np.zeros(2, np.int64)  # (one share: every body)
+    BB[1] = n
+    starts = np.zeros(2, np.int64)
+    starts[1] = NI.shape[0]
     X0[:, :] = X
     ST[S_BUILDS] += 1
     WL, WH = wall_list(X, Bd, WP, WL, WH, n, skin)
-    return NI, NJ, NS, table, KB, slot_regions(NS, table, KB), WL, WH
+    return NI, NJ, NS, table, BB, slot_regions(NS, table, starts), WL, WH

@@ -19,11 +19,11 @@ ROLL_STEPS = np.int64(16)
 
 
 @jit_inline
-def rolling_resistance(W, T, PT, Bd, i, j, oi, oj, cap, dt):
+def rolling_resistance(W, Ti, PTi, oi, Tj, PTj, oj, Bd, i, j, cap, dt):
     """Torque up to `cap` against the relative rotation (rolling and twisting alike: LAMMPS
     composes a twisting model, here it shares mu_r, since a sphere left spinning about its
     contact normal would never stop), below it a viscous torque that would stop the rotation
-    in ROLL_STEPS steps. i's and j's shares go to rows oi and oj of T and PT."""
+    in ROLL_STEPS steps. i's share goes to row oi of Ti and PTi, j's to row oj of Tj and PTj."""
     wx, wy, wz = W[i, 0], W[i, 1], W[i, 2]
     ieff = Bd[i, B_I]
     if j >= 0:
@@ -34,8 +34,8 @@ def rolling_resistance(W, T, PT, Bd, i, j, oi, oj, cap, dt):
         return
     g = min(cap, ieff * rate / (ROLL_STEPS * dt)) / rate
     for d, wd in ((0, wx), (1, wy), (2, wz)):
-        T[oi, d] -= g * wd
-        PT[oi, PT_ROLL + d] -= g * wd
+        Ti[oi, d] -= g * wd
+        PTi[oi, PT_ROLL + d] -= g * wd
         if j >= 0:
-            T[oj, d] += g * wd
-            PT[oj, PT_ROLL + d] += g * wd
+            Tj[oj, d] += g * wd
+            PTj[oj, PT_ROLL + d] += g * wd

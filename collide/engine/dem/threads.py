@@ -1,23 +1,26 @@
 """The force pass and the kicks on several threads, bit for bit as on one (`collide.dem_threads`
 drives them; each kernel releases the GIL and works on one thread's share).
 
-The bodies are split into contiguous ranges, one a thread, balanced by their listed pairs (a
-pair (i, j), i < j, belongs to i's thread: the pair list is sorted by i, so a thread's pairs are
-one run of it). One step's forces take two passes:
+The bodies are split into contiguous ranges, one a thread, balanced by bodies, pairs and wall
+contacts (`plan`). Each pair (i, j), i < j, is worked out by the thread that owns j; the pair list
+is sorted by i. A pair whose i is another thread's (a "cross" pair: a few where the bodies are
+numbered in space, as a filled box) gives i's share to a buffer. A step:
 
-1. `weights` and `cross_pass`: each thread sets its bodies' forces to their weights (so that a
-   thread with no cross pairs of its own does that while the others work theirs out), then
-   works out its pairs whose j is another thread's (the "cross" pairs, a few where the bodies
-   are numbered in space, as a filled box) into a buffer, each body's share apart, every
-   element written once onto -0.0 (adding -0.0 changes nothing, not even a zero's sign);
-2. `own_pass`, after every thread's first pass: each thread adds the cross pairs' shares
-   coming in from lower threads (in the order of their i),
-   then goes through its own pairs in the list's order (its cross pairs' i shares from the
-   buffer) and its bodies' wall contacts, and kicks its bodies.
+1. `weights` then `inbound_pass`: each thread sets its bodies' forces to their weights, then works
+   out its inbound cross pairs in the list's order: j's share added to its own rows, i's share
+   into the buffer, every element of it written once onto -0.0 (adding -0.0 changes nothing, not
+   even a zero's sign); then it raises its flag (`barrier.raise_flag`);
+2. `own_pass`: its pairs whose i is its own, in the list's order, the outgoing cross pairs' i
+   shares taken from the buffer once the threads that work them out have raised their flags
+   (waited for at the first such pair: in a box numbered in space the pairs at the end of a
+   thread's range, long done), then its bodies' wall contacts; then it kicks its bodies;
+3. every thread meets at the barrier, the one meeting of a step: the step's figures (contacts,
+   energy, distance moved) are summed from the threads' rows and the next step may read any body.
 
 Every body's force, torque and parts then receive the same additions in the same order as in
-the one-thread pass (`forces.forces`: weight, pairs in key order, walls), so the sums are equal
-bit for bit whatever the number of threads (tests/engine/dem/test_threads.py).
+the one-thread pass (`forces.forces`: weight, pairs in key order (a j's inbound pairs, whose i
+are lower, before its own), walls), so the sums are equal bit for bit whatever the number of
+threads (tests/engine/dem/test_threads.py).
 """
 
 from __future__ import annotations
@@ -26,10 +29,10 @@ import math
 
 import numpy as np
 
-from collide.engine.broad import BOX_ANY, NBOX, nearest
-from collide.engine.dem.barrier import barrier_wait
+from collide.engine.broad import BOX_ANY, NBOX
+from collide.engine.dem.barrier import barrier_wait, raise_flag, wait_flag
 from collide.engine.dem.contact import contact_force, contact_into
-from collide.engine.dem.forces import _close, _peak
+from collide.engine.dem.forces import _close, _peak, pair_gap
 from collide.engine.dem.geometry import wall_height
 from collide.engine.dem.layout import (
     B_II,
@@ -65,8 +68,8 @@ from collide.engine.dem.neighbours import take_slot
 from collide.engine.dem.verlet import _drift_body, _half_kick, kick_kick_drift, kinetic_parts
 from collide.engine.jit import jit, jit_inline
 
-# A cross pair's buffer row, per side (0: i, 1: j): force (3), friction torque (3), rolling
-# torque (3), parts (NPT).
+# A cross pair's buffer row, i's share: force (3), friction torque (3), rolling torque (3), parts
+# (NPT).
 XF, XT, XTR, XPT = 0, 3, 6, 9
 NX = 9 + int(NPT)
 # A cross pair's state in a step (SF): not engaged, engaged, engaged and opened, closed.
@@ -81,57 +84,77 @@ NST_ROW = 24
 
 
 @jit
-def plan(PI, PJ, WL, n, threads):
-    """The threads' shares of a pair list: body bounds, pair bounds, wall bounds, cross-pair slot
-    bounds (each (threads + 1,)); each slot's pair; and the slots coming into each body (CSR:
-    inc_start (n + 1,), inc_slot), in the order of their i."""
-    npairs = PI.shape[0]
+def plan(PI, PJ, WL, n, cut):
+    """The threads' shares of a pair list: body bounds, pair bounds (by i), wall bounds, bounds of
+    each thread's cross-pair slots by i ("outgoing") and by j ("inbound"), each (threads + 1,);
+    each slot's pair (in the list's order); the inbound slots, thread by thread, each thread's
+    in the list's order; the slot regions' starts (`neighbours.slot_regions`: the pairs whose j
+    is in each share, before it); and each thread's work. A thread's work counts its bodies, the
+    pairs it works out (those whose j is its own) and its wall contacts; thread t's share of the
+    whole ends at the fraction cut[t + 1] (cut: (threads + 1,), from 0 to 1)."""
+    threads = cut.shape[0] - 1
+    npairs, nwall = PI.shape[0], WL.shape[0]
+    work = np.ones(n, np.int64)
+    for k in range(npairs):
+        work[PJ[k]] += 1
+    for m in range(nwall):
+        work[WL[m, 1]] += 1
+    total = n + npairs + nwall
     bounds = np.zeros(threads + 1, np.int64)
-    kb = np.zeros(threads + 1, np.int64)
-    total = n + npairs
-    k, t, acc = 0, 1, 0
+    shares = np.zeros(threads, np.int64)
+    t, acc = 1, 0
     for a in range(n):
-        while t < threads and acc * threads >= t * total:
-            bounds[t], kb[t] = a, k
+        while t < threads and acc >= cut[t] * total:
+            bounds[t] = a
             t += 1
-        first = k
-        while k < npairs and PI[k] == a:
-            k += 1
-        acc += 1 + k - first
-    while t < threads:
-        bounds[t], kb[t] = n, npairs
+        acc += work[a]
+        shares[t - 1] += work[a]
+    while t <= threads:
+        bounds[t] = n
         t += 1
-    bounds[threads], kb[threads] = n, npairs
-    wb = np.zeros(threads + 1, np.int64)
-    m = 0
-    for t in range(1, threads + 1):
-        while m < WL.shape[0] and WL[m, 1] < bounds[t]:
-            m += 1
-        wb[t] = m
-    wb[threads] = WL.shape[0]
+    kb = _cuts(PI, bounds)
+    wb = _cuts(WL[:, 1], bounds)
+    owner = np.empty(n, np.int64)
+    for r in range(threads):
+        owner[bounds[r]:bounds[r + 1]] = r
     sb = np.zeros(threads + 1, np.int64)
-    for t in range(threads):
-        sb[t + 1] = sb[t]
-        for k in range(kb[t], kb[t + 1]):
-            sb[t + 1] += PJ[k] >= bounds[t + 1]
+    ib = np.zeros(threads + 1, np.int64)
+    starts = np.zeros(threads + 1, np.int64)
+    for k in range(npairs):
+        r, q = owner[PI[k]], owner[PJ[k]]
+        starts[q + 1] += 1
+        if q != r:
+            sb[r + 1] += 1
+            ib[q + 1] += 1
+    for r in range(threads):
+        sb[r + 1] += sb[r]
+        ib[r + 1] += ib[r]
+        starts[r + 1] += starts[r]
     cross = np.empty(sb[threads], np.int64)
-    inc_start = np.zeros(n + 1, np.int64)
+    inbound = np.empty(sb[threads], np.int64)
+    fill = ib[:threads].copy()
     s = 0
-    for t in range(threads):
-        for k in range(kb[t], kb[t + 1]):
-            if PJ[k] >= bounds[t + 1]:
-                cross[s] = k
-                inc_start[PJ[k] + 1] += 1
-                s += 1
-    for a in range(n):
-        inc_start[a + 1] += inc_start[a]
-    inc_slot = np.empty(s, np.int64)
-    fill = inc_start[:n].copy()
-    for q in range(s):
-        j = PJ[cross[q]]
-        inc_slot[fill[j]] = q
-        fill[j] += 1
-    return bounds, kb, wb, sb, cross, inc_start, inc_slot
+    for k in range(npairs):
+        q = owner[PJ[k]]
+        if q != owner[PI[k]]:
+            cross[s] = k
+            inbound[fill[q]] = s
+            fill[q] += 1
+            s += 1
+    return bounds, kb, wb, sb, ib, cross, inbound, starts, shares
+
+
+@jit
+def _cuts(rows, bounds):
+    """Where the ascending `rows` reach each of `bounds`."""
+    cuts = np.empty(bounds.shape[0], np.int64)
+    m = 0
+    for t in range(bounds.shape[0]):
+        while m < rows.shape[0] and rows[m] < bounds[t]:
+            m += 1
+        cuts[t] = m
+    cuts[bounds.shape[0] - 1] = rows.shape[0]
+    return cuts
 
 
 @jit_inline
@@ -178,13 +201,13 @@ def _end(hist, k, record, STT, row):
 
 
 @jit_inline
-def _begin_pair(PS, HS, KB, BUMP, k, record, STT, row):
-    """`_begin` for listed pair k, whose history is row PS[k] of HS (a slot taken if it has none:
-    `neighbours.take_slot`). Returns (its slot, whether it opened)."""
+def _begin_pair(PS, HS, BB, BUMP, k, j, record, STT, row):
+    """`_begin` for listed pair k (second body j), whose history is row PS[k] of HS (a slot
+    taken if it has none: `neighbours.take_slot`). Returns (its slot, whether it opened)."""
     s = PS[k]
     if s >= 0 and HS[s, H_ON] != 0.0:
         return s, False
-    s = take_slot(PS, BUMP, KB, k)
+    s = take_slot(PS, BUMP, BB, k, j)
     HS[s, H_ON] = 0.0  # (a slot just taken holds nothing yet)
     return s, _begin(HS, s, record, STT, row)
 
@@ -214,47 +237,45 @@ def _keep(STT, row, tally):
 
 
 @jit
-def cross_pass(X, V, W, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row,
-               out, box):
-    """Thread `row`'s cross pairs (slots s0..s1) into XB, their states into SF (a pair in a
+def inbound_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, tabs, fl, dt, t, record, q0, q1, inbound, cross,
+                 XB, SF, STT, row, out, box):
+    """Thread `row`'s inbound cross pairs (inbound[q0:q1]: those whose j is its own, in the
+    list's order): j's share added to its rows of F, T and PT (after its weight, before its
+    own pairs, as in the one-thread pass), i's into XB, the pair's state into SF (a pair in a
     periodic box at its nearest images). Two copies, the nearest-image test folded away in the
     one without (as `forces.forces`)."""
     if box[BOX_ANY] != 0.0:
-        _cross(X, V, W, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row,
-               out, box, True)
+        _inbound(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, tabs, fl, dt, t, record, q0, q1, inbound,
+                 cross, XB, SF, STT, row, out, box, True)
     else:
-        _cross(X, V, W, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row,
-               out, box, False)
+        _inbound(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, tabs, fl, dt, t, record, q0, q1, inbound,
+                 cross, XB, SF, STT, row, out, box, False)
 
 
 @jit_inline
-def _cross(X, V, W, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, record, s0, s1, cross, XB, SF, STT, row, out,
-           box, periodic):
+def _inbound(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, tabs, fl, dt, t, record, q0, q1, inbound, cross, XB,
+             SF, STT, row, out, box, periodic):
     tally = _tally(STT, row)
-    for s in range(s0, s1):
+    for q in range(q0, q1):
+        s = inbound[q]
         k = cross[s]
         i, j = PI[k], PJ[k]
         SF[s] = IDLE
-        dx = X[j, 0] - X[i, 0]
-        dy = X[j, 1] - X[i, 1]
-        dz = X[j, 2] - X[i, 2]
-        if periodic:
-            dx, dy, dz = nearest(dx, dy, dz, box)
-        reach = Bd[i, B_R] + Bd[j, B_R]
-        d2 = dx * dx + dy * dy + dz * dz
-        if d2 >= reach * reach:
+        apart, dx, dy, dz, d2, reach = pair_gap(X, Bd, i, j, box, periodic)
+        if apart:
             if _end_pair(PS, HS, k, record, STT, row):
                 SF[s] = CLOSED
             continue
         dist = math.sqrt(d2)
         inv = 1.0 / dist
         delta = reach - dist
-        hs, opened = _begin_pair(PS, HS, KB, BUMP, k, record, STT, row)
+        hs, opened = _begin_pair(PS, HS, BB, BUMP, k, j, record, STT, row)
         SF[s] = OPENED if opened else ENGAGED
-        XB[s, :, :] = -0.0
-        fn = contact_into(X, V, W, XB[s, :, XF:XF + 3], XB[s, :, XT:XT + 3], XB[s, :, XTR:XTR + 3], XB[s, :, XPT:],
-                          Bd, i, j, 0, 1, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j], HS, hs, fl, dt,
-                          out)
+        XB[s, :] = -0.0
+        side = XB[s:s + 1]
+        fn = contact_into(X, V, W, side[:, XF:XF + 3], side[:, XT:XT + 3], side[:, XTR:XTR + 3], side[:, XPT:], 0,
+                          F, T, T, PT, j, Bd, i, j, dx * inv, dy * inv, dz * inv, delta, tabs, MAT[i], MAT[j], HS, hs,
+                          fl, dt, out)
         tally = _engaged(tally, delta, fn)
         if record:
             _peak(HS, hs, t, delta, fn, out)
@@ -264,9 +285,7 @@ def _cross(X, V, W, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, tabs, fl, dt, t, record, 
 @jit
 def weights(F, T, PT, Bd, grav, lo, hi):
     """Bodies lo..hi's forces set to their weights, torques and parts to zero, as `forces.forces`
-    starts (one fill of the share's rows, as it fills all). Done before the cross pass, while a
-    thread with no cross pairs of its own would only wait for the others': the rows are read
-    again only by this thread's passes (the cross pass writes into XB)."""
+    starts (one fill of the share's rows, as it fills all)."""
     g0, g1, g2 = grav[0], grav[1], grav[2]
     T[lo:hi, :] = 0.0
     PT[lo:hi, :] = 0.0
@@ -276,75 +295,69 @@ def weights(F, T, PT, Bd, grav, lo, hi):
 
 
 @jit_inline
-def _take(XB, s, side, F, T, PT, a):
-    """A cross pair's share for body a, added in the one-thread pass's order (friction torque,
-    rolling torque, force and parts)."""
+def _take(XB, s, F, T, PT, a):
+    """A cross pair's share for its body i, added in the one-thread pass's order (friction
+    torque, rolling torque, force and parts)."""
     for d in range(3):
-        T[a, d] += XB[s, side, XT + d]
+        T[a, d] += XB[s, XT + d]
     for d in range(3):
-        T[a, d] += XB[s, side, XTR + d]
+        T[a, d] += XB[s, XTR + d]
     for d in range(3):
-        F[a, d] += XB[s, side, XF + d]
+        F[a, d] += XB[s, XF + d]
     for c in range(NPT):
-        PT[a, c] += XB[s, side, XPT + c]
+        PT[a, c] += XB[s, XPT + c]
 
 
 @jit
-def own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, fl, dt, t, record,
-             bd, row, inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box):
-    """Thread `row`'s bodies' forces (`_own`), in two copies as `cross_pass`."""
+def own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs, wtabs, fl, dt, t, record,
+             bd, row, XB, SF, STT, EVP, EVW, out, box, meet):
+    """Thread `row`'s bodies' forces (`_own`), in two copies as `inbound_pass`."""
     if box[BOX_ANY] != 0.0:
-        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, fl, dt, t, record,
-             bd, row, inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, True)
+        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs, wtabs, fl, dt, t, record,
+             bd, row, XB, SF, STT, EVP, EVW, out, box, meet, True)
     else:
-        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, fl, dt, t, record,
-             bd, row, inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, False)
+        _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs, wtabs, fl, dt, t, record,
+             bd, row, XB, SF, STT, EVP, EVW, out, box, meet, False)
 
 
 @jit_inline
-def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, KB, BUMP, WL, WH, WP, tabs, wtabs, fl, dt, t, record, bd,
-         row, inc_start, inc_slot, XB, SF, STT, EVP, EVW, out, box, periodic):
-    """Thread `row`'s bodies' forces (bd: its body, pair, wall and slot starts, then ends), after
-    every thread's `cross_pass`. Events (pairs: 2 k, + 1 if closed; walls: 2 m, + 1) go to EVP
-    from the thread's first pair and EVW from its first wall contact, if recorded."""
-    lo, hi, k0, k1, m0, m1, s = bd[0], bd[1], bd[2], bd[3], bd[4], bd[5], bd[6]
+def _own(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs, wtabs, fl, dt, t, record, bd,
+         row, XB, SF, STT, EVP, EVW, out, box, meet, periodic):
+    """Thread `row`'s own pairs (those whose i and j are its own), and its outgoing cross pairs'
+    i shares from XB once the threads that work them out have raised their flags (`meet`: the
+    thread's row of the barrier; waited for at the first such pair, and so before any of its
+    bodies that another thread reads moves), in the list's order, after its inbound pairs; then
+    its bodies' wall contacts (bd: its body, pair, wall and slot starts, then ends). Events
+    (pairs: 2 k, + 1 if closed; walls: 2 m, + 1) go to EVP from the thread's first pair and EVW
+    from its first wall contact, if recorded."""
+    hi, k0, k1, m0, m1, s = bd[1], bd[2], bd[3], bd[4], bd[5], bd[6]
     nw = 0
-    # The share's rows hold their weights (`weights`, before the cross pass); then the cross
-    # pairs' shares coming in, body by body in the order of their i: a loop over
-    # them alone (a loop over every body, most with none, took a tenth of the pass).
-    a = lo
-    for q in range(inc_start[lo], inc_start[hi]):
-        while inc_start[a + 1] <= q:
-            a += 1
-        if SF[inc_slot[q]] == ENGAGED or SF[inc_slot[q]] == OPENED:
-            _take(XB, inc_slot[q], 1, F, T, PT, a)
     tally = _tally(STT, row)
+    waited = False
     for k in range(k0, k1):
         i, j = PI[k], PJ[k]
         if j >= hi:
+            if not waited:
+                for other in range(row + 1, STT.shape[0]):
+                    wait_flag(meet, other)
+                waited = True
             state = SF[s]
             if state == ENGAGED or state == OPENED:
-                _take(XB, s, 0, F, T, PT, i)
+                _take(XB, s, F, T, PT, i)
             if record and (state == OPENED or state == CLOSED):
                 EVP[k0 + nw] = 2 * k + (state == CLOSED)
                 nw += 1
             s += 1
             continue
-        dx = X[j, 0] - X[i, 0]
-        dy = X[j, 1] - X[i, 1]
-        dz = X[j, 2] - X[i, 2]
-        if periodic:
-            dx, dy, dz = nearest(dx, dy, dz, box)
-        reach = Bd[i, B_R] + Bd[j, B_R]
-        d2 = dx * dx + dy * dy + dz * dz
-        if d2 >= reach * reach:
+        apart, dx, dy, dz, d2, reach = pair_gap(X, Bd, i, j, box, periodic)
+        if apart:
             if _end_pair(PS, HS, k, record, STT, row) and record:
                 EVP[k0 + nw] = 2 * k + 1
                 nw += 1
             continue
         dist = math.sqrt(d2)
         inv = 1.0 / dist
-        hs, opened = _begin_pair(PS, HS, KB, BUMP, k, record, STT, row)
+        hs, opened = _begin_pair(PS, HS, BB, BUMP, k, j, record, STT, row)
         if opened and record:
             EVP[k0 + nw] = 2 * k
             nw += 1
@@ -518,16 +531,17 @@ def _figures(S, ST, FG, t, record):
 
 
 @jit
-def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS, SKB, BUMP, WL, WH, WP, tabs,
-              wtabs, grav, fl, fp, rolling, ST, FG, IV, REC, RB, kb, wb, cross, inc_start, inc_slot, XB, SF, EVP, EVW,
-              EB, STT, PM, outs, CTL):
+def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS, SBB, BUMP, WL, WH, WP, tabs,
+              wtabs, grav, fl, fp, rolling, ST, FG, IV, REC, RB, kb, wb, cross, inbound, XB, SF, EVP, EVW, EB, STT, PM,
+              outs, CTL):
     """Thread r's part of the run's steps (every thread runs it at once, with the same control
-    flow, meeting at `barrier`), from the state in CTL until the run needs what only the driver
-    does (`dem_threads`: coasting, rebuilding the lists, recording a frame, growing IV and REC)
-    or ends. STT (2, threads, NST) and PM (2, threads) alternate between steps, so that no thread
-    writes a row another may still read. Thread 0 keeps the run's figures and writes CTL back.
-    New contacts take their slots from the regions SKB, BUMP (`neighbours.take_slot`), which
-    are the list's whatever the threads that run this stretch (kb, their plan's)."""
+    flow, meeting at `barrier` once a step, at its end), from the state in CTL until the run
+    needs what only the driver does (`dem_threads`: coasting, rebuilding the lists, recording a
+    frame, growing IV and REC) or ends. STT (2, threads, NST) and PM (2, threads) alternate
+    between steps, so that no thread writes a row another may still read. Thread 0 keeps the
+    run's figures and writes CTL back. New contacts take their slots from the regions SBB,
+    BUMP (`neighbours.take_slot`), which are the list's whatever the threads that run this
+    stretch (the all-threads plan's)."""
     threads = STT.shape[1]
     n = X.shape[0]
     dt, t_end, rest, skin = fp[P_DT], fp[P_TEND], fp[P_REST], fp[P_SKIN]
@@ -574,11 +588,11 @@ def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS
         S = STT[p]
         S[r, :] = 0.0
         weights(F, T, PT, Bd, grav, lo, hi)
-        cross_pass(X, V, W, Bd, MAT, PI, PJ, PS, HS, SKB, BUMP, tabs, fl, h, t, record, RB[r, 6], RB[r, 7], cross, XB,
-                   SF, S, r, outs[r], box)
-        barrier_wait(barrier)
-        own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, SKB, BUMP, WL, WH, WP, tabs, wtabs, fl, h, t,
-                 record, RB[r], r, inc_start, inc_slot, XB, SF, S, EVP, EVW, outs[r], box)
+        inbound_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, SBB, BUMP, tabs, fl, h, t, record, RB[r, 8],
+                     RB[r, 9], inbound, cross, XB, SF, S, r, outs[r], box)
+        raise_flag(barrier)
+        own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, SBB, BUMP, WL, WH, WP, tabs, wtabs, fl, h, t,
+                 record, RB[r], r, XB, SF, S, EVP, EVW, outs[r], box, barrier)
         kick_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, 0.5 * h, 0.5 * h_next, h_next, lo, hi, rolling, spin, planar,
                    True, fuse_ok and S[r, ST_ENG] > 0.0, EB, S, r)
         barrier_wait(barrier)

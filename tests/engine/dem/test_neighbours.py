@@ -52,8 +52,8 @@ def test_carried_history_holds_the_engaged_contacts_only():
     assert table.shape == (2 + len(NI), NH)
     assert list(NS) == [0, -1, -1, 1, -1, -1, -1]
     assert np.array_equal(table[0], HS[2]) and np.array_equal(table[1], HS[0])
-    KB = np.array([0, 3, len(NI)])
-    BUMP = slot_regions(NS, table, KB)
-    taken = [int(take_slot(NS, BUMP, KB, k)) for k in (5, 1, 3, 2, 6)]
-    assert taken == [2 + 3, 2 + 0, 1, 2 + 1, 2 + 4]  # (pair 3 keeps its own)
+    BB = np.array([0, 5, n])  # two shares: a pair's region is its j's share's, 4 pairs in the first
+    BUMP = slot_regions(NS, table, np.array([0, 4, len(NI)]))
+    taken = [int(take_slot(NS, BUMP, BB, k, NJ[k])) for k in (5, 1, 3, 2, 6)]
+    assert taken == [2 + 4, 2 + 0, 1, 2 + 1, 2 + 5]  # (pair 3 keeps its own)
     assert max(taken) < table.shape[0] and len(set(taken)) == len(taken)

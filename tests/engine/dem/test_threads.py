@@ -140,3 +140,44 @@ def test_a_run_that_changes_its_threads_between_stretches_gives_the_one_thread_r
         assert np.asarray(a).tobytes() == np.asarray(b).tobytes()
     assert expected[6][S_BUILDS] > 4  # neighbour lists built: several stretches
     assert LAST_RUN["alone"] > 0 and LAST_RUN["meets"][0] > 0
+
+
+def test_the_cuts_follow_the_threads_speeds():
+    """`dem_threads._Balance`: a thread that took twice the cycles for the same work is given a
+    third of the next, once learned (the speeds' ratio tends to 2 as the same stretch repeats);
+    a stretch with a thread that did nothing teaches nothing."""
+    from collide.dem_threads import _Balance
+
+    balance = _Balance(2)
+    assert np.allclose(balance.cut(2), [0.0, 0.5, 1.0])
+    balance.learn(np.array([0, 100]), np.array([1.0, 2.0]))
+    assert np.allclose(balance.cut(2), [0.0, 0.5, 1.0])
+    for _ in range(40):
+        balance.learn(np.array([100, 100]), np.array([1.0, 2.0]))
+    assert np.allclose(balance.cut(2), [0.0, 2.0 / 3.0, 1.0])
+    assert np.allclose(balance.cut(3), [0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0])  # (another count: even)
+
+
+def test_uneven_cuts_give_the_one_thread_run_bit_for_bit(monkeypatch):
+    """Wherever the bodies are cut among the threads (here most to one thread, then most to the
+    other, list after list), the run is the one-thread run bit for bit."""
+    from collide.dem_threads import _Balance, dem_run_threaded
+    from collide.engine.dem.loop import dem_run
+
+    lists = []
+
+    def cut(self, threads):
+        lists.append(threads)
+        heavy = np.full(threads, 1.0)
+        heavy[len(lists) % threads] = 8.0
+        return np.concatenate(([0.0], np.cumsum(heavy))) / heavy.sum()
+
+    monkeypatch.setattr(_Balance, "cut", cut)
+    args = _args(_box(64, False, 0.0, seed=4), True, 0.0)
+    one = _copy(args)
+    expected = dem_run(*one)
+    mine = _copy(args)
+    got = dem_run_threaded(*mine, 2)
+    assert len(lists) > 4  # several lists, cut both ways
+    for a, b in zip(one[:4] + expected, mine[:4] + got):
+        assert np.asarray(a).tobytes() == np.asarray(b).tobytes()
