@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 from collide.engine.dem.normal import normal_elastic
+from collide.engine.dem.tangential import friction_cap
 from collide.engine.flight import free_state
 from collide.engine.jit import jit_inline
 from collide.engine.layout import (
@@ -22,6 +23,7 @@ from collide.engine.layout import (
     C_LIS,
     C_LJF,
     C_LJS,
+    C_MU,
     C_N,
     C_REACH,
     C_SH,
@@ -139,6 +141,16 @@ def dashpots(X, C, CI, nc, vc, fa):
             X[j, fa] += s * nx
             X[j, fa + 1] += s * ny
             X[j, fa + 2] += s * nz
+
+
+@jit_inline
+def cap(C, c):
+    """Contact c's friction cap: with a dashpot the DEM kernel's, mu max(F_n, 0) (its F_n may pull
+    as the contact ends); without, mu F_n of the spring unclamped, smooth for a substep straying
+    just outside the contact (its end is a located event)."""
+    if C[c, C_GAMMA] > 0.0:
+        return friction_cap(C[c, C_MU], C[c, C_FN])
+    return C[c, C_MU] * C[c, C_FN]
 
 
 @jit_inline

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import math
 
-from collide.engine.dem.tangential import friction_cap
 from collide.engine.event.contact import (
     add_force,
+    cap,
     dashpots,
     planar_velocity_terms,
     response,
@@ -23,14 +23,12 @@ from collide.engine.layout import (
     C_B,
     C_EPS,
     C_FF,
-    C_FN,
     C_GV,
     C_HELD,
     C_LIF,
     C_LIS,
     C_LJF,
     C_LJS,
-    C_MU,
     C_N,
     CI_I,
     CI_J,
@@ -242,7 +240,7 @@ dashpots (`dashpots`) are velocity-dependent forces too: they go in first, with 
             C[c, C_FF + 1] = 0.0
             C[c, C_FF + 2] = 0.0
             if mag > 0.0:
-                f = -friction_cap(C[c, C_MU], C[c, C_FN]) / mag
+                f = -cap(C, c) / mag
                 C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2] = f * sx, f * sy, f * sz
                 add_force(X, C, CI, c, f * sx, f * sy, f * sz, X_SF, X_SL, spin, planar)
         else:

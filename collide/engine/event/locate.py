@@ -7,17 +7,14 @@ from __future__ import annotations
 
 import math
 
-from collide.engine.dem.tangential import friction_cap
-from collide.engine.event.contact import geometry, overlap, response, slip, slip_rate, springs
+from collide.engine.event.contact import cap, geometry, overlap, response, slip, slip_rate, springs
 from collide.engine.event.modes import flips, mode_events
 from collide.engine.event.substep import hold_pull, kick_start, settle, step
 from collide.engine.jit import jit_call, jit_inline, jit_part
 from collide.engine.layout import (
     AIM,
     C_EPS,
-    C_FN,
     C_HELD,
-    C_MU,
     C_N,
     CI_MODE,
     CREEP_LIMIT,
@@ -106,8 +103,8 @@ def slip_turn(X, C, CI, nc, fl, h, negligible):
     top = 0.0
     which = -1
     for c in range(nc):
-        cap = friction_cap(C[c, C_MU], C[c, C_FN])
-        if CI[c, CI_MODE] != SLIDE or cap * response(X, C, CI, c, fl[FL_SPIN]) * h <= negligible:
+        friction_force = cap(C, c)
+        if CI[c, CI_MODE] != SLIDE or friction_force * response(X, C, CI, c, fl[FL_SPIN]) * h <= negligible:
             continue
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, fl[FL_SPIN], False)
         nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
@@ -133,7 +130,7 @@ def stiff_slide(X, C, CI, nc, dt, spin):
         if CI[c, CI_MODE] != SLIDE:
             continue
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, False)
-        rate = friction_cap(C[c, C_MU], C[c, C_FN]) * response(X, C, CI, c, spin)
+        rate = cap(C, c) * response(X, C, CI, c, spin)
         mag = math.sqrt(sx * sx + sy * sy + sz * sz)
         if STIFF_SLIDE_IMPULSES * rate * dt > mag:
             tau = min(tau, mag / rate)
@@ -229,7 +226,7 @@ def turning_nudges(X, C, CI, na, nc, fl, nudge, reach, negligible, span, vc, wc,
         gx, gy, gz = gx - along * ux, gy - along * uy, gz - along * uz
         least = max(size + 2.0 * min(along, 0.0) * span, C[c, C_EPS])
         rate = (gx * gx + gy * gy + gz * gz) / (least * least)  # theta'^2
-        force = friction_cap(C[c, C_MU], C[c, C_FN]) * response(X, C, CI, c, spin)
+        force = cap(C, c) * response(X, C, CI, c, spin)
         if force * rate > 0.0:
             nudge = min(nudge, (12.0 * NUDGE_SHARE * negligible / (force * rate)) ** (1.0 / 3.0))
             reach = min(reach, (NUDGE_SHARE * negligible / (YOSHIDA_ERROR * force * rate * rate)) ** 0.2)
