@@ -50,6 +50,10 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
                      "(first order)")
     if integrator == "seed":
         return SEED, "integrator 'seed' asked for: the report's own update on its fixed grid"
+    if scene.needs_dem and alone_blocker(scene) is not None:
+        return EVENT, (f"{dem_reason(scene)} with the linear spring: its dashpot (the DEM kernel's law) in the "
+                       f"islands' steps of order {_order(integrator)} ({integrator}), every contact, its end and "
+                       "each friction mode change located")
     if scene.needs_dem and len(scene.bodies) == 2:
         return EVENT, (f"{dem_reason(scene)} with two spheres and no walls, no friction: their contact in the "
                        "relative coordinate (reduced mass and radius, head-on) at order 8 (DOP853's Runge-Kutta), its "

@@ -19,7 +19,17 @@ import numpy as np
 from collide.engine import layout, tier
 from collide.engine.dem import layout as dk
 from collide.engine.dem import loop as dem_loop
-from collide.model import KISSING, TABLE_ESTAR, TABLE_K, TABLE_KTR, TABLE_REST, Model, State, select_model
+from collide.model import (
+    KISSING,
+    TABLE_ESTAR,
+    TABLE_K,
+    TABLE_KTR,
+    TABLE_REST,
+    Model,
+    State,
+    damping_ratio,
+    select_model,
+)
 from collide.periodic import NEIGHBOUR_SKIN
 from collide.results import ContactLog, RunResult, Trajectory
 from collide.stepper import (
@@ -142,17 +152,6 @@ def check_dem(model: Model, state: State, dt: np.ndarray, max_steps: int, durati
             raise RunError(f"dt = {dt[b]:.3g} s over {duration[b]:.3g} s is {steps[b]:.3g} steps (limit "
                            f"{max_steps:.3g}); use a larger dt or a shorter duration, or allow more (--max-steps)")
     return per_contact
-
-
-def damping_ratio(restitution: np.ndarray, hertz: bool) -> np.ndarray:
-    """The dashpot's zeta (gamma = 2 zeta sqrt(m* dF/d delta)) that gives this restitution:
-    -ln e / sqrt(ln^2 e + pi^2) for the linear spring; for Hertz LIGGGHTS' and LAMMPS'
-    coefficient 2 sqrt(5/6) beta sqrt(S_n m*), the same times sqrt(5/6), which gives e exactly
-    too when the force may pull at the end (tests/engine/dem/test_damping.py)."""
-    e = np.asarray(restitution, dtype=float)
-    le = np.log(np.where(e > 0, e, 1.0))
-    zeta = np.where(e > 0, -le / np.sqrt(le**2 + math.pi**2), 1.0)  # e -> 0: critically damped
-    return zeta * (math.sqrt(5.0 / 6.0) if hertz else 1.0)
 
 
 def kernel_tables(model: Model, b: int) -> tuple[np.ndarray, np.ndarray]:

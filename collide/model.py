@@ -42,6 +42,17 @@ EVENT_COLUMNS = 3  # the event engine reads k, mu, eps only
 KISSING = {1: 2, 2: 6, 3: 12}  # most equal spheres that can touch one sphere at once
 
 
+def damping_ratio(restitution: np.ndarray, hertz: bool) -> np.ndarray:
+    """The dashpot's zeta (gamma = 2 zeta sqrt(m* dF/d delta)) that gives this restitution:
+    -ln e / sqrt(ln^2 e + pi^2) for the linear spring; for Hertz LIGGGHTS' and LAMMPS'
+    coefficient 2 sqrt(5/6) beta sqrt(S_n m*), the same times sqrt(5/6), which gives e exactly
+    too when the force may pull at the end (tests/engine/dem/test_damping.py)."""
+    e = np.asarray(restitution, dtype=float)
+    le = np.log(np.where(e > 0, e, 1.0))
+    zeta = np.where(e > 0, -le / np.sqrt(le**2 + math.pi**2), 1.0)  # e -> 0: critically damped
+    return zeta * (math.sqrt(5.0 / 6.0) if hertz else 1.0)
+
+
 @dataclass(frozen=True)
 class Model:
     """Static description of B scenes of the same shape (see module docstring for shapes)."""

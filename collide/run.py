@@ -18,7 +18,7 @@ from collide.invariant import check_invariant
 from collide.limits import step_limit
 from collide.model import compile_scenes, reference_frequency, select_model, select_state
 from collide.results import RunResult
-from collide.scene import Scene, SceneError, alone_blocker, dem_reason
+from collide.scene import Scene, SceneError, alone_blocker, dem_reason, island_blocker
 from collide.stepper import EDGE_TOL, Progress, RunError, approach_bound, simulate
 
 
@@ -246,10 +246,16 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
                                            if not auto_used[0] else None)
         if blocker is None:
             return _run_alone(scenes[0], integ, model, state, float(tols[0]), record, max_steps, measure, forced)
-        if forced:
+        islands = None if integ == "seed" else next(
+            (why for why in (island_blocker(s) for s in scenes if s.needs_dem) if why is not None), "")
+        if islands == "":
+            needs = None  # the islands take it: the restitution's dashpot in their steps
+        elif forced:
             raise SceneError(f"integrator: '{integ}' cannot run {needs.name}'s contact law ({dem_reason(needs)}): "
                              f"{blocker}; it runs with --integrator dem")
-        integ = "dem"
+        else:
+            blocker = f"{blocker}; {islands}" if islands else blocker
+            integ = "dem"
     if integ == "dem":
         run = _run_dem(scenes, model, state, requested, auto_used, tols, dt, record, max_steps, progress, measure)
         return _engine(run, scenes[0], "dem", forced, blocker if needs is not None else None)
@@ -298,7 +304,8 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
                            ["model"] * len(scenes)), scenes[0], integ, forced)
     if not measure:
         return run  # a measuring run: its caller judges it
-    if len(scenes) == 1 and measure_mod.outside_model(run.result):
+    # The error model is the undamped law's: a damped run's error is measured.
+    if len(scenes) == 1 and (measure_mod.outside_model(run.result) or scenes[0].needs_dem):
         if measure_mod.measurable(scenes[0], run.auto[0]):
             run = measure_mod.measured(run, _event_rerun(scenes[0], integ, record), max_steps)
         else:

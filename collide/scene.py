@@ -539,9 +539,12 @@ def _parse_scene(raw: dict, default_name: str, progress: Progress) -> Scene:
                   gravity=gravity, duration=duration, tail=tail, tol=tol, rest=rest,
                   description=raw.get("description", ""), domain=domain, source=raw)
     if scene.needs_dem:
-        # The event engine where it runs these laws at full order (a sphere alone among walls),
-        # else the DEM kernel (collide.alone.engine_choice says which and why).
+        # The event engine where it runs these laws at full order (a sphere alone among walls, or
+        # the linear spring's dashpot in islands), else the DEM kernel (collide.alone.engine_choice
+        # says which and why).
         blocker = alone_blocker(scene)
+        if blocker and integrator != "seed" and island_blocker(scene) is None:
+            blocker = None
         if "integrator" not in raw:
             scene = replace(scene, integrator="dem" if blocker else DEFAULT_INTEGRATOR)
         elif integrator == "seed" or (integrator != "dem" and blocker):
@@ -674,6 +677,29 @@ def dem_reason(scene: Scene) -> str:
             (m.rolling_friction or 0.0) == 0.0 for m in scene.materials):
         return "restitution below 1"
     return "rolling_friction"
+
+
+# A damped scene of more bodies than this under gravity among walls settles into lasting contacts
+# (a pile): DEM's, whose cost does not grow with the contacts' events.
+ISLAND_PILE = 50
+
+
+def island_blocker(scene: Scene) -> str | None:
+    """Why the event engine's islands cannot run a scene whose law goes beyond the report's (None:
+    they can, the linear spring with the restitution's dashpot and Coulomb friction)."""
+    c = scene.contact
+    rolling = [c.rolling_friction] + [m.rolling_friction or 0.0 for m in scene.materials] + \
+        [p.rolling_friction or 0.0 for p in scene.pairs]
+    if max(rolling) > 0.0:
+        return "rolling resistance is DEM's only"
+    if c.model != "linear":
+        return "Hertz contacts between spheres (inside an island) are DEM's so far"
+    if c.tangential != "coulomb":
+        return "a tangential spring between spheres (inside an island) is DEM's so far"
+    if len(scene.bodies) > ISLAND_PILE and scene.gravity is not None and scene.walls:
+        return (f"{len(scene.bodies)} damped spheres under gravity among walls settle into lasting contacts "
+                "(a pile), which DEM steps at a cost that does not grow with their events")
+    return None
 
 
 def alone_blocker(scene: Scene) -> str | None:

@@ -28,6 +28,7 @@ from collide.model import (
     TABLE_K,
     Model,
     State,
+    damping_ratio,
     max_frequency,
     plane_of_motion,
     reference_frequency,
@@ -262,6 +263,18 @@ def unpack_state(model: Model, G: np.ndarray) -> tuple:
     return s, v, w, q
 
 
+def event_tables(model: Model) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each member's pair and wall tables for the event engine: the model's, with the restitution
+    turned into the dashpot's damping ratio (`collide.dem.damping_ratio`, as the DEM kernel's)."""
+    out = []
+    for b in range(model.batch):
+        pair, wall = model.pair_table[b].copy(), model.wall_table[b].copy()
+        pair[..., layout.TP_ZETA] = damping_ratio(pair[..., layout.TP_ZETA], model.hertz)
+        wall[..., layout.TP_ZETA] = damping_ratio(wall[..., layout.TP_ZETA], model.hertz)
+        out.append((np.ascontiguousarray(pair), np.ascontiguousarray(wall)))
+    return out
+
+
 def periodic_settings(model: Model, fp: np.ndarray, box: int, cap: int) -> None:
     """The periodic box into the kernels' settings fp (B, ...) from column `box`: the periods, 1.0
     if any axis wraps; and at `cap` how far a body may move between two looks at the nearest
@@ -327,6 +340,12 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     fl[:, layout.FL_SPIN], fl[:, layout.FL_FRICTION], fl[:, layout.FL_SEED] = spin, friction, model.seed_lever
     fl[:, layout.FL_PLANAR], fl[:, layout.FL_RECORD], fl[:, layout.FL_AUTO] = model.dim < 3, record, auto & integ.events
     fl[:, layout.FL_MAXSTEPS], fl[:, layout.FL_DIM], fl[:, layout.FL_TURNS] = max_steps, model.dim, turns
+    # The restitution's dashpots: a velocity-dependent normal force, stepped with the friction.
+    tables = event_tables(model)
+    damped = np.array([(pair[..., layout.TP_ZETA] > 0).any() or (wall[..., layout.TP_ZETA] > 0).any()
+                       for pair, wall in tables])
+    fl[:, layout.FL_DAMPED] = damped
+    fl[:, layout.FL_FRICTION] |= damped
     t_end = np.where(np.isfinite(duration), duration, np.inf)
     fp = np.zeros((b_count, int(layout.NFP)))
     fp[:, layout.FP_DT], fp[:, layout.FP_OMEGA_H] = dt, omega_h
@@ -340,9 +359,6 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     fastest = np.sqrt((initial.v ** 2).sum(-1)).max(-1)
     fp[:, layout.FP_END_SLOW] = np.where(np.asarray(resolved) > 1e-9, resolved, 0.0) * fastest
     periodic_settings(model, fp, layout.FP_BOX, layout.FP_CAP)
-    # Contiguous already (stacked per scene); a strided view would compile the kernel anew.
-    tables = [(np.ascontiguousarray(model.pair_table[b]), np.ascontiguousarray(model.wall_table[b]))
-              for b in range(b_count)]
     walls = [WP] * b_count
     # A frictional 3D run in one plane runs turned into z = const, on the planar path (half the
     # cost of the general one for a rack: a smaller hold system, smooth band values, substeps).

@@ -136,7 +136,8 @@ C_K, C_MU, C_EPS, C_REACH, C_HELD, C_FF, C_B = 10, 11, 12, 13, 14, 17, 20
 C_INV = 26  # 1 / C_DIST of a pair (the slip rates' turning terms divide by it)
 C_GV = 27  # in the plane, a stuck contact's hold rate's velocity terms along e1, at a kick's last pass
 C_SH = 28  # what takes j's centre to its image nearest i's in a periodic box (QF_SH's; else 0)
-NC = 31
+C_GAMMA = 31  # the restitution's dashpot coefficient (kg/s; 0: undamped): the DEM kernel's `dashpot`
+NC = 32
 CI_I, CI_J, CI_GI, CI_GJ, CI_MODE, CI_Q, CI_EDGE, CI_RETRIED, CI_FLIPPED, CI_GRAZE = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
 # CI_RETRIED, CI_FLIPPED: `decide`'s marks (arrays of its own were allocated at every call);
 # CI_GRAZE: run_island's, for the next step.
@@ -152,7 +153,10 @@ E_V0, E_R0, E_V1, E_R1, E_VC, E_RC, E_FORCED = 0, 1, 2, 3, 4, 5, 6
 NE = 7
 # Settings: flags (int) and figures (float).
 FL_SPIN, FL_FRICTION, FL_SEED, FL_PLANAR, FL_RECORD, FL_AUTO, FL_MAXSTEPS, FL_DIM, FL_TURNS = range(9)
-NFL = 9
+# FL_DAMPED: some contact has a dashpot (a restitution below 1): a velocity-dependent normal force,
+# in the kicks with the friction (FL_FRICTION is set with it).
+FL_DAMPED = 9
+NFL = 10
 FP_DT, FP_OMEGA_H, FP_TEND, FP_TAIL, FP_SCALE, FP_SLOW, FP_EVENT_TOL, FP_END_SLOW, FP_NOW, FP_NOW_STEPS = range(10)
 # FP_NOW, FP_NOW_STEPS are written by the run: time reached and steps, read by a progress display.
 # FP_BOX..: the periodic box (collide.engine.broad's `box`: the periods, 0 where an axis does not
@@ -162,6 +166,7 @@ FP_BOX, FP_CAP = 10, 14
 NFP = 15
 # Contact parameter tables: pairs (M, M, NP), walls (M, NP).
 TP_K, TP_MU, TP_EPS = range(3)
+TP_ZETA = 4  # the event engine's tables carry the damping ratio where the model's hold the restitution
 # Records.
 # Knots: a body's exact state at a time, with its acceleration just before (K_A) and just after
 # (K_AN): a friction mode change or the seed's per-step forces make it jump there.

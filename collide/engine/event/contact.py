@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import math
 
+from collide.engine.dem.normal import normal_elastic
+from collide.engine.dem.tangential import friction_cap
 from collide.engine.flight import free_state
 from collide.engine.jit import jit_inline
 from collide.engine.layout import (
@@ -14,12 +16,14 @@ from collide.engine.layout import (
     C_DELTA,
     C_DIST,
     C_FN,
+    C_GAMMA,
     C_INV,
     C_K,
     C_LIF,
     C_LIS,
     C_LJF,
     C_LJS,
+    C_MU,
     C_N,
     C_REACH,
     C_SH,
@@ -84,26 +88,69 @@ def geometry(X, C, CI, nc, WP, seed, fric):
             C[c, C_LJS] = 0.0
         C[c, C_DELTA] = delta
         C[c, C_DIST] = dist
-        C[c, C_FN] = C[c, C_K] * delta
+        C[c, C_FN] = normal_elastic(False, C[c, C_K], 0.0, 0.0, delta)[0]
 
 
 @jit_inline
 def springs(X, C, CI, na, nc, grav):
-    """Accelerations X_A from the springs and gravity."""
+    """Accelerations X_A from the springs (the elastic part of the normal force: a dashpot's
+    depends on the velocities and goes with the friction, `dashpots`) and gravity."""
     for a in range(na):
         for d in range(3):
             X[a, X_FO + d] = 0.0
     for c in range(nc):
         i = CI[c, CI_I]
         j = CI[c, CI_J]
+        elastic = normal_elastic(False, C[c, C_K], 0.0, 0.0, C[c, C_DELTA])[0]
         for d in range(3):
-            f = C[c, C_FN] * C[c, C_N + d]
+            f = elastic * C[c, C_N + d]
             X[i, X_FO + d] -= f
             if j >= 0:
                 X[j, X_FO + d] += f
     for a in range(na):
         for d in range(3):
             X[a, X_A + d] = X[a, X_FO + d] * X[a, X_IM] + grav[d]
+
+
+@jit_inline
+def dashpots(X, C, CI, nc, vc, fa):
+    """The restitution's dashpots at the velocities in column vc: each damped contact's normal
+    force C_FN becomes the DEM kernel's, spring plus gamma times the overlap's rate (unclipped: it
+    may pull as the contact ends, as there), and the dashpot's accelerations are added to column
+    fa. A dashpot's force lies along the line of centres: no torque."""
+    for c in range(nc):
+        gamma = C[c, C_GAMMA]
+        if gamma == 0.0:
+            continue
+        i = CI[c, CI_I]
+        j = CI[c, CI_J]
+        nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+        rx, ry, rz = X[i, vc], X[i, vc + 1], X[i, vc + 2]
+        if j >= 0:
+            rx -= X[j, vc]
+            ry -= X[j, vc + 1]
+            rz -= X[j, vc + 2]
+        damp = gamma * (rx * nx + ry * ny + rz * nz)  # the overlap's rate: > 0 while approaching
+        C[c, C_FN] = normal_elastic(False, C[c, C_K], 0.0, 0.0, C[c, C_DELTA])[0] + damp
+        s = damp * X[i, X_IM]
+        X[i, fa] -= s * nx
+        X[i, fa + 1] -= s * ny
+        X[i, fa + 2] -= s * nz
+        if j >= 0:
+            s = damp * X[j, X_IM]
+            X[j, fa] += s * nx
+            X[j, fa + 1] += s * ny
+            X[j, fa + 2] += s * nz
+
+
+@jit_inline
+def cap(C, c):
+    """Contact c's friction cap: with a dashpot the DEM kernel's, mu max(F_n, 0) (its F_n may pull
+    as the contact ends); without, mu F_n of the spring unclamped, smooth for a substep straying
+    just outside the contact (its end is a located event)."""
+    if C[c, C_GAMMA] > 0.0:
+        return friction_cap(C[c, C_MU], C[c, C_FN])
+    return C[c, C_MU] * C[c, C_FN]
 
 
 @jit_inline

@@ -8,24 +8,32 @@ from __future__ import annotations
 
 import math
 
-from collide.engine.event.contact import add_force, planar_velocity_terms, response, set_basis, slip, slip_rate
+from collide.engine.event.contact import (
+    add_force,
+    cap,
+    dashpots,
+    planar_velocity_terms,
+    response,
+    set_basis,
+    slip,
+    slip_rate,
+)
 from collide.engine.jit import jit_call, jit_inline
 from collide.engine.layout import (
     C_B,
     C_EPS,
     C_FF,
-    C_FN,
     C_GV,
     C_HELD,
     C_LIF,
     C_LIS,
     C_LJF,
     C_LJS,
-    C_MU,
     C_N,
     CI_I,
     CI_J,
     CI_MODE,
+    FL_DAMPED,
     FL_PLANAR,
     FL_SEED,
     FL_SPIN,
@@ -212,12 +220,16 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh):
     `slide_direction`); 0 when they hold none. `fresh`: the stuck contacts' matrix must be built
     (a new geometry or new modes), else the last one is reused. The slides' own (X_SF, X_SL)
     are kept apart: in the plane they are mu F_n on the held side whatever the velocities, and
-    a kick's later passes there change only the stuck contacts' (see `repull`)."""
+    a kick's later passes there change only the stuck contacts' (see `repull`). The restitution's
+dashpots (`dashpots`) are velocity-dependent forces too: they go in first, with the slides'."""
     spin, seed, planar = fl[FL_SPIN], fl[FL_SEED], fl[FL_PLANAR] == YES
     for a in range(na):
         for d in range(3):
             X[a, X_SF + d] = 0.0
             X[a, X_SL + d] = 0.0
+    if fl[FL_DAMPED]:
+        # The dashpots first: they set the normal forces that cap the friction.
+        dashpots(X, C, CI, nc, vc, X_SF)
     m = 0
     for c in range(nc):
         if CI[c, CI_MODE] == SLIDE:
@@ -228,7 +240,7 @@ def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh):
             C[c, C_FF + 1] = 0.0
             C[c, C_FF + 2] = 0.0
             if mag > 0.0:
-                f = -C[c, C_MU] * C[c, C_FN] / mag
+                f = -cap(C, c) / mag
                 C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2] = f * sx, f * sy, f * sz
                 add_force(X, C, CI, c, f * sx, f * sy, f * sz, X_SF, X_SL, spin, planar)
         else:

@@ -10,6 +10,8 @@ import math
 import numpy as np
 
 from collide.engine.broad import NBOX
+from collide.engine.dem.damping import dashpot
+from collide.engine.dem.geometry import reduced
 from collide.engine.event.contact import engaged, geometry, overlap, springs
 from collide.engine.event.locate import step_events, stiff_slide
 from collide.engine.event.modes import decide, flips, mode_events
@@ -21,6 +23,7 @@ from collide.engine.layout import (
     C_DELTA,
     C_EPS,
     C_FN,
+    C_GAMMA,
     C_K,
     C_MU,
     C_REACH,
@@ -113,6 +116,7 @@ from collide.engine.layout import (
     TP_EPS,
     TP_K,
     TP_MU,
+    TP_ZETA,
     VERLET_ERROR,
     WINDOW_STEPS,
     X_A,
@@ -170,8 +174,12 @@ def gather(G, GI, X, XI, C, CI, Q, QF, nq, bodies_params):
         if gj >= 0:
             mj = int(G[gj, G_MAT])
             C[nc, C_K], C[nc, C_MU], C[nc, C_EPS] = ptab[mi, mj, TP_K], ptab[mi, mj, TP_MU], ptab[mi, mj, TP_EPS]
+            zeta, mstar = ptab[mi, mj, TP_ZETA], reduced(G[gi, G_M], G[gj, G_M])
         else:
             C[nc, C_K], C[nc, C_MU], C[nc, C_EPS] = wtab[mi, TP_K], wtab[mi, TP_MU], wtab[mi, TP_EPS]
+            zeta, mstar = wtab[mi, TP_ZETA], G[gi, G_M]
+        # The DEM kernel's dashpot for the linear spring (its stiffness is k whatever the overlap).
+        C[nc, C_GAMMA] = dashpot(zeta, mstar, C[nc, C_K]) if zeta > 0.0 else 0.0
         C[nc, C_REACH] = QF[k, QF_REACH]
         for d in range(3):
             C[nc, C_SH + d] = QF[k, QF_SH + d]

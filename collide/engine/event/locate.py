@@ -7,16 +7,14 @@ from __future__ import annotations
 
 import math
 
-from collide.engine.event.contact import geometry, overlap, response, slip, slip_rate, springs
+from collide.engine.event.contact import cap, geometry, overlap, response, slip, slip_rate, springs
 from collide.engine.event.modes import flips, mode_events
 from collide.engine.event.substep import hold_pull, kick_start, settle, step
 from collide.engine.jit import jit_call, jit_inline, jit_part
 from collide.engine.layout import (
     AIM,
     C_EPS,
-    C_FN,
     C_HELD,
-    C_MU,
     C_N,
     CI_MODE,
     CREEP_LIMIT,
@@ -28,6 +26,7 @@ from collide.engine.layout import (
     E_VC,
     EPS64,
     EVENT_RES,
+    FL_DAMPED,
     FL_FRICTION,
     FL_PLANAR,
     FL_SEED,
@@ -104,7 +103,8 @@ def slip_turn(X, C, CI, nc, fl, h, negligible):
     top = 0.0
     which = -1
     for c in range(nc):
-        if CI[c, CI_MODE] != SLIDE or C[c, C_MU] * C[c, C_FN] * response(X, C, CI, c, fl[FL_SPIN]) * h <= negligible:
+        friction_force = cap(C, c)
+        if CI[c, CI_MODE] != SLIDE or friction_force * response(X, C, CI, c, fl[FL_SPIN]) * h <= negligible:
             continue
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, fl[FL_SPIN], False)
         nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
@@ -130,7 +130,7 @@ def stiff_slide(X, C, CI, nc, dt, spin):
         if CI[c, CI_MODE] != SLIDE:
             continue
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, False)
-        rate = C[c, C_MU] * C[c, C_FN] * response(X, C, CI, c, spin)
+        rate = cap(C, c) * response(X, C, CI, c, spin)
         mag = math.sqrt(sx * sx + sy * sy + sz * sz)
         if STIFF_SLIDE_IMPULSES * rate * dt > mag:
             tau = min(tau, mag / rate)
@@ -226,7 +226,7 @@ def turning_nudges(X, C, CI, na, nc, fl, nudge, reach, negligible, span, vc, wc,
         gx, gy, gz = gx - along * ux, gy - along * uy, gz - along * uz
         least = max(size + 2.0 * min(along, 0.0) * span, C[c, C_EPS])
         rate = (gx * gx + gy * gy + gz * gz) / (least * least)  # theta'^2
-        force = C[c, C_MU] * C[c, C_FN] * response(X, C, CI, c, spin)
+        force = cap(C, c) * response(X, C, CI, c, spin)
         if force * rate > 0.0:
             nudge = min(nudge, (12.0 * NUDGE_SHARE * negligible / (force * rate)) ** (1.0 / 3.0))
             reach = min(reach, (NUDGE_SHARE * negligible / (YOSHIDA_ERROR * force * rate * rate)) ** 0.2)
@@ -243,7 +243,7 @@ def first_trial(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, g
     # the step's impulse stays within), before `foresee` moves the bodies on.
     pull_rate, warm, one_pass = 0.0, True, False
     if fl[FL_FRICTION]:
-        warm, one_pass = kick_start(CI, nc, fl[FL_PLANAR] == YES)
+        warm, one_pass = kick_start(CI, nc, fl[FL_PLANAR] == YES, fl[FL_DAMPED])
         if warm and not one_pass:  # only a warm kick with stuck contacts reads it
             pull_rate = hold_pull(X, C, CI, nc)
         if nudge > 0.0 and fl[FL_PLANAR] != YES:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from collide.engine.event.contact import response, slip, slip_rate
+from collide.engine.event.contact import cap, response, slip, slip_rate
 from collide.engine.event.forces import friction
 from collide.engine.event.substep import settle
 from collide.engine.jit import jit_call, jit_inline
@@ -16,9 +16,7 @@ from collide.engine.layout import (
     BAND,
     C_EPS,
     C_FF,
-    C_FN,
     C_HELD,
-    C_MU,
     C_N,
     CI_EDGE,
     CI_FLIPPED,
@@ -72,7 +70,7 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh, 
             k = response(X, C, CI, c, spin) * STICK_SCALE / scale
             fx, fy, fz = C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2]
             fmag = math.sqrt(fx * fx + fy * fy + fz * fz)
-            E[c, vcol] = (C[c, C_MU] * C[c, C_FN] - fmag) * k
+            E[c, vcol] = (cap(C, c) - fmag) * k
             E[second, vcol] = -(fx * C[c, C_HELD] + fy * C[c, C_HELD + 1] + fz * C[c, C_HELD + 2]) * k
             E[c, rcol] = math.nan
             E[second, rcol] = math.nan
@@ -207,7 +205,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
             if need <= force_tol and not (CI[c, CI_FLIPPED] and need > -force_tol):
                 CI[c, CI_MODE] = BAND
                 changed = True
-            elif fmag >= C[c, C_MU] * C[c, C_FN] - force_tol:
+            elif fmag >= cap(C, c) - force_tol:
                 CI[c, CI_MODE] = SLIDE
                 changed = True
             if not planar and fmag > 0 and CI[c, CI_MODE] != BAND:

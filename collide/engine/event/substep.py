@@ -16,6 +16,7 @@ from collide.engine.layout import (
     C_B,
     C_DIST,
     C_EPS,
+    C_GAMMA,
     C_HELD,
     C_LIS,
     C_LJS,
@@ -26,6 +27,7 @@ from collide.engine.layout import (
     CONTRACTION_SAFETY,
     EPS64,
     FIXED_POINT,
+    FL_DAMPED,
     FL_FRICTION,
     FL_PLANAR,
     FL_SEED,
@@ -39,6 +41,7 @@ from collide.engine.layout import (
     X_FP,
     X_HP,
     X_I,
+    X_IM,
     X_L,
     X_L0,
     X_LP,
@@ -129,10 +132,18 @@ def close_and_open(X, na, h, spin, planar):
 def hold_pull(X, C, CI, nc):
     """How fast the stuck contacts' hold forces follow the velocities, |dG/dv| (1/s): the frame
     turning at the relative speed over the distance and with the spins, the arms with the spins.
-    Taken once a step: within one it changes by a share of the step's impulse, which
+    With the dashpots' (gamma over the reduced mass, summed). Taken once a step: within one it
+    changes by a share of the step's impulse, which
     CONTRACTION_SAFETY covers (computed at each kick, it took three square roots per stuck
     contact every time)."""
     pull = 0.0
+    for c in range(nc):
+        # A dashpot's force follows the velocities at gamma (1/m_i + 1/m_j); several on a body add.
+        gamma = C[c, C_GAMMA]
+        if gamma > 0.0:
+            i, j = CI[c, CI_I], CI[c, CI_J]
+            pull += gamma * (X[i, X_IM] + (X[j, X_IM] if j >= 0 else 0.0))
+    damped, pull = pull, 0.0
     for c in range(nc):
         if CI[c, CI_MODE] == STICK:
             i, j = CI[c, CI_I], CI[c, CI_J]
@@ -146,19 +157,20 @@ def hold_pull(X, C, CI, nc):
             wi, wj = math.sqrt(wi), math.sqrt(wj)
             arm = C[c, C_DIST] if j >= 0 else C[c, C_LIS]
             pull = max(pull, (math.sqrt(rel) + C[c, C_LIS] * wi + C[c, C_LJS] * wj) / arm + wi + wj)
-    return pull
+    return damped + pull
 
 
 @jit_inline
-def kick_start(CI, nc, planar):
+def kick_start(CI, nc, planar, damped):
     """How a step's closing kicks start, from its modes: (warm, one pass). Warm: from the last
     kick's friction (C_FF and its accelerations), which differs from this one's by a substep's
     change, a pass fewer than from none; not with a slide out of the plane, whose kick can have
     two roots (see slide_direction): a start off the one the kick's own impulse defines can
     settle on the other (measured: a random 3D scene stopped converging with the tolerance).
     One pass: in the plane a slide's friction is mu F_n on the held side whatever the
-    velocities, so with nothing stuck one pass is the fixed point."""
-    warm, one_pass = True, planar
+    velocities, so with nothing stuck one pass is the fixed point, unless a dashpot (`damped`)
+    makes F_n follow them."""
+    warm, one_pass = True, planar and not damped
     for c in range(nc):
         if CI[c, CI_MODE] == STICK:
             one_pass = False
@@ -179,6 +191,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact, pull_rate, wa
     friction forces at the closing velocities stay in C_FF."""
     spin = fl[FL_SPIN]
     planar = fl[FL_PLANAR] == YES
+    damped = fl[FL_DAMPED]
     work = 0.0
     if h_end != 0.0:
         if one_pass:
@@ -212,7 +225,7 @@ def kick(X, C, CI, na, nc, h_end, h_start, stuck, A, b, fl, exact, pull_rate, wa
         moves, turns = (2, 2) if planar else (3, 0)
         last = math.inf
         for it in range(FIXED_POINT):
-            if it > 0 and planar:
+            if it > 0 and planar and not damped:
                 repull(X, C, CI, nc, stuck, A, b, fl, X_V1, X_W1)
             # Each pass but a cold first takes each contact's own friction in V1 back out.
             elif not friction(X, C, CI, na, nc, X_V1, X_W1, stuck, A, b, fl, h_end if warm or it > 0 else 0.0,
