@@ -20,7 +20,7 @@ import numpy as np
 from collide.engine import jit, layout, tier
 from collide.model import TABLE_ESTAR, TABLE_K, TABLE_KTR, TABLE_MU, TABLE_REST, Model, State, select_model
 from collide.results import ContactLog, RunResult
-from collide.scene import Scene, alone_blocker, dem_reason
+from collide.scene import Scene, alone_blocker, dem_reason, island_blocker
 from collide.stepper import (
     RunError,
     approach_bound,
@@ -46,8 +46,8 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
     if integrator == "dem":
         if forced:
             return DEM, "integrator 'dem' asked for: the fixed-step DEM kernel (first order)"
-        return DEM, (f"{dem_reason(scene)}, and {blocker or alone_blocker(scene)}: the fixed-step DEM kernel "
-                     "(first order)")
+        why = blocker or "; ".join(w for w in (alone_blocker(scene), island_blocker(scene)) if w)
+        return DEM, f"{dem_reason(scene)}, and {why}: the fixed-step DEM kernel (first order)"
     if integrator == "seed":
         return SEED, "integrator 'seed' asked for: the report's own update on its fixed grid"
     if scene.needs_dem and alone_blocker(scene) is not None:

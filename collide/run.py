@@ -19,7 +19,7 @@ from collide.limits import step_limit
 from collide.model import compile_scenes, reference_frequency, select_model, select_state
 from collide.results import RunResult
 from collide.scene import Scene, SceneError, alone_blocker, dem_reason, island_blocker
-from collide.stepper import EDGE_TOL, Progress, RunError, approach_bound, simulate
+from collide.stepper import EDGE_TOL, Progress, RunError, approach_bound, check_pass_through, simulate
 
 
 @dataclass
@@ -248,6 +248,8 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
             return _run_alone(scenes[0], integ, model, state, float(tols[0]), record, max_steps, measure, forced)
         islands = None if integ == "seed" else next(
             (why for why in (island_blocker(s) for s in scenes if s.needs_dem) if why is not None), "")
+        if islands == "":
+            islands = _islands_pass(model, state, forced)
         if islands == "":
             needs = None  # the islands take it: the restitution's dashpot in their steps
         elif forced:
@@ -502,6 +504,19 @@ def check_finite(result: RunResult, scenes: list[Scene]) -> None:
                 raise RunError(f"{scene.name}: body.{body}'s final {what} is not finite (at t = "
                                f"{float(final.t[b]):.6g} s): float64 overflowed; use a shorter duration or "
                                "smaller values")
+
+
+def _islands_pass(model, state, forced: bool) -> str:
+    """Why the islands' own pass-through bound refuses a damped scene ("" when it does not).
+    That bound takes the largest approach speed any two bodies could reach, DEM's the pairs' own:
+    such a scene runs in DEM, unless the event engine was asked for (then its refusal stands)."""
+    try:
+        check_pass_through(model, state)
+    except RunError as soft:
+        if forced:
+            raise
+        return f"the event engine's pass-through bound refuses it ({soft})"
+    return ""
 
 
 def run_scene(scene: Scene, **kwargs) -> SceneRun:

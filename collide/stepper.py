@@ -26,6 +26,7 @@ from collide.integrators import INTEGRATORS, Integrator
 from collide.limits import MAX_STEPS_DEFAULT
 from collide.model import (
     TABLE_K,
+    TABLE_REST,
     Model,
     State,
     damping_ratio,
@@ -114,6 +115,50 @@ def approach_bound(model: Model, state: State) -> np.ndarray:
     return speed
 
 
+def _damped_peak(restitution: np.ndarray) -> np.ndarray:
+    """The largest overlap of a linear spring-dashpot contact of this restitution against the
+    undamped one's, v / omega: exp(-zeta phi / sqrt(1 - zeta^2)), phi = atan2(sqrt(1 - zeta^2),
+    zeta) (1 for e = 1; the least damping of a scene's contacts bounds them all)."""
+    zeta = np.minimum(damping_ratio(restitution, False), 1.0 - 1e-9)
+    root = np.sqrt(1.0 - zeta**2)
+    return np.exp(-zeta * np.arctan2(root, zeta) / root)
+
+
+def check_pass_through(model: Model, state: State) -> None:
+    """Refuse a contact so soft that the spheres would pass through each other or a wall."""
+    # Pass-through: the overlap a head-on approach at the bound would reach, against the
+    # distance between centres at touch (the stiffest wall: the sphere's own radius).
+    speed = approach_bound(model, state)
+    k_pair = model.pair_table[..., 0].reshape(model.batch, -1).min(axis=1)
+    damped = _damped_peak(model.pair_table[..., TABLE_REST].reshape(model.batch, -1).max(axis=1))
+    heavy = np.sort(model.mass, axis=1)[:, -2:] if model.n_bodies > 1 else model.mass
+    reduced = heavy.prod(axis=1) / heavy.sum(axis=1) if model.n_bodies > 1 else model.mass[:, 0]
+    with np.errstate(over="ignore", invalid="ignore"):
+        overlap = speed * np.sqrt(reduced / k_pair) * damped
+    reach = 2.0 * model.radius.min(axis=1)
+    if model.n_bodies > 1 and not np.all(np.isfinite(overlap)):
+        raise RunError("the speeds are too large to judge whether the spheres would pass through each other "
+                       "(the bound overflows); use smaller velocities")
+    if model.n_bodies > 1 and (overlap >= reach).any():
+        b = int(np.argmax(overlap / reach))
+        raise RunError(f"contact.k = {model.k[b]:.4g} N/m is too soft: the overlap could reach {overlap[b]:.3g} m, "
+                       f"beyond the distance between centres at touch ({reach[b]:.3g} m); the spheres would pass "
+                       "through each other. Use a stiffer contact.k")
+    if model.n_walls:
+        k_wall = model.wall_table[..., 0].reshape(model.batch, -1).min(axis=1)
+        with np.errstate(over="ignore", invalid="ignore"):
+            wall_overlap = speed * np.sqrt(model.mass.max(axis=1) / k_wall) * _damped_peak(
+                model.wall_table[..., TABLE_REST].reshape(model.batch, -1).max(axis=1))
+        if not np.all(np.isfinite(wall_overlap)):
+            raise RunError("the speeds are too large to judge whether a sphere would pass through a wall "
+                           "(the bound overflows); use smaller velocities")
+        if (wall_overlap >= model.radius.min(axis=1)).any():
+            b = int(np.argmax(wall_overlap / model.radius.min(axis=1)))
+            raise RunError(f"contact.k = {model.k[b]:.4g} N/m is too soft for a sphere on a wall: the overlap could "
+                           f"reach {wall_overlap[b]:.3g} m, more than its radius; it would pass through the wall. "
+                           "Use a stiffer contact.k")
+
+
 def check_run(model: Model, state: State, dt: np.ndarray, integrator: Integrator, max_steps: int,
               auto: np.ndarray) -> list[str]:
     """Refuse a step the integrator cannot keep stable, a contact so soft the spheres would pass
@@ -127,35 +172,8 @@ def check_run(model: Model, state: State, dt: np.ndarray, integrator: Integrator
         raise RunError(f"dt = {dt[b]:.3g} s is beyond the stability limit of '{integrator.name}' "
                        f"for this contact (omega = {omega[b]:.4g} rad/s); the largest safe step is "
                        f"{limit[b]:.3g} s (use --dt auto to choose one)")
-    # Pass-through: the overlap a head-on approach at the bound would reach, against the
-    # distance between centres at touch (the stiffest wall: the sphere's own radius).
-    speed = approach_bound(model, state)
+    check_pass_through(model, state)
     k_pair = model.pair_table[..., 0].reshape(model.batch, -1).min(axis=1)
-    heavy = np.sort(model.mass, axis=1)[:, -2:] if model.n_bodies > 1 else model.mass
-    reduced = heavy.prod(axis=1) / heavy.sum(axis=1) if model.n_bodies > 1 else model.mass[:, 0]
-    with np.errstate(over="ignore", invalid="ignore"):
-        overlap = speed * np.sqrt(reduced / k_pair)
-    reach = 2.0 * model.radius.min(axis=1)
-    if model.n_bodies > 1 and not np.all(np.isfinite(overlap)):
-        raise RunError("the speeds are too large to judge whether the spheres would pass through each other "
-                       "(the bound overflows); use smaller velocities")
-    if model.n_bodies > 1 and (overlap >= reach).any():
-        b = int(np.argmax(overlap / reach))
-        raise RunError(f"contact.k = {model.k[b]:.4g} N/m is too soft: the overlap could reach {overlap[b]:.3g} m, "
-                       f"beyond the distance between centres at touch ({reach[b]:.3g} m); the spheres would pass "
-                       "through each other. Use a stiffer contact.k")
-    if model.n_walls:
-        k_wall = model.wall_table[..., 0].reshape(model.batch, -1).min(axis=1)
-        with np.errstate(over="ignore", invalid="ignore"):
-            wall_overlap = speed * np.sqrt(model.mass.max(axis=1) / k_wall)
-        if not np.all(np.isfinite(wall_overlap)):
-            raise RunError("the speeds are too large to judge whether a sphere would pass through a wall "
-                           "(the bound overflows); use smaller velocities")
-        if (wall_overlap >= model.radius.min(axis=1)).any():
-            b = int(np.argmax(wall_overlap / model.radius.min(axis=1)))
-            raise RunError(f"contact.k = {model.k[b]:.4g} N/m is too soft for a sphere on a wall: the overlap could "
-                           f"reach {wall_overlap[b]:.3g} m, more than its radius; it would pass through the wall. "
-                           "Use a stiffer contact.k")
     slowest = reference_frequency(model)
     slowest = np.where(slowest > 0, slowest, np.inf)
     per_contact = math.pi / (np.sqrt(k_pair / model.mass.max(axis=1)) * dt) if model.n_bodies > 1 else \

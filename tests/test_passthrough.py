@@ -240,3 +240,20 @@ def test_spheres_at_rest_touching_to_round_off_are_no_pass_through(dim: int) -> 
     result = run_scene(parse_scene(raw, "touching"))
     assert result.result.final.s[0, 2, 0] - result.result.final.s[0, 1, 0] < 2 * 0.03021  # they do overlap
     check_invariant(result.result)  # and that is no pass-through
+
+
+@pytest.mark.parametrize("e", [0.95, 0.6, 0.2, 0.01])
+def test_the_pass_through_bound_of_a_damped_contact_is_its_largest_overlap(e):
+    """The event engine's pass-through check scales the undamped overlap v / omega by the
+    spring-dashpot's peak (collide.stepper._damped_peak): it must be the largest overlap of the
+    damped oscillator, integrated independently."""
+    from scipy.integrate import solve_ivp
+
+    from collide.model import damping_ratio
+    from collide.stepper import _damped_peak
+
+    zeta = float(damping_ratio(np.array(e), False))
+    sol = solve_ivp(lambda t, y: [y[1], -y[0] - 2 * zeta * y[1]], [0.0, 4.0], [0.0, 1.0], rtol=1e-12, atol=1e-14,
+                    events=lambda t, y: y[1], dense_output=True)
+    peak = sol.sol(sol.t_events[0][0])[0]
+    assert abs(float(_damped_peak(np.array([e]))[0]) - peak) <= 1e-9

@@ -138,42 +138,20 @@ def _glancing(seed: int, tol: float, dim: int) -> dict:
             "body": bodies}
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_damped_frictional_islands_conserve_momentum_and_balance_energy(seed):
+@pytest.mark.parametrize("seed", range(2))
+def test_damped_frictional_islands_go_to_dem_with_the_cause(seed):
+    """The islands do not yet locate the moment F_n crosses zero while a damped contact slides
+    (docs/method.md), so a run at a tighter tolerance could move past what the measurement saw:
+    such scenes run in DEM and say why."""
     from collide.scene import parse_scene
 
     dim = 2 if seed % 2 else 3
-    run = run_scene(parse_scene(_glancing(seed, 1e-7, dim)), record=False)
-    r = run.result
-    assert r.engine == "event" and run.error_method[0] == "measured"
-    m = r.model.mass[0][:, None]
-    v0, v1 = r.initial.v[0], r.final.v[0]
-    scale = np.abs(v0).max()
-    assert np.abs((m * v1).sum(0) - (m * v0).sum(0)).max() <= 1e-12 * (m * scale).sum()
-    # Energy: what the dashpots and the friction took is the kinetic and spin energy lost (to the
-    # tolerance's share of it: m v dv per body, dv at most tol times the speed; ten times that).
-    inertia = r.model.inertia[0][:, None]
-
-    def energy(s):
-        return 0.5 * (m * s.v[0] ** 2).sum() + 0.5 * (inertia * s.w[0] ** 2).sum()
-
-    assert abs(energy(r.initial) - energy(r.final) - r.final.work[0]) <= 1e-6 * energy(r.initial)
-
-
-@pytest.mark.xfail(strict=False, reason="a damped contact's F_n through zero while it slides is not located yet: "
-                   "seed 3 (2D) agrees to 8e-9 between tol 1e-7 and 1e-8, then moves by 9e-5 at 1e-9")
-@pytest.mark.parametrize("seed", range(6))
-def test_the_measured_error_of_damped_frictional_islands_holds_against_a_hundredth_of_the_tolerance(seed):
-    from collide.scene import parse_scene
-
-    dim = 2 if seed % 2 else 3
-    run = run_scene(parse_scene(_glancing(seed, 1e-7, dim)), record=False)
-    tight = run_scene(parse_scene(_glancing(seed, 1e-9, dim)), record=False, measure=False)
-    r = run.result
-    scale = np.abs(r.initial.v[0]).max()
-    off = max(np.abs(tight.result.final.v[0] - r.final.v[0]).max(),
-              np.abs(tight.result.final.w[0] - r.final.w[0]).max() * r.model.radius[0].max()) / scale
-    assert off <= 10 * run.error_estimate[0]
+    raw = _glancing(seed, 1e-3, dim)
+    r = run_scene(parse_scene(raw), record=False).result
+    assert r.engine == "dem"
+    assert "Coulomb friction during a damped contact between spheres is DEM's so far" in r.engine_reason
+    raw["contact"]["mu"] = 0.0  # without friction the islands take it
+    assert run_scene(parse_scene(raw), record=False).result.engine == "event"
 
 
 def test_the_dem_kernel_converges_at_first_order_towards_the_islands_answer():
