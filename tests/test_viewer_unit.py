@@ -18,7 +18,9 @@ from viewer import ensemble as ens
 from viewer import files
 from viewer.geometry import compressed_sphere, fit_camera, orientation_wxyz, quat_from_to
 from viewer.params import (
+    AUTO,
     CONTACT_PARAMS,
+    DEM_TOL,
     Settings,
     TypedValueError,
     add_ball,
@@ -1031,3 +1033,24 @@ def test_a_blob_shadow_fades_towards_the_floor_in_its_colour():
     assert np.array_equal(out[0], dark) and np.array_equal(out[3], dark)
     assert np.array_equal(out[1], as_linear(np.array(floor)))
     assert np.allclose(out[2], 0.5 * (np.array(dark) + as_linear(np.array(floor))), atol=1)
+
+
+@pytest.mark.parametrize(("name", "engine"), [("newtons-cradle", "event"), ("textbook-1d", "event"),
+                                              ("bounce", "event"), ("demo-bonus", "dem")])
+def test_the_restitution_slider_keeps_the_event_engine_where_it_runs_the_law(name, engine):
+    """Restitution below 1 from the slider: the event engine where it runs the dashpot at full
+    order (its steps from the tolerance, which the slider keeps), the DEM kernel at DEM's
+    tolerance only where it does not (docs/method.md, "Which engine runs a scene")."""
+    scene = load_scene(name)
+    controls = scene_controls(scene)
+    values = values_of(scene, controls)
+    values["contact.restitution"] = 0.7
+    settings = check_settings(scene.integrator, scene.dt, scene.tol)
+    moved = build_scene(controls, values, settings)
+    run = run_scene(moved, record=False)
+    assert run.result.engine == engine
+    if engine == "event":
+        assert moved.tol == scene.tol and moved.dt == AUTO
+        assert float(run.error_estimate[0]) <= scene.tol
+    else:
+        assert moved.tol >= DEM_TOL

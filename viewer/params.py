@@ -408,13 +408,16 @@ def build_scene(controls: Controls, values: dict[str, float], settings: Settings
     raw["dt"] = settings.dt
     raw["tol"] = settings.tol
     if settings.integrator != "dem":
-        # A law only the DEM kernel has (restitution below 1 from the slider, Hertz...): run it
-        # there rather than refuse, at 1 000 steps a contact at most (DEM's tol is 1/steps).
-        probe = {key: value for key, value in raw.items() if key not in ("integrator", "dt", "tol")}
-        if parse_scene(probe, controls.scene.name).needs_dem:
-            raw["integrator"] = "dem"
+        # A law beyond the report's (restitution below 1 from the slider, Hertz...): the event
+        # engine where it runs it at full order (its steps from tol: dt auto), else the DEM
+        # kernel rather than a refusal, at 1 000 steps a contact at most (DEM's tol is 1/steps).
+        probe = parse_scene({key: value for key, value in raw.items() if key not in ("integrator", "dt", "tol")},
+                            controls.scene.name)
+        if probe.needs_dem:
             raw["dt"] = AUTO
-            raw["tol"] = max(settings.tol, DEM_TOL)
+            if probe.integrator == "dem":
+                raw["integrator"] = "dem"
+                raw["tol"] = max(settings.tol, DEM_TOL)
     return for_viewing(parse_scene(raw, controls.scene.name))
 
 
