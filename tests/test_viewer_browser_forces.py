@@ -151,7 +151,8 @@ def test_textbook_1d_at_half_restitution_plays_to_the_end_and_its_end_time_can_b
     from viewer.testing import screenshot_dir
 
     raw = dict(load_scene("textbook-1d").source)
-    # As the restitution slider sends it: to the DEM kernel, at the viewer's DEM tol.
+    # In the DEM kernel at the viewer's DEM tol (the slider itself takes the event engine here:
+    # tests/test_viewer_unit.py), whose run ends after a tail of free flight.
     raw.update(contact={"k": 1500.0, "mu": 0.0, "restitution": 0.5}, integrator="dem", tol=1e-3)
     scene = parse_scene(raw, "textbook-1d")
     end = float(run_scene(for_viewing(scene)).result.final.t[0])

@@ -114,7 +114,7 @@ def test_the_recordings_contact_series_draws_the_engines_forces():
 
 
 def test_textbook_1d_at_half_restitution_is_viewed_to_the_runs_end():
-    """e = 0.5 runs in the DEM kernel; its tail of free flight after the separation is part of the
+    """e = 0.5 in the DEM kernel (asked for); its tail of free flight after the separation is part of the
     run (199 ms), and the view reaches it with the bodies where the run left them."""
     raw = dict(load_scene("textbook-1d").source)
     raw.update(contact={"k": 1500.0, "mu": 0.0, "restitution": 0.5}, integrator="dem", tol=1e-3)
