@@ -169,10 +169,15 @@ class Scene:
         c = self.contact
         rest = [c.restitution] + [m.restitution for m in self.materials if m.restitution is not None] + \
             [p.restitution for p in self.pairs if p.restitution is not None]
-        rolling = [c.rolling_friction] + [m.rolling_friction for m in self.materials
-                                          if m.rolling_friction is not None] + \
+        return c.model != "linear" or c.tangential != "coulomb" or min(rest) < 1.0 or self.has_rolling
+
+    @property
+    def has_rolling(self) -> bool:
+        """Whether any contact has rolling resistance (the contact's, a material's or a pair's)."""
+        rolling = [self.contact.rolling_friction] + [m.rolling_friction for m in self.materials
+                                                     if m.rolling_friction is not None] + \
             [p.rolling_friction for p in self.pairs if p.rolling_friction is not None]
-        return c.model != "linear" or c.tangential != "coulomb" or min(rest) < 1.0 or max(rolling) > 0.0
+        return max(rolling) > 0.0
 
     @property
     def has_spin(self) -> bool:
@@ -688,9 +693,7 @@ def island_blocker(scene: Scene) -> str | None:
     """Why the event engine's islands cannot run a scene whose law goes beyond the report's (None:
     they can, the linear spring with the restitution's dashpot, without friction)."""
     c = scene.contact
-    rolling = [c.rolling_friction] + [m.rolling_friction or 0.0 for m in scene.materials] + \
-        [p.rolling_friction or 0.0 for p in scene.pairs]
-    if max(rolling) > 0.0:
+    if scene.has_rolling:
         return "rolling resistance is DEM's only"
     if c.model != "linear":
         return "Hertz contacts between spheres (inside an island) are DEM's so far"
@@ -711,9 +714,7 @@ def alone_blocker(scene: Scene) -> str | None:
     """Why the event engine cannot run a scene whose law goes beyond the report's (None: it can,
     as a sphere alone among walls or two spheres and no walls)."""
     c = scene.contact
-    rolling = [c.rolling_friction] + [m.rolling_friction or 0.0 for m in scene.materials] + \
-        [p.rolling_friction or 0.0 for p in scene.pairs]
-    if max(rolling) > 0.0:
+    if scene.has_rolling:
         return "rolling resistance is DEM's only"
     if len(scene.bodies) == 2 and scene.walls:
         return ("two spheres with walls: contacts between spheres under these laws among walls are DEM's so far; "
