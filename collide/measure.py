@@ -197,6 +197,7 @@ def _settled(candidate, tol: float, step_tol: float, spent: float):
     """The measured run as reported: the user's tolerance, the steps of the run returned, the wall
     time of every run it took, and a warning where even the tightest run did not meet tol."""
     candidate.tol = [tol]
+    candidate.step_tol = step_tol
     candidate.result.wall_time_s = spent
     if float(candidate.error_estimate[0]) > tol:
         candidate.result.warnings.append(

@@ -35,6 +35,9 @@ class SceneRun:
     # (B,) how error_estimate was found: "model" (the integrator's error model at this step) or
     # "measured" (against the same run at a tenth of the tolerance; see collide.measure).
     error_method: list[str] | None = None
+    # The tolerance the run's steps were chosen for, where a measurement made a tighter run the
+    # answer (its `tol` stays the user's).
+    step_tol: float | None = None
 
     @property
     def scene(self) -> Scene:
@@ -361,18 +364,14 @@ def _run_alone(scene: Scene, integ: str, model, state, tol: float, record: bool,
     elif measure_mod.outside_model(result, lasting):
         # The measurement compares final states: its runs record nothing (recording took a third of
         # a run's time), unless one of them becomes the answer (below).
-        finer_tols: dict[int, float] = {}
-
         def finer_run(finer: float, steps: int) -> SceneRun:
-            done = run_scenes([scene], integrator=integ, tol=finer, record=False, max_steps=steps, measure=False)
-            finer_tols[id(done.result)] = finer
-            return done
+            return run_scenes([scene], integrator=integ, tol=finer, record=False, max_steps=steps, measure=False)
 
         rerun = measure_mod.Rerun(run=finer_run, step=lambda finer: alone_step(model, state, finer, duration),
                                   floor=ALONE_TOL_FLOOR)
         run = measure_mod.measured(run, rerun, limit)
         if record and run.result.trajectories is None:  # a tighter run is the answer: its trajectory
-            again = run_scenes([scene], integrator=integ, tol=finer_tols[id(run.result)], record=True,
+            again = run_scenes([scene], integrator=integ, tol=run.step_tol, record=True,
                                max_steps=limit, measure=False).result
             run.result.trajectories = again.trajectories
             run.result.wall_time_s += again.wall_time_s

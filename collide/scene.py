@@ -319,8 +319,23 @@ def load_scene(source: str | Path, overrides: list[str] | None = None, progress:
             progress("reading", 0, 0)
         raw, default_name = read_raw(source)
         raw = apply_overrides(raw, overrides or [])
+        if str(source) in builtin_names():
+            _follow_the_law(raw, overrides or [])
         _resolve_bodies_file(raw, source)
         return parse_scene(raw, default_name, progress)
+
+
+# The tables whose keys make a scene's contact law.
+_LAW_TABLES = ("contact", "material", "pair")
+
+
+def _follow_the_law(raw: dict, overrides: list[str]) -> None:
+    """A built-in's `integrator` is the one recommended for its own contact law (docs/design.md,
+    built-in scenes): an override that changes the law, and names no integrator, drops it, so the
+    engine is chosen by the new law as for a scene that names none."""
+    keys = [split_override(item)[0] for item in overrides]
+    if "integrator" not in keys and any(key.split(".")[0] in _LAW_TABLES for key in keys):
+        raw.pop("integrator", None)
 
 
 def _resolve_bodies_file(raw: dict, source: str | Path) -> None:
@@ -555,7 +570,8 @@ def _parse_scene(raw: dict, default_name: str, progress: Progress) -> Scene:
         elif integrator == "seed" or (integrator != "dem" and blocker):
             why = "the report's update runs its contact law only" if integrator == "seed" else blocker
             raise SceneError(f"integrator: {_shown(integrator)} cannot run this scene's contact law "
-                             f"({dem_reason(scene)}): {why}; it runs with integrator = 'dem'")
+                             f"({dem_reason(scene)}): {why}; it runs with integrator = 'dem', or with no "
+                             "integrator key (the law then chooses)")
     _check_sticky(scene)
     check_periodic(scene)
     if scene.contact.model == "hertz" and contact.youngs_modulus is None:
@@ -678,8 +694,7 @@ def dem_reason(scene: Scene) -> str:
         return f"model = '{c.model}'"
     if c.tangential != "coulomb":
         return f"tangential = '{c.tangential}'"
-    if scene.needs_dem and c.rolling_friction == 0.0 and all(
-            (m.rolling_friction or 0.0) == 0.0 for m in scene.materials):
+    if scene.needs_dem and not scene.has_rolling:
         return "restitution below 1"
     return "rolling_friction"
 

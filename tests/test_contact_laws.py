@@ -168,3 +168,18 @@ def test_materials_are_overridden_by_name():
     assert scene.materials[0].restitution == 0.7
     with pytest.raises(SceneError, match="no material named 'wood' \\(materials: phenolic\\)"):
         apply_overrides(raw, ["material.wood.mu=1"])
+
+
+def test_a_law_override_lets_a_builtin_choose_its_engine():
+    # demo-bonus recommends kahan6 for the report's law; a damped law with friction between two
+    # spheres must be taken by whichever engine runs it, not refused by the recommendation.
+    changed = load_scene("demo-bonus", ["contact.restitution=0.8"])
+    assert "integrator" not in changed.source and changed.needs_dem
+    assert changed.integrator == parse_scene(dict(changed.source)).integrator
+    run = run_scene(changed, record=False, tol=1e-3)
+    assert run.result.engine in ("event", "dem") and run.result.engine_reason
+    # Bodies moved, law kept: the recommendation stands.
+    assert load_scene("demo-bonus", ["body.ball1.velocity.x=2"]).source["integrator"] == "kahan6"
+    # Named with the override, it is the user's: refused where it cannot run the law.
+    with pytest.raises(SceneError, match="cannot run this scene's contact law"):
+        load_scene("demo-bonus", ["contact.restitution=0.8", "integrator=kahan6"])
