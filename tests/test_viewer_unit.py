@@ -160,6 +160,54 @@ def test_contact_parameters_come_from_one_table():
     assert ("contact.restitution" in idents) == hasattr(load_scene("demo-bonus").contact, "restitution")
 
 
+def test_law_sliders_show_where_the_scene_uses_the_law():
+    """E for Hertz (the materials' own where they give it), the tangential ratio for the spring,
+    rolling resistance where a contact has it; none of them on the report's law."""
+    bonus = {p.ident for p in scene_controls(load_scene("demo-bonus")).params}
+    assert not {"contact.youngs_modulus", "contact.tangential_stiffness_ratio", "contact.rolling_friction"} & bonus
+    bounce = {p.ident for p in scene_controls(load_scene("bounce")).params}
+    assert "material.rubber.youngs_modulus" in bounce and "contact.youngs_modulus" not in bounce
+    pile = {p.ident for p in scene_controls(load_scene("pile")).params}
+    assert {"material.glass.youngs_modulus", "contact.tangential_stiffness_ratio", "contact.rolling_friction"} <= pile
+
+
+def test_unmoved_law_sliders_leave_the_law_as_it_was():
+    """The tangential ratio's slider shows [contact]'s default; unmoved, each pair keeps the
+    Mindlin ratio of its own materials (glass: nu = 0.25, not [contact]'s 0.3), and moved, every
+    pair takes the value."""
+    from collide.model import TABLE_KTR, compile_scenes
+
+    scene = load_scene("pile")
+    controls = scene_controls(scene)
+    same = build_scene(controls, controls.defaults(), controls.settings)
+    nu = 0.25  # (index 0 is "no material")
+    assert compile_scenes([same])[0].pair_table[0, 1, 1, TABLE_KTR] == pytest.approx(2 * (1 - nu) / (2 - nu))
+    moved = build_scene(controls, controls.defaults() | {"contact.tangential_stiffness_ratio": 0.5},
+                        controls.settings)
+    assert compile_scenes([moved])[0].pair_table[0, 1, 1, TABLE_KTR] == 0.5
+
+
+def test_the_youngs_modulus_slider_moves_a_full_order_hertz_run():
+    """E four times stiffer on the bouncing ball: still the event engine at the scene's tolerance,
+    and the first impact's peak force grows as Hertz's E*^(2/5) (F_max = (4/3 E* sqrt r)^(2/5)
+    (5/4 m v^2)^(3/5) for the undamped law; Hertz's damping at fixed e scales both runs alike)."""
+    scene = load_scene("bounce")
+    controls = scene_controls(scene)
+    values = values_of(scene, controls)
+    runs = []
+    for factor in (1.0, 4.0):
+        values["material.rubber.youngs_modulus"] = 5e6 * factor
+        moved = build_scene(controls, values, controls.settings)
+        assert moved.materials[0].youngs_modulus == 5e6 * factor
+        runs.append(run_scene(moved, record=False))
+    assert all(run.result.engine == "event" for run in runs)
+    assert all(float(run.error_estimate[0]) <= scene.tol for run in runs)
+    peaks = [float(run.result.contacts.max_normal_force[0]) for run in runs]
+    # Gravity's pull during the contact breaks the self-similarity, by at most its share of the peak.
+    weight = scene.bodies[0].mass * 9.81
+    assert peaks[1] / peaks[0] == pytest.approx(4.0 ** 0.4, rel=2 * weight / peaks[0])
+
+
 def test_more_and_fewer_balls():
     scene = load_scene("demo-bonus")
     more = add_ball(scene)

@@ -217,13 +217,32 @@ CONTACT_PARAMS: tuple[ContactParam, ...] = (
                  "Coulomb friction coefficient", nonneg=True),
     ContactParam("eps", "eps", "m/s", lambda s: s.dim > 1, lambda x: (0.0, max(0.1, 10 * x), 1e-7),
                  "friction dead band: slip below it feels no friction", nonneg=True),
-    # The elasticity slider (docs/design.md section 9), for every scene: below 1 the run goes to the
-    # DEM kernel (`build_scene`), which has the dashpot. Below 0.05 a contact is nearly plastic
-    # and lasts long: the slider starts there unless the scene is perfectly inelastic (0).
+    # The elasticity slider (docs/design.md section 9), for every scene: below 1 the run takes the
+    # engine that runs the dashpot (`build_scene`). Below 0.05 a contact is nearly plastic and
+    # lasts long: the slider starts there unless the scene is perfectly inelastic (0).
     ContactParam("restitution", "restitution", "", lambda s: hasattr(s.contact, "restitution"),
                  lambda x: (0.0 if x < 0.05 else 0.05, 1.0, 0.01),
                  "coefficient of restitution: 1 elastic, smaller loses energy, 0 perfectly inelastic", nonneg=True),
+    # The laws beyond the report's, where the scene uses them (docs/design.md section 9).
+    ContactParam("youngs_modulus", "E", "Pa", lambda s: s.contact.model == "hertz", _k_span,
+                 "Young's modulus of the Hertz contact", positive=True),
+    ContactParam("tangential_stiffness_ratio", "k_t / k_n", "", lambda s: s.contact.tangential == "spring",
+                 lambda x: _range(x, 0.05, max(1.0, x)),
+                 "tangential spring stiffness over the normal stiffness; until moved, each pair takes Mindlin's "
+                 "from its materials (Hertz) or 2/7 (linear)", positive=True),
+    ContactParam("rolling_friction", "mu_r", "", lambda s: s.dim > 1 and s.has_rolling,
+                 lambda x: (0.0, max(0.2, 2 * x), 0.001),
+                 "rolling resistance: a torque mu_r R* F_n against the rolling", nonneg=True),
 )
+
+
+def _contact_value(contact, name: str) -> float | None:
+    """[contact]'s own value for a row (None: the scene takes it from its materials only); the
+    tangential ratio's default is the law's (2/7 linear, Mindlin's for Hertz)."""
+    if name == "tangential_stiffness_ratio":
+        return contact.stiffness_ratio
+    value = getattr(contact, name)
+    return None if value is None else float(value)
 
 
 def scene_controls(scene: Scene) -> Controls:
@@ -275,15 +294,16 @@ def scene_controls(scene: Scene) -> Controls:
     for row in CONTACT_PARAMS:
         if not row.applies(scene):
             continue
-        x = float(getattr(scene.contact, row.name))
-        lo, hi, step = row.span(x)
         own = _own_values(scene, row.name)
-        unused = ""
-        if own and not default_used(scene, row.name):
-            unused = (f"[contact] {row.name} reaches no contact here: the materials and pairs set every "
-                      f"contact's own ({', '.join(label for label, _, _ in own)}: their sliders below)")
-        params.append(Param(f"contact.{row.name}", row.label, "contact", row.unit, 1.0, lo, hi, step, x,
-                            hint=row.hint, positive=row.positive, nonneg=row.nonneg, unused=unused))
+        x = _contact_value(scene.contact, row.name)
+        if x is not None:
+            lo, hi, step = row.span(x)
+            unused = ""
+            if own and not default_used(scene, row.name):
+                unused = (f"[contact] {row.name} reaches no contact here: the materials and pairs set every "
+                          f"contact's own ({', '.join(label for label, _, _ in own)}: their sliders below)")
+            params.append(Param(f"contact.{row.name}", row.label, "contact", row.unit, 1.0, lo, hi, step, x,
+                                hint=row.hint, positive=row.positive, nonneg=row.nonneg, unused=unused))
         # A material's or a pair's own value: a slider of its own (break-3d's balls bounce at
         # 0.95 off each other and 0.5 off the cloth).
         for label, key, value in own:
@@ -399,7 +419,8 @@ def build_scene(controls: Controls, values: dict[str, float], settings: Settings
             raise SceneError(f"{where} = {display:g}: {problem}")
         si = display / param.scale
         if param.component is None:
-            put(param.key, si)
+            if display != param.value:  # an unmoved control leaves the scene's own value (a law's default too)
+                put(param.key, si)
         else:
             vectors.setdefault(param.key, [0.0] * controls.scene.dim)[param.component] = si
     for key, vector in vectors.items():
