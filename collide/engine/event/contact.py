@@ -149,7 +149,8 @@ def press_rate(X, C, CI, c, ac):
     """The rate of damped contact c's normal force F_n = k delta + gamma delta' (C_FN, from
     `dashpots`) under the accelerations in column ac: k delta' + gamma delta'', where delta'' is
     the accelerations' part along the line of centres less, for a pair, the line turning:
-    |v_t|^2 / dist (a wall's normal does not turn)."""
+    |v_t|^2 / dist (a wall's normal does not turn). gamma is the linear spring's, constant; the
+    rate aims the event's root search and picks its side at zero, and the value lands it."""
     i = CI[c, CI_I]
     j = CI[c, CI_J]
     nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
