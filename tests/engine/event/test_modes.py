@@ -212,9 +212,9 @@ def test_a_damped_sliding_contacts_normal_force_through_zero_is_an_event_as_dop8
     the slide's second mode value, located as an event, and each step keeps the cap's branch it
     started on (`cap`, CI_PRESS), so a kahan6 substep reaching back past the kink keeps the order.
     A slide whose F_n pulls, and then presses again, goes on without friction between. At tol
-    1e-9 the outcome agrees with DOP853's to 1e-8 of the speed (measured: two spheres 1.7e-10 in
-    3D, 1.8e-10 in 2D; a sphere onto a floor under gravity 1.8e-10, 2.0e-10; settling there, F_n
-    through zero and back, 8.7e-11, 6.7e-11)."""
+    1e-9 the outcome agrees with DOP853's to 1e-8 of the speed (measured, in 3D and 2D: two
+    spheres 1.7e-10 and 1.8e-10; a sphere onto a floor under gravity 1.8e-10 and 2.0e-10; settling
+    there, F_n through zero and back, 6.7e-11 and 8.7e-11)."""
     from collide.scene import parse_scene
 
     raw = _oblique_damped(dim, floor)
