@@ -706,7 +706,7 @@ ISLAND_PILE = 50
 
 def island_blocker(scene: Scene) -> str | None:
     """Why the event engine's islands cannot run a scene whose law goes beyond the report's (None:
-    they can, the linear spring with the restitution's dashpot, without friction)."""
+    they can, the linear spring with the restitution's dashpot and Coulomb friction)."""
     c = scene.contact
     if scene.has_rolling:
         return "rolling resistance is DEM's only"
@@ -714,11 +714,6 @@ def island_blocker(scene: Scene) -> str | None:
         return "Hertz contacts between spheres (inside an island) are DEM's so far"
     if c.tangential != "coulomb":
         return "a tangential spring between spheres (inside an island) is DEM's so far"
-    if scene.has_friction:
-        # The islands step it, but the moment F_n crosses zero while a contact slides is not yet
-        # located, so a run at a tighter tolerance can jump past what the measurement saw
-        # (docs/method.md).
-        return "Coulomb friction during a damped contact between spheres is DEM's so far"
     if len(scene.bodies) > ISLAND_PILE and scene.gravity is not None and scene.walls:
         return (f"{len(scene.bodies)} damped spheres under gravity among walls settle into lasting contacts "
                 "(a pile), which DEM steps at a cost that does not grow with their events")

@@ -52,9 +52,8 @@ def test_materials_give_masses_moduli_and_mixed_pair_values():
     ({"contact": {"model": "hertz"}}, "contact.youngs_modulus: missing"),
     ({"contact": {"model": "hooke"}}, "contact.model: unknown 'hooke'"),
     ({"contact": {"tangential": "mindlin"}}, "contact.tangential: unknown 'mindlin'"),
-    ({"contact": {"restitution": 0.5, "mu": 0.3}, "integrator": "kahan6"},
-     "integrator: 'kahan6' cannot run this scene's contact law (restitution below 1): Coulomb friction with a "
-     "dead band during"),
+    ({"contact": {"rolling_friction": 0.1, "mu": 0.3}, "integrator": "kahan6"},
+     "integrator: 'kahan6' cannot run this scene's contact law (rolling_friction): rolling resistance is DEM's only"),
     ({"body": [{"name": "a", "radius": 0.1, "position": [0, 0, 0], "material": "wood"}]}, "body.a.material: unknown"),
     ({"body": [{"name": "a", "radius": 0.1, "position": [0, 0, 0]}]}, "body.a.mass: missing"),
     ({"rest": 1e-6}, "rest: ends a DEM run"),

@@ -1084,7 +1084,8 @@ def test_a_blob_shadow_fades_towards_the_floor_in_its_colour():
 
 
 @pytest.mark.parametrize(("name", "engine"), [("newtons-cradle", "event"), ("textbook-1d", "event"),
-                                              ("bounce", "event"), ("demo-bonus", "dem")])
+                                              ("bounce", "event"), ("demo-bonus", "event"),
+                                              ("break-3d", "dem")])
 def test_the_restitution_slider_keeps_the_event_engine_where_it_runs_the_law(name, engine):
     """Restitution below 1 from the slider: the event engine where it runs the dashpot at full
     order (its steps from the tolerance, which the slider keeps), the DEM kernel at DEM's

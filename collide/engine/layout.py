@@ -141,7 +141,11 @@ NC = 32
 CI_I, CI_J, CI_GI, CI_GJ, CI_MODE, CI_Q, CI_EDGE, CI_RETRIED, CI_FLIPPED, CI_GRAZE = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
 # CI_RETRIED, CI_FLIPPED: `decide`'s marks (arrays of its own were allocated at every call);
 # CI_GRAZE: run_island's, for the next step.
-NCI = 10
+# CI_PRESS: the side (+1, -1) of a damped sliding contact's F_n at its step's start, whose branch
+# of the cap mu max(F_n, 0) the step keeps (0 while `decide` chooses the modes: the cap itself);
+# its second mode value is F_n on that side, so F_n through zero either way is a located event.
+CI_PRESS = 10
+NCI = 11
 # Q / QF: an island's candidate contacts.
 Q_I, Q_J, Q_ENG = 0, 1, 2
 QF_REACH, QF_D0, QF_R0, QF_D1, QF_R1, QF_DP, QF_RP, QF_DB, QF_RB = 0, 1, 2, 3, 4, 5, 6, 7, 8

@@ -29,6 +29,7 @@ from collide.engine.layout import (
     C_SH,
     CI_I,
     CI_J,
+    CI_PRESS,
     GI_LOC,
     LATE,
     Q_ENG,
@@ -144,12 +145,41 @@ def dashpots(X, C, CI, nc, vc, fa):
 
 
 @jit_inline
-def cap(C, c):
+def press_rate(X, C, CI, c, ac):
+    """The rate of damped contact c's normal force F_n = k delta + gamma delta' (C_FN, from
+    `dashpots`) under the accelerations in column ac: k delta' + gamma delta'', where delta'' is
+    the accelerations' part along the line of centres less, for a pair, the line turning:
+    |v_t|^2 / dist (a wall's normal does not turn). gamma is the linear spring's, constant; the
+    rate aims the event's root search and picks its side at zero, and the value lands it."""
+    i = CI[c, CI_I]
+    j = CI[c, CI_J]
+    nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
+    rx, ry, rz = X[i, X_V], X[i, X_V + 1], X[i, X_V + 2]
+    ax, ay, az = X[i, ac], X[i, ac + 1], X[i, ac + 2]
+    if j >= 0:
+        rx, ry, rz = rx - X[j, X_V], ry - X[j, X_V + 1], rz - X[j, X_V + 2]
+        ax, ay, az = ax - X[j, ac], ay - X[j, ac + 1], az - X[j, ac + 2]
+    rn = rx * nx + ry * ny + rz * nz
+    curve = (ax * nx + ay * ny + az * nz)
+    if j >= 0:
+        curve -= (rx * rx + ry * ry + rz * rz - rn * rn) * C[c, C_INV]
+    stiffness = normal_elastic(False, C[c, C_K], 0.0, 0.0, C[c, C_DELTA])[1]
+    return stiffness * rn + C[c, C_GAMMA] * curve
+
+
+@jit_inline
+def cap(C, CI, c):
     """Contact c's friction cap: with a dashpot the DEM kernel's, mu max(F_n, 0) (its F_n may pull
-    as the contact ends); without, mu F_n of the spring unclamped, smooth for a substep straying
-    just outside the contact (its end is a located event)."""
+    as the contact ends), where a step's modes are decided (CI_PRESS 0); through the step the
+    branch it started on, mu F_n or 0 (CI_PRESS 1, -1), smooth for the compositions' substeps
+    that reach back past the start: the kink between is a located event (`mode_events`).
+    Without a dashpot, mu F_n of the spring unclamped, smooth for a substep straying just
+    outside the contact (its end is a located event)."""
     if C[c, C_GAMMA] > 0.0:
-        return friction_cap(C[c, C_MU], C[c, C_FN])
+        side = CI[c, CI_PRESS]
+        if side == 0:
+            return friction_cap(C[c, C_MU], C[c, C_FN])
+        return C[c, C_MU] * C[c, C_FN] if side > 0 else 0.0
     return C[c, C_MU] * C[c, C_FN]
 
 

@@ -240,7 +240,7 @@ dashpots (`dashpots`) are velocity-dependent forces too: they go in first, with 
             C[c, C_FF + 1] = 0.0
             C[c, C_FF + 2] = 0.0
             if mag > 0.0:
-                f = -cap(C, c) / mag
+                f = -cap(C, CI, c) / mag
                 C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2] = f * sx, f * sy, f * sz
                 add_force(X, C, CI, c, f * sx, f * sy, f * sz, X_SF, X_SL, spin, planar)
         else:

@@ -35,6 +35,7 @@ from collide.engine.layout import (
     CI_I,
     CI_J,
     CI_MODE,
+    CI_PRESS,
     CI_Q,
     CN_KNOTS,
     E_FORCED,
@@ -368,12 +369,24 @@ def start_modes(G, X, XI, C, CI, E, na, nc, stuck, A, b, WP, grav, fl, scale, ca
         if not stepped:
             geometry(X, C, CI, nc, WP, fl[FL_SEED], fl[FL_FRICTION])
             springs(X, C, CI, na, nc, grav)
+        # The modes are decided with the friction cap itself (see `cap`).
+        for c in range(nc):
+            CI[c, CI_PRESS] = 0
         done, ok, turned, solved = decide(X, C, CI, na, nc, stuck, A, b, fl, scale)
         share(G, XI, na, done)
         if not ok or not mode_events(X, C, CI, E, na, nc, E_V0, E_R0, stuck, A, b, fl, scale,
                                      YES if turned else NO, YES if solved else NO):
             return False
         for c in range(nc):
+            # The step goes on with the cap's branch at its start: a damped slide's F_n below
+            # zero, or on zero and heading below (an F_n event just landed), is watched from
+            # below (its return through zero is the next event) with no friction meanwhile.
+            k = nc + c
+            CI[c, CI_PRESS] = 1
+            if CI[c, CI_MODE] == SLIDE and (E[k, E_V0] < -MODE_TOL or (abs(E[k, E_V0]) <= MODE_TOL
+                                                                       and E[k, E_R0] < 0)):
+                CI[c, CI_PRESS] = -1
+                E[k, E_V0], E[k, E_R0] = -E[k, E_V0], -E[k, E_R0]
             # A mode that starts on its edge and leaves it (a slide that cannot be held
             # yet, a slip entering the band) may come back through it within the step:
             # counted as just inside, that return is an event like any other (unless

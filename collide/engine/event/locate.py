@@ -103,7 +103,7 @@ def slip_turn(X, C, CI, nc, fl, h, negligible):
     top = 0.0
     which = -1
     for c in range(nc):
-        friction_force = cap(C, c)
+        friction_force = cap(C, CI, c)
         if CI[c, CI_MODE] != SLIDE or friction_force * response(X, C, CI, c, fl[FL_SPIN]) * h <= negligible:
             continue
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, fl[FL_SPIN], False)
@@ -130,7 +130,7 @@ def stiff_slide(X, C, CI, nc, dt, spin):
         if CI[c, CI_MODE] != SLIDE:
             continue
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, False)
-        rate = cap(C, c) * response(X, C, CI, c, spin)
+        rate = cap(C, CI, c) * response(X, C, CI, c, spin)
         mag = math.sqrt(sx * sx + sy * sy + sz * sz)
         if STIFF_SLIDE_IMPULSES * rate * dt > mag:
             tau = min(tau, mag / rate)
@@ -226,7 +226,7 @@ def turning_nudges(X, C, CI, na, nc, fl, nudge, reach, negligible, span, vc, wc,
         gx, gy, gz = gx - along * ux, gy - along * uy, gz - along * uz
         least = max(size + 2.0 * min(along, 0.0) * span, C[c, C_EPS])
         rate = (gx * gx + gy * gy + gz * gz) / (least * least)  # theta'^2
-        force = cap(C, c) * response(X, C, CI, c, spin)
+        force = cap(C, CI, c) * response(X, C, CI, c, spin)
         if force * rate > 0.0:
             nudge = min(nudge, (12.0 * NUDGE_SHARE * negligible / (force * rate)) ** (1.0 / 3.0))
             reach = min(reach, (NUDGE_SHARE * negligible / (YOSHIDA_ERROR * force * rate * rate)) ** 0.2)

@@ -1,14 +1,15 @@
 """Friction modes and their events (README "Friction as events"): each contact's mode values
-and rates (`mode_events`: a slide's slip above the band's edge, a stuck contact's margin to
-mu F_n and its hold force), the modes chosen where they change (`decide`), and a stuck slip
-whose hold comes to zero taken across the band as one impulse (`flips`).
+and rates (`mode_events`: a slide's slip above the band's edge and a damped one's F_n through
+zero, a stuck contact's margin to mu F_n and its hold force), the modes chosen where they change
+(`decide`), and a stuck slip whose hold comes to zero taken across the band as one impulse
+(`flips`).
 """
 
 from __future__ import annotations
 
 import math
 
-from collide.engine.event.contact import cap, response, slip, slip_rate
+from collide.engine.event.contact import cap, press_rate, response, slip, slip_rate
 from collide.engine.event.forces import friction
 from collide.engine.event.substep import settle
 from collide.engine.jit import jit_call, jit_inline
@@ -16,11 +17,15 @@ from collide.engine.layout import (
     BAND,
     C_EPS,
     C_FF,
+    C_FN,
+    C_GAMMA,
     C_HELD,
+    C_MU,
     C_N,
     CI_EDGE,
     CI_FLIPPED,
     CI_MODE,
+    CI_PRESS,
     CI_RETRIED,
     E_V0,
     E_V1,
@@ -70,7 +75,7 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh, 
             k = response(X, C, CI, c, spin) * STICK_SCALE / scale
             fx, fy, fz = C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2]
             fmag = math.sqrt(fx * fx + fy * fy + fz * fz)
-            E[c, vcol] = (cap(C, c) - fmag) * k
+            E[c, vcol] = (cap(C, CI, c) - fmag) * k
             E[second, vcol] = -(fx * C[c, C_HELD] + fy * C[c, C_HELD + 1] + fz * C[c, C_HELD + 2]) * k
             E[c, rcol] = math.nan
             E[second, rcol] = math.nan
@@ -99,8 +104,18 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh, 
                 # slows lands a little before |slip| = eps, where it slides on, redirected.
                 E[c, vcol] = (0.5 * (mag + along) - C[c, C_EPS]) / scale
                 E[c, rcol] = 0.5 * (outward + gx * hx + gy * hy + gz * hz) / scale
-            E[second, vcol] = 1.0
-            E[second, rcol] = 0.0
+            if C[c, C_GAMMA] > 0.0 and C[c, C_MU] > 0.0:
+                # A damped F_n passes zero as the contact eases out (it pulls at its end) and
+                # may turn back: there the cap mu max(F_n, 0) has its kink, an event as a mode
+                # change is (the slide goes on, with or without a force). F_n on its side at the
+                # step's start (CI_PRESS), as the slip change mu F_n makes over STICK_SCALE.
+                side = -1.0 if CI[c, CI_PRESS] < 0 else 1.0
+                k = side * C[c, C_MU] * response(X, C, CI, c, spin) * STICK_SCALE / scale
+                E[second, vcol] = C[c, C_FN] * k
+                E[second, rcol] = press_rate(X, C, CI, c, X_T) * k
+            else:
+                E[second, vcol] = 1.0
+                E[second, rcol] = 0.0
         elif planar:
             # In the plane the band is a segment along the tangent e = z x n, its edges where
             # the slip along e is eps and -eps: values smooth in the slip. eps - |slip| has a
@@ -205,7 +220,7 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
             if need <= force_tol and not (CI[c, CI_FLIPPED] and need > -force_tol):
                 CI[c, CI_MODE] = BAND
                 changed = True
-            elif fmag >= cap(C, c) - force_tol:
+            elif fmag >= cap(C, CI, c) - force_tol:
                 CI[c, CI_MODE] = SLIDE
                 changed = True
             if not planar and fmag > 0 and CI[c, CI_MODE] != BAND:
