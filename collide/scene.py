@@ -695,8 +695,6 @@ def island_blocker(scene: Scene) -> str | None:
     c = scene.contact
     if scene.has_rolling:
         return "rolling resistance is DEM's only"
-    if c.model != "linear":
-        return "Hertz contacts between spheres (inside an island) are DEM's so far"
     if c.tangential != "coulomb":
         return "a tangential spring between spheres (inside an island) is DEM's so far"
     if scene.has_friction:
