@@ -167,9 +167,14 @@ class Scene:
         """Whether the contact law goes beyond the report's (linear, undamped, Coulomb with a
         dead band, no rolling resistance): such laws run in the fixed-step DEM kernel."""
         c = self.contact
-        rest = [c.restitution] + [m.restitution for m in self.materials if m.restitution is not None] + \
+        return c.model != "linear" or c.tangential != "coulomb" or self.damped or self.has_rolling
+
+    @property
+    def damped(self) -> bool:
+        """Whether any contact has a restitution below 1 (the contact's, a material's or a pair's)."""
+        rest = [self.contact.restitution] + [m.restitution for m in self.materials if m.restitution is not None] + \
             [p.restitution for p in self.pairs if p.restitution is not None]
-        return c.model != "linear" or c.tangential != "coulomb" or min(rest) < 1.0 or self.has_rolling
+        return min(rest) < 1.0
 
     @property
     def has_rolling(self) -> bool:
@@ -691,19 +696,23 @@ ISLAND_PILE = 50
 
 def island_blocker(scene: Scene) -> str | None:
     """Why the event engine's islands cannot run a scene whose law goes beyond the report's (None:
-    they can, the linear spring with the restitution's dashpot, without friction)."""
+    they can, the linear spring or Hertz, with or without the restitution's dashpot, without
+    friction)."""
     c = scene.contact
     if scene.has_rolling:
         return "rolling resistance is DEM's only"
     if c.tangential != "coulomb":
         return "a tangential spring between spheres (inside an island) is DEM's so far"
     if scene.has_friction:
+        if c.model != "linear":
+            return "Coulomb friction during a Hertz contact between spheres is DEM's so far"
         # The islands step it, but the moment F_n crosses zero while a contact slides is not yet
         # located, so a run at a tighter tolerance can jump past what the measurement saw
         # (docs/method.md).
         return "Coulomb friction during a damped contact between spheres is DEM's so far"
     if len(scene.bodies) > ISLAND_PILE and scene.gravity is not None and scene.walls:
-        return (f"{len(scene.bodies)} damped spheres under gravity among walls settle into lasting contacts "
+        what = "damped" if c.model == "linear" else "Hertz"
+        return (f"{len(scene.bodies)} {what} spheres under gravity among walls settle into lasting contacts "
                 "(a pile), which DEM steps at a cost that does not grow with their events")
     return None
 
