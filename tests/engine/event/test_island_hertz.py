@@ -140,3 +140,17 @@ def test_the_start_and_end_regions_keep_the_order():
     fine = np.abs(out[1e-10] - out[1e-11]).max() / speed
     assert coarse <= 1e-8
     assert fine <= coarse / 25.0
+
+
+def test_the_viewers_restitution_slider_keeps_a_hertz_chain_in_the_event_engine():
+    """A slider moving a Hertz chain's restitution (viewer.params.build_scene) keeps the event
+    engine, whose run is measured: no first-order DEM run for a law the islands step."""
+    from viewer.params import build_scene, scene_controls
+
+    raw, _ = _chain(1, 4, 1.0, 1e-6)
+    controls = scene_controls(parse_scene(raw))
+    scene = build_scene(controls, controls.defaults() | {"contact.restitution": 0.7}, controls.settings)
+    assert scene.integrator == "kahan6" and scene.contact.restitution == 0.7
+    run = run_scene(scene, record=False)
+    assert run.result.engine == "event" and run.error_method[0] == "measured"
+    assert run.error_estimate[0] <= 1e-6
