@@ -239,6 +239,7 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     needs = next((scene for scene in scenes if scene.needs_dem), None)
     forced = integrator is not None or "integrator" in scenes[0].source
     blocker = None
+    in_islands = False
     if needs is not None and integ != "dem":
         blocker = alone_blocker(needs) or ("the report's update runs its contact law only" if integ == "seed" else
                                            "a batch of them is DEM's" if len(scenes) > 1 else
@@ -254,7 +255,8 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
         if islands == "":
             islands = _islands_pass(model, state, forced)
         if islands == "":
-            needs = None  # the islands take it: the restitution's dashpot in their steps
+            needs = None  # the islands take it: the restitution's dashpot or Hertz in their steps
+            in_islands = True
         elif forced:
             raise SceneError(f"integrator: '{integ}' cannot run {needs.name}'s contact law ({dem_reason(needs)}): "
                              f"{blocker}; it runs with --integrator dem")
@@ -306,7 +308,7 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     check_finite(result, scenes)
     check_invariant(result)
     run = _engine(SceneRun(list(scenes), result, dt, [float(x) for x in tols], estimate, auto_used,
-                           ["model"] * len(scenes)), scenes[0], integ, forced)
+                           ["model"] * len(scenes)), scenes[0], integ, forced, islands=in_islands)
     if not measure:
         return run  # a measuring run: its caller judges it
     # The error model is the undamped law's: a damped run's error is measured.
@@ -320,9 +322,10 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     return run
 
 
-def _engine(run: SceneRun, scene: Scene, integ: str, forced: bool, blocker: str | None = None) -> SceneRun:
+def _engine(run: SceneRun, scene: Scene, integ: str, forced: bool, blocker: str | None = None,
+            islands: bool = False) -> SceneRun:
     """The run with its engine and why it ran there (the JSON's `engine`, `engine_reason`)."""
-    run.result.engine, run.result.engine_reason = engine_choice(scene, integ, forced, blocker)
+    run.result.engine, run.result.engine_reason = engine_choice(scene, integ, forced, blocker, islands)
     return run
 
 

@@ -724,11 +724,11 @@ def alone_blocker(scene: Scene) -> str | None:
     if scene.has_rolling:
         return "rolling resistance is DEM's only"
     if len(scene.bodies) == 2 and scene.walls:
-        return ("two spheres with walls: contacts between spheres under these laws among walls are DEM's so far; "
-                "the event engine takes a sphere alone among walls, or two spheres and no walls")
+        return ("two spheres with walls: the event engine takes a sphere alone among walls, or two spheres and no "
+                "walls, whole; more run in its islands where they can")
     if len(scene.bodies) > 2:
-        return (f"{len(scene.bodies)} spheres: contacts between spheres under these laws (inside an island) "
-                "are DEM's so far; the event engine takes a sphere alone among walls, or two spheres and no walls")
+        return (f"{len(scene.bodies)} spheres: the event engine takes a sphere alone among walls, or two spheres "
+                "and no walls, whole; more run in its islands where they can")
     if scene.has_friction and len(scene.bodies) == 2:
         return "friction between two spheres under these laws is DEM's so far"
     if scene.has_friction and c.tangential != "spring":
