@@ -57,7 +57,8 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
         damped = " and its dashpot" if scene.damped else ""
         return EVENT, (f"{dem_reason(scene)}: Hertz's force{damped} (the DEM kernel's law) in the islands' steps "
                        f"of order {_order(integrator)} ({integrator}), each contact's start and end stepped over s "
-                       "(t - t_0 ~ s^2, damped s^4: the force smooth in s), every contact's start and end located")
+                       "(t - t_0 ~ s^2, damped s^4: the force smooth in s), every contact's start and end"
+                       f"{' and each friction mode change' if scene.has_friction else ''} located")
     if scene.needs_dem and islands:
         return EVENT, (f"{dem_reason(scene)} with the linear spring: its dashpot (the DEM kernel's law) in the "
                        f"islands' steps of order {_order(integrator)} ({integrator}), every contact, its end and "

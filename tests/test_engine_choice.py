@@ -145,7 +145,7 @@ PAIR = {"dim": 2, "duration": 0.05, "tol": 1e-3,
                  {"name": "b", "mass": 1.0, "radius": 0.1, "position": [0.3, 0.0]}]}
 # Three spheres under these laws: the islands' without friction; with Coulomb friction DEM's.
 TRIO = {**PAIR, "body": PAIR["body"] + [{"name": "c", "mass": 1.0, "radius": 0.1, "position": [0.6, 0.0]}]}
-RUBBING_TRIO = {**TRIO, "contact": {**PAIR["contact"], "mu": 0.3}}
+RUBBING_TRIO = {**TRIO, "contact": {**PAIR["contact"], "mu": 0.3}}  # damped, with friction
 
 
 def _scene_file(tmp_path, raw: dict) -> str:
@@ -166,7 +166,7 @@ def test_the_json_says_which_engine_ran_and_why(monkeypatch, capsys, tmp_path):
     assert trio["engine"] == "event" and "Hertz's force and its dashpot" in trio["engine_reason"]
     rubbing = _json([_scene_file(tmp_path, RUBBING_TRIO)], monkeypatch, capsys, tmp_path)
     assert rubbing["engine"] == "dem" and "3 spheres" in rubbing["engine_reason"]
-    assert "Coulomb friction during a Hertz contact between spheres" in rubbing["engine_reason"]
+    assert "Coulomb friction during a damped contact between spheres" in rubbing["engine_reason"]
     # Not head-on, the line of centres turns during the contact: DEM, with the cause.
     oblique = copy.deepcopy(PAIR)
     oblique["body"][1]["position"], oblique["duration"] = [0.3, 0.05], 0.2

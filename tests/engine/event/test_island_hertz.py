@@ -154,3 +154,53 @@ def test_the_viewers_restitution_slider_keeps_a_hertz_chain_in_the_event_engine(
     run = run_scene(scene, record=False)
     assert run.result.engine == "event" and run.error_method[0] == "measured"
     assert run.error_estimate[0] <= 1e-6
+
+
+def _rubbing(seed: int, dim: int) -> dict:
+    """Three spheres under undamped Hertz with Coulomb friction, spin, random mu, masses, radii
+    and angles, in 2D or 3D."""
+    rng = np.random.default_rng(100 + seed)
+    bodies = []
+    for i in range(3):
+        pos = [0.08 * i, rng.uniform(-0.02, 0.02)] + ([rng.uniform(-0.02, 0.02)] if dim == 3 else [])
+        vel = [rng.uniform(-1, 1), rng.uniform(-0.3, 0.3)] + ([rng.uniform(-0.3, 0.3)] if dim == 3 else [])
+        if i == 0:
+            vel[0] = 1.5
+        body = {"name": f"b{i}", "mass": float(rng.uniform(0.1, 1.0)), "radius": float(rng.uniform(0.015, 0.025)),
+                "position": pos, "velocity": vel}
+        body["spin"] = float(rng.uniform(-20, 20)) if dim == 2 else rng.uniform(-20, 20, 3).tolist()
+        bodies.append(body)
+    return {"dim": dim, "duration": 0.3, "body": bodies,
+            "contact": {"model": "hertz", "youngs_modulus": 1e8, "mu": float(rng.uniform(0.1, 0.8))}}
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_hertz_with_coulomb_friction_between_spheres_meets_its_tolerance(seed):
+    """Undamped Hertz with Coulomb friction in the islands (2D and 3D glancing trios, spin): the
+    outcome at tol 1e-6 within the tolerance of the run at 1e-9, and within 10 times its
+    measured estimate; its energy only falls (friction's work)."""
+    dim = 2 if seed % 2 else 3
+    raw = _rubbing(seed, dim)
+    radii = np.array([b["radius"] for b in raw["body"]])[:, None]
+    out = {}
+    for tol in (1e-6, 1e-9):
+        run = run_scene(parse_scene(dict(raw, tol=tol)), record=False)
+        assert run.result.engine == "event" and "friction mode change" in run.result.engine_reason
+        out[tol] = run, np.concatenate([run.result.final.v[0].ravel(), (run.result.final.w[0] * radii).ravel()])
+    run = out[1e-6][0]
+    off = np.abs(out[1e-6][1] - out[1e-9][1]).max() / 1.5
+    assert run.error_method[0] == "measured"
+    assert off <= 1e-6
+    assert off <= 10.0 * run.error_estimate[0]
+    # Energy: what the spheres lose is friction's work (a velocity error of tol times the speed
+    # moves each body's energy by m v dv at most; four times that allowed).
+    m = np.array([b["mass"] for b in raw["body"]])
+
+    def energy(v, w):
+        return 0.5 * (m * (v**2).sum(-1)).sum() + 0.2 * (m * radii[:, 0] ** 2 * (w**2).sum(-1)).sum()
+
+    final = run.result.final
+    w0 = np.array([np.atleast_1d(b["spin"]) for b in raw["body"]])
+    lost = energy(np.array([b["velocity"] for b in raw["body"]]), w0) - energy(final.v[0], final.w[0])
+    assert final.work[0] >= 0.0
+    assert abs(lost - final.work[0]) <= 4e-6 * 1.5 * (m * 1.5).sum()
