@@ -129,13 +129,14 @@ X_IM, X_II, X_R, X_M, X_I = 59, 60, 61, 62, 63
 X_SF, X_SL = 64, 67  # sliding contacts' part of X_F, X_L
 X_FP, X_LP, X_HP = 70, 73, 76  # the kick before's X_F, X_L and closing span (row 0; 0: none)
 X_F0, X_L0 = 77, 80  # the friction accelerations at the step's start (with X_S0...)
-# Row 0: the step's map of time (`substep.mapped_step`): its kind (MAP_NONE, MAP_START, MAP_END),
+# Row 0: the step's map of time (`substep.mapped_step`): its kind (MAP_NONE, MAP_START, MAP_END,
+# MAP_BOTH),
 # the step's start's time past a Hertz start (MAP_START), that start region's length, the
 # phase's step, the power of the map, and the time offset the last step call reached.
 X_MK, X_MU, X_MH, X_MD, X_MP, X_MO = 83, 84, 85, 86, 87, 88
 X_MR = 89  # 1 / omega, the stiffest contact's time scale
 NX = 90
-MAP_NONE, MAP_START, MAP_END = 0, 1, 2
+MAP_NONE, MAP_START, MAP_END, MAP_BOTH = 0, 1, 2, 3
 # A Hertz contact's start and end regions: this share of the time its approach takes to reach its
 # largest overlap at its rate (at least of 1 / omega, the stiffest contact's), stepped over s with
 # t - t_start (or t_end - t) = H s^P, uniform in s, the last step of the start region about the

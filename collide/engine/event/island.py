@@ -90,6 +90,7 @@ from collide.engine.layout import (
     K_T,
     KAHAN6_ERROR,
     LATE,
+    MAP_BOTH,
     MAP_END,
     MAP_NONE,
     MAP_SHARE,
@@ -574,10 +575,6 @@ def set_map(X, C, CI, nc, t, anchor, region, h_full, dt, omega, W, fl):
         return h_full
     X[0, X_MH], X[0, X_MD], X[0, X_MP] = region, dt, 4.0 if fl[FL_DAMPED] else 2.0
     X[0, X_MR] = 1.0 / omega
-    left = anchor + region - t
-    if left > 1e-3 * dt:
-        X[0, X_MK], X[0, X_MU] = MAP_START, t - anchor
-        return min(W - t, left)
     soonest = math.inf
     for c in range(nc):
         rate = closing(X, C, CI, c)
@@ -585,8 +582,14 @@ def set_map(X, C, CI, nc, t, anchor, region, h_full, dt, omega, W, fl):
             to_end = max(C[c, C_DELTA], 0.0) / -rate
             if to_end <= MAP_SHARE * reach_overlap(C, c, rate) / -rate + 2.0 * dt:
                 soonest = min(soonest, to_end)
+    left = anchor + region - t
+    if left > 1e-3 * dt and not soonest < left:
+        X[0, X_MK], X[0, X_MU] = MAP_START, t - anchor
+        return min(W - t, left)
     if soonest < math.inf:
-        X[0, X_MK] = MAP_END
+        # A contact's end within a start region: at the start itself, a map singular at both
+        # ends of the step; later on, the end's (the start's force is smooth by then).
+        X[0, X_MK] = MAP_BOTH if left > 1e-3 * dt and t == anchor else MAP_END
         return min(W - t, max(h_full, 1.5 * soonest))
     return h_full
 

@@ -32,6 +32,7 @@ from collide.engine.layout import (
     FL_PLANAR,
     FL_SEED,
     FL_SPIN,
+    MAP_BOTH,
     MAP_NONE,
     MAP_START,
     NO,
@@ -371,8 +372,9 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
     start = 0.0 if restart else X[0, X_MO]
     X[0, X_MO] = start + h
     n = weights.shape[0]
-    # (One Verlet substep integrates a map of time exactly only where it is linear in s: P = 2.)
-    if X[0, X_MK] != MAP_NONE and (n > 1 or X[0, X_MP] <= 2.0):
+    # (One Verlet substep integrates a map of time exactly only where it is linear in s: P = 2 at
+    # one end.)
+    if X[0, X_MK] != MAP_NONE and (n > 1 or (X[0, X_MP] <= 2.0 and X[0, X_MK] != MAP_BOTH)):
         return mapped_step(X, C, CI, na, nc, h, start, weights, WP, grav, stuck, A, b, fl, exact, pull_rate, warm,
                            one_pass)
     first = 0.5 * weights[0] * h
@@ -391,13 +393,20 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
 def offset(X, kind, sa, sb, h, sigma):
     """The time past a mapped call's start at sigma in [0, 1] over it, and its rate d t / d sigma:
     MAP_START t = t_s + H s^P, s from sa to sb (t_s the Hertz contact's start); MAP_END the call
-    ends on the contact's end, t_end - t = h (1 - sigma)^P."""
+    ends on the contact's end, t_end - t = h (1 - sigma)^P; MAP_BOTH both (a contact starting
+    at the call's start, another ending at its end)."""
     p = X[0, X_MP]
     if kind == MAP_START:
         big = X[0, X_MH]
         s = sa + sigma * (sb - sa)
         return big * (s ** p - sa ** p), big * p * s ** (p - 1.0) * (sb - sa)
     rest = 1.0 - sigma
+    if kind == MAP_BOTH:
+        # Singular at both ends: 3 s^2 - 2 s^3 (P = 2), or 35 s^4 - 84 s^5 + 70 s^6 - 20 s^7.
+        if p > 2.0:
+            return (h * sigma ** 4 * (35.0 - sigma * (84.0 - sigma * (70.0 - 20.0 * sigma))),
+                    140.0 * h * (sigma * rest) ** 3)
+        return h * sigma * sigma * (3.0 - 2.0 * sigma), 6.0 * h * sigma * rest
     return h * (1.0 - rest ** p), h * p * rest ** (p - 1.0)
 
 
