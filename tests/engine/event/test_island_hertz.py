@@ -10,6 +10,7 @@ import pytest
 from collide.model import damping_ratio
 from collide.run import run_scene
 from collide.scene import parse_scene
+from tests.engine.event.test_island import _glancing
 
 YOUNG, POISSON = 1e8, 0.3
 
@@ -157,21 +158,11 @@ def test_the_viewers_restitution_slider_keeps_a_hertz_chain_in_the_event_engine(
 
 
 def _rubbing(seed: int, dim: int) -> dict:
-    """Three spheres under undamped Hertz with Coulomb friction, spin, random mu, masses, radii
-    and angles, in 2D or 3D."""
-    rng = np.random.default_rng(100 + seed)
-    bodies = []
-    for i in range(3):
-        pos = [0.08 * i, rng.uniform(-0.02, 0.02)] + ([rng.uniform(-0.02, 0.02)] if dim == 3 else [])
-        vel = [rng.uniform(-1, 1), rng.uniform(-0.3, 0.3)] + ([rng.uniform(-0.3, 0.3)] if dim == 3 else [])
-        if i == 0:
-            vel[0] = 1.5
-        body = {"name": f"b{i}", "mass": float(rng.uniform(0.1, 1.0)), "radius": float(rng.uniform(0.015, 0.025)),
-                "position": pos, "velocity": vel}
-        body["spin"] = float(rng.uniform(-20, 20)) if dim == 2 else rng.uniform(-20, 20, 3).tolist()
-        bodies.append(body)
-    return {"dim": dim, "duration": 0.3, "body": bodies,
-            "contact": {"model": "hertz", "youngs_modulus": 1e8, "mu": float(rng.uniform(0.1, 0.8))}}
+    """The damped islands' glancing trios (2D or 3D, spin, random mu, masses, radii and angles)
+    under undamped Hertz with Coulomb friction."""
+    raw = _glancing(seed, 1e-6, dim)
+    raw["contact"] = {"model": "hertz", "youngs_modulus": 1e8, "mu": raw["contact"]["mu"]}
+    return raw
 
 
 @pytest.mark.parametrize("seed", range(8))
