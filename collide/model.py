@@ -353,8 +353,8 @@ def hertz_bound(model: Model, speed: np.ndarray) -> Model:
     delta) of its Hertz contacts, for the event engine's islands (their step, frequencies and
     dashpot's contraction bound): at the overlap where an approach at `speed` (B,) stops,
     8/15 E* sqrt(R*) delta^2.5 = m* v^2 / 2, plus where the weight of every body rests on one
-    contact, 4/3 E* sqrt(R*) delta^1.5 = sum m g; with each material's largest radius and mass
-    (dF/d delta grows with both)."""
+    contact, 4/3 E* sqrt(R*) delta^1.5 = sum m g (at least 1e-9 R*); with each material's largest
+    radius and mass (dF/d delta grows with both)."""
     n_mat = model.pair_table.shape[1]
     big_r = np.stack([np.where(model.material == a, model.radius, 0.0).max(axis=1) for a in range(n_mat)], axis=1)
     big_m = np.stack([np.where(model.material == a, model.mass, 0.0).max(axis=1) for a in range(n_mat)], axis=1)
@@ -366,6 +366,9 @@ def hertz_bound(model: Model, speed: np.ndarray) -> Model:
         with np.errstate(divide="ignore", invalid="ignore"):
             root = np.sqrt(rstar)
             delta = (15.0 * mstar * v2 / (16.0 * estar * root)) ** 0.4 + (0.75 * weight / (estar * root)) ** (2.0 / 3.0)
+            # (Nothing approaching nor weighing: a billionth of R*, whatever stiffness a contact at
+            # rest has.)
+            delta = np.maximum(delta, 1e-9 * rstar)
             return np.nan_to_num(2.0 * estar * np.sqrt(rstar * delta))
 
     pair, wall = model.pair_table.copy(), model.wall_table.copy()
