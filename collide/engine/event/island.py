@@ -547,19 +547,31 @@ def reach_overlap(C, c, rate):
 
 
 @jit_call
-def hertz_start(X, C, CI, nc, omega):
-    """The length of the start region of a Hertz contact at its start (touching, its overlap
-    within TOUCH_TOL of its reach, and not separating; its force's derivatives are singular
-    there): MAP_SHARE of the time its approach takes to reach its largest overlap (d / rate),
-    at least MAP_SHARE / omega. 0 where none starts."""
-    region = 0.0
+def hertz_start(X, C, CI, nc, t, omega):
+    """The youngest Hertz contact's start and the length of its start region (its force's
+    derivatives are singular at its start): MAP_SHARE of the time its approach takes to reach its
+    largest overlap (d / rate), at least MAP_SHARE / omega. A contact touching (its overlap within
+    TOUCH_TOL of its reach) and not separating starts at t; one pressing and approaching within
+    its region began its overlap over its rate ago (a little earlier than that: its force slows
+    it; run_island takes that at a window's start only). (-inf, 0) where none is within its start
+    region."""
+    begun, region = -math.inf, 0.0
     for c in range(nc):
         rate = closing(X, C, CI, c)
-        if C[c, C_ESTAR] > 0.0 and C[c, C_DELTA] <= TOUCH_TOL * C[c, C_REACH] and rate >= 0.0:
-            region = max(region, MAP_SHARE / omega)
-            if rate > 0.0:
-                region = max(region, MAP_SHARE * reach_overlap(C, c, rate) / rate)
-    return region
+        if C[c, C_ESTAR] <= 0.0 or rate < 0.0:
+            continue
+        span = MAP_SHARE / omega
+        if rate > 0.0:
+            span = max(span, MAP_SHARE * reach_overlap(C, c, rate) / rate)
+        if C[c, C_DELTA] <= TOUCH_TOL * C[c, C_REACH]:
+            age = 0.0
+        elif rate > 0.0 and C[c, C_DELTA] / rate < span:
+            age = C[c, C_DELTA] / rate
+        else:
+            continue
+        if t - age > begun:
+            begun, region = t - age, span
+    return begun, region
 
 
 @jit_call
@@ -681,9 +693,11 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         geometry(X, C, CI, nc, WP, fl[FL_SEED], fl[FL_FRICTION])
         springs(X, C, CI, na, nc, grav)
         if fl[FL_HERTZ] and omega > 0.0:
-            begun = hertz_start(X, C, CI, nc, omega)
-            if begun > 0.0:
-                anchor, region = t, begun
+            begun, span = hertz_start(X, C, CI, nc, t, omega)
+            # A contact begun here; or, at a window's start (no start known), one begun before
+            # (estimated: the overlap of one pressed from touching at rest grows as t^3.5).
+            if begun == t or (anchor == -math.inf and begun > anchor):
+                anchor, region = begun, span
         e_start = energy(X, C, na, nc, grav, spin)
         t_phase = t
         e_room = max(abs(e_start), energy_scale(X, C, na, nc, grav, spin))
