@@ -250,8 +250,12 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
         islands = None if integ == "seed" else next(
             (why for why in (island_blocker(s) for s in scenes if s.needs_dem) if why is not None), "")
         if islands == "" and model.hertz:
-            # The islands step Hertz by a linear spring's frequencies: the stiffness it reaches.
-            model = hertz_bound(model, approach_bound(model, state))
+            # The islands step Hertz by a linear spring's frequencies: the stiffness it reaches
+            # (on a wall a sphere's own speed is its approach, as in `float_resolution`).
+            speed = approach_bound(model, state)
+            if model.n_walls:
+                speed = np.maximum(speed, np.sqrt((state.v ** 2).sum(-1)).max(axis=1))
+            model = hertz_bound(model, speed)
         if islands == "":
             islands = _islands_pass(model, state, forced)
         if islands == "":
