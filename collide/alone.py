@@ -39,10 +39,12 @@ EVENT, DEM, SEED = "event", "dem", "seed"
 TOL_FLOOR = 1e-13
 
 
-def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | None = None) -> tuple[str, str]:
+def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | None = None,
+                  islands: bool = False) -> tuple[str, str]:
     """(engine, why) for a scene run with `integrator`; `forced`: the integrator was asked for
     (the scene's `integrator` or --integrator), not chosen; `blocker`: why the event engine
-    could not take it (else `alone_blocker`'s)."""
+    could not take it (else `alone_blocker`'s); `islands`: a law beyond the report's ran in the
+    islands (else as `alone_blocker` says)."""
     if integrator == "dem":
         if forced:
             return DEM, "integrator 'dem' asked for: the fixed-step DEM kernel (first order)"
@@ -50,7 +52,14 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
         return DEM, f"{dem_reason(scene)}, and {why}: the fixed-step DEM kernel (first order)"
     if integrator == "seed":
         return SEED, "integrator 'seed' asked for: the report's own update on its fixed grid"
-    if scene.needs_dem and alone_blocker(scene) is not None:
+    islands = islands or alone_blocker(scene) is not None
+    if scene.needs_dem and islands and scene.contact.model != "linear":
+        damped = " and its dashpot" if scene.damped else ""
+        return EVENT, (f"{dem_reason(scene)}: Hertz's force{damped} (the DEM kernel's law) in the islands' steps "
+                       f"of order {_order(integrator)} ({integrator}), each contact's start and end stepped over s "
+                       "(t - t_0 ~ s^2, damped s^4: the force smooth in s), every contact's start and end"
+                       f"{' and each friction mode change' if scene.has_friction else ''} located")
+    if scene.needs_dem and islands:
         return EVENT, (f"{dem_reason(scene)} with the linear spring: its dashpot (the DEM kernel's law) in the "
                        f"islands' steps of order {_order(integrator)} ({integrator}), every contact, its end and "
                        "each friction mode change located")

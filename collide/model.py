@@ -348,6 +348,45 @@ def select_state(state: State, index: int) -> State:
                  None if state.stored is None else state.stored[sl])
 
 
+def hertz_bound(model: Model, speed: np.ndarray) -> Model:
+    """The model with its tables' k (TABLE_K) a bound on the stiffness dF/d delta = 2 E* sqrt(R*
+    delta) of its Hertz contacts, for the event engine's islands (their step, frequencies and
+    dashpot's contraction bound): at the overlap where an approach at `speed` (B,) stops,
+    8/15 E* sqrt(R*) delta^2.5 = m* v^2 / 2, plus where the weight of every body rests on one
+    contact, 4/3 E* sqrt(R*) delta^1.5 = sum m g (at least 1e-9 R*); with each material's largest
+    radius and mass (dF/d delta grows with both)."""
+    n_mat = model.pair_table.shape[1]
+    big_r = np.stack([np.where(model.material == a, model.radius, 0.0).max(axis=1) for a in range(n_mat)], axis=1)
+    big_m = np.stack([np.where(model.material == a, model.mass, 0.0).max(axis=1) for a in range(n_mat)], axis=1)
+    g = 0.0 if model.gravity is None else np.sqrt((model.gravity ** 2).sum(-1))
+    weight = model.mass.sum(axis=1) * g
+    v2 = np.asarray(speed, dtype=float) ** 2
+
+    def stiffness(estar: np.ndarray, rstar: np.ndarray, mstar: np.ndarray) -> np.ndarray:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            root = np.sqrt(rstar)
+            delta = (15.0 * mstar * v2 / (16.0 * estar * root)) ** 0.4 + (0.75 * weight / (estar * root)) ** (2.0 / 3.0)
+            # (Nothing approaching nor weighing: a billionth of R*, whatever stiffness a contact at
+            # rest has.)
+            delta = np.maximum(delta, 1e-9 * rstar)
+            return np.nan_to_num(2.0 * estar * np.sqrt(rstar * delta))
+
+    pair, wall = model.pair_table.copy(), model.wall_table.copy()
+    for a in range(n_mat):
+        for c in range(n_mat):
+            rstar = big_r[:, a] * big_r[:, c] / np.maximum(big_r[:, a] + big_r[:, c], 1e-300)
+            mstar = big_m[:, a] * big_m[:, c] / np.maximum(big_m[:, a] + big_m[:, c], 1e-300)
+            pair[:, a, c, TABLE_K] = stiffness(pair[:, a, c, TABLE_ESTAR], rstar, mstar)
+        wall[:, a, TABLE_K] = stiffness(wall[:, a, TABLE_ESTAR], big_r[:, a], big_m[:, a])
+    # A material no body has makes no contact: its rows take the stiffest's (bounds take the
+    # tables' least and largest k).
+    for table in (pair, wall):
+        k = table[..., TABLE_K]
+        top = k.reshape(model.batch, -1).max(axis=1).reshape((-1,) + (1,) * (k.ndim - 1))
+        table[..., TABLE_K] = np.where(k > 0.0, k, top)
+    return replace(model, pair_table=pair, wall_table=wall)
+
+
 def reference_frequency(model: Model) -> np.ndarray:
     """The stiffest single contact's angular frequency (B,): sqrt(k (1/m_i + 1/m_j)) for the
     pair of materials and bodies that maximise it, sqrt(k / m) on a wall. The auto step is

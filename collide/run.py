@@ -16,7 +16,7 @@ from collide.alone import AloneError, alone_step, contact_tol, engine_choice, si
 from collide.integrators import INTEGRATORS
 from collide.invariant import check_invariant
 from collide.limits import step_limit
-from collide.model import compile_scenes, reference_frequency, select_model, select_state
+from collide.model import compile_scenes, hertz_bound, reference_frequency, select_model, select_state
 from collide.results import RunResult
 from collide.scene import Scene, SceneError, alone_blocker, dem_reason, island_blocker
 from collide.stepper import EDGE_TOL, Progress, RunError, approach_bound, check_pass_through, simulate
@@ -242,6 +242,7 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     needs = next((scene for scene in scenes if scene.needs_dem), None)
     forced = integrator is not None or "integrator" in scenes[0].source
     blocker = None
+    in_islands = False
     if needs is not None and integ != "dem":
         blocker = alone_blocker(needs) or ("the report's update runs its contact law only" if integ == "seed" else
                                            "a batch of them is DEM's" if len(scenes) > 1 else
@@ -251,10 +252,18 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
             return _run_alone(scenes[0], integ, model, state, float(tols[0]), record, max_steps, measure, forced)
         islands = None if integ == "seed" else next(
             (why for why in (island_blocker(s) for s in scenes if s.needs_dem) if why is not None), "")
+        if islands == "" and model.hertz:
+            # The islands step Hertz by a linear spring's frequencies: the stiffness it reaches
+            # (on a wall a sphere's own speed is its approach, as in `float_resolution`).
+            speed = approach_bound(model, state)
+            if model.n_walls:
+                speed = np.maximum(speed, np.sqrt((state.v ** 2).sum(-1)).max(axis=1))
+            model = hertz_bound(model, speed)
         if islands == "":
             islands = _islands_pass(model, state, forced)
         if islands == "":
-            needs = None  # the islands take it: the restitution's dashpot in their steps
+            needs = None  # the islands take it: the restitution's dashpot or Hertz in their steps
+            in_islands = True
         elif forced:
             raise SceneError(f"integrator: '{integ}' cannot run {needs.name}'s contact law ({dem_reason(needs)}): "
                              f"{blocker}; it runs with --integrator dem")
@@ -306,7 +315,7 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     check_finite(result, scenes)
     check_invariant(result)
     run = _engine(SceneRun(list(scenes), result, dt, [float(x) for x in tols], estimate, auto_used,
-                           ["model"] * len(scenes)), scenes[0], integ, forced)
+                           ["model"] * len(scenes)), scenes[0], integ, forced, islands=in_islands)
     if not measure:
         return run  # a measuring run: its caller judges it
     # The error model is the undamped law's: a damped run's error is measured.
@@ -320,9 +329,10 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
     return run
 
 
-def _engine(run: SceneRun, scene: Scene, integ: str, forced: bool, blocker: str | None = None) -> SceneRun:
+def _engine(run: SceneRun, scene: Scene, integ: str, forced: bool, blocker: str | None = None,
+            islands: bool = False) -> SceneRun:
     """The run with its engine and why it ran there (the JSON's `engine`, `engine_reason`)."""
-    run.result.engine, run.result.engine_reason = engine_choice(scene, integ, forced, blocker)
+    run.result.engine, run.result.engine_reason = engine_choice(scene, integ, forced, blocker, islands)
     return run
 
 

@@ -167,9 +167,14 @@ class Scene:
         """Whether the contact law goes beyond the report's (linear, undamped, Coulomb with a
         dead band, no rolling resistance): such laws run in the fixed-step DEM kernel."""
         c = self.contact
-        rest = [c.restitution] + [m.restitution for m in self.materials if m.restitution is not None] + \
+        return c.model != "linear" or c.tangential != "coulomb" or self.damped or self.has_rolling
+
+    @property
+    def damped(self) -> bool:
+        """Whether any contact has a restitution below 1 (the contact's, a material's or a pair's)."""
+        rest = [self.contact.restitution] + [m.restitution for m in self.materials if m.restitution is not None] + \
             [p.restitution for p in self.pairs if p.restitution is not None]
-        return c.model != "linear" or c.tangential != "coulomb" or min(rest) < 1.0 or self.has_rolling
+        return min(rest) < 1.0
 
     @property
     def has_rolling(self) -> bool:
@@ -706,16 +711,20 @@ ISLAND_PILE = 50
 
 def island_blocker(scene: Scene) -> str | None:
     """Why the event engine's islands cannot run a scene whose law goes beyond the report's (None:
-    they can, the linear spring with the restitution's dashpot and Coulomb friction)."""
+    they can: the linear spring or Hertz with the restitution's dashpot, with Coulomb friction too
+    except during a damped Hertz contact)."""
     c = scene.contact
     if scene.has_rolling:
         return "rolling resistance is DEM's only"
-    if c.model != "linear":
-        return "Hertz contacts between spheres (inside an island) are DEM's so far"
     if c.tangential != "coulomb":
         return "a tangential spring between spheres (inside an island) is DEM's so far"
+    if scene.has_friction and scene.damped and c.model == "hertz":
+        # The islands locate a damped linear contact's F_n through zero while it slides
+        # (docs/method.md); Hertz's damped F_n and its rate there are not yet in that search.
+        return "Coulomb friction during a damped Hertz contact between spheres is DEM's so far"
     if len(scene.bodies) > ISLAND_PILE and scene.gravity is not None and scene.walls:
-        return (f"{len(scene.bodies)} damped spheres under gravity among walls settle into lasting contacts "
+        what = "damped" if c.model == "linear" else "Hertz"
+        return (f"{len(scene.bodies)} {what} spheres under gravity among walls settle into lasting contacts "
                 "(a pile), which DEM steps at a cost that does not grow with their events")
     return None
 
@@ -727,11 +736,11 @@ def alone_blocker(scene: Scene) -> str | None:
     if scene.has_rolling:
         return "rolling resistance is DEM's only"
     if len(scene.bodies) == 2 and scene.walls:
-        return ("two spheres with walls: contacts between spheres under these laws among walls are DEM's so far; "
-                "the event engine takes a sphere alone among walls, or two spheres and no walls")
+        return ("two spheres with walls: the event engine takes a sphere alone among walls, or two spheres and no "
+                "walls, whole; more run in its islands where they can")
     if len(scene.bodies) > 2:
-        return (f"{len(scene.bodies)} spheres: contacts between spheres under these laws (inside an island) "
-                "are DEM's so far; the event engine takes a sphere alone among walls, or two spheres and no walls")
+        return (f"{len(scene.bodies)} spheres: the event engine takes a sphere alone among walls, or two spheres "
+                "and no walls, whole; more run in its islands where they can")
     if scene.has_friction and len(scene.bodies) == 2:
         return "friction between two spheres under these laws is DEM's so far"
     if scene.has_friction and c.tangential != "spring":

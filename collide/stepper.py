@@ -363,6 +363,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
     damped = np.array([(pair[..., layout.TP_ZETA] > 0).any() or (wall[..., layout.TP_ZETA] > 0).any()
                        for pair, wall in tables])
     fl[:, layout.FL_DAMPED] = damped
+    fl[:, layout.FL_HERTZ] = model.hertz
     fl[:, layout.FL_FRICTION] |= damped
     t_end = np.where(np.isfinite(duration), duration, np.inf)
     fp = np.zeros((b_count, int(layout.NFP)))

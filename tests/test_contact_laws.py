@@ -72,7 +72,7 @@ def test_report_scenes_keep_their_integrator_and_law():
 
 
 def test_integrator_override_that_cannot_run_the_law_is_refused():
-    # (Friction during a Hertz contact is DEM's; the bounce itself runs in the event engine.)
+    # (Friction during a damped contact is DEM's; the bounce itself runs in the event engine.)
     with pytest.raises(SceneError, match="runs with --integrator dem"):
         run_scene(load_scene("bounce", ["contact.mu=0.3"]), integrator="kahan6", record=False)
 

@@ -143,8 +143,9 @@ PAIR = {"dim": 2, "duration": 0.05, "tol": 1e-3,
         "contact": {"model": "hertz", "youngs_modulus": 1e8, "restitution": 0.7},
         "body": [{"name": "a", "mass": 1.0, "radius": 0.1, "position": [0.0, 0.0], "velocity": [1.0, 0.0]},
                  {"name": "b", "mass": 1.0, "radius": 0.1, "position": [0.3, 0.0]}]}
-# Three spheres under these laws: DEM's (two and no walls run in the event engine).
+# Three spheres under these laws: the islands' without friction; with Coulomb friction DEM's.
 TRIO = {**PAIR, "body": PAIR["body"] + [{"name": "c", "mass": 1.0, "radius": 0.1, "position": [0.6, 0.0]}]}
+RUBBING_TRIO = {**TRIO, "contact": {**PAIR["contact"], "mu": 0.3}}  # damped, with friction
 
 
 def _scene_file(tmp_path, raw: dict) -> str:
@@ -162,7 +163,10 @@ def test_the_json_says_which_engine_ran_and_why(monkeypatch, capsys, tmp_path):
     pair = _json([_scene_file(tmp_path, PAIR)], monkeypatch, capsys, tmp_path)
     assert pair["engine"] == "event" and "two spheres and no walls" in pair["engine_reason"]
     trio = _json([_scene_file(tmp_path, TRIO)], monkeypatch, capsys, tmp_path)
-    assert trio["engine"] == "dem" and "3 spheres" in trio["engine_reason"]
+    assert trio["engine"] == "event" and "Hertz's force and its dashpot" in trio["engine_reason"]
+    rubbing = _json([_scene_file(tmp_path, RUBBING_TRIO)], monkeypatch, capsys, tmp_path)
+    assert rubbing["engine"] == "dem" and "3 spheres" in rubbing["engine_reason"]
+    assert "Coulomb friction during a damped contact between spheres" in rubbing["engine_reason"]
     # Not head-on, the line of centres turns during the contact: DEM, with the cause.
     oblique = copy.deepcopy(PAIR)
     oblique["body"][1]["position"], oblique["duration"] = [0.3, 0.05], 0.2
@@ -178,24 +182,26 @@ def test_either_engine_may_be_forced(monkeypatch, capsys, tmp_path):
     event = _json(["bounce", "--set", "integrator='kahan6'", "--tol", "1e-6"], monkeypatch, capsys, tmp_path)
     assert event["engine"] == "event"
     # The event engine asked for where it cannot run the scene: one line with the cause.
-    code, out, err = _main(["run", _scene_file(tmp_path, TRIO), "--integrator", "kahan6", "--no-record"],
+    code, out, err = _main(["run", _scene_file(tmp_path, RUBBING_TRIO), "--integrator", "kahan6", "--no-record"],
                            monkeypatch, capsys, tmp_path)
     _one_line_error(code, out, err, "3 spheres")
     code, out, err = _main(["run", "bounce", "--integrator", "seed", "--no-record"], monkeypatch, capsys, tmp_path)
     _one_line_error(code, out, err, "the report's update runs its contact law only")
     with pytest.raises(SceneError, match="3 spheres"):
-        parse_scene({**copy.deepcopy(TRIO), "integrator": "kahan6"})
+        parse_scene({**copy.deepcopy(RUBBING_TRIO), "integrator": "kahan6"})
 
 
 def test_bad_input_is_refused_or_sent_where_it_runs(monkeypatch, capsys, tmp_path):
     code, out, err = _main(["run", "bounce", "--tol", "1e-14", "--no-record"], monkeypatch, capsys, tmp_path)
     assert code != 0 and len(err.splitlines()) == 1 and "finer than a sphere's contacts reach" in err
     assert "Traceback" not in err
-    # A given step is DEM's notion: the automatic choice sends the run there, and says so.
+    # A given step: not the sphere alone's own contacts (their steps come from --tol), but the
+    # islands, which step Hertz at it, and say so.
     given = _json(["bounce", "--dt", "2e-5", "--set", "duration=0.5"], monkeypatch, capsys, tmp_path)
-    assert given["engine"] == "dem" and "a given dt" in given["engine_reason"]
+    assert given["engine"] == "event" and "Hertz's force and its dashpot" in given["engine_reason"]
+    assert "islands' steps" in given["engine_reason"]
     # A tolerance DEM cannot reach, for a scene only DEM runs: the existing refusal, with its cause.
-    code, out, err = _main(["run", _scene_file(tmp_path, TRIO), "--tol", "1e-9", "--no-record"],
+    code, out, err = _main(["run", _scene_file(tmp_path, RUBBING_TRIO), "--tol", "1e-9", "--no-record"],
                            monkeypatch, capsys, tmp_path)
     assert code != 0 and "DEM steps per contact" in err and len(err.splitlines()) == 1
 

@@ -129,7 +129,20 @@ X_IM, X_II, X_R, X_M, X_I = 59, 60, 61, 62, 63
 X_SF, X_SL = 64, 67  # sliding contacts' part of X_F, X_L
 X_FP, X_LP, X_HP = 70, 73, 76  # the kick before's X_F, X_L and closing span (row 0; 0: none)
 X_F0, X_L0 = 77, 80  # the friction accelerations at the step's start (with X_S0...)
-NX = 83
+# Row 0: the step's map of time (`substep.mapped_step`): its kind (MAP_NONE, MAP_START, MAP_END,
+# MAP_BOTH),
+# the step's start's time past a Hertz start (MAP_START), that start region's length, the
+# phase's step, the power of the map, and the time offset the last step call reached.
+X_MK, X_MU, X_MH, X_MD, X_MP, X_MO = 83, 84, 85, 86, 87, 88
+X_MR = 89  # 1 / omega, the stiffest contact's time scale
+NX = 90
+MAP_NONE, MAP_START, MAP_END, MAP_BOTH = 0, 1, 2, 3
+# A Hertz contact's start and end regions: this share of the time its approach takes to reach its
+# largest overlap at its rate (at least of 1 / omega, the stiffest contact's), stepped over s with
+# t - t_start (or t_end - t) = H s^P, uniform in s, the last step of the start region about the
+# phase's step: there every force is smooth in s (delta^1.5 = s^(1.5 P), Hertz's dashpot
+# delta^(1/4) = s^(P/4): P = 4 damped, 2 undamped).
+MAP_SHARE = 0.6
 # C / CI: an island's engaged contacts.
 C_N, C_DELTA, C_DIST, C_LIF, C_LJF, C_LIS, C_LJS, C_FN = 0, 3, 4, 5, 6, 7, 8, 9
 C_K, C_MU, C_EPS, C_REACH, C_HELD, C_FF, C_B = 10, 11, 12, 13, 14, 17, 20
@@ -137,7 +150,11 @@ C_INV = 26  # 1 / C_DIST of a pair (the slip rates' turning terms divide by it)
 C_GV = 27  # in the plane, a stuck contact's hold rate's velocity terms along e1, at a kick's last pass
 C_SH = 28  # what takes j's centre to its image nearest i's in a periodic box (QF_SH's; else 0)
 C_GAMMA = 31  # the restitution's dashpot coefficient (kg/s; 0: undamped): the DEM kernel's `dashpot`
-NC = 32
+# (Hertz: at the overlap C_K is taken at, a bound for the kicks' contraction; the kicks take it at
+# the contact's overlap, from C_ZETA and C_MSTAR)
+# Hertz (C_ESTAR > 0; 0: the linear spring C_K): E*, R*, and the dashpot's damping ratio and m*.
+C_ESTAR, C_RSTAR, C_ZETA, C_MSTAR = 32, 33, 34, 35
+NC = 36
 CI_I, CI_J, CI_GI, CI_GJ, CI_MODE, CI_Q, CI_EDGE, CI_RETRIED, CI_FLIPPED, CI_GRAZE = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
 # CI_RETRIED, CI_FLIPPED: `decide`'s marks (arrays of its own were allocated at every call);
 # CI_GRAZE: run_island's, for the next step.
@@ -160,7 +177,8 @@ FL_SPIN, FL_FRICTION, FL_SEED, FL_PLANAR, FL_RECORD, FL_AUTO, FL_MAXSTEPS, FL_DI
 # FL_DAMPED: some contact has a dashpot (a restitution below 1): a velocity-dependent normal force,
 # in the kicks with the friction (FL_FRICTION is set with it).
 FL_DAMPED = 9
-NFL = 10
+FL_HERTZ = 10  # the contacts are Hertz's
+NFL = 11
 FP_DT, FP_OMEGA_H, FP_TEND, FP_TAIL, FP_SCALE, FP_SLOW, FP_EVENT_TOL, FP_END_SLOW, FP_NOW, FP_NOW_STEPS = range(10)
 # FP_NOW, FP_NOW_STEPS are written by the run: time reached and steps, read by a progress display.
 # FP_BOX..: the periodic box (collide.engine.broad's `box`: the periods, 0 where an axis does not
@@ -170,6 +188,7 @@ FP_BOX, FP_CAP = 10, 14
 NFP = 15
 # Contact parameter tables: pairs (M, M, NP), walls (M, NP).
 TP_K, TP_MU, TP_EPS = range(3)
+TP_ESTAR = 3  # Hertz's E* (the model's TABLE_ESTAR)
 TP_ZETA = 4  # the event engine's tables carry the damping ratio where the model's hold the restitution
 # Records.
 # Knots: a body's exact state at a time, with its acceleration just before (K_A) and just after

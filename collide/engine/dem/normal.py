@@ -14,3 +14,12 @@ def normal_elastic(hertz, k, estar, rstar, delta):
         root = math.sqrt(rstar * delta)
         return 4.0 / 3.0 * estar * root * delta, 2.0 * estar * root
     return k * delta, k
+
+
+@jit_inline
+def normal_energy(hertz, k, estar, rstar, delta):
+    """The energy `normal_elastic`'s spring holds at overlap delta: k delta^2 / 2, or Hertz's
+    8/15 E* sqrt(R*) delta^2.5."""
+    if hertz:
+        return 8.0 / 15.0 * estar * math.sqrt(rstar * delta) * delta * delta
+    return 0.5 * k * delta * delta

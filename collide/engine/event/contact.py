@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import math
 
-from collide.engine.dem.normal import normal_elastic
+from collide.engine.dem.damping import dashpot
+from collide.engine.dem.normal import normal_elastic, normal_energy
 from collide.engine.dem.tangential import friction_cap
 from collide.engine.flight import free_state
 from collide.engine.jit import jit_inline
@@ -15,6 +16,7 @@ from collide.engine.layout import (
     C_B,
     C_DELTA,
     C_DIST,
+    C_ESTAR,
     C_FN,
     C_GAMMA,
     C_INV,
@@ -23,10 +25,13 @@ from collide.engine.layout import (
     C_LIS,
     C_LJF,
     C_LJS,
+    C_MSTAR,
     C_MU,
     C_N,
     C_REACH,
+    C_RSTAR,
     C_SH,
+    C_ZETA,
     CI_I,
     CI_J,
     CI_PRESS,
@@ -46,6 +51,30 @@ from collide.engine.layout import (
     X_S,
     X_V,
 )
+
+
+@jit_inline
+def elastic(C, c):
+    """Contact c's spring force and stiffness at its overlap C_DELTA: the DEM kernel's
+    `normal_elastic`, the linear spring unclamped (smooth for a substep straying just outside
+    the contact, whose end is a located event), Hertz (C_ESTAR > 0) none past touching (its
+    force and stiffness are zero there)."""
+    delta = C[c, C_DELTA]
+    hertz = C[c, C_ESTAR] > 0.0
+    if hertz and delta <= 0.0:
+        return 0.0, 0.0
+    return normal_elastic(hertz, C[c, C_K], C[c, C_ESTAR], C[c, C_RSTAR], delta)
+
+
+@jit_inline
+def stored(C, c):
+    """The energy contact c's spring holds at its overlap (`normal_energy`; Hertz's none past
+    touching)."""
+    delta = C[c, C_DELTA]
+    hertz = C[c, C_ESTAR] > 0.0
+    if hertz and delta <= 0.0:
+        return 0.0
+    return normal_energy(hertz, C[c, C_K], C[c, C_ESTAR], C[c, C_RSTAR], delta)
 
 
 @jit_inline
@@ -89,7 +118,7 @@ def geometry(X, C, CI, nc, WP, seed, fric):
             C[c, C_LJS] = 0.0
         C[c, C_DELTA] = delta
         C[c, C_DIST] = dist
-        C[c, C_FN] = normal_elastic(False, C[c, C_K], 0.0, 0.0, delta)[0]
+        C[c, C_FN] = elastic(C, c)[0]
 
 
 @jit_inline
@@ -102,9 +131,9 @@ def springs(X, C, CI, na, nc, grav):
     for c in range(nc):
         i = CI[c, CI_I]
         j = CI[c, CI_J]
-        elastic = normal_elastic(False, C[c, C_K], 0.0, 0.0, C[c, C_DELTA])[0]
+        fn = elastic(C, c)[0]
         for d in range(3):
-            f = elastic * C[c, C_N + d]
+            f = fn * C[c, C_N + d]
             X[i, X_FO + d] -= f
             if j >= 0:
                 X[j, X_FO + d] += f
@@ -118,11 +147,15 @@ def dashpots(X, C, CI, nc, vc, fa):
     """The restitution's dashpots at the velocities in column vc: each damped contact's normal
     force C_FN becomes the DEM kernel's, spring plus gamma times the overlap's rate (unclipped: it
     may pull as the contact ends, as there), and the dashpot's accelerations are added to column
-    fa. A dashpot's force lies along the line of centres: no torque."""
+    fa. Hertz's gamma follows the stiffness dF/d delta (the DEM kernel's `dashpot` at it), zero
+    past touching. A dashpot's force lies along the line of centres: no torque."""
     for c in range(nc):
         gamma = C[c, C_GAMMA]
         if gamma == 0.0:
             continue
+        spring, kn = elastic(C, c)
+        if C[c, C_ESTAR] > 0.0:
+            gamma = dashpot(C[c, C_ZETA], C[c, C_MSTAR], kn)
         i = CI[c, CI_I]
         j = CI[c, CI_J]
         nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
@@ -132,7 +165,7 @@ def dashpots(X, C, CI, nc, vc, fa):
             ry -= X[j, vc + 1]
             rz -= X[j, vc + 2]
         damp = gamma * (rx * nx + ry * ny + rz * nz)  # the overlap's rate: > 0 while approaching
-        C[c, C_FN] = normal_elastic(False, C[c, C_K], 0.0, 0.0, C[c, C_DELTA])[0] + damp
+        C[c, C_FN] = spring + damp
         s = damp * X[i, X_IM]
         X[i, fa] -= s * nx
         X[i, fa + 1] -= s * ny

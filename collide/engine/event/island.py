@@ -12,7 +12,7 @@ import numpy as np
 from collide.engine.broad import NBOX
 from collide.engine.dem.damping import dashpot
 from collide.engine.dem.geometry import reduced
-from collide.engine.event.contact import engaged, geometry, overlap, springs
+from collide.engine.event.contact import engaged, geometry, overlap, springs, stored
 from collide.engine.event.locate import step_events, stiff_slide
 from collide.engine.event.modes import decide, flips, mode_events
 from collide.engine.event.rest import rest_phase, rest_ready
@@ -22,12 +22,17 @@ from collide.engine.layout import (
     BAND,
     C_DELTA,
     C_EPS,
+    C_ESTAR,
     C_FN,
     C_GAMMA,
     C_K,
+    C_MSTAR,
     C_MU,
+    C_N,
     C_REACH,
+    C_RSTAR,
     C_SH,
+    C_ZETA,
     CI_EDGE,
     CI_GI,
     CI_GJ,
@@ -54,7 +59,9 @@ from collide.engine.layout import (
     F_STATUS_T,
     F_UNLOCATED_T,
     FL_AUTO,
+    FL_DAMPED,
     FL_FRICTION,
+    FL_HERTZ,
     FL_MAXSTEPS,
     FL_PLANAR,
     FL_RECORD,
@@ -84,6 +91,11 @@ from collide.engine.layout import (
     K_T,
     KAHAN6_ERROR,
     LATE,
+    MAP_BOTH,
+    MAP_END,
+    MAP_NONE,
+    MAP_SHARE,
+    MAP_START,
     MAXSTEPS,
     MODE_TOL,
     NC,
@@ -114,7 +126,9 @@ from collide.engine.layout import (
     STIFF_SLIDE_SPAN,
     SUZUKI_ERROR,
     TINY_LIMIT,
+    TOUCH_TOL,
     TP_EPS,
+    TP_ESTAR,
     TP_K,
     TP_MU,
     TP_ZETA,
@@ -130,6 +144,12 @@ from collide.engine.layout import (
     X_L,
     X_L0,
     X_M,
+    X_MD,
+    X_MH,
+    X_MK,
+    X_MP,
+    X_MR,
+    X_MU,
     X_Q,
     X_R,
     X_S,
@@ -143,9 +163,10 @@ from collide.engine.records import add_knot, intervals, record_step, share
 
 
 @jit
-def gather(G, GI, X, XI, C, CI, Q, QF, nq, bodies_params):
+def gather(G, GI, X, XI, C, CI, Q, QF, nq, bodies_params, hertz):
     """Set up the island's engaged contacts (C, CI) and their bodies (X, XI) from the engaged
-    candidates; returns (bodies, contacts)."""
+    candidates; returns (bodies, contacts). `hertz`: the contacts are Hertz's (E* and R*; the
+    tables' k is then the run's bound on the stiffness dF/d delta, `collide.model.hertz_bound`)."""
     ptab, wtab = bodies_params
     na = 0
     nc = 0
@@ -176,10 +197,15 @@ def gather(G, GI, X, XI, C, CI, Q, QF, nq, bodies_params):
             mj = int(G[gj, G_MAT])
             C[nc, C_K], C[nc, C_MU], C[nc, C_EPS] = ptab[mi, mj, TP_K], ptab[mi, mj, TP_MU], ptab[mi, mj, TP_EPS]
             zeta, mstar = ptab[mi, mj, TP_ZETA], reduced(G[gi, G_M], G[gj, G_M])
+            estar, rstar = ptab[mi, mj, TP_ESTAR], reduced(G[gi, G_R], G[gj, G_R])
         else:
             C[nc, C_K], C[nc, C_MU], C[nc, C_EPS] = wtab[mi, TP_K], wtab[mi, TP_MU], wtab[mi, TP_EPS]
             zeta, mstar = wtab[mi, TP_ZETA], G[gi, G_M]
-        # The DEM kernel's dashpot for the linear spring (its stiffness is k whatever the overlap).
+            estar, rstar = wtab[mi, TP_ESTAR], G[gi, G_R]
+        C[nc, C_ESTAR] = estar if hertz else 0.0
+        C[nc, C_RSTAR], C[nc, C_ZETA], C[nc, C_MSTAR] = rstar, zeta, mstar
+        # The DEM kernel's dashpot at the stiffness k (Hertz's at its bound: the kicks take it at
+        # the overlap, `dashpots`).
         C[nc, C_GAMMA] = dashpot(zeta, mstar, C[nc, C_K]) if zeta > 0.0 else 0.0
         C[nc, C_REACH] = QF[k, QF_REACH]
         for d in range(3):
@@ -214,7 +240,7 @@ def island_omega(X, C, CI, na, nc):
 
 @jit_inline
 def energy(X, C, na, nc, grav, spin):
-    """Kinetic, rotational, gravitational and spring energy of the island's stepped bodies."""
+    """Kinetic, rotational, gravitational and spring energy (`stored`) of the island's stepped bodies."""
     e = 0.0
     for a in range(na):
         for d in range(3):
@@ -222,7 +248,7 @@ def energy(X, C, na, nc, grav, spin):
             if spin:
                 e += 0.5 * X[a, X_I] * X[a, X_W + d] ** 2
     for c in range(nc):
-        e += 0.5 * C[c, C_K] * C[c, C_DELTA] ** 2
+        e += stored(C, c)
     return e
 
 
@@ -241,7 +267,7 @@ def energy_scale(X, C, na, nc, grav, spin):
             if spin:
                 e += 0.5 * X[a, X_I] * X[a, X_W + d] ** 2
     for c in range(nc):
-        e += 0.5 * C[c, C_K] * C[c, C_DELTA] ** 2
+        e += stored(C, c)
     return e
 
 
@@ -514,6 +540,85 @@ def end_phase(G, GI, X, XI, Q, QF, KN, na, nq, t, WP, grav, record, changed):
                 KN[GI[g, GI_KNOT], K_FREE] = 1.0
 
 
+@jit_inline
+def closing(X, C, CI, c):
+    """Contact c's overlap rate (> 0 while approaching) at the island's velocities."""
+    i, j = CI[c, CI_I], CI[c, CI_J]
+    rate = 0.0
+    for d in range(3):
+        rate += (X[i, X_V + d] - (X[j, X_V + d] if j >= 0 else 0.0)) * C[c, C_N + d]
+    return rate
+
+
+@jit_inline
+def reach_overlap(C, c, rate):
+    """The overlap Hertz contact c would reach from its overlap at this overlap rate, all its
+    relative kinetic energy stored: 8/15 E* sqrt(R*) (d^2.5 - delta^2.5) = m* rate^2 / 2."""
+    delta = max(C[c, C_DELTA], 0.0)
+    grow = 15.0 / 16.0 * C[c, C_MSTAR] * rate * rate / (C[c, C_ESTAR] * math.sqrt(C[c, C_RSTAR]))
+    return (delta ** 2.5 + grow) ** 0.4
+
+
+@jit_call
+def hertz_start(X, C, CI, nc, t, omega):
+    """The youngest Hertz contact's start and the length of its start region (its force's
+    derivatives are singular at its start): MAP_SHARE of the time its approach takes to reach its
+    largest overlap (d / rate), at least MAP_SHARE / omega. A contact touching (its overlap within
+    TOUCH_TOL of its reach) and not separating starts at t; one pressing and approaching within
+    its region began its overlap over its rate ago (a little earlier than that: its force slows
+    it; run_island takes that at a window's start only). (-inf, 0) where none is within its start
+    region."""
+    begun, region = -math.inf, 0.0
+    for c in range(nc):
+        rate = closing(X, C, CI, c)
+        if C[c, C_ESTAR] <= 0.0 or rate < 0.0:
+            continue
+        span = MAP_SHARE / omega
+        if rate > 0.0:
+            span = max(span, MAP_SHARE * reach_overlap(C, c, rate) / rate)
+        if C[c, C_DELTA] <= TOUCH_TOL * C[c, C_REACH]:
+            age = 0.0
+        elif rate > 0.0 and C[c, C_DELTA] / rate < span:
+            age = C[c, C_DELTA] / rate
+        else:
+            continue
+        if t - age > begun:
+            begun, region = t - age, span
+    return begun, region
+
+
+@jit_call
+def set_map(X, C, CI, nc, t, anchor, region, h_full, dt, omega, W, fl):
+    """The step's map of time (X_MK...; `substep.mapped_step`) and its length: within `region`
+    of a Hertz contact's start (`anchor`, `hertz_start`), MAP_START to the region's end; else where
+    a Hertz contact may end within its end region (MAP_SHARE of the time its energy takes to
+    leave it, at its overlap rate) and two steps (its overlap over its rate, which its force
+    shortens), MAP_END, at least half as long again as that (the event search lands the end, on
+    which the map's end then falls)."""
+    X[0, X_MK] = MAP_NONE
+    if not fl[FL_HERTZ] or not omega > 0.0:
+        return h_full
+    X[0, X_MH], X[0, X_MD], X[0, X_MP] = region, dt, 4.0 if fl[FL_DAMPED] else 2.0
+    X[0, X_MR] = 1.0 / omega
+    soonest = math.inf
+    for c in range(nc):
+        rate = closing(X, C, CI, c)
+        if C[c, C_ESTAR] > 0.0 and rate < 0.0:
+            to_end = max(C[c, C_DELTA], 0.0) / -rate
+            if to_end <= MAP_SHARE * reach_overlap(C, c, rate) / -rate + 2.0 * dt:
+                soonest = min(soonest, to_end)
+    left = anchor + region - t
+    if left > 1e-3 * dt and not soonest < left:
+        X[0, X_MK], X[0, X_MU] = MAP_START, t - anchor
+        return min(W - t, left)
+    if soonest < math.inf:
+        # A contact's end within a start region: at the start itself, a map singular at both
+        # ends of the step; later on, the end's (the start's force is smooth by then).
+        X[0, X_MK] = MAP_BOTH if left > 1e-3 * dt and t == anchor else MAP_END
+        return min(W - t, max(h_full, 1.5 * soonest))
+    return h_full
+
+
 @jit_call
 def count_unlocated(ST, FG, t):
     """A step whose event search ran out of trials (it may have passed an event)."""
@@ -579,6 +684,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
     tiny = 0
     restarts = 0
     idle = 0  # contact phases in a row that ended where they began
+    anchor, region = -math.inf, 0.0  # the last start of a Hertz contact and its region (`set_map`)
     while t < W and ST[S_STATUS] == OK:
         n_eng = engage(G, GI, X, Q, QF, nq, t, WP, grav)
         IV, OP = intervals(Q, nq, t, IV, OP, CNT, ST)
@@ -589,7 +695,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             continue
         # A contact phase: the bodies of the engaged contacts are stepped.
         bring_engaged(G, Q, nq, t, grav, fl)
-        na, nc = gather(G, GI, X, XI, C, CI, Q, QF, nq, tables)
+        na, nc = gather(G, GI, X, XI, C, CI, Q, QF, nq, tables, fl[FL_HERTZ])
         if 2 * nc > A.shape[0] and fric:
             A = np.zeros((2 * nc, 2 * nc))
         omega, dt, max_turn, negligible, nudge, reach, briefs, exact = phase_settings(X, C, CI, na, nc, weights, fl,
@@ -599,6 +705,12 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         FG[F_DT_MIN] = min(FG[F_DT_MIN], dt)
         geometry(X, C, CI, nc, WP, fl[FL_SEED], fl[FL_FRICTION])
         springs(X, C, CI, na, nc, grav)
+        if fl[FL_HERTZ] and omega > 0.0:
+            begun, span = hertz_start(X, C, CI, nc, t, omega)
+            # A contact begun here; or, at a window's start (no start known), one begun before
+            # (estimated: the overlap of one pressed from touching at rest grows as t^3.5).
+            if begun == t or (anchor == -math.inf and begun > anchor):
+                anchor, region = begun, span
         e_start = energy(X, C, na, nc, grav, spin)
         t_phase = t
         e_room = max(abs(e_start), energy_scale(X, C, na, nc, grav, spin))
@@ -629,9 +741,10 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 break
             mark_start(G, GI, X, XI, Q, QF, KN, na, nq, t, WP, grav, fric, record)
             h_full, grown = step_length(X, C, CI, nc, dt, omega, W, t, grown, turner, spin, fric, fl)
+            h_full = set_map(X, C, CI, nc, t, anchor, region, h_full, dt, omega, W, fl)
             h, work, ok, limited, late, located = step_events(
                 G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, weights, WP, grav, stuck, A, b, fl, scale, max_turn,
-                negligible, nudge, reach, briefs, exact, ST, omega)
+                negligible, nudge, reach, briefs if X[0, X_MK] == MAP_NONE else (0.0, 0.0, 0.0), exact, ST, omega)
             if not located:
                 count_unlocated(ST, FG, t)
             if late >= 0:

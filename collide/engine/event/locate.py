@@ -33,6 +33,7 @@ from collide.engine.layout import (
     FL_SPIN,
     FORESEE_SPAN,
     LATE_SAFETY,
+    MAP_END,
     MODE_TOL,
     NO,
     NUDGE_SHARE,
@@ -60,6 +61,7 @@ from collide.engine.layout import (
     X_F0,
     X_L,
     X_L0,
+    X_MK,
     X_S,
     X_UA,
     X_V,
@@ -457,7 +459,10 @@ def next_trial(X, C, CI, na, nc, h, h_next, weights, WP, grav, stuck, A, b, fl, 
         # Out of the plane, as far as the slips turning at this trial's end allow.
         near_nudge, near_reach = turning_nudges(X, C, CI, na, nc, fl, nudge, reach, negligible, abs(h_next - h),
                                                 X_V, X_W, X_F, X_L)
-    if nudge > 0.0 and abs(h_next - h) <= near_reach:
+    # (Where the step's map ends on a Hertz contact's end (MAP_END, MAP_BOTH), not back from a
+    # trial past that end:
+    # over it the force was not smooth, and its error would stay in the nudge's end.)
+    if nudge > 0.0 and abs(h_next - h) <= near_reach and (h_next > h or X[0, X_MK] < MAP_END):
         # Close to the last trial's end (a root search's last refinements): one Verlet
         # substep from there, forwards or back, a ninth of the cost of a step from the start,
         # or a little further a Yoshida step, a third of it.

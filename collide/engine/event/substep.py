@@ -32,6 +32,9 @@ from collide.engine.layout import (
     FL_PLANAR,
     FL_SEED,
     FL_SPIN,
+    MAP_BOTH,
+    MAP_NONE,
+    MAP_START,
     NO,
     SLIDE,
     STICK,
@@ -46,6 +49,13 @@ from collide.engine.layout import (
     X_L0,
     X_LP,
     X_M,
+    X_MD,
+    X_MH,
+    X_MK,
+    X_MO,
+    X_MP,
+    X_MR,
+    X_MU,
     X_Q,
     X_R,
     X_S,
@@ -310,6 +320,35 @@ def settle(X, C, CI, na, nc, stuck, A, b, fl, fresh):
     return take_velocities(X, na, X_VB, X_WB, spin, planar), True
 
 
+@jit_inline
+def drift(X, C, CI, na, nc, hk, WP, grav, fl):
+    """A substep's drift over hk, then the geometry and spring accelerations at its end."""
+    spin, planar = fl[FL_SPIN], fl[FL_PLANAR]
+    for a in range(na):
+        for d in range(3):
+            X[a, X_S + d] += X[a, X_V + d] * hk
+        if spin:
+            turn(X[a, X_Q:X_Q + 4], X[a, X_W], X[a, X_W + 1], X[a, X_W + 2], hk, planar)
+    geometry(X, C, CI, nc, WP, fl[FL_SEED], fl[FL_FRICTION])
+    springs(X, C, CI, na, nc, grav)
+
+
+@jit_inline
+def kicks(X, C, CI, na, nc, close, opening, stuck, A, b, fl, exact, pull_rate, warm, one_pass):
+    """The kicks between two substeps (see `kick`): with friction or dashpots `kick`, else the
+    springs' over close then opening. Returns (work, ok)."""
+    if fl[FL_FRICTION]:
+        return kick(X, C, CI, na, nc, close, opening, stuck, A, b, fl, exact, pull_rate, warm, one_pass)
+    # Two adds, as with friction: a sweep mixing mu = 0 with mu > 0 matches single runs.
+    for a in range(na):
+        for d in range(3):
+            if close != 0.0:
+                X[a, X_V + d] += close * X[a, X_A + d]
+            if opening != 0.0:
+                X[a, X_V + d] += opening * X[a, X_A + d]
+    return 0.0, True
+
+
 @jit_call
 def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact, pull_rate, warm, one_pass):
     """One step of h from the start state (X_S0..., its friction accelerations in X_F0, X_L0), or
@@ -320,46 +359,97 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
     by the event search): a trial's end is off it by the kicks' fixed-point tolerance. The end
     state is left in (X_S...) with its geometry in C and its accelerations in X_A, X_F. `exact`,
     `pull_rate`, `warm`, `one_pass`: the kicks' (see `kick`), the same for every trial of a
-    step. Returns (work, ok)."""
-    spin, fric, seed, planar = fl[FL_SPIN], fl[FL_FRICTION], fl[FL_SEED], fl[FL_PLANAR]
+    step. Where the step's map of time (X_MK) is set, `mapped_step` takes it. Returns (work, ok)."""
+    fric = fl[FL_FRICTION]
     if restart:
         for a in range(na):
             for d in range(13):
                 X[a, X_S + d] = X[a, X_S0 + d]
             for d in range(3 if fric else 0):
                 X[a, X_F + d], X[a, X_L + d] = X[a, X_F0 + d], X[a, X_L0 + d]
-        geometry(X, C, CI, nc, WP, seed, fric)
+        geometry(X, C, CI, nc, WP, fl[FL_SEED], fric)
         springs(X, C, CI, na, nc, grav)
+    start = 0.0 if restart else X[0, X_MO]
+    X[0, X_MO] = start + h
     n = weights.shape[0]
-    work = 0.0
-    ok = True
+    # (One Verlet substep integrates a map of time exactly only where it is linear in s: P = 2 at
+    # one end.)
+    if X[0, X_MK] != MAP_NONE and (n > 1 or (X[0, X_MP] <= 2.0 and X[0, X_MK] != MAP_BOTH)):
+        return mapped_step(X, C, CI, na, nc, h, start, weights, WP, grav, stuck, A, b, fl, exact, pull_rate, warm,
+                           one_pass)
     first = 0.5 * weights[0] * h
-    if fric:
-        work, ok = kick(X, C, CI, na, nc, 0.0, first, stuck, A, b, fl, exact, pull_rate, warm, one_pass)
-    else:
-        for a in range(na):
-            for d in range(3):
-                X[a, X_V + d] += first * X[a, X_A + d]
+    work, ok = kicks(X, C, CI, na, nc, 0.0, first, stuck, A, b, fl, exact, pull_rate, warm, one_pass)
     for k in range(n):
         hk = weights[k] * h
-        for a in range(na):
-            for d in range(3):
-                X[a, X_S + d] += X[a, X_V + d] * hk
-            if spin:
-                turn(X[a, X_Q:X_Q + 4], X[a, X_W], X[a, X_W + 1], X[a, X_W + 2], hk, planar)
-        geometry(X, C, CI, nc, WP, seed, fric)
-        springs(X, C, CI, na, nc, grav)
-        close = 0.5 * hk
+        drift(X, C, CI, na, nc, hk, WP, grav, fl)
         opening = 0.5 * weights[k + 1] * h if k + 1 < n else 0.0
-        if fric:
-            done, good = kick(X, C, CI, na, nc, close, opening, stuck, A, b, fl, exact, pull_rate, warm, one_pass)
-            work += done
-            ok = ok and good
-        else:
-            # Two adds, as with friction: a sweep mixing mu = 0 with mu > 0 matches single runs.
-            for a in range(na):
-                for d in range(3):
-                    X[a, X_V + d] += close * X[a, X_A + d]
-                    if opening != 0.0:
-                        X[a, X_V + d] += opening * X[a, X_A + d]
+        done, good = kicks(X, C, CI, na, nc, 0.5 * hk, opening, stuck, A, b, fl, exact, pull_rate, warm, one_pass)
+        work += done
+        ok = ok and good
+    return work, ok
+
+
+@jit_inline
+def offset(X, kind, sa, sb, h, sigma):
+    """The time past a mapped call's start at sigma in [0, 1] over it, and its rate d t / d sigma:
+    MAP_START t = t_s + H s^P, s from sa to sb (t_s the Hertz contact's start); MAP_END the call
+    ends on the contact's end, t_end - t = h (1 - sigma)^P; MAP_BOTH both (a contact starting
+    at the call's start, another ending at its end)."""
+    p = X[0, X_MP]
+    if kind == MAP_START:
+        big = X[0, X_MH]
+        s = sa + sigma * (sb - sa)
+        return big * (s ** p - sa ** p), big * p * s ** (p - 1.0) * (sb - sa)
+    rest = 1.0 - sigma
+    if kind == MAP_BOTH:
+        # Singular at both ends: 3 s^2 - 2 s^3 (P = 2), or 35 s^4 - 84 s^5 + 70 s^6 - 20 s^7.
+        if p > 2.0:
+            return (h * sigma ** 4 * (35.0 - sigma * (84.0 - sigma * (70.0 - 20.0 * sigma))),
+                    140.0 * h * (sigma * rest) ** 3)
+        return h * sigma * sigma * (3.0 - 2.0 * sigma), 6.0 * h * sigma * rest
+    return h * (1.0 - rest ** p), h * p * rest ** (p - 1.0)
+
+
+@jit_call
+def mapped_step(X, C, CI, na, nc, h, start, weights, WP, grav, stuck, A, b, fl, exact, pull_rate, warm, one_pass):
+    """`step` over s instead of t, where a Hertz contact starts or ends (its force's derivatives are
+    singular at delta = 0; over s every force is smooth, see MAP_SHARE): the composition over s
+    in as many runs as bring the longest substep to about the phase's step (X_MD). In the extended
+    phase space (s a coordinate) the kicks advance s, each by the exact time span between its two
+    s (a constant force, gravity, kicks exactly), and the drifts, at fixed s, move the bodies by
+    dt/ds times their s span (exact for the map's polynomial, of degree P - 1 below the
+    composition's order): both parts' flows are exact, so the composition keeps its order in s.
+    `start`: the call's start's time past the step's start (a nudge's). Returns (work, ok)."""
+    kind, p = X[0, X_MK], X[0, X_MP]
+    sa, sb = 0.0, 1.0
+    if kind == MAP_START:
+        big, u = X[0, X_MH], X[0, X_MU]
+        sa = (max(u + start, 0.0) / big) ** (1.0 / p)
+        sb = (max(u + start + h, 0.0) / big) ** (1.0 / p)
+        runs = int(math.ceil(abs(sb - sa) * p * big / X[0, X_MD]))
+    else:
+        runs = int(math.ceil(p * abs(h) / X[0, X_MD]))
+    # Near an end the step's own length sets the map's scale in s, not the phase's step: its
+    # error goes as (the change of velocity over it) / runs^order, and that change as
+    # (omega h)^2.5 (with Hertz's dashpot, ~ delta^(1/4), as (omega h)^1.25): at least
+    # (omega dt)^(-3/4) runs (damped (omega dt)^-1) bring it to a regular step's (omega dt)^7.
+    least = (0.75 if p > 2.0 else 0.5) * p * (X[0, X_MD] / X[0, X_MR]) ** (-1.0 if p > 2.0 else -0.75)
+    runs = max(runs, int(math.ceil(least)), 1)
+    n = weights.shape[0]
+    total = runs * n
+    sigma = 0.0
+    first = offset(X, kind, sa, sb, h, 0.5 * weights[0] / runs)[0]
+    work, ok = kicks(X, C, CI, na, nc, 0.0, first, stuck, A, b, fl, exact, pull_rate, warm, one_pass)
+    for k in range(total):
+        w = weights[k % n] / runs
+        mid, rate = offset(X, kind, sa, sb, h, sigma + 0.5 * w)
+        drift(X, C, CI, na, nc, rate * w, WP, grav, fl)
+        end = offset(X, kind, sa, sb, h, sigma + w)[0]
+        opening = 0.0
+        if k + 1 < total:
+            opening = offset(X, kind, sa, sb, h, sigma + w + 0.5 * weights[(k + 1) % n] / runs)[0] - end
+        done, good = kicks(X, C, CI, na, nc, end - mid, opening, stuck, A, b, fl, exact, pull_rate, warm, one_pass)
+        work += done
+        ok = ok and good
+        sigma += w
     return work, ok
