@@ -166,7 +166,7 @@ def test_the_json_says_which_engine_ran_and_why(monkeypatch, capsys, tmp_path):
     assert trio["engine"] == "event" and "Hertz's force and its dashpot" in trio["engine_reason"]
     rubbing = _json([_scene_file(tmp_path, RUBBING_TRIO)], monkeypatch, capsys, tmp_path)
     assert rubbing["engine"] == "dem" and "3 spheres" in rubbing["engine_reason"]
-    assert "Coulomb friction during a damped contact between spheres" in rubbing["engine_reason"]
+    assert "Coulomb friction during a damped Hertz contact between spheres" in rubbing["engine_reason"]
     # Not head-on, the line of centres turns during the contact: DEM, with the cause.
     oblique = copy.deepcopy(PAIR)
     oblique["body"][1]["position"], oblique["duration"] = [0.3, 0.05], 0.2
