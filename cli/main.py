@@ -190,7 +190,7 @@ def run(
 
     # The trajectory is kept only for what uses it: the recording and the CSV.
     keep = not no_record or csv is not None
-    with progress_display(loaded.name) as show:
+    with progress_display(loaded.name, loaded.rest) as show:
         result = run_scene(loaded, integrator=integrator, dt=step, tol=tol, record=keep, progress=show,
                            max_steps=max_steps)
     summary = run_summary(result, bodies=not json_)  # (--json writes the bodies a chunk at a time)
