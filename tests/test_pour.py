@@ -1,4 +1,4 @@
-"""The heavy built-in `pour` (100 000 spheres poured into a box, docs/design.md section 5) and how
+"""The heavy built-in `pour` (100 000 spheres poured into a box, docs/design.md section 6) and how
 heavy built-ins are kept out of what runs every built-in. The full scene runs for minutes: the
 tests run the same file with a box a fraction of its width and the fill's count cut in
 proportion (the same loose packing and the same drop), through the command line a user has."""
