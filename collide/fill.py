@@ -8,7 +8,8 @@ more of a wide distribution. Candidates are drawn and judged in batches on a cel
 (`collide.spheregrid`), so a fill costs time linear in its spheres. A count that cannot be
 placed is refused with how many fitted. Lattice arrangements put spheres on a square (2D) or
 cubic (3D) lattice of pitch twice the largest radius, filled from the region's lower end up.
-The same `seed` gives the same bodies.
+A random fill's spheres are then numbered along a Z-order curve of cells, so that spheres near
+in space are near in the body arrays. The same `seed` gives the same bodies.
 """
 
 from __future__ import annotations
