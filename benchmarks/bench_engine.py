@@ -21,7 +21,7 @@ from collide.scene import builtin_names, load_scene
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("scenes", nargs="*", default=builtin_names())
+    parser.add_argument("scenes", nargs="*", default=builtin_names(heavy=False))
     parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args()
     run_scene(load_scene("demo-1d"), record=False)  # load the compiled kernels once

@@ -409,7 +409,7 @@ def main() -> None:
         parser.error(f"{replay_path}: no such recording (collide run gas-box writes recordings/gas-box.rrd)")
     spheres = args.synthetic or 1000
     # Slider scenes: every built-in a user would drag a slider on (1 000-sphere runs take seconds).
-    names = [n for n in builtin_names() if len(load_scene(n).bodies) <= 200] if args.only != "replay" else []
+    names = [n for n in builtin_names(heavy=False) if len(load_scene(n).bodies) <= 200] if args.only != "replay" else []
     do_replay = args.only != "latency"
     use_browser = not args.no_browser and CHROMIUM.exists()
     try:

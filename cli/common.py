@@ -70,10 +70,12 @@ PROGRESS_AFTER = 2.0  # s: a run shorter than this shows no progress
 
 
 @contextmanager
-def progress_display(name: str):
+def progress_display(name: str, rest: float | None = None):
     """A progress line on stderr (never stdout: `--json` keeps stdout pure) for a run that takes
-    more than PROGRESS_AFTER seconds: simulated time reached, steps, rate. Shown when stderr is a
-    terminal, or with COLLIDE_PROGRESS=1; erased when the run ends."""
+    more than PROGRESS_AFTER seconds: a bar, simulated time reached, steps, rate; for a run to
+    rest (`rest`: the fraction of its peak kinetic energy it ends below) the kinetic energy's fall
+    towards it too. Shown when stderr is a terminal, or with COLLIDE_PROGRESS=1; erased when the
+    run ends."""
     wanted = os.environ.get("COLLIDE_PROGRESS", "").strip() == "1" or sys.stderr.isatty()
     try:
         after = float(os.environ.get("COLLIDE_PROGRESS_AFTER", PROGRESS_AFTER))
@@ -81,11 +83,11 @@ def progress_display(name: str):
         after = PROGRESS_AFTER
     shown = [False]
 
-    def show(member: int, members: int, t_now: float, t_end: float, steps: int, elapsed: float) -> None:
+    def show(member: int, members: int, t_now: float, t_end: float, steps: int, elapsed: float,
+             settling: float = math.nan) -> None:
         if elapsed < after:
             return
-        part = f"{t_now:.4g} s of {t_end:.4g} s ({100 * t_now / t_end:.0f} %)" if math.isfinite(t_end) else \
-            f"{t_now:.4g} s"
+        part = progress_part(t_now, t_end, settling, rest)
         who = f" member {member + 1}/{members}" if members > 1 else ""
         rate = steps / elapsed if elapsed > 0 else 0.0
         sys.stderr.write(f"\r{name}{who}: {part}, {steps:,} steps, {rate:,.0f} steps/s, {elapsed:.0f} s ")
@@ -94,6 +96,26 @@ def progress_display(name: str):
 
     with _status_line(show if wanted else None, shown) as shown_line:
         yield shown_line
+
+
+def progress_part(t_now: float, t_end: float, settling: float, rest: float | None) -> str:
+    """How far a run is: a bar of the share done and the figures behind it. A run to rest is as
+    far as the larger of its time against its duration and its kinetic energy's fall from the
+    peak towards `rest` times it, on a log scale (it ends at whichever comes first)."""
+    timed = math.isfinite(t_end) and t_end > 0
+    done = t_now / t_end if timed else math.nan
+    text = (f"{t_now:.4g} s of {'at most ' if rest else ''}{t_end:.4g} s" if timed else f"{t_now:.4g} s")
+    if rest and 0.0 < rest < 1.0 and math.isfinite(settling) and settling > 0.0:
+        fallen = math.log(min(settling, 1.0)) / math.log(rest)
+        done = max(done, fallen) if timed else fallen
+        text += f", kinetic energy {settling:.1e} of its peak (at rest below {rest:.0e})"
+    if not math.isfinite(done):
+        return text
+    filled = round(BAR * min(max(done, 0.0), 1.0))
+    return f"[{'#' * filled}{'-' * (BAR - filled)}] {100 * min(done, 1.0):.0f} % {text}"
+
+
+BAR = 20  # characters of the progress bar
 
 
 @contextmanager

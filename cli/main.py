@@ -95,8 +95,8 @@ def _print_bodies(bodies: list[dict[str, Any]], every: bool) -> None:
                    "--all-bodies lists every one, --json holds every one")
 
 
-def print_summary(summary: dict[str, Any], recording: Path | None, every_body: bool = False) -> None:
-    """A readable summary: final state, residuals, cost."""
+def print_summary(summary: dict[str, Any], recording: str | None, every_body: bool = False) -> None:
+    """A readable summary: final state, residuals, cost (`recording`: the file and what it took)."""
     auto = " (auto)" if summary.get("dt_auto") else ""
     typer.echo(f"{summary['scene']}: {summary['dim']}D, integrator {summary['integrator']}, "
                f"dt {summary['dt']:.3g} s{auto}")
@@ -190,7 +190,7 @@ def run(
 
     # The trajectory is kept only for what uses it: the recording and the CSV.
     keep = not no_record or csv is not None
-    with progress_display(loaded.name) as show:
+    with progress_display(loaded.name, loaded.rest) as show:
         result = run_scene(loaded, integrator=integrator, dt=step, tol=tol, record=keep, progress=show,
                            max_steps=max_steps)
     summary = run_summary(result, bodies=not json_)  # (--json writes the bodies a chunk at a time)
@@ -210,10 +210,16 @@ def run(
         final, model = result.result.final, result.result.model
         placed, _ = wrap(final.s[0], np.array(model.box_lower), np.array(model.period))  # (into a periodic box)
         write_state(save_state, loaded, placed, final.v[0], final.w[0])
+    written = None  # the recording, its size and write time, as the summary says them
     if recording is not None:
+        import time
+
         from collide.recording import DEFAULT_FPS, last_write, write_recording
 
+        started = time.perf_counter()
         write_recording(result, recording, stride=stride)
+        written = f"{recording} ({recording.stat().st_size / 1e6:.3g} MB, written in " \
+            f"{wall_text(time.perf_counter() - started)})"
         if last_write.frame_every > 1:
             summary["warnings"].append(f"the recording's 3D view keeps every k-th frame, k = {last_write.frame_every} "
                                        f"({last_write.fps:.3g} frames per simulated second: "
@@ -224,7 +230,7 @@ def run(
     if json_:
         write_summary_json(summary, result, sys.stdout)
     else:
-        print_summary(summary, recording, all_bodies)
+        print_summary(summary, written, all_bodies)
         if csv is not None:
             typer.echo(f"  csv: {csv}")
         if save_state is not None:
@@ -249,14 +255,13 @@ def scenes(
 
       collide scenes --show demo-bonus > my_scene.toml
     """
-    from collide.scene import builtin_names, builtin_text, load_scene
+    from collide.scene import builtin_names, builtin_text, read_raw
 
     if show is not None:
         typer.echo(builtin_text(show), nl=False)
         return
-    for name in builtin_names():
-        scene = load_scene(name)
-        typer.echo(f"{name:<20} {scene.description}")
+    for name in builtin_names():  # (read, not loaded: a heavy one's fill would be placed)
+        typer.echo(f"{name:<20} {read_raw(name)[0].get('description', '')}")
 
 
 # Commands main.py defines itself; the others live in their own modules (OPTIONAL), imported only

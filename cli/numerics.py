@@ -193,10 +193,11 @@ def validate_command(
     test: Annotated[list[int] | None, typer.Option("--test", help="chung-ooi: only this test, 1-8 "
                                                    "(repeatable).")] = None,
 ) -> None:
-    """Check the simulator: the report's textbook tables (Figs 3-6) and every built-in scene (or
-    the scenes given) by the checks that fit it: the rigid-body limit where it applies, else
-    closed forms, conservation, energy balance and self-convergence, one row per check; or, with
-    --suite chung-ooi, the Chung & Ooi (2011) impact benchmarks against their closed forms.
+    """Check the simulator: the report's textbook tables (Figs 3-6) and every built-in scene but the
+    heavy ones (or the scenes given: `collide validate pour` runs the heavy one, for minutes) by
+    the checks that fit it: the rigid-body limit where it applies, else closed forms,
+    conservation, energy balance and self-convergence, one row per check; or, with --suite
+    chung-ooi, the Chung & Ooi (2011) impact benchmarks against their closed forms.
 
     Exit code 0: every residual within its stated bound; 1: some residual beyond it.
 

@@ -47,6 +47,7 @@ def view(
         scenes_dir = Path("scenes")
     if source.lower().endswith(".rrd") and not Path(source).is_file():
         raise UserError(f"recording '{source}' does not exist")
+    _refuse_heavy(source)
     try:
         check_listen_address(host)  # before any work: a wrong --host must not hang
     except OSError as exc:
@@ -64,6 +65,17 @@ def view(
     if host not in ("127.0.0.1", "localhost", "::1"):
         typer.echo(f"  listening on {host}: anyone who can reach this address can use the viewer", err=True)
     app.serve_forever()
+
+
+def _refuse_heavy(source: str) -> None:
+    """A heavy built-in runs for minutes and draws too many spheres for a live view: the viewer
+    opens its recording (level of detail for many bodies) instead."""
+    from collide.scene import HEAVY_BODIES, builtin_names, is_heavy
+
+    if source in builtin_names() and is_heavy(source):
+        raise UserError(f"'{source}' is a heavy built-in (more than {HEAVY_BODIES:,} bodies, a run of minutes): "
+                        f"record it with `collide run {source}` and open the recording with "
+                        f"`collide view recordings/{source}.rrd`")
 
 
 def register(app: typer.Typer) -> None:

@@ -202,7 +202,8 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
     else:
         def run_member(b: int) -> tuple:
             return dem_loop.dem_run(*members[b][0])
-    outcomes = run_members(b_count, run_member, progress, [(m[0][-1], int(dk.P_NOW), m[1]) for m in members])
+    watched = [(m[0][-1], int(dk.P_NOW), m[1], int(dk.P_NOW_KINETIC)) for m in members]
+    outcomes = run_members(b_count, run_member, progress, watched)
     wall_time = time.perf_counter() - started
     ends = _final_arrays(model)  # (the state's own columns: no table of every body's columns beside them)
     for b, (t, WK, KN, REC, IV, EP, st, fg) in enumerate(outcomes):
@@ -299,7 +300,8 @@ def kernel_args(model: Model, initial: State, b: int, *, dt: np.ndarray, duratio
     fl = np.array([model.dim, model.spin_dim > 0, model.hertz, model.tangential_spring, record, max_steps],
                   dtype=np.int64)
     fp = np.array([dt[b], t_end, rest[b] if np.isfinite(rest[b]) else 0.0, 0.0, frame,
-                   SKIN * float(model.radius[b].min()), 0.0, 0.0, *model.period, 1.0 if model.periodic else 0.0])
+                   SKIN * float(model.radius[b].min()), 0.0, 0.0, *model.period, 1.0 if model.periodic else 0.0,
+                   0.0, 0.0])
     pair, wall = kernel_tables(model, b)
     return (X, V, W, Q, _bodies(model, b), pair, wall, WP, grav, fl, fp), t_end
 

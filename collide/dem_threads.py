@@ -353,7 +353,7 @@ def _recorded_step(state, C, IV, REC, KN, nkn, EP, nep):
     while C[par.C_NEXT] <= t:
         C[par.C_NEXT] += fp[dk.P_FRAME]
     if steps & 255 == 0:
-        fp[dk.P_NOW], fp[dk.P_NOW_STEPS] = t, steps
+        fp[dk.P_NOW], fp[dk.P_NOW_STEPS], fp[dk.P_NOW_KINETIC], fp[dk.P_NOW_PEAK] = t, steps, kinetic_now, peak
     if steps >= fl[dk.F_MAXSTEPS]:
         ST[dk.S_STATUS], FG[dk.G_STATUS_T] = dk.MAXSTEPS, t
         return True, IV, REC, KN, nkn, EP, nep

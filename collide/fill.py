@@ -8,7 +8,8 @@ more of a wide distribution. Candidates are drawn and judged in batches on a cel
 (`collide.spheregrid`), so a fill costs time linear in its spheres. A count that cannot be
 placed is refused with how many fitted. Lattice arrangements put spheres on a square (2D) or
 cubic (3D) lattice of pitch twice the largest radius, filled from the region's lower end up.
-The same `seed` gives the same bodies.
+A random fill's spheres are then numbered along a Z-order curve of cells, so that spheres near
+in space are near in the body arrays. The same `seed` gives the same bodies.
 """
 
 from __future__ import annotations
@@ -268,6 +269,8 @@ def fill_bodies(table: Any, index: int, dim: int, materials: dict, domain: Any,
         position = _lattice(radius, region, dim, where)
     else:
         position = _random(radius, region, dim, where, rng, obstacles, walls, progress or (lambda *_: None))
+        near = _z_order(position, 2.0 * float(radius.max()))
+        radius, position = radius[near], position[near]
     mass = 4.0 / 3.0 * math.pi * radius**3 * density
     for what, values in (("radii", radius), ("masses", mass), ("moments of inertia", 0.4 * mass * radius**2)):
         if not (values.min() >= MIN_POSITIVE and values.max() <= MAX_MAGNITUDE):
@@ -414,6 +417,20 @@ def _random(radius: np.ndarray, region: Region, dim: int, where: str, rng: np.ra
                              f"arrangement (random insertion jams near a packing fraction of "
                              f"{JAMMING[dim]}); ask for fewer, a bigger region, or arrangement = 'lattice'")
     return position
+
+
+def _z_order(position: np.ndarray, cell: float) -> np.ndarray:
+    """The order of the spheres along a Z-order (Morton) curve through cells of this size: spheres
+    near in space are then near in the body arrays, so a contact pass over many bodies reads
+    memory nearby (in the order drawn, a pair's two bodies lie anywhere in arrays of 100 000,
+    and the contact pass waited on memory)."""
+    cells = np.minimum(((position - position.min(axis=0)) / cell).astype(np.int64), (1 << 20) - 1)
+    code = np.zeros(len(position), np.int64)
+    dim = position.shape[1]
+    for bit in range(20):
+        for axis in range(dim):
+            code |= ((cells[:, axis] >> bit) & 1) << (bit * dim + axis)
+    return np.argsort(code, kind="stable")
 
 
 def _clear_of_each_other(pos: np.ndarray, rad: np.ndarray) -> np.ndarray:

@@ -238,14 +238,37 @@ def dump_toml(data: dict) -> str:
 # Built-in scenes
 
 _BUILTIN_PACKAGE = "collide.scenes"
+# A built-in declaring more bodies than this is heavy: its run takes minutes, so what runs every
+# built-in (the tests, `collide validate`, the outcomes, the viewer's picker) leaves it out.
+HEAVY_BODIES = 10_000
 
 
-def builtin_names() -> list[str]:
+def builtin_names(heavy: bool = True) -> list[str]:
     """Names of the built-in scenes: the report's demos first, then its textbook checks, then
-    the scenes beyond the report (what a new user meets first in a list)."""
+    the scenes beyond the report (what a new user meets first in a list). `heavy=False` leaves
+    out the heavy ones (`is_heavy`)."""
     files = resources.files(_BUILTIN_PACKAGE).iterdir()
     names = [p.name[:-5] for p in files if p.name.endswith(".toml")]
+    names = [n for n in names if heavy or not is_heavy(n)]
     return sorted(names, key=lambda n: (0 if n.startswith("demo") else 1 if n.startswith("textbook") else 2, n))
+
+
+def declared_bodies(raw: dict) -> int:
+    """The bodies a raw scene table declares by count, without placing them: its `[[body]]`
+    tables and its fills' `count`s (a fill to a packing fraction counts by its spheres only once
+    drawn, and a `[bodies]` file by its rows once read: neither is counted here)."""
+    bodies, fills = raw.get("body", []), raw.get("fill", [])
+    count = len(bodies) if isinstance(bodies, list) else 0
+    for fill in fills if isinstance(fills, list) else []:
+        value = fill.get("count") if isinstance(fill, dict) else None
+        count += value if isinstance(value, int) and not isinstance(value, bool) else 0
+    return count
+
+
+def is_heavy(name: str) -> bool:
+    """Whether a built-in declares more than HEAVY_BODIES bodies (read from its file, not loaded)."""
+    text = resources.files(_BUILTIN_PACKAGE).joinpath(f"{name}.toml").read_text()
+    return declared_bodies(_parse_toml(text, name)) > HEAVY_BODIES
 
 
 def builtin_text(name: str) -> str:
@@ -428,14 +451,16 @@ def set_path(raw: dict, key: str, value: Any) -> None:
             plural = "bodies" if kind == "body" else "materials"
             raise SceneError(f"override key '{key}': no {kind} named '{parts[1]}' ({plural}: {names or 'none'})")
         table, rest = matches[0], parts[2:]
-    elif parts[0] == "wall":
+    elif parts[0] in ("wall", "fill"):
+        kind = parts[0]
         if len(parts) < 3 or not parts[1].isdigit():
-            raise SceneError(f"override key '{key}': use wall.INDEX.FIELD (INDEX from 0)")
-        walls = raw.get("wall", [])
+            raise SceneError(f"override key '{key}': use {kind}.INDEX.FIELD (INDEX from 0)")
+        tables = raw.get(kind, [])
         index = int(parts[1])
-        if index >= len(walls):
-            raise SceneError(f"override key '{key}': the scene has {len(walls)} wall(s)")
-        table, rest = walls[index], parts[2:]
+        if not isinstance(tables, list) or index >= len(tables) or not isinstance(tables[index], dict):
+            count = len(tables) if isinstance(tables, list) else 0
+            raise SceneError(f"override key '{key}': the scene has {count} {kind}(s)")
+        table, rest = tables[index], parts[2:]
     else:
         table, rest = raw, parts
     if len(rest) == 2 and rest[1] in _COMPONENTS and isinstance(table.get(rest[0]), list):

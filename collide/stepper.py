@@ -58,8 +58,9 @@ def step_limit_error(steps: int, t: float, open_ended: bool) -> RunError:
 
 
 # A progress display: called about 4 times a second while a run is going, with (member, members,
-# simulated time reached, simulated end (inf if open), steps so far, seconds since it started).
-Progress = Callable[[int, int, float, float, int, float], None]
+# simulated time reached, simulated end (inf if open), steps so far, seconds since it started,
+# the kinetic energy over its peak so far: how far a run to rest has settled, NaN where unknown).
+Progress = Callable[[int, int, float, float, int, float, float], None]
 PROGRESS_PERIOD = 0.25
 # At most this many threads step a batch's members (default: every core the process may use);
 # a Dask worker sets 1, its cluster being shaped to the cores already.
@@ -71,9 +72,11 @@ _STARTUP_PROBE = [os.environ.get(STARTUP_PROBE_VARIABLE, "")]
 
 
 @contextmanager
-def watch(progress: Progress | None, fp: np.ndarray, now: int, t_end: float, member: int, members: int):
+def watch(progress: Progress | None, fp: np.ndarray, now: int, t_end: float, member: int, members: int,
+          settling: int = -1):
     """Report a kernel's progress from a thread while it runs: the compiled kernels release the
-    GIL and write the time reached and their step count into fp[now], fp[now + 1]."""
+    GIL and write the time reached and their step count into fp[now], fp[now + 1] (and the DEM
+    kernel its kinetic energy and peak into fp[settling], fp[settling + 1])."""
     if progress is None:
         yield
         return
@@ -82,7 +85,9 @@ def watch(progress: Progress | None, fp: np.ndarray, now: int, t_end: float, mem
 
     def poll() -> None:
         while not done.wait(PROGRESS_PERIOD):
-            progress(member, members, float(fp[now]), t_end, int(fp[now + 1]), time.perf_counter() - started)
+            peak = fp[settling + 1] if settling >= 0 else 0.0
+            ratio = float(fp[settling] / peak) if peak > 0.0 else math.nan
+            progress(member, members, float(fp[now]), t_end, int(fp[now + 1]), time.perf_counter() - started, ratio)
 
     thread = threading.Thread(target=poll, daemon=True)
     thread.start()
@@ -397,7 +402,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
 
     started = time.perf_counter()
     outcomes = run_members(b_count, run_member, progress,
-                           [(fp[b], int(layout.FP_NOW), t_end[b]) for b in range(b_count)])
+                           [(fp[b], int(layout.FP_NOW), t_end[b], -1) for b in range(b_count)])
     wall_time = time.perf_counter() - started
     t_final = np.zeros(b_count)
     ivals = []
@@ -437,13 +442,13 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
 
 
 def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Progress | None,
-                watched: list[tuple[np.ndarray, int, float]]) -> list[tuple]:
+                watched: list[tuple[np.ndarray, int, float, int]]) -> list[tuple]:
     """run_member(b) for every member, in order. A batch of compiled runs goes side by side,
     one thread per core the process may use (the kernels release the GIL; each member is
     stepped exactly as alone), every thread taking every threads-th member (a task per member
     cost 40 us of locking; COLLIDE_THREADS caps the threads). Interpreted kernels hold the GIL,
     and a run that reports progress (watched: each member's (fp, index of its time reached,
-    end)) is one member at a time."""
+    end, index of its kinetic energy or -1)) is one member at a time."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     cap = os.environ.get(THREADS_VARIABLE, "")
     if cap.isdigit() and int(cap) > 0:
@@ -454,8 +459,8 @@ def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Prog
     if threads < 2:
         outcomes = []
         for b in range(b_count):
-            fp, now, t_end = watched[b]
-            with watch(progress, fp, now, t_end, b, b_count):
+            fp, now, t_end, settling = watched[b]
+            with watch(progress, fp, now, t_end, b, b_count, settling):
                 outcomes.append(run_member(b))
         return outcomes
     outcomes: list[tuple] = [()] * b_count

@@ -430,13 +430,14 @@ def check_scene(scene: Scene, *, tol: float = DEFAULT_TOL, scan: bool = True,
 
 def validate(scenes: list[str] | None = None, *, tol: float = DEFAULT_TOL,
              scan: bool = True, duration: float | None = None) -> Validation:
-    """Run the textbook tables and every check that applies to each (given) scene: the rigid
+    """Run the textbook tables and every check that applies to each given scene (default: every
+    built-in but the heavy ones, `collide.scene.HEAVY_BODIES`): the rigid
     cross-check and softness scan where the rigid reference applies, the scene checks of
     `collide.scene_checks` on all, over the first `duration` seconds if given."""
     if duration is not None and not (math.isfinite(duration) and duration > 0):
         raise ValueError(f"--duration: must be a positive number of seconds, got {duration}")
     started = time.perf_counter()
-    names = list(scenes) if scenes else builtin_names()
+    names = list(scenes) if scenes else builtin_names(heavy=False)
     checks, scans, reports = [], [], []
     for name in names:
         scene = load_scene(name)

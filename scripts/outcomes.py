@@ -22,12 +22,12 @@ EXTRA_TOLS = {"demo-bonus": [1e-4, 1e-9], "billiards-break": [1e-6], "textbook-g
 
 
 def cases() -> list[tuple[str, str | dict, dict]]:
-    """(label, source, run options): the built-ins at their own settings and a few tolerances, the
+    """(label, source, run options): the built-ins (but the heavy ones) at their own settings and a few tolerances, the
     report's seed runs, and the tests' scene files."""
     from collide.scene import builtin_names
 
     out = []
-    for name in builtin_names():
+    for name in builtin_names(heavy=False):
         out.append((name, name, {}))
         for tol in EXTRA_TOLS.get(name, []):
             out.append((f"{name}@tol={tol:g}", name, {"tol": tol}))

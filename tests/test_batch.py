@@ -523,7 +523,7 @@ def test_batch_members_run_side_by_side_unless_capped(monkeypatch):
         time.sleep(0.02)  # long enough that both threads take members
         return (b,)
 
-    watched = [(np.zeros(8), 6, 1.0)] * 6
+    watched = [(np.zeros(8), 6, 1.0, -1)] * 6
     assert run_members(6, member, None, watched) == [(b,) for b in range(6)]
     assert len(set(seen)) == 2
     seen.clear()

@@ -130,7 +130,7 @@ def test_friction_energy_plus_dissipated_work_is_conserved():
     assert dg.residuals(r).energy[0] < 1e-7
 
 
-@pytest.mark.parametrize("name", builtin_names())
+@pytest.mark.parametrize("name", builtin_names(heavy=False))
 def test_momenta_at_round_off_on_every_builtin(name):
     scene = load_scene(name)
     if scene.walls:
@@ -142,7 +142,7 @@ def test_momenta_at_round_off_on_every_builtin(name):
         assert res.angular_momentum[0] <= 1e-12
 
 
-@pytest.mark.parametrize("name", [n for n in builtin_names() if load_scene(n).contact.mu == 0])
+@pytest.mark.parametrize("name", [n for n in builtin_names(heavy=False) if load_scene(n).contact.mu == 0])
 def test_frictionless_energy_residual(name):
     run = run_scene(load_scene(name), record=False)
     # The event engine keeps the report's law to 1e-6 at every built-in's tol; a scene beyond it

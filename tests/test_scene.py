@@ -69,7 +69,7 @@ def test_overrides_set_vectors_and_components():
     assert scene.contact.mu == 0.3 and scene.dt == "auto" and scene.integrator == "seed"
 
 
-@pytest.mark.parametrize("name", builtin_names())
+@pytest.mark.parametrize("name", builtin_names(heavy=False))
 def test_builtins_round_trip_through_toml(name, tmp_path):
     scene = load_scene(name)
     path = tmp_path / f"{name}.toml"

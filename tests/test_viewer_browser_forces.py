@@ -102,7 +102,7 @@ def _steel_pair():
 def _scenes() -> list:
     from collide.scene import builtin_names
 
-    return list(builtin_names()) + ["glass-bead", "steel-pair"]
+    return list(builtin_names(heavy=False)) + ["glass-bead", "steel-pair"]
 
 
 @pytest.mark.parametrize("name", _scenes())

@@ -59,7 +59,8 @@ def _serve() -> None:
         with lock:
             _send(out, message)
 
-    def progress(member: int, members: int, t: float, t_end: float, steps: int, seconds: float) -> None:
+    def progress(member: int, members: int, t: float, t_end: float, steps: int, seconds: float,
+                 settling: float) -> None:
         answer(("progress", t, t_end, steps, seconds))
 
     while True:

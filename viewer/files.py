@@ -105,7 +105,7 @@ class SceneChoice:
 
 def scene_choices(scenes_dir: Path | None, extra: list[str] | None = None) -> list[SceneChoice]:
     """Built-in scenes, then the .toml files of `scenes_dir`, then any extra paths."""
-    choices = [SceneChoice(name, name) for name in builtin_names()]
+    choices = [SceneChoice(name, name) for name in builtin_names(heavy=False)]
     seen = {c.source for c in choices}
     paths: list[Path] = []
     if scenes_dir is not None and scenes_dir.is_dir():

@@ -34,7 +34,10 @@ P_DT, P_TEND, P_REST, P_TAIL, P_FRAME, P_SKIN, P_NOW, P_NOW_STEPS = range(8)
 # P_BOX..: the periodic box as collide.engine.broad's `box` (the periods, 0 where an axis does
 # not wrap, then 1.0 if any does).
 P_BOX = 8
-NPAR = 12
+# Written by the run with P_NOW: the kinetic energy at that step and its peak so far, read by a
+# progress display (a run to rest ends when their ratio falls below P_REST).
+P_NOW_KINETIC, P_NOW_PEAK = 12, 13
+NPAR = 14
 # Outputs: stats (int) and figures (float).
 S_STEPS, S_STATUS, S_CONTACTS, S_BUILDS, S_PAIRS, S_JUMPS = range(6)
 NSTAT = 6

@@ -38,6 +38,8 @@ from collide.engine.dem.layout import (
     P_DT,
     P_FRAME,
     P_NOW,
+    P_NOW_KINETIC,
+    P_NOW_PEAK,
     P_NOW_STEPS,
     P_REST,
     P_SKIN,
@@ -261,6 +263,8 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         if steps & 255 == 0:
             fp[P_NOW] = t
             fp[P_NOW_STEPS] = steps
+            fp[P_NOW_KINETIC] = kinetic_now
+            fp[P_NOW_PEAK] = peak
         if steps >= fl[F_MAXSTEPS]:
             ST[S_STATUS] = MAXSTEPS
             FG[G_STATUS_T] = t

@@ -57,6 +57,8 @@ from collide.engine.dem.layout import (
     P_BOX,
     P_DT,
     P_NOW,
+    P_NOW_KINETIC,
+    P_NOW_PEAK,
     P_NOW_STEPS,
     P_REST,
     P_SKIN,
@@ -615,6 +617,8 @@ def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS
             if steps & 255 == 0:
                 fp[P_NOW] = t
                 fp[P_NOW_STEPS] = steps
+                fp[P_NOW_KINETIC] = kinetic_now
+                fp[P_NOW_PEAK] = max(peak, kinetic_now)
         if behind or record:  # the late drifts, thread 0's contact starts and ends: seen by all
             barrier_wait(barrier)
             niv, nrec = np.int64(CTL[C_NIV]), np.int64(CTL[C_NREC])
