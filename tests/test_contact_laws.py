@@ -170,15 +170,14 @@ def test_materials_are_overridden_by_name():
 
 
 def test_a_law_override_lets_a_builtin_choose_its_engine():
-    # demo-bonus recommends kahan6 for the report's law; a damped law with friction between two
-    # spheres must be taken by whichever engine runs it, not refused by the recommendation.
-    changed = load_scene("demo-bonus", ["contact.restitution=0.8"])
-    assert "integrator" not in changed.source and changed.needs_dem
-    assert changed.integrator == parse_scene(dict(changed.source)).integrator
+    # demo-bonus recommends kahan6 for the report's law; rolling resistance (DEM's only) must be
+    # taken by the engine that runs it, not refused by the recommendation.
+    changed = load_scene("demo-bonus", ["contact.rolling_friction=0.01"])
+    assert "integrator" not in changed.source and changed.integrator == "dem"
     run = run_scene(changed, record=False, tol=1e-3)
-    assert run.result.engine in ("event", "dem") and run.result.engine_reason
+    assert run.result.engine == "dem" and "rolling" in run.result.engine_reason
     # Bodies moved, law kept: the recommendation stands.
     assert load_scene("demo-bonus", ["body.ball1.velocity.x=2"]).source["integrator"] == "kahan6"
     # Named with the override, it is the user's: refused where it cannot run the law.
     with pytest.raises(SceneError, match="cannot run this scene's contact law"):
-        load_scene("demo-bonus", ["contact.restitution=0.8", "integrator=kahan6"])
+        load_scene("demo-bonus", ["contact.rolling_friction=0.01", "integrator=kahan6"])
