@@ -117,6 +117,15 @@ def check_tol_floor(integrator: str, tol: np.ndarray) -> None:
 ROUND_OFF_SLACK = 10.0
 
 
+def impact_speed(model, state) -> np.ndarray:
+    """The fastest approach a contact can see (B,): `approach_bound` between bodies, and on a wall,
+    which stays put, a sphere's own speed too."""
+    speed = approach_bound(model, state)
+    if model.n_walls:
+        speed = np.maximum(speed, np.sqrt((state.v ** 2).sum(-1)).max(axis=1))
+    return speed
+
+
 def float_resolution(model, state, durations: np.ndarray, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """What float64 resolves of the scene's stiffest collision (B,), its contact frequency
     scaled by `scale`: (positions, clock). Positions: the collision's overlap, about v / omega
@@ -129,12 +138,10 @@ def float_resolution(model, state, durations: np.ndarray, scale: float = 1.0) ->
     collision's: the clock limits the outcome to the square of omega x tick."""
     omega = reference_frequency(model) * scale
     fastest = np.sqrt((state.v ** 2).sum(-1)).max(axis=1)
-    speed = approach_bound(model, state)
+    speed = impact_speed(model, state)
     # Under 1e-9 of the fastest body's speed an approach is round-off (bodies moving together), as
     # the engine takes it (`simulate`'s FP_SLOW).
     speed = np.where(speed > 1e-9 * fastest, speed, 0.0)
-    if model.n_walls:  # a wall stays put: a sphere's own speed is its approach
-        speed = np.maximum(speed, fastest)
     g = np.zeros(model.batch) if model.gravity is None else np.sqrt((model.gravity ** 2).sum(-1))
     reach = (np.sqrt((state.s ** 2).sum(-1)) + model.radius).max(axis=1)
     if model.n_walls:
@@ -253,12 +260,8 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
         islands = None if integ == "seed" else next(
             (why for why in (island_blocker(s) for s in scenes if s.needs_dem) if why is not None), "")
         if islands == "" and model.hertz:
-            # The islands step Hertz by a linear spring's frequencies: the stiffness it reaches
-            # (on a wall a sphere's own speed is its approach, as in `float_resolution`).
-            speed = approach_bound(model, state)
-            if model.n_walls:
-                speed = np.maximum(speed, np.sqrt((state.v ** 2).sum(-1)).max(axis=1))
-            model = hertz_bound(model, speed)
+            # The islands step Hertz by a linear spring's frequencies: the stiffness it reaches.
+            model = hertz_bound(model, impact_speed(model, state))
         if islands == "":
             islands = _islands_pass(model, state, forced)
         if islands == "":
