@@ -248,8 +248,14 @@ def _check(model: Model, st: np.ndarray, fg: np.ndarray, t: float, open_ended: b
                            "an axis along it, or gravity across it): such a contact is DEM's so far",
     }
     failed = "the sphere's contact with wall {wall} at {at} could not be integrated (its steps did not converge)"
-    raise AloneError(stops.get(status, failed).format(wall=int(fg[layout.F_STATUS_A]), at=at))
+    cause = PairTurns if status == pair.PAIR_OBLIQUE else AloneError
+    raise cause(stops.get(status, failed).format(wall=int(fg[layout.F_STATUS_A]), at=at))
 
 
 class AloneError(RunError):
     """A sphere alone among walls met what the event engine cannot take at full order yet."""
+
+
+class PairTurns(AloneError):
+    """Two spheres met off-centre: the line of their centres turns during the contact, which the
+    pair's relative coordinate does not take (the islands do, where their laws allow)."""

@@ -12,7 +12,7 @@ import numpy as np
 from collide import diagnostics as dg
 from collide import measure as measure_mod
 from collide.alone import TOL_FLOOR as ALONE_TOL_FLOOR
-from collide.alone import AloneError, alone_step, contact_tol, engine_choice, simulate_alone
+from collide.alone import AloneError, PairTurns, alone_step, contact_tol, engine_choice, simulate_alone
 from collide.integrators import INTEGRATORS
 from collide.invariant import check_invariant
 from collide.limits import step_limit
@@ -256,7 +256,10 @@ def run_scenes(scenes: list[Scene], *, integrator: str | None = None, dt: float 
                                            "a given dt is DEM's (the event engine takes its steps from --tol)"
                                            if not auto_used[0] else None)
         if blocker is None:
-            return _run_alone(scenes[0], integ, model, state, float(tols[0]), record, max_steps, measure, forced)
+            try:
+                return _run_alone(scenes[0], integ, model, state, float(tols[0]), record, max_steps, measure, forced)
+            except PairTurns as exc:
+                blocker = str(exc)  # two spheres met off-centre: the islands take the turning line
         islands = None if integ == "seed" else next(
             (why for why in (island_blocker(s) for s in scenes if s.needs_dem) if why is not None), "")
         if islands == "" and model.hertz:
@@ -357,6 +360,8 @@ def _run_alone(scene: Scene, integ: str, model, state, tol: float, record: bool,
         result = simulate_alone(model, state, tol=tol, duration=duration,
                                 tail=np.nan if scene.tail is None else scene.tail, record=record, max_steps=limit)
     except AloneError as exc:
+        if isinstance(exc, PairTurns) and island_blocker(scene) is None:
+            raise  # the islands take it (run_scenes)
         return _in_dem(scene, tol, record, max_steps, measure, forced, exc)
     result.integrator = integ
     check_finite(result, [scene])
