@@ -90,7 +90,7 @@ def test_the_pressing_value_of_a_damped_hertz_contact_has_the_rate_it_reports(di
     (in units of the dashpot at the contact's bound), its rate along the motion under springs,
     gravity and the dashpots checked by a central difference, at the tables' overlaps and at a
     thousandth of them (towards the contact's end, where F_n's own rate goes as delta^(-3/4)); its
-    sign is F_n's. (Leaving out the term of gamma's growth, gamma_delta, misses by 2e-2 to 0.8.)"""
+    sign is F_n's. (Leaving out the term of gamma's growth, gamma_delta, misses by 19 % to 42 %.)"""
     X, C, CI, WP, nc, grav = _damped_hertz(dim, wall, squeeze)
     pressing, acc = _pressing(X, C, CI, WP, nc, grav)
     value, rate, acc = pressing[:, 0], pressing[:, 1], acc.copy()
