@@ -590,8 +590,8 @@ def _parse_scene(raw: dict, default_name: str, progress: Progress) -> Scene:
                   description=raw.get("description", ""), domain=domain, source=raw)
     if scene.needs_dem:
         # The event engine where it runs these laws at full order (a sphere alone among walls, or
-        # the linear spring's dashpot in islands), else the DEM kernel (collide.alone.engine_choice
-        # says which and why).
+        # in islands: `island_blocker`), else the DEM kernel (collide.alone.engine_choice says
+        # which and why).
         blocker = alone_blocker(scene)
         if blocker and integrator != "seed" and island_blocker(scene) is None:
             blocker = None
@@ -736,17 +736,12 @@ ISLAND_PILE = 50
 
 def island_blocker(scene: Scene) -> str | None:
     """Why the event engine's islands cannot run a scene whose law goes beyond the report's (None:
-    they can: the linear spring or Hertz with the restitution's dashpot, with Coulomb friction too
-    except during a damped Hertz contact)."""
+    they can: the linear spring or Hertz, with the restitution's dashpot and Coulomb friction)."""
     c = scene.contact
     if scene.has_rolling:
         return "rolling resistance is DEM's only"
     if c.tangential != "coulomb":
         return "a tangential spring between spheres (inside an island) is DEM's so far"
-    if scene.has_friction and scene.damped and c.model == "hertz":
-        # The islands locate a damped linear contact's F_n through zero while it slides
-        # (docs/method.md); Hertz's damped F_n and its rate there are not yet in that search.
-        return "Coulomb friction during a damped Hertz contact between spheres is DEM's so far"
     if len(scene.bodies) > ISLAND_PILE and scene.gravity is not None and scene.walls:
         what = "damped" if c.model == "linear" else "Hertz"
         return (f"{len(scene.bodies)} {what} spheres under gravity among walls settle into lasting contacts "

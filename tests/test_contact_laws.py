@@ -12,7 +12,7 @@ import pytest
 from collide import diagnostics as dg
 from collide.model import TABLE_ESTAR, TABLE_MU, TABLE_REST, compile_scenes
 from collide.run import RunError, run_scene, run_scenes
-from collide.scene import SceneError, load_scene, parse_scene
+from collide.scene import DEFAULT_INTEGRATOR, SceneError, load_scene, parse_scene
 from collide.trajectory import sample
 from tests.dem_scenes import GLASS, _pile, _wall_scene
 
@@ -29,7 +29,8 @@ def test_materials_give_masses_moduli_and_mixed_pair_values():
                     {"name": "b", "material": "steel", "radius": 0.02, "position": [0.1, 0, 0]},
                     {"name": "c", "material": "steel", "radius": 0.02, "position": [0.2, 0, 0], "mass": 1.0}]}
     scene = parse_scene(raw)
-    assert scene.integrator == "dem"  # chosen for a law beyond the report's
+    # A law beyond the report's (Hertz, its dashpot, Coulomb friction) that the islands step.
+    assert scene.needs_dem and scene.integrator == DEFAULT_INTEGRATOR
     assert scene.bodies[0].mass == pytest.approx(4 / 3 * math.pi * 0.01**3 * 2800.0, rel=1e-15)
     assert scene.bodies[2].mass == 1.0  # a given mass wins
     model, _ = compile_scenes([scene])
@@ -72,9 +73,12 @@ def test_report_scenes_keep_their_integrator_and_law():
 
 
 def test_integrator_override_that_cannot_run_the_law_is_refused():
-    # (Friction during a damped contact is DEM's; the bounce itself runs in the event engine.)
+    # (Rolling resistance is DEM's only; the bounce itself runs in the event engine, and with
+    # Coulomb friction during its damped Hertz contacts in the islands.)
     with pytest.raises(SceneError, match="runs with --integrator dem"):
-        run_scene(load_scene("bounce", ["contact.mu=0.3"]), integrator="kahan6", record=False)
+        run_scene(load_scene("bounce", ["contact.rolling_friction=0.01"]), integrator="kahan6", record=False)
+    run = run_scene(load_scene("bounce", ["contact.mu=0.3"]), integrator="kahan6", record=False)
+    assert run.result.engine == "event" and "each friction mode change located" in run.result.engine_reason
 
 
 # ---------------------------------------------------------------------------------------------

@@ -143,9 +143,15 @@ PAIR = {"dim": 2, "duration": 0.05, "tol": 1e-3,
         "contact": {"model": "hertz", "youngs_modulus": 1e8, "restitution": 0.7},
         "body": [{"name": "a", "mass": 1.0, "radius": 0.1, "position": [0.0, 0.0], "velocity": [1.0, 0.0]},
                  {"name": "b", "mass": 1.0, "radius": 0.1, "position": [0.3, 0.0]}]}
-# Three spheres under these laws: the islands' without friction; with Coulomb friction DEM's.
+# Three spheres under these laws: the islands', with Coulomb friction too; with a tangential
+# spring DEM's.
 TRIO = {**PAIR, "body": PAIR["body"] + [{"name": "c", "mass": 1.0, "radius": 0.1, "position": [0.6, 0.0]}]}
-RUBBING_TRIO = {**TRIO, "contact": {**PAIR["contact"], "mu": 0.3}}  # damped, with friction
+# Damped, with friction: the first sphere spins into the second off the line of centres, which
+# passes it on to the third.
+RUBBING_TRIO = {**TRIO, "duration": 0.4, "contact": {**PAIR["contact"], "mu": 0.3},
+                "body": [{**TRIO["body"][0], "spin": 30.0}, {**TRIO["body"][1], "position": [0.3, 0.03]},
+                         TRIO["body"][2]]}
+SPRUNG_TRIO = {**TRIO, "contact": {**RUBBING_TRIO["contact"], "tangential": "spring"}}
 
 
 def _scene_file(tmp_path, raw: dict) -> str:
@@ -165,8 +171,11 @@ def test_the_json_says_which_engine_ran_and_why(monkeypatch, capsys, tmp_path):
     trio = _json([_scene_file(tmp_path, TRIO)], monkeypatch, capsys, tmp_path)
     assert trio["engine"] == "event" and "Hertz's force and its dashpot" in trio["engine_reason"]
     rubbing = _json([_scene_file(tmp_path, RUBBING_TRIO)], monkeypatch, capsys, tmp_path)
-    assert rubbing["engine"] == "dem" and "3 spheres" in rubbing["engine_reason"]
-    assert "Coulomb friction during a damped Hertz contact between spheres" in rubbing["engine_reason"]
+    assert rubbing["engine"] == "event" and "Hertz's force and its dashpot" in rubbing["engine_reason"]
+    assert "each friction mode change located" in rubbing["engine_reason"]
+    sprung = _json([_scene_file(tmp_path, SPRUNG_TRIO)], monkeypatch, capsys, tmp_path)
+    assert sprung["engine"] == "dem" and "3 spheres" in sprung["engine_reason"]
+    assert "a tangential spring between spheres (inside an island) is DEM's so far" in sprung["engine_reason"]
     # Not head-on, the line of centres turns during the contact: the islands take it.
     oblique = copy.deepcopy(PAIR)
     oblique["body"][1]["position"], oblique["duration"] = [0.3, 0.05], 0.2
@@ -182,13 +191,16 @@ def test_either_engine_may_be_forced(monkeypatch, capsys, tmp_path):
     event = _json(["bounce", "--set", "integrator='kahan6'", "--tol", "1e-6"], monkeypatch, capsys, tmp_path)
     assert event["engine"] == "event"
     # The event engine asked for where it cannot run the scene: one line with the cause.
-    code, out, err = _main(["run", _scene_file(tmp_path, RUBBING_TRIO), "--integrator", "kahan6", "--no-record"],
+    code, out, err = _main(["run", _scene_file(tmp_path, SPRUNG_TRIO), "--integrator", "kahan6", "--no-record"],
                            monkeypatch, capsys, tmp_path)
     _one_line_error(code, out, err, "3 spheres")
     code, out, err = _main(["run", "bounce", "--integrator", "seed", "--no-record"], monkeypatch, capsys, tmp_path)
     _one_line_error(code, out, err, "the report's update runs its contact law only")
     with pytest.raises(SceneError, match="3 spheres"):
-        parse_scene({**copy.deepcopy(RUBBING_TRIO), "integrator": "kahan6"})
+        parse_scene({**copy.deepcopy(SPRUNG_TRIO), "integrator": "kahan6"})
+    # Damped Hertz with Coulomb friction between spheres: the islands', forced or not.
+    rubbing = _json([_scene_file(tmp_path, RUBBING_TRIO), "--integrator", "kahan6"], monkeypatch, capsys, tmp_path)
+    assert rubbing["engine"] == "event"
 
 
 def test_bad_input_is_refused_or_sent_where_it_runs(monkeypatch, capsys, tmp_path):
@@ -201,9 +213,13 @@ def test_bad_input_is_refused_or_sent_where_it_runs(monkeypatch, capsys, tmp_pat
     assert given["engine"] == "event" and "Hertz's force and its dashpot" in given["engine_reason"]
     assert "islands' steps" in given["engine_reason"]
     # A tolerance DEM cannot reach, for a scene only DEM runs: the existing refusal, with its cause.
-    code, out, err = _main(["run", _scene_file(tmp_path, RUBBING_TRIO), "--tol", "1e-9", "--no-record"],
+    code, out, err = _main(["run", _scene_file(tmp_path, SPRUNG_TRIO), "--tol", "1e-9", "--no-record"],
                            monkeypatch, capsys, tmp_path)
     assert code != 0 and "DEM steps per contact" in err and len(err.splitlines()) == 1
+    # The islands reach it where they run the law: damped Hertz with Coulomb friction, measured.
+    rubbing = _json([_scene_file(tmp_path, RUBBING_TRIO), "--tol", "1e-9"], monkeypatch, capsys, tmp_path)
+    assert rubbing["engine"] == "event" and rubbing["error_method"] == "measured"
+    assert rubbing["error_estimate"] <= 1e-9
 
 
 LANDING = math.sqrt(2 * 0.25 / G)  # a ball of r = 0.05 m let go at y = 0.3 m reaches the floor

@@ -18,3 +18,10 @@ from collide.engine.jit import jit_inline
 def dashpot(zeta, mstar, k):
     """The dashpot for the restitution with a spring of stiffness k: 2 zeta sqrt(m* k)."""
     return 2.0 * zeta * math.sqrt(mstar * k)
+
+
+@jit_inline
+def dashpot_slope(zeta, mstar, k, dk):
+    """How `dashpot`'s gamma changes as its spring's stiffness k changes by dk: zeta sqrt(m* / k)
+    dk (Hertz's stiffness grows with the overlap, and its gamma with it, as delta^(1/4))."""
+    return zeta * math.sqrt(mstar / k) * dk

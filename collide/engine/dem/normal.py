@@ -17,6 +17,15 @@ def normal_elastic(hertz, k, estar, rstar, delta):
 
 
 @jit_inline
+def normal_curvature(hertz, estar, rstar, delta):
+    """How `normal_elastic`'s stiffness changes with the overlap, d^2F/d delta^2: none for the
+    linear spring, Hertz's E* sqrt(R* / delta) (its stiffness over 2 delta) at delta > 0."""
+    if hertz:
+        return estar * math.sqrt(rstar / delta)
+    return 0.0
+
+
+@jit_inline
 def normal_energy(hertz, k, estar, rstar, delta):
     """The energy `normal_elastic`'s spring holds at overlap delta: k delta^2 / 2, or Hertz's
     8/15 E* sqrt(R*) delta^2.5."""

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import math
 
-from collide.engine.dem.damping import dashpot
-from collide.engine.dem.normal import normal_elastic, normal_energy
+from collide.engine.dem.damping import dashpot, dashpot_slope
+from collide.engine.dem.normal import normal_curvature, normal_elastic, normal_energy
 from collide.engine.dem.tangential import friction_cap
 from collide.engine.flight import free_state
 from collide.engine.jit import jit_inline
@@ -178,12 +178,22 @@ def dashpots(X, C, CI, nc, vc, fa):
 
 
 @jit_inline
-def press_rate(X, C, CI, c, ac):
-    """The rate of damped contact c's normal force F_n = k delta + gamma delta' (C_FN, from
-    `dashpots`) under the accelerations in column ac: k delta' + gamma delta'', where delta'' is
-    the accelerations' part along the line of centres less, for a pair, the line turning:
-    |v_t|^2 / dist (a wall's normal does not turn). gamma is the linear spring's, constant; the
-    rate aims the event's root search and picks its side at zero, and the value lands it."""
+def press(X, C, CI, c, ac):
+    """Damped contact c's pressing value, whose zero is its normal force's F_n = F_el(delta) +
+    gamma(delta) delta' (C_FN, from `dashpots`), and the value's rate under the accelerations in
+    column ac. delta'' is the accelerations' part along the line of centres less, for a pair,
+    the line turning: |v_t|^2 / dist (a wall's normal does not turn).
+
+    F_n's own rate is k delta' + gamma_delta delta'^2 + gamma delta'' (gamma_delta = d gamma /
+    d delta, `dashpot_slope` of the curvature `normal_curvature`). Hertz's gamma grows as
+    delta^(1/4): at the contact's end F_n comes back to zero with the overlap, as delta^(1/4),
+    and its rate is unbounded (as delta^(-3/4)), which the root search's cubics and `foresee`'s
+    parabolas cannot follow. The value is F_n / gamma(delta) = F_el / gamma + delta' instead, the
+    same zero (gamma > 0 inside), smooth through the end (delta' there, and past it), with the
+    rate (k - F_el gamma_delta / gamma) delta' / gamma + delta''; both in force units through
+    the dashpot at the contact's stiffness C_GAMMA (Hertz's at its bound). The linear spring's
+    gamma is that one: its value is F_n, its rate k delta' + gamma delta''. Returns (value,
+    rate)."""
     i = CI[c, CI_I]
     j = CI[c, CI_J]
     nx, ny, nz = C[c, C_N], C[c, C_N + 1], C[c, C_N + 2]
@@ -196,8 +206,19 @@ def press_rate(X, C, CI, c, ac):
     curve = (ax * nx + ay * ny + az * nz)
     if j >= 0:
         curve -= (rx * rx + ry * ry + rz * rz - rn * rn) * C[c, C_INV]
-    stiffness = normal_elastic(False, C[c, C_K], 0.0, 0.0, C[c, C_DELTA])[1]
-    return stiffness * rn + C[c, C_GAMMA] * curve
+    top = C[c, C_GAMMA]
+    spring, stiffness = elastic(C, c)
+    hertz = C[c, C_ESTAR] > 0.0
+    gamma = dashpot(C[c, C_ZETA], C[c, C_MSTAR], stiffness) if hertz else top
+    if not gamma > 0.0:
+        # Past Hertz's touching (a substep straying out): F_n / gamma's limit there.
+        return top * rn, top * curve
+    lean = 0.0
+    if hertz:
+        bend = normal_curvature(True, C[c, C_ESTAR], C[c, C_RSTAR], C[c, C_DELTA])
+        lean = spring * dashpot_slope(C[c, C_ZETA], C[c, C_MSTAR], stiffness, bend) / gamma
+    ratio = top / gamma
+    return C[c, C_FN] * ratio, ratio * (stiffness - lean) * rn + top * curve
 
 
 @jit_inline

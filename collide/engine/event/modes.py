@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from collide.engine.event.contact import cap, press_rate, response, slip, slip_rate
+from collide.engine.event.contact import cap, press, response, slip, slip_rate
 from collide.engine.event.forces import friction
 from collide.engine.event.substep import settle
 from collide.engine.jit import jit_call, jit_inline
@@ -17,7 +17,6 @@ from collide.engine.layout import (
     BAND,
     C_EPS,
     C_FF,
-    C_FN,
     C_GAMMA,
     C_HELD,
     C_MU,
@@ -108,11 +107,13 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh, 
                 # A damped F_n passes zero as the contact eases out (it pulls at its end) and
                 # may turn back: there the cap mu max(F_n, 0) has its kink, an event as a mode
                 # change is (the slide goes on, with or without a force). F_n on its side at the
-                # step's start (CI_PRESS), as the slip change mu F_n makes over STICK_SCALE.
+                # step's start (CI_PRESS), as the slip change mu F_n makes over STICK_SCALE
+                # (Hertz's through `press`'s weighting, smooth to the contact's end).
                 side = -1.0 if CI[c, CI_PRESS] < 0 else 1.0
                 k = side * C[c, C_MU] * response(X, C, CI, c, spin) * STICK_SCALE / scale
-                E[second, vcol] = C[c, C_FN] * k
-                E[second, rcol] = press_rate(X, C, CI, c, X_T) * k
+                value, rate = press(X, C, CI, c, X_T)
+                E[second, vcol] = value * k
+                E[second, rcol] = rate * k
             else:
                 E[second, vcol] = 1.0
                 E[second, rcol] = 0.0

@@ -101,13 +101,14 @@ def test_contacts_changing_modes_at_once_reach_consistent_modes():
     assert loose > 3 * tight
 
 
-def _oblique_damped(dim: int, floor: str = "") -> dict:
+def _oblique_damped(dim: int, floor: str = "", hertz: bool = False) -> dict:
     """Two spheres meeting obliquely with spin, a dashpot (e = 0.6) and Coulomb friction (mu =
     0.1), or the first alone onto a floor under gravity (`floor` "bounce"): the slip stays far
     from the dead band, so the contact slides throughout, and its F_n passes zero before the
     overlap does (the dashpot pulls at the end). `floor` "settle": it comes down slowly (4.9e-2
     m/s, five times its resting overlap's speed over a period) at e = 0.3 and stays, F_n pulling
-    for a while as it rebounds: F_n passes zero and comes back."""
+    for a while as it rebounds: F_n passes zero and comes back. `hertz`: the same under Hertz
+    (E 1e8 Pa, nu 0.3) with its dashpot."""
     spins = ([30.0, -60.0, 80.0], [-20.0, 15.0, 5.0]) if dim == 3 else (150.0, -20.0)
     bodies = [{"name": "a", "mass": 0.3, "radius": 0.02, "position": [0.0, 0.0, 0.0][:dim],
                "velocity": [1.2, 0.1, -0.2][:dim], "spin": spins[0]},
@@ -123,6 +124,9 @@ def _oblique_damped(dim: int, floor: str = "") -> dict:
         bodies[0].update(mass=0.1, position=[0.0, 0.02 + 1e-5, 0.0][:dim], velocity=[0.5, -0.04696, 0.2][:dim])
         raw.update(duration=0.01)
         raw["contact"]["restitution"] = 0.3
+    if hertz:
+        raw["contact"].pop("k")
+        raw["contact"].update(model="hertz", youngs_modulus=1e8, poisson_ratio=0.3)
     return raw
 
 
@@ -130,7 +134,9 @@ def _oblique_reference(raw: dict, inertia: np.ndarray) -> tuple[np.ndarray, np.n
     """The same law integrated independently: DOP853 (rtol 1e-13) from the touch (in closed form)
     to the overlap's end (if it ends), then in flight to the run's end. A pair: the spring k / 2 (two in
     series), the dashpot 2 zeta sqrt(m* k / 2), levers l = r - delta / 2; a sphere on the floor:
-    k, 2 zeta sqrt(m k), l = r - delta; unclipped. Friction mu max(F_n, 0) against the slip P_t(v_i
+    k, 2 zeta sqrt(m k), l = r - delta; unclipped. Hertz: 4/3 E* sqrt(R*) delta^1.5 and its
+    dashpot 2 zeta sqrt(m* 2 E* sqrt(R* delta)) (LIGGGHTS'), E* = E / (2 (1 - nu^2)) for a pair,
+    E / (1 - nu^2) on the rigid floor. Friction mu max(F_n, 0) against the slip P_t(v_i
     - v_j) + (l_i w_i + l_j w_j) x n, its torques l (n x f). The cap's kink (F_n through zero) is
     an event the integration stops at and restarts from. Returns (velocities, spins, how many
     times F_n crossed zero)."""
@@ -146,9 +152,22 @@ def _oblique_reference(raw: dict, inertia: np.ndarray) -> tuple[np.ndarray, np.n
     mi, mj, ri, rj = a["mass"], b["mass"], a["radius"], b["radius"]
     c = raw["contact"]
     g = full(raw.get("gravity", [0.0, 0.0]))
-    k, mu, reach = (c["k"], c["mu"], ri) if floor else (0.5 * c["k"], c["mu"], ri + rj)
+    hertz = c.get("model") == "hertz"
+    mu, reach = c["mu"], (ri if floor else ri + rj)
     mstar = mi if floor else mi * mj / (mi + mj)
-    gamma = 2.0 * float(damping_ratio(np.array(c["restitution"]), False)) * np.sqrt(mstar * k)
+    zeta = float(damping_ratio(np.array(c["restitution"]), hertz))
+    if hertz:
+        estar = c["youngs_modulus"] / ((1.0 if floor else 2.0) * (1.0 - c["poisson_ratio"] ** 2))
+        root = np.sqrt(ri if floor else ri * rj / (ri + rj))
+
+        def normal(delta, rate):
+            return 4.0 / 3.0 * estar * root * max(delta, 0.0) ** 1.5 + 2.0 * zeta * np.sqrt(
+                mstar * 2.0 * estar * root * np.sqrt(max(delta, 0.0))) * rate
+    else:
+        k = c["k"] if floor else 0.5 * c["k"]
+
+        def normal(delta, rate):
+            return k * delta + 2.0 * zeta * np.sqrt(mstar * k) * rate
     y = np.concatenate([full(b_[key]) for key in ("position", "velocity", "spin") for b_ in (a, b)])
     if floor:  # the touch: y + v t - g t^2 / 2 = r, falling
         touch = (y[7] + np.sqrt(y[7] ** 2 + 2.0 * -g[1] * (y[1] - reach))) / -g[1]
@@ -169,7 +188,7 @@ def _oblique_reference(raw: dict, inertia: np.ndarray) -> tuple[np.ndarray, np.n
             rel = y[6:9] - y[9:12]
             li, lj = ri - 0.5 * delta, rj - 0.5 * delta
         slip = rel - (rel @ n) * n + np.cross(li * y[12:15] + lj * y[15:18], n)
-        return n, delta, k * delta + gamma * (rel @ n), li, lj, slip
+        return n, delta, normal(delta, rel @ n), li, lj, slip
 
     def rhs(_, y, side):
         n, _, fn, li, lj, s = parts(y)
@@ -205,19 +224,24 @@ def _oblique_reference(raw: dict, inertia: np.ndarray) -> tuple[np.ndarray, np.n
     return y[6:12].reshape(2, 3)[:n], y[12:18].reshape(2, 3)[:n], crossings
 
 
+@pytest.mark.parametrize("hertz", [False, True])
 @pytest.mark.parametrize(("dim", "floor", "crossings"), [(2, "", 1), (3, "", 1), (2, "bounce", 1), (3, "bounce", 1),
                                                         (2, "settle", 2), (3, "settle", 2)])
-def test_a_damped_sliding_contacts_normal_force_through_zero_is_an_event_as_dop853_sees_it(dim, floor, crossings):
+def test_a_damped_sliding_contacts_normal_force_through_zero_is_an_event_as_dop853_sees_it(dim, floor, crossings,
+                                                                                           hertz):
     """The cap mu max(F_n, 0) has a kink where a damped F_n passes zero, before the contact ends:
     the slide's second mode value, located as an event, and each step keeps the cap's branch it
     started on (`cap`, CI_PRESS), so a kahan6 substep reaching back past the kink keeps the order.
     A slide whose F_n pulls, and then presses again, goes on without friction between. At tol
     1e-9 the outcome agrees with DOP853's to 1e-8 of the speed (measured, in 3D and 2D: two
     spheres 1.7e-10 and 1.8e-10; a sphere onto a floor under gravity 1.8e-10 and 2.0e-10; settling
-    there, F_n through zero and back, 6.7e-11 and 8.7e-11)."""
+    there, F_n through zero and back, 6.7e-11 and 8.7e-11). Under Hertz with its dashpot, F_n
+    through zero is located on `contact.press`'s value (F_n over gamma(delta)), each contact's
+    start and end stepped over s (measured: two spheres 6.7e-11 and 4.5e-11, onto a floor
+    8.6e-11 and 2.1e-11, settling 1.5e-12 and 1.2e-11)."""
     from collide.scene import parse_scene
 
-    raw = _oblique_damped(dim, floor)
+    raw = _oblique_damped(dim, floor, hertz)
     run = run_scene(parse_scene(raw), record=False)
     r = run.result
     assert r.engine == "event" and run.error_method[0] == "measured"
