@@ -272,7 +272,7 @@ class _Writer(_Drawing):
             "intervals": int(len(self.traj.intervals)), "dim": model.dim, "spin_dim": model.spin_dim,
             "n_bodies": model.n_bodies, "n_walls": model.n_walls, "friction": bool(self.friction),
             "stride": self.stride, "fps": float(self.fps), "contact_frames": self.contact_frames,
-            "frame_every": self.frame_every,
+            "frame_every": self.frame_every, "frame_steps": int(r.frame_steps),
             "force_scale": float(self.force_scale),
         }
         if r.warnings:
