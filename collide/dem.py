@@ -311,7 +311,7 @@ def kernel_args(model: Model, initial: State, b: int, *, dt: np.ndarray, duratio
     frame = steps * dt[b] if asked else max(frame, steps * dt[b])
     fl = np.array([model.dim, model.spin_dim > 0, model.hertz, model.tangential_spring, record, max_steps],
                   dtype=np.int64)
-    fp = np.array([dt[b], t_end, rest[b] if np.isfinite(rest[b]) else 0.0, 0.0, frame,
+    fp = np.array([dt[b], t_end, rest[b] if np.isfinite(rest[b]) else 0.0, frame if steps > 1 else 0.0, frame,
                    SKIN * float(model.radius[b].min()), 0.0, 0.0, *model.period, 1.0 if model.periodic else 0.0,
                    0.0, 0.0])
     pair, wall = kernel_tables(model, b)
