@@ -106,3 +106,31 @@ def test_collide_run_says_the_frames(tmp_path: Path) -> None:
                            timeout=600)
     assert asked.returncode == 0, asked.stderr[-2000:]
     assert json.loads(asked.stdout)["frames"]["every_steps"] == 7
+
+
+def test_tables_hashed_in_place_give_the_canonical_checksum() -> None:
+    """The checksum hashes float tables from their own memory: the same digest as over the bytes
+    `_canonical` makes of them (what files written before hold), empty tables and a table of
+    another float width or order included."""
+    import hashlib
+
+    from collide.recording.spec import _canonical, checksum
+
+    def by_bytes(tables: dict, meta: dict) -> str:
+        digest = hashlib.sha256()
+        for label, table in ((b"tables", tables), (b"meta", meta)):
+            digest.update(label)
+            for key in sorted(table):
+                digest.update(len(key).to_bytes(4, "little") + key.encode())
+                data = _canonical(table[key])
+                digest.update(len(data).to_bytes(8, "little") + data)
+        return digest.hexdigest()
+
+    rng = np.random.default_rng(1)
+    tables = {"knots": rng.random((50, layout.NK)), "records": np.zeros((0, layout.NR)),
+              "intervals": np.asfortranarray(rng.random((7, 4))).astype(np.float32)}
+    meta = {"n": 3, "initial_s": rng.random((4, 3)), "initial_w": np.zeros((4, 0)), "x": [1.0, 2.5], "name": "a"}
+    before = checksum(tables, meta)
+    assert before == by_bytes(tables, meta)
+    tables["knots"][3, 4] = np.nextafter(tables["knots"][3, 4], 2.0)  # one bit
+    assert checksum(tables, meta) != before

@@ -90,7 +90,7 @@ def checksum(tables: dict[str, np.ndarray], meta: dict[str, Any]) -> str:
                 head = _array_head("<f8", value.shape)
                 data = np.ascontiguousarray(value, dtype="<f8")
                 digest.update((len(head) + data.nbytes).to_bytes(8, "little") + head)
-                digest.update(memoryview(data).cast("B"))
+                digest.update(data)
                 continue
             data = _canonical(value)
             digest.update(len(data).to_bytes(8, "little") + data)
