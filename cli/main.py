@@ -154,7 +154,7 @@ def run(
     frame_steps: Annotated[int | None, typer.Option(
         "--frame-steps", min=1, help="A DEM run's recording: a frame each K steps (1: every step; also "
         "COLLIDE_FRAME_STEPS=K).", show_default="the scene's duration in 100-1 500 frames, from 1 000 bodies at "
-        "least 100 steps apart")] = None,
+        "most one each 100 steps")] = None,
 ) -> None:
     """Run one scene, print a summary and write a Rerun recording.
 
@@ -228,8 +228,8 @@ def run(
             f"{wall_text(time.perf_counter() - started)})"
         frames = summary.get("frames")
         if frames and frames["every_steps"] > 1:
-            written += f"; {frames['recorded']} frames, at least {frames['every_steps']} steps apart " \
-                "(--frame-steps for more)"
+            written += f"; {frames['recorded']} frames, one each {frames['every_steps']} steps " \
+                "(--frame-steps K for one each K)"
         if last_write.frame_every > 1:
             summary["warnings"].append(f"the recording's 3D view keeps every k-th frame, k = {last_write.frame_every} "
                                        f"({last_write.fps:.3g} frames per simulated second: "

@@ -100,7 +100,7 @@ def test_collide_run_says_the_frames(tmp_path: Path) -> None:
     done = subprocess.run([sys.executable, "-m", "cli.main", "run", "pour", *args, "--threads", "1", "--out",
                            str(out)], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
-    assert "steps apart (--frame-steps for more)" in done.stdout
+    assert f"frames, one each {dem.FRAME_STEPS} steps (--frame-steps K for one each K)" in done.stdout
     asked = subprocess.run([sys.executable, "-m", "cli.main", "run", "pour", *args, "--threads", "1",
                             "--frame-steps", "7", "--json", "--out", str(out)], capture_output=True, text=True,
                            timeout=600)

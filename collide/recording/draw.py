@@ -112,7 +112,7 @@ class _Drawing:
                  f"| frames | {len(self.view.times)} (3D), {len(self.exact.times)} (plots) |",
                  f"| stride | {self.stride} |", f"| fps (free flight) | {self.fps:g} |",
                  f"| frames kept | {self._frames_kept()} |",
-                 *([f"| DEM frames | {len(self.traj.knot_times)}, at least {r.frame_steps} steps apart |"]
+                 *([f"| DEM frames | {len(self.traj.knot_times)}, one each {r.frame_steps} steps |"]
                    if r.frame_steps > 1 else []),
                  f"| force arrows | {self.force_scale:.4g} m/N |", f"| collide | {collide_version()} |"]
         lines += [f"| warning | {w} |" for w in r.warnings]
