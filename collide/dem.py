@@ -306,8 +306,8 @@ def kernel_args(model: Model, initial: State, b: int, *, dt: np.ndarray, duratio
     frames = int(np.clip(FRAME_BUDGET // max(model.n_bodies, 1), 100, 1500))
     frame = t_end / frames if np.isfinite(t_end) else t_c[b] / 10.0
     steps, asked = frame_steps(model.n_bodies)
-    # Steps are dt long: frames at least k dt apart are at least k steps apart (a coast between
-    # contacts records a frame at each of its ends).
+    # Steps are dt long: frames on a grid k dt apart are about k steps apart; a coast records its
+    # two ends only a grid spacing after the last frame (P_COAST_GAP; every coast when k is 1).
     frame = steps * dt[b] if asked else max(frame, steps * dt[b])
     fl = np.array([model.dim, model.spin_dim > 0, model.hertz, model.tangential_spring, record, max_steps],
                   dtype=np.int64)
