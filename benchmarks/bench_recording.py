@@ -12,7 +12,13 @@ Prints figures (medians of repeats); asserts nothing. Two parts:
    through the batch stepper in chunks, against a loop of single runs timed on `--single-runs`
    of the same scenes and extrapolated.
 
+3. `--many`: scenes of many bodies (the pile; the pour cut to 10 000 spheres for 0.03 s), each run
+   in fresh processes, alternately with and without its recording: the run's CPU and wall, the
+   recording's write CPU and wall, frames, size, and the process's peak RSS either way (what
+   `collide.dem.FRAME_STEPS` is chosen from: writing at most the run's own cost).
+
 Run: python benchmarks/bench_recording.py [--repeats 3] [--dt 1.3e-7] [--sweep-runs 10000]
+     python benchmarks/bench_recording.py --many [--repeats 3] [--threads 1]
 """
 
 from __future__ import annotations
@@ -156,7 +162,69 @@ def bench_sweep(runs: int, single_runs: int, chunk: int, folder: Path) -> None:
     print(f"  per-run cost, single / batch = {single_per_run / batch_per_run:.1f}x")
 
 
+MANY = {"pile": [], "pour-10k": ["fill.0.count=10000", "duration=0.03"]}
+
+
+def _child(name: str, record: bool, out: Path) -> dict:
+    """One fresh process: load, run (recorded or not), write; its figures as a dict."""
+    import resource
+
+    def cpu() -> float:
+        usage = resource.getrusage(resource.RUSAGE_SELF)
+        return usage.ru_utime + usage.ru_stime
+
+    scene = load_scene(name.split("-")[0], MANY[name])
+    wall, used = time.perf_counter(), cpu()
+    run = run_scene(scene, record=record)
+    figures = {"run_wall": time.perf_counter() - wall, "run_cpu": cpu() - used, "steps": int(run.result.steps[0]),
+               "load": os.getloadavg()[0]}
+    if record:
+        wall, used = time.perf_counter(), cpu()
+        rec.write_recording(run, out)
+        figures.update(write_wall=time.perf_counter() - wall, write_cpu=cpu() - used,
+                       frames=len(run.result.trajectory.knot_times), every=run.result.frame_steps,
+                       mb=out.stat().st_size / 1e6)
+    figures["peak_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return figures
+
+
+def bench_many(repeats: int, threads: int, folder: Path) -> None:
+    import json
+    import subprocess
+    import sys
+
+    env = dict(os.environ, COLLIDE_THREADS=str(threads))
+    for name in MANY:
+        rows: dict[bool, list[dict]] = {False: [], True: []}
+        for _ in range(repeats):
+            for record in (False, True):
+                done = subprocess.run([sys.executable, __file__, "--child", name, str(int(record)),
+                                       str(folder / "many.rrd")], capture_output=True, text=True, env=env, check=True)
+                rows[record].append(json.loads(done.stdout.splitlines()[-1]))
+        bare, rec_ = rows[False], rows[True]
+
+        def med(rows: list[dict], key: str) -> float:
+            return _median([r[key] for r in rows])
+
+        loads = [r["load"] for r in bare + rec_]
+        print(f"{name}: {rec_[0]['steps']} steps, {threads} thread(s), medians of {repeats} (load "
+              f"{min(loads):.1f}-{max(loads):.1f})")
+        print(f"  run:    {med(rec_, 'run_cpu'):.2f} s CPU, {med(rec_, 'run_wall'):.2f} s wall (recorded); "
+              f"{med(bare, 'run_cpu'):.2f} s CPU unrecorded")
+        print(f"  write:  {med(rec_, 'write_cpu'):.2f} s CPU, {med(rec_, 'write_wall'):.2f} s wall, "
+              f"{rec_[0]['frames']} frames at least {rec_[0]['every']} steps apart, {rec_[0]['mb']:.1f} MB")
+        print(f"  write / run (CPU) = {med(rec_, 'write_cpu') / med(rec_, 'run_cpu'):.2f}  (target <= 1)")
+        print(f"  peak RSS: {med(bare, 'peak_mb'):.0f} MB unrecorded, {med(rec_, 'peak_mb'):.0f} MB recorded")
+
+
 def main() -> None:
+    import sys
+
+    if len(sys.argv) > 1 and sys.argv[1] == "--child":
+        import json
+
+        print(json.dumps(_child(sys.argv[2], sys.argv[3] == "1", Path(sys.argv[4]))))
+        return
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeats", type=int, default=3)
@@ -168,9 +236,14 @@ def main() -> None:
     parser.add_argument("--chunk", type=int, default=1000)
     parser.add_argument("--skip-recording", action="store_true")
     parser.add_argument("--skip-sweep", action="store_true")
+    parser.add_argument("--many", action="store_true", help="only part 3: recordings of many bodies")
+    parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
+        if args.many:
+            bench_many(args.repeats, args.threads, folder)
+            return
         if not args.skip_recording:
             bench_recording(args.dt, args.integrator, args.repeats, args.log_rows, folder)
         if not args.skip_sweep:

@@ -151,6 +151,10 @@ def run(
     threads: Annotated[int | None, typer.Option(
         "--threads", min=1, help="Threads a DEM run steps on, the same result whatever the number (also "
         "COLLIDE_THREADS=N).", show_default="every core from 4 000 bodies, 1 below")] = None,
+    frame_steps: Annotated[int | None, typer.Option(
+        "--frame-steps", min=1, help="A DEM run's recording: a frame each K steps (1: every step; also "
+        "COLLIDE_FRAME_STEPS=K).", show_default="the scene's duration in 100-1 500 frames, from 1 000 bodies at "
+        "most one each 100 steps")] = None,
 ) -> None:
     """Run one scene, print a summary and write a Rerun recording.
 
@@ -173,6 +177,8 @@ def run(
     step = parse_dt(dt)
     if threads is not None:
         os.environ["COLLIDE_THREADS"] = str(threads)  # read by collide.dem.run_threads
+    if frame_steps is not None:
+        os.environ["COLLIDE_FRAME_STEPS"] = str(frame_steps)  # read by collide.dem.frame_steps
     recording = None
     if not no_record:
         from collide.batch import safe_name
@@ -220,6 +226,10 @@ def run(
         write_recording(result, recording, stride=stride)
         written = f"{recording} ({recording.stat().st_size / 1e6:.3g} MB, written in " \
             f"{wall_text(time.perf_counter() - started)})"
+        frames = summary.get("frames")
+        if frames and frames["every_steps"] > 1:
+            written += f"; {frames['recorded']} frames, one each {frames['every_steps']} steps " \
+                "(--frame-steps K for one each K)"
         if last_write.frame_every > 1:
             summary["warnings"].append(f"the recording's 3D view keeps every k-th frame, k = {last_write.frame_every} "
                                        f"({last_write.fps:.3g} frames per simulated second: "

@@ -49,6 +49,13 @@ HERTZ_TIME = 2.868  # t_c = 2.868 (m*^2 / (R* E*^2 v))^(1/5): Johnson, Contact M
 ERROR_CONSTANT, ERROR_ORDER = 1.2, 1
 MIN_STEPS_PER_CONTACT, MAX_STEPS_PER_CONTACT = 50, 20_000
 FRAME_BUDGET = 2_000_000  # body-frames a recording keeps at most
+# From FRAME_STEPS_FROM bodies on, where a body's share of both costs dominates, a frame is taken
+# at most once each FRAME_STEPS steps, so that writing the recording costs at most the run: a
+# body's frame costs about 50 times its step to write (CPU, a 10 000-sphere pour whose spheres
+# mostly fly: the cheapest steps; benchmarks/bench_recording.py --many). `collide run
+# --frame-steps K` (COLLIDE_FRAME_STEPS) asks for a frame each K steps.
+FRAME_STEPS, FRAME_STEPS_FROM = 100, 1000
+FRAME_STEPS_VARIABLE = "COLLIDE_FRAME_STEPS"
 SKIN = NEIGHBOUR_SKIN  # neighbour-list skin, in smallest radii (a periodic box's shortest period needs it)
 
 
@@ -241,6 +248,7 @@ def simulate_dem(model: Model, initial: State, *, dt: np.ndarray, duration: np.n
                        windows=np.zeros(b_count, np.int64))
     result.dissipation = figures[:, [dk.G_DAMP, dk.G_FRIC, dk.G_ROLL]].copy()
     result.threads = threads
+    result.frame_steps = frame_steps(model.n_bodies)[0] if record else 0
     return result
 
 
@@ -297,13 +305,26 @@ def kernel_args(model: Model, initial: State, b: int, *, dt: np.ndarray, duratio
     t_end = duration[b] if np.isfinite(duration[b]) else np.inf
     frames = int(np.clip(FRAME_BUDGET // max(model.n_bodies, 1), 100, 1500))
     frame = t_end / frames if np.isfinite(t_end) else t_c[b] / 10.0
+    steps, asked = frame_steps(model.n_bodies)
+    # Steps are dt long: frames on a grid k dt apart are about k steps apart; a coast records its
+    # two ends only a grid spacing after the last frame (P_COAST_GAP; every coast when k is 1).
+    frame = steps * dt[b] if asked else max(frame, steps * dt[b])
     fl = np.array([model.dim, model.spin_dim > 0, model.hertz, model.tangential_spring, record, max_steps],
                   dtype=np.int64)
-    fp = np.array([dt[b], t_end, rest[b] if np.isfinite(rest[b]) else 0.0, 0.0, frame,
+    fp = np.array([dt[b], t_end, rest[b] if np.isfinite(rest[b]) else 0.0, frame if steps > 1 else 0.0, frame,
                    SKIN * float(model.radius[b].min()), 0.0, 0.0, *model.period, 1.0 if model.periodic else 0.0,
                    0.0, 0.0])
     pair, wall = kernel_tables(model, b)
     return (X, V, W, Q, _bodies(model, b), pair, wall, WP, grav, fl, fp), t_end
+
+
+def frame_steps(n_bodies: int) -> tuple[int, bool]:
+    """The least steps between a recorded run's frames, and whether the user asked for it
+    (COLLIDE_FRAME_STEPS: then it is the frames' spacing, not only their least)."""
+    asked = os.environ.get(FRAME_STEPS_VARIABLE, "")
+    if asked.isdigit() and int(asked) > 0:
+        return int(asked), True
+    return (FRAME_STEPS if n_bodies >= FRAME_STEPS_FROM else 1), False
 
 
 def _tail_knots(KN: np.ndarray, t: float, X: np.ndarray, V: np.ndarray, grav: np.ndarray) -> np.ndarray:

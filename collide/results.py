@@ -51,6 +51,7 @@ class RunResult:
     attempts: np.ndarray | None = None  # (B,) whole steps tried from a step's start (events cost more than one)
     free_since: np.ndarray | None = None  # (B, N) when each body's last contact ended (0: none; the end: open)
     threads: int = 1  # the threads one DEM run stepped on (collide.dem.run_threads)
+    frame_steps: int = 0  # a recorded DEM run: the least steps between its frames (collide.dem.frame_steps)
     engine: str = ""  # which engine ran it ("event", "dem", "seed"; collide.alone.engine_choice)
     engine_reason: str = ""  # and why
 
@@ -81,4 +82,4 @@ class RunResult:
                          pick(self.jumps), self.wall_time_s, log, trajectories, list(self.warnings),
                          pick(self.dt_min), pick(self.windows), pick(self.dissipation), pick(self.closed_steps),
                          pick(self.attempts), pick(self.free_since), engine=self.engine,
-                         engine_reason=self.engine_reason)
+                         engine_reason=self.engine_reason, frame_steps=self.frame_steps)

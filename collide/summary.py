@@ -90,6 +90,10 @@ def run_summary(run: SceneRun, member: int = 0, bodies: bool = True) -> dict[str
         # The kernel's friction account includes what the tangential springs still hold.
         summary["dissipated"] = {"damping": damping, "friction": friction - stored, "rolling": rolling,
                                  "tangential_spring_energy": stored}
+    traj = r.trajectories[member] if r.trajectories is not None else None
+    if r.frame_steps and traj is not None:
+        # A recorded DEM run: its frames, taken at most once each `every_steps` steps (collide.dem).
+        summary["frames"] = {"recorded": int(len(traj.knot_times)), "every_steps": int(r.frame_steps)}
     if scene.rest is not None:
         summary["packing_fraction"] = _finite_or_none(dg.packing_fraction(r.model, r.final.s[member], member))
     _refuse_non_finite({k: v for k, v in summary.items() if k != "bodies" or not finite}, scene.name)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -75,9 +76,15 @@ class Trajectory:
         return self._rows[1].work
 
     @cached_property
+    def index(self) -> Knots:
+        """The knots sorted by body and time, once (a sort of every knot: a recording of many
+        bodies asks for it several times)."""
+        return Knots(self.model, self)
+
+    @cached_property
     def free(self) -> np.ndarray:
         """(S, 1): the segment that ends at row k was free flight for every body."""
-        return ~Knots(self.model, self).stepped(self.knot_times)[:, None]
+        return ~self.index.stepped(self.knot_times)[:, None]
 
     def contacts_touched(self) -> np.ndarray:
         """(C, 2) every contact that was ever engaged, in the order they began: (i, j) with
@@ -138,11 +145,14 @@ def settled(traj: Trajectory, times: np.ndarray) -> np.ndarray:
     its spin and dissipated work straight across the step, and the energy balance there was off
     by up to 6e-4 (a 27-sphere pile at tol 1e-4, 1e-5 at exact states; two balls sliding on a
     floor, 1.3e-5 against 2e-15)."""
+    index = traj.index
+    # Each body's steps: a knot followed by one of the same body's, with no free flight between.
+    last = np.zeros(len(index.t), bool)
+    last[index.end[index.end > 0] - 1] = True
+    step = np.flatnonzero(~last & index.steps)
     inside = np.zeros(len(times) + 1, np.int64)
-    for knots in body_knots(traj):
-        stepped = knots[:-1, layout.K_FREE] == 0.0
-        np.add.at(inside, np.searchsorted(times, knots[:-1, layout.K_T][stepped], side="right"), 1)
-        np.add.at(inside, np.searchsorted(times, knots[1:, layout.K_T][stepped], side="left"), -1)
+    np.add.at(inside, np.searchsorted(times, index.t[step], side="right"), 1)
+    np.add.at(inside, np.searchsorted(times, index.t[step + 1], side="left"), -1)
     return np.cumsum(inside[:-1]) == 0
 
 
@@ -154,7 +164,7 @@ def sample(model: Model, traj: Trajectory, times: np.ndarray, member: int = 0) -
     velocities and accelerations (a high-order step takes about ten steps a contact: a cubic would
     make the energy wobble by per cent between them); spins and dissipated work are linear in
     a step, orientation turns at the spin."""
-    return Knots(model, traj).sample(times, member)
+    return traj.index.with_model(model).sample(times, member)
 
 
 CHUNK = 1 << 14  # (time, body) pairs evaluated at once: about 6 MB of gathered knot rows
@@ -179,6 +189,15 @@ class Knots:
         self.start = np.searchsorted(body, bodies, side="left")
         self.end = np.searchsorted(body, bodies, side="right")
         self.steps = knots[self.order, layout.K_FREE] == 0.0  # the segment after the knot is a step
+
+    def with_model(self, model: Model) -> Knots:
+        """The same sorted knots read with another model of the same bodies (a batch's, whose
+        member's gravity the trajectory's own model holds as its only one): no second sort."""
+        if model is self.model:
+            return self
+        other = copy.copy(self)
+        other.model = model
+        return other
 
     def stepped(self, times: np.ndarray) -> np.ndarray:
         """(S,) for sorted distinct times (the knot times): the segment that ends at times[k]

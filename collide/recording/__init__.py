@@ -22,10 +22,10 @@ contact step (or every `stride`-th; each contact's first and last step always) a
 step end falls inside another's step, whose bodies are interpolated there: residuals are drawn
 only where every body's state is exact (`diagnostics.settled`). The 3D view adds at least
 `contact_frames` frames across each contact, interpolated between steps, so a contact taken in
-a few long steps still animates smoothly. Each entity is written with one `send_columns` call;
-static data with one `log`. Entities a scene does not need are absent: no friction without
-friction, no spin when nothing spins, no walls without walls, no angular momentum in 1D, no
-contact entity for a contact that never happened.
+a few long steps still animates smoothly. Each entity is written with one `send_columns` call
+(the trajectory's tables 65 536 rows a call); static data with one `log`. Entities a scene
+does not need are absent: no friction without friction, no spin when nothing spins, no walls
+without walls, no angular momentum in 1D, no contact entity for a contact that never happened.
 
 Entity paths (`<b>` a body name, `<c>` a contact such as `ball1-ball2` or `ball1-wall0`):
 

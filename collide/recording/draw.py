@@ -28,10 +28,17 @@ def _axis_with_zero(values: np.ndarray) -> rrb.ScalarAxis:
 class _Drawing:
     """The entities a person looks at, written by `writer._Writer` (which this is a part of)."""
 
+    _swept: tuple[np.ndarray, float] | None = None  # `_extent`, once (a pass over every knot)
+
     # -- layout ---------------------------------------------------------------------------
 
     def _extent(self) -> tuple[np.ndarray, float]:
         """Centre and size of the region the bodies sweep (3D), for the camera and the walls."""
+        if self._swept is None:
+            self._swept = self._sweep()
+        return self._swept
+
+    def _sweep(self) -> tuple[np.ndarray, float]:
         knots = self.traj.knots
         s = _pad3(knots[:, layout.K_S:layout.K_S + self.model.dim])
         r = self.model.radius[0][knots[:, layout.K_BODY].astype(int)][:, None]
@@ -105,6 +112,8 @@ class _Drawing:
                  f"| frames | {len(self.view.times)} (3D), {len(self.exact.times)} (plots) |",
                  f"| stride | {self.stride} |", f"| fps (free flight) | {self.fps:g} |",
                  f"| frames kept | {self._frames_kept()} |",
+                 *([f"| DEM frames | {len(self.traj.knot_times)}, one each {r.frame_steps} steps |"]
+                   if r.frame_steps > 1 else []),
                  f"| force arrows | {self.force_scale:.4g} m/N |", f"| collide | {collide_version()} |"]
         lines += [f"| warning | {w} |" for w in r.warnings]
         self._static("/settings", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))

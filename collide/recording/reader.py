@@ -238,7 +238,8 @@ def _rebuild(path: Path, tables: dict[str, np.ndarray], meta: dict[str, Any]) ->
                        warnings=[str(w) for w in (meta.get("warnings") or [])],
                        dissipation=None if meta.get("dissipation_damping") is None else
                        np.array([[float(meta[f"dissipation_{part}"]) for part in DISSIPATION_PARTS]]),
-                       engine=str(meta.get("engine") or ""), engine_reason=str(meta.get("engine_reason") or ""))
+                       engine=str(meta.get("engine") or ""), engine_reason=str(meta.get("engine_reason") or ""),
+                       frame_steps=int(meta.get("frame_steps") or 0))
     request = meta.get("dt_request", "none")
     dt_request: float | str | None = None if request == "none" else \
         ("auto" if request == "auto" else float(request))

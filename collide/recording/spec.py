@@ -44,6 +44,10 @@ _TABLES = (("knots", "/collide/knots", int(layout.NK)), ("records", "/collide/co
            ("intervals", "/collide/contact_intervals", 4))
 
 
+def _array_head(kind: str, shape: tuple[int, ...]) -> bytes:
+    return b"a" + kind.encode() + b"(" + ",".join(str(n) for n in shape).encode() + b")"
+
+
 def _canonical(value: Any) -> bytes:
     """Bytes of a meta value or table that do not depend on how Arrow handed it back."""
     if value is None:
@@ -58,8 +62,7 @@ def _canonical(value: Any) -> bytes:
         return b"s" + value.encode("utf-8", "surrogatepass")
     if isinstance(value, np.ndarray) and value.dtype.kind in "fiub":
         kind = {"f": "<f8", "i": "<i8", "u": "<i8", "b": "u1"}[value.dtype.kind]
-        shape = ",".join(str(n) for n in value.shape).encode()
-        return b"a" + kind.encode() + b"(" + shape + b")" + np.ascontiguousarray(value, dtype=kind).tobytes()
+        return _array_head(kind, value.shape) + np.ascontiguousarray(value, dtype=kind).tobytes()
     if isinstance(value, (list, tuple, np.ndarray)):
         items = list(value)
         if items and all(isinstance(v, (float, np.floating)) for v in items):
@@ -81,6 +84,14 @@ def checksum(tables: dict[str, np.ndarray], meta: dict[str, Any]) -> str:
             if key == "checksum" or table[key] is None:  # AnyValues stores no None: absent
                 continue
             digest.update(len(key).to_bytes(4, "little") + key.encode())
-            data = _canonical(table[key])
+            value = table[key]
+            if isinstance(value, np.ndarray) and value.dtype.kind == "f":
+                # Hashed from the table's own memory: the bytes `_canonical` makes, not a copy of them.
+                head = _array_head("<f8", value.shape)
+                data = np.ascontiguousarray(value, dtype="<f8")
+                digest.update((len(head) + data.nbytes).to_bytes(8, "little") + head)
+                digest.update(data)
+                continue
+            data = _canonical(value)
             digest.update(len(data).to_bytes(8, "little") + data)
     return digest.hexdigest()

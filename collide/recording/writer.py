@@ -1,8 +1,9 @@
 """Writing a run's recording: `write_recording` (docs/design.md section 5).
 
-A `_Writer` computes the run's frames and sends every entity with one `send_columns` call (what
-a person looks at: `draw._Drawing`; what a program reads back, the trajectory's tables and the
-settings: here), then seals the file (`integrity`); the file takes its name once checked whole.
+A `_Writer` computes the run's frames and sends every entity with one `send_columns` call, the
+trajectory's tables in calls of TABLE_ROWS rows (what a person looks at: `draw._Drawing`; what a
+program reads back, the trajectory's tables and the settings: here), then seals the file
+(`integrity`); the file takes its name once checked whole.
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ MAX_FREE_FRAMES = 100_000  # frames of free flight in one recording, at most (fp
 # (/collide/knots ...) is stored whole whatever this is.
 MAX_BODY_FRAMES = 10_000_000
 CONTACT_FRAMES = 100  # least frames across one contact in the 3D view
+TABLE_ROWS = 1 << 16  # rows of a trajectory table sent in one call (/collide/knots ...)
 SEAL_ATTEMPTS = 4  # writes of a recording whose seal's placeholder LZ4 did not keep verbatim
 
 
@@ -245,18 +247,22 @@ class _Writer(_Drawing):
 
     def _write_steps(self) -> None:
         """The trajectory exactly, float64, so that `read_recording` restores the run: knots,
-        contact records and contact intervals, each with its row number (order on reading)."""
+        contact records and contact intervals, each with its row number (order on reading), sent
+        TABLE_ROWS rows at a time (one call for a run of many bodies' frames held Rerun's copies
+        of them all at once while it encoded them)."""
         traj = self.traj
         for entity, table, time_col in (("/collide/knots", traj.knots, layout.K_T),
                                          ("/collide/contact_records", traj.records, layout.R_T),
                                          ("/collide/contact_intervals", traj.intervals, layout.V_START)):
             rows, width = table.shape
-            if rows == 0:
-                continue
-            cols = [_any_column("row", np.arange(rows, dtype=np.int64), 1, rows),
-                    _any_column("values", np.ascontiguousarray(table, dtype=np.float64).reshape(-1), width, rows)]
-            times = np.nan_to_num(table[:, time_col], nan=0.0)
-            self._send(entity, cols, rr.TimeColumn(TIMELINE, duration=times))
+            for start in range(0, rows, TABLE_ROWS):
+                part = table[start:start + TABLE_ROWS]
+                count = len(part)
+                cols = [_any_column("row", np.arange(start, start + count, dtype=np.int64), 1, count),
+                        _any_column("values", np.ascontiguousarray(part, dtype=np.float64).reshape(-1), width,
+                                    count)]
+                times = np.nan_to_num(part[:, time_col], nan=0.0)
+                self._send(entity, cols, rr.TimeColumn(TIMELINE, duration=times))
 
     def _write_meta(self) -> None:
         r, run, model = self.result, self.run, self.model
@@ -272,7 +278,7 @@ class _Writer(_Drawing):
             "intervals": int(len(self.traj.intervals)), "dim": model.dim, "spin_dim": model.spin_dim,
             "n_bodies": model.n_bodies, "n_walls": model.n_walls, "friction": bool(self.friction),
             "stride": self.stride, "fps": float(self.fps), "contact_frames": self.contact_frames,
-            "frame_every": self.frame_every,
+            "frame_every": self.frame_every, "frame_steps": int(r.frame_steps),
             "force_scale": float(self.force_scale),
         }
         if r.warnings:

@@ -29,7 +29,9 @@ NPT = 9
 # Flags and figures.
 F_DIM, F_SPIN, F_HERTZ, F_TSPRING, F_RECORD, F_MAXSTEPS = range(6)
 NFLAG = 6
-P_DT, P_TEND, P_REST, P_TAIL, P_FRAME, P_SKIN, P_NOW, P_NOW_STEPS = range(8)
+P_DT, P_TEND, P_REST, P_COAST_GAP, P_FRAME, P_SKIN, P_NOW, P_NOW_STEPS = range(8)
+# P_COAST_GAP: a coast (free flight where nothing touches) records frames at its ends only when it
+# ends this long after the last frame (0: always; many bodies: the frames' spacing).
 # P_NOW, P_NOW_STEPS are written by the run: time reached and steps, read by a progress display.
 # P_BOX..: the periodic box as collide.engine.broad's `box` (the periods, 0 where an axis does
 # not wrap, then 1.0 if any does).

@@ -35,6 +35,7 @@ from collide.engine.dem.layout import (
     NR,
     NSTAT,
     P_BOX,
+    P_COAST_GAP,
     P_DT,
     P_FRAME,
     P_NOW,
@@ -137,7 +138,9 @@ def flight(X, V, W, Qo, F, Bd, WK, WP, grav, fl, fp, t, ever, PI, PJ, WL, ST, KN
         tau = t_end - t
     over = False
     if tau > 2.0 * dt:
-        KN, nkn = fly(X, V, W, Qo, F, Bd, WK, grav, tau, t, n, spin, planar, record, KN, nkn)
+        # (Many bodies: two frames at each of many short coasts would outnumber the frames' rule.)
+        framed = record != 0 and (nkn == 0 or t + tau - KN[nkn - 1, 0] >= fp[P_COAST_GAP])
+        KN, nkn = fly(X, V, W, Qo, F, Bd, WK, grav, tau, t, n, spin, planar, framed, KN, nkn)
         t += tau
         ST[S_JUMPS] += 1
         over = _at_end(t, t_end) or (not math.isfinite(t_end) and ever and not may_meet(X, V, Bd, WP, grav, n, box))
