@@ -239,3 +239,17 @@ def test_the_laws_have_one_kernel_type_for_any_count_of_walls():
         assert rows.shape[0] == len(walls) and rows.flags.c_contiguous and not rows.flags.writeable
         types.add(numba.typeof(rows))
     assert len(types) == 1
+
+
+def test_a_tangential_spring_between_two_spheres_runs_in_the_event_engine(monkeypatch, capsys, tmp_path):
+    """Two spheres and no walls meeting off-centre with friction and a tangential spring: the
+    event engine, the JSON saying how; a third sphere makes an island, where the spring is DEM's,
+    with that cause."""
+    spring = {**PAIR["contact"], "mu": 0.3, "tangential": "spring", "tangential_stiffness_ratio": 0.8}
+    pair = {**copy.deepcopy(PAIR), "contact": spring}
+    pair["body"][1]["position"], pair["duration"] = [0.3, 0.05], 0.2
+    rubbing = _json([_scene_file(tmp_path, pair)], monkeypatch, capsys, tmp_path)
+    assert rubbing["engine"] == "event" and "two spheres and no walls" in rubbing["engine_reason"]
+    assert "stick and slip located" in rubbing["engine_reason"]
+    trio = _json([_scene_file(tmp_path, {**TRIO, "contact": spring})], monkeypatch, capsys, tmp_path)
+    assert trio["engine"] == "dem" and "tangential spring between spheres inside an island" in trio["engine_reason"]

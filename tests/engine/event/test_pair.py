@@ -19,6 +19,7 @@ from collide.engine.event import impact as im
 from collide.engine.layout import R_MODE
 from collide.run import run_scene
 from collide.scene import parse_scene
+from tests.engine.event.test_oblique import switched
 from tests.test_event_laws import reference_contact
 
 
@@ -89,7 +90,7 @@ def test_status_codes_of_the_event_kernels_are_distinct():
 
     codes = [layout.OK, layout.NONFINITE, layout.ENERGY, layout.STALL, layout.MAXSTEPS, layout.SINGULAR,
              alone.ALONE_WALLS, alone.ALONE_FAILED, alone.ALONE_HELD, alone.ALONE_PLANE, alone.ALONE_CHATTER,
-             pair.PAIR_OBLIQUE, pair.PAIR_FAILED]
+             pair.PAIR_OBLIQUE, pair.PAIR_FAILED, pair.PAIR_HELD, pair.PAIR_CHATTER, pair.PAIR_PLANE]
     assert len(set(codes)) == len(codes)
 
 
@@ -209,14 +210,7 @@ def rub_reference(case: dict) -> np.ndarray:
             return np.concatenate([y[2:4], y[7:9], y[[4, 9]] * r]) / SPEED
         n, tt, delta, u, fn, kt, gt, cap, lever, slip, f = parts(y, mode, s)
         if len(sol.t_events[0]):
-            if mode == "slip":
-                y[10], mode = -s * cap / kt, "stick"
-            else:
-                s = math.copysign(1.0, f)
-                y[10] = -s * cap / kt
-                held = s * cap - gt * slip  # the spring held at the cap, its dashpot's share dropped
-                mode = "stick" if gt > 0.0 and s * slip >= 0.0 and abs(held) <= cap else "slip"
-                s = s if mode == "stick" or s * slip < 0.0 else math.copysign(1.0, held)
+            mode, s, y[10] = switched(mode, s, slip, f, cap, kt, gt)
         t += 1e-15 * max(t, 1e-9)  # past the located switch
     raise AssertionError("the reference contact did not end")
 
@@ -266,3 +260,17 @@ def test_random_oblique_pairs_agree_across_tolerances_and_their_error_holds():
         (coarse, estimate, _), (fine, _, _) = rub_run(case, 1e-6), rub_run(case, 1e-9)
         diff = np.abs(coarse - fine).max()
         assert diff <= 1e-6 and diff <= 10.0 * estimate, (seed, diff, estimate)
+
+
+def test_a_pair_out_of_one_plane_goes_to_dem_with_its_cause():
+    """In 3D a sphere spinning about the line it slides along makes the slip leave the plane of
+    the relative motion, which the event engine does not take: chosen by itself the run goes to
+    DEM and says why."""
+    raw = rub_scene({**SLIDING, "model": "hertz", "e": 0.8}, 1e-3)
+    raw["dim"] = 3
+    for body in raw["body"]:
+        body["position"], body["velocity"] = body["position"] + [0.0], body["velocity"] + [0.0]
+        body["spin"] = [0.0, 0.0, 0.0]
+    raw["body"][1]["spin"] = [0.0, 50.0, 0.0]  # about y: across the plane z = 0 of the motion
+    run = run_scene(parse_scene(raw), record=False)
+    assert run.result.engine == "dem" and "not along one line" in run.result.engine_reason
