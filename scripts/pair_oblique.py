@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import re
 import sys
 import time
 from pathlib import Path
@@ -41,7 +42,7 @@ def main() -> int:
         try:
             (coarse, estimate, res6), (fine, _, res9) = rub_run(case, 1e-6), rub_run(case, 1e-9)
         except (RunError, AssertionError) as exc:
-            handed[str(exc).split(";")[0][:110]] += 1
+            handed[re.sub(r"at t = \S+ s ", "", str(exc).split(";")[0])] += 1
             continue
         counted += 1
         diff = float(np.abs(coarse - fine).max())

@@ -17,6 +17,7 @@ from collide import chung_ooi as co
 from collide.dem import damping_ratio
 from collide.engine.event import impact as im
 from collide.engine.layout import R_MODE
+from collide.errors import RunError
 from collide.run import run_scene
 from collide.scene import parse_scene
 from tests.engine.event.test_oblique import switched
@@ -203,7 +204,8 @@ def rub_reference(case: dict) -> np.ndarray:
     s = -math.copysign(1.0, slip)
     # Round-off of each part (an atol far below it made the parts that start at zero, a spin or
     # the stretch, take steps of round-off's length)
-    atol = 1e-16 * np.array([r[0], r[0], SPEED, SPEED, SPEED / r[0], r[0], r[0], SPEED, SPEED, SPEED / r[1], 1e-3 * r[0]])
+    atol = 1e-16 * np.array([r[0], r[0], SPEED, SPEED, SPEED / r[0], r[0], r[0], SPEED, SPEED, SPEED / r[1],
+                             1e-3 * r[0]])
     t = 0.0
     for _ in range(2000):
         sol = solve_ivp(rhs, (t, t + 1.0), y, method="DOP853", rtol=1e-13, atol=atol, args=(mode, s),
@@ -228,9 +230,10 @@ def rub_run(case: dict, tol: float):
 
 
 def _modes(case: dict) -> set:
-    """The friction modes of the case's recorded contact (2 stick, 1 slip)."""
+    """The friction modes of the case's recorded contact (2 stick, 1 slip; the record at touching
+    has none, 0)."""
     run = run_scene(parse_scene(copy.deepcopy(rub_scene(case, 1e-6))), record=True)
-    return {int(m) for m in run.result.trajectories[0].records[:, R_MODE]}
+    return {int(m) for m in run.result.trajectories[0].records[1:, R_MODE]}
 
 
 STICKING = {**rub_case(1), "theta": 0.15, "mu": 0.8, "e": 1.0, "model": "hertz", "spin": [0.0, 0.0]}
@@ -256,13 +259,22 @@ def test_the_sticking_and_sliding_cases_stick_and_slide():
 
 
 def test_random_oblique_pairs_agree_across_tolerances_and_their_error_holds():
-    """Twelve random cases (benchmarks/pair_oblique.py runs 120): outcomes at tol 1e-6 and 1e-9
-    within 1e-6, the 1e-6 run's difference from the 1e-9 run at most 10 times its estimate."""
+    """Twelve random cases (scripts/pair_oblique.py runs 120): outcomes at tol 1e-6 and 1e-9
+    within 1e-6, the 1e-6 run's difference from the 1e-9 run at most 10 times its estimate. A
+    case whose stick and slip alternate without end (a sliding mode of the law, as for a sphere on
+    a wall: tests/engine/event/test_oblique.py) is handed on with that cause, never answered."""
+    counted = 0
     for seed in range(100, 112):
         case = rub_case(seed)
-        (coarse, estimate, _), (fine, _, _) = rub_run(case, 1e-6), rub_run(case, 1e-9)
+        try:
+            (coarse, estimate, _), (fine, _, _) = rub_run(case, 1e-6), rub_run(case, 1e-9)
+        except RunError as exc:
+            assert "alternates between stick and slip" in str(exc), str(exc)
+            continue
+        counted += 1
         diff = np.abs(coarse - fine).max()
         assert diff <= 1e-6 and diff <= 10.0 * estimate, (seed, diff, estimate)
+    assert counted >= 10
 
 
 def test_a_pair_out_of_one_plane_goes_to_dem_with_its_cause():
