@@ -5,9 +5,9 @@ The event engine locates every contact and steps it at the composition's order; 
 report's linear spring it runs every scene. Its island step does not take Hertz or a dashpot
 yet, but a sphere alone among walls never forms an island: each contact is one normal contact
 (`collide.engine.event.impact`, order 8) between closed-form flights, so such a scene runs
-there at full order whatever its tolerance. Every other scene with these laws (two spheres or
-more, friction, tangential springs, rolling resistance, a periodic box) runs in the fixed-step,
-first-order DEM kernel (docs/method.md, "Which engine runs a scene").
+there at full order whatever its tolerance; so do two spheres and no walls (`event.pair`, with a
+tangential spring and friction too). Scenes with these laws that neither these nor the islands
+take run in the fixed-step, first-order DEM kernel (docs/method.md, "Which engine runs a scene").
 """
 
 from __future__ import annotations
