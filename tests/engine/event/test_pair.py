@@ -289,3 +289,26 @@ def test_a_pair_out_of_one_plane_goes_to_dem_with_its_cause():
     raw["body"][1]["spin"] = [0.0, 50.0, 0.0]  # about y: across the plane z = 0 of the motion
     run = run_scene(parse_scene(raw), record=False)
     assert run.result.engine == "dem" and "not along one line" in run.result.engine_reason
+
+
+def test_a_pair_in_any_plane_of_3d_gives_the_plane_outcome():
+    """The sliding and a random case turned into a plane of random orientation in 3D (spins along
+    its normal): the outcome, turned back, is the 2D run's within 1e-12 of the speed."""
+    rng = np.random.default_rng(51)
+    for case in (SLIDING, rub_case(4)):
+        flat, _, _ = rub_run(case, 1e-8)
+        turn, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        turn[:, 0] *= np.linalg.det(turn)  # a rotation, not a reflection (spins are axial)
+        raw = rub_scene(case, 1e-8)
+        raw["dim"] = 3
+        for body in raw["body"]:
+            for key in ("position", "velocity"):
+                body[key] = (turn @ np.array(body[key] + [0.0])).tolist()
+            body["spin"] = (turn[:, 2] * body["spin"]).tolist()
+        run = run_scene(parse_scene(raw), record=False)
+        res = run.result
+        assert res.engine == "event", res.engine_reason
+        v = res.final.v[0, :, :] @ turn  # back into the plane's coordinates
+        w = res.final.w[0] @ turn[:, 2] * np.array(res.model.radius[0, :2])
+        assert np.abs(v[:, 2]).max() <= 1e-12 * SPEED
+        assert np.abs(np.concatenate([v[:, :2].ravel(), w]) / SPEED - flat).max() <= 1e-12
