@@ -5,9 +5,9 @@ The event engine locates every contact and steps it at the composition's order; 
 report's linear spring it runs every scene. Its island step does not take Hertz or a dashpot
 yet, but a sphere alone among walls never forms an island: each contact is one normal contact
 (`collide.engine.event.impact`, order 8) between closed-form flights, so such a scene runs
-there at full order whatever its tolerance. Every other scene with these laws (two spheres or
-more, friction, tangential springs, rolling resistance, a periodic box) runs in the fixed-step,
-first-order DEM kernel (docs/method.md, "Which engine runs a scene").
+there at full order whatever its tolerance; so do two spheres and no walls (`event.pair`, with a
+tangential spring and friction too). Scenes with these laws that neither these nor the islands
+take run in the fixed-step, first-order DEM kernel (docs/method.md, "Which engine runs a scene").
 """
 
 from __future__ import annotations
@@ -63,6 +63,11 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
         return EVENT, (f"{dem_reason(scene)} with the linear spring: its dashpot (the DEM kernel's law) in the "
                        f"islands' steps of order {_order(integrator)} ({integrator}), every contact, its end and "
                        "each friction mode change located")
+    if scene.needs_dem and len(scene.bodies) == 2 and scene.has_friction:
+        return EVENT, (f"{dem_reason(scene)} with two spheres and no walls: their contact in the relative coordinate "
+                       "(reduced mass, the line of centres turning, each sphere's spin) at order 6 (Gauss-Legendre), "
+                       "its start and end and friction's stick and slip located, the tangential spring, flights in "
+                       "closed form")
     if scene.needs_dem and len(scene.bodies) == 2:
         return EVENT, (f"{dem_reason(scene)} with two spheres and no walls, no friction: their contact in the "
                        "relative coordinate (reduced mass and radius, head-on) at order 8 (DOP853's Runge-Kutta), its "
@@ -126,6 +131,17 @@ def rub_rows(model: Model, b: int = 0) -> np.ndarray:
     return rows
 
 
+def pair_rub_row(model: Model, b: int = 0) -> np.ndarray:
+    """The two spheres' tangential spring as `pair.pair_run` takes it (1, 3), from the pair table
+    as `rub_rows` from the wall table."""
+    row = np.zeros((1, 3))
+    if model.tangential_spring and model.spin_dim:
+        tab = model.pair_table[b, int(model.material[b, 0]), int(model.material[b, 1])]
+        row[0] = tab[TABLE_MU], tab[TABLE_KTR], math.sqrt(tab[TABLE_KTR])
+    row.setflags(write=False)
+    return row
+
+
 def contact_tol(model: Model, state: State, tol: float, duration: float = math.nan) -> float:
     """The tolerance of each contact (relative to its approach speed) for a run's tol (relative
     to the fastest initial speed, docs/method.md): tol times that speed over the fastest approach
@@ -179,7 +195,7 @@ def simulate_alone(model: Model, state: State, *, tol: float, duration: float, t
     share = contact_tol(model, state, tol, duration)
     ends = np.array(impact.steps_for(share) + oblique.rub_steps(share), np.int64)
     two = model.n_bodies == 2
-    args = (G[0], pair_row(model), grav[0], fl, fp, ends) if two else \
+    args = (G[0], pair_row(model), pair_rub_row(model), grav[0], fl, fp, ends) if two else \
         (G[0], WP, law_rows(model), rub_rows(model), grav[0], fl, fp, ends)
     kernel = pair.pair_run if two else alone.alone_run
     _load_compiled(kernel, args)  # loading is not simulating
@@ -237,6 +253,12 @@ def _check(model: Model, st: np.ndarray, fg: np.ndarray, t: float, open_ended: b
         pair.PAIR_OBLIQUE: "the spheres touch at {at} not head-on (moving across the line of their centres): the "
                            "line turns during the contact, which is DEM's so far",
         pair.PAIR_FAILED: "the spheres' contact at {at} could not be integrated (its steps did not converge)",
+        pair.PAIR_HELD: "the spheres' contact at {at} does not separate: such a contact with a tangential spring is "
+                        "DEM's so far",
+        pair.PAIR_CHATTER: "the spheres' contact at {at} alternates between stick and slip without end (a sliding "
+                           "mode of the spring's law, which the event engine does not take yet)",
+        pair.PAIR_PLANE: "the spheres' slip at {at} is not along one line (their motion not in one plane): such a "
+                         "contact is DEM's so far",
         alone.ALONE_WALLS: "the sphere's contact with wall {wall} at {at} comes within reach of another wall: "
                            "two contacts at once under these laws are DEM's so far",
         alone.ALONE_HELD: "the sphere's contact with wall {wall} at {at} does not separate (held on the wall, "

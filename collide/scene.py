@@ -741,7 +741,8 @@ def island_blocker(scene: Scene) -> str | None:
     if scene.has_rolling:
         return "rolling resistance is DEM's only"
     if c.tangential != "coulomb":
-        return "a tangential spring between spheres (inside an island) is DEM's so far"
+        return ("a tangential spring between spheres inside an island (three or more, or two with walls) is DEM's "
+                "so far: two spheres and no walls take it in the event engine")
     if len(scene.bodies) > ISLAND_PILE and scene.gravity is not None and scene.walls:
         what = "damped" if c.model == "linear" else "Hertz"
         return (f"{len(scene.bodies)} {what} spheres under gravity among walls settle into lasting contacts "
@@ -761,7 +762,7 @@ def alone_blocker(scene: Scene) -> str | None:
     if len(scene.bodies) > 2:
         return (f"{len(scene.bodies)} spheres: the event engine takes a sphere alone among walls, or two spheres "
                 "and no walls, whole; more run in its islands where they can")
-    if scene.has_friction and len(scene.bodies) == 2:
+    if scene.has_friction and len(scene.bodies) == 2 and c.tangential != "spring":
         return "friction between two spheres under these laws is DEM's so far"
     if scene.has_friction and c.tangential != "spring":
         return "Coulomb friction with a dead band during a Hertz or damped contact is DEM's so far"

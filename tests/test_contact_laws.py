@@ -4,6 +4,7 @@ conservation law; tolerances are stated where they are set."""
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -70,6 +71,25 @@ def test_report_scenes_keep_their_integrator_and_law():
     for name in ("demo-bonus", "billiards-break", "gas-box"):
         scene = load_scene(name)
         assert not scene.needs_dem and scene.integrator != "dem"
+
+
+def test_a_tangential_spring_between_two_spheres_chooses_the_event_engine():
+    """Two spheres and no walls with a tangential spring and friction: the event engine's
+    integrator (event/pair.py); a third sphere (an island) or Coulomb friction with a dead band
+    there: DEM, and an event integrator asked for is refused."""
+    contact = {"model": "hertz", "restitution": 0.8, "mu": 0.3, "tangential": "spring",
+               "tangential_stiffness_ratio": 0.5}
+    body = [{"name": n, "material": "glass", "radius": 0.01, "position": [0.03 * k, 0.005 * k]}
+            for k, n in enumerate("abc")]
+    body[0]["velocity"] = [1.0, 0.0]
+    pair = {"dim": 2, "contact": contact, "material": [{"name": "glass", "density": 2800.0, **GLASS}],
+            "body": body[:2]}
+    assert parse_scene(copy.deepcopy(pair)).integrator != "dem"
+    assert parse_scene({**copy.deepcopy(pair), "body": copy.deepcopy(body)}).integrator == "dem"
+    coulomb = {**copy.deepcopy(pair), "contact": {**contact, "tangential": "coulomb"}}
+    assert parse_scene(coulomb).integrator == "dem"
+    with pytest.raises(SceneError, match="kahan6. cannot run this scene.s contact law"):
+        parse_scene({**copy.deepcopy(pair), "body": copy.deepcopy(body), "integrator": "kahan6"})
 
 
 def test_integrator_override_that_cannot_run_the_law_is_refused():

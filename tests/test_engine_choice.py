@@ -175,7 +175,7 @@ def test_the_json_says_which_engine_ran_and_why(monkeypatch, capsys, tmp_path):
     assert "each friction mode change located" in rubbing["engine_reason"]
     sprung = _json([_scene_file(tmp_path, SPRUNG_TRIO)], monkeypatch, capsys, tmp_path)
     assert sprung["engine"] == "dem" and "3 spheres" in sprung["engine_reason"]
-    assert "a tangential spring between spheres (inside an island) is DEM's so far" in sprung["engine_reason"]
+    assert "a tangential spring between spheres inside an island" in sprung["engine_reason"]
     # Not head-on, the line of centres turns during the contact: the islands take it.
     oblique = copy.deepcopy(PAIR)
     oblique["body"][1]["position"], oblique["duration"] = [0.3, 0.05], 0.2
@@ -318,3 +318,17 @@ def test_two_spheres_meeting_off_centre_run_in_the_islands_at_full_order(offset,
     error = np.abs(got - reference).max() / np.abs(v).max()
     assert error <= 1e-8
     assert error <= 10.0 * run.error_estimate[0]
+
+
+def test_a_tangential_spring_between_two_spheres_runs_in_the_event_engine(monkeypatch, capsys, tmp_path):
+    """Two spheres and no walls meeting off-centre with friction and a tangential spring: the
+    event engine, the JSON saying how; a third sphere makes an island, where the spring is DEM's,
+    with that cause."""
+    spring = {**PAIR["contact"], "mu": 0.3, "tangential": "spring", "tangential_stiffness_ratio": 0.8}
+    pair = {**copy.deepcopy(PAIR), "contact": spring}
+    pair["body"][1]["position"], pair["duration"] = [0.3, 0.05], 0.2
+    rubbing = _json([_scene_file(tmp_path, pair)], monkeypatch, capsys, tmp_path)
+    assert rubbing["engine"] == "event" and "two spheres and no walls" in rubbing["engine_reason"]
+    assert "stick and slip located" in rubbing["engine_reason"]
+    trio = _json([_scene_file(tmp_path, {**TRIO, "contact": spring})], monkeypatch, capsys, tmp_path)
+    assert trio["engine"] == "dem" and "tangential spring between spheres inside an island" in trio["engine_reason"]

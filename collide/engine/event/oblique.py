@@ -18,6 +18,12 @@ located by secant steps on the step's length, as `impact.land` lands a peak, so 
 keeps the step's order (Gauss-Legendre, three stages, order 6; over sigma = delta^(1/p) near the
 ends, as `impact` integrates Hertz's singular start and end).
 
+Two spheres alone (no walls, `pair`) take the same contact in their relative coordinate: the
+reduced mass, one sphere's spin as the wall's sphere's and the other's as a second spin, each
+lever its radius less half the overlap (the DEM kernel's contact point), and the line of
+centres turning with the relative velocity across it (its centripetal and Coriolis terms; the
+stretch, along the turning tangent, turns with it as the DEM kernel's projection keeps it).
+
 The tangential motion must stay in one line of the wall (the contact point's slip, the centre's
 velocity along the wall and gravity's part along it parallel, no spin about that line): always so
 in a 2D scene. In 3D a contact that is not such is DEM's so far (`PLANE`). A contact that does
@@ -57,14 +63,17 @@ from collide.engine.jit import jit
 from collide.engine.numerics import dot3, illinois
 
 # T, the spring's parameters: mu, k_t / k_n, its root, the sphere's mass, inertia and radius,
-# gravity along the line e, and the slip's sign s (set as the contact goes)
-T_MU, T_KTR, T_ROOT, T_M, T_I, T_R, T_G, T_S = range(8)
-NT = 8
+# gravity along the line e, the slip's sign s (set as the contact goes); the lever's share of
+# delta (1 at a wall, 1/2 between spheres), the other sphere's inertia and radius (a wall: inf
+# and 0) and the line of centres' length at touching (a wall: 0, no turning)
+T_MU, T_KTR, T_ROOT, T_M, T_I, T_R, T_G, T_S, T_LEVER, T_I2, T_R2, T_D = range(12)
+NT = 12
 # y, the state: delta over time (the time over sigma), delta's rate, the dashpot's work, the
 # stretch xi, the centre's velocity along e, the spin about b = -N x e, friction's work, the
-# centre's way along e, the angle turned about b
-Y0, YU, YWN, YXI, YVT, YWB, YWT, YP, YTH = range(9)
-NY = 9
+# centre's way along e (two spheres: the angle the line of centres turned), the angle turned
+# about b, the other sphere's spin about b and its angle turned
+Y0, YU, YWN, YXI, YVT, YWB, YWT, YP, YTH, YW2, YTH2 = range(11)
+NY = 11
 STICK, SLIP = 0, 1
 SWITCHES = 1000  # mode changes inside one step before the step counts as failed
 HELD, PLANE, CHATTER = 3.0, 4.0, 5.0  # O_END beyond impact's: a contact that does not separate; not in
@@ -106,7 +115,7 @@ def forces(P, T, mode, delta, y):
     _, kn = normal_elastic(P[0] > 0.0, P[1], P[2], P[3], delta)
     kt, gt = spring_coefficients(kn, gamma, T[T_KTR], T[T_ROOT])
     cap = friction_cap(T[T_MU], fn)
-    vc = y[YVT] + (T[T_R] - delta) * y[YWB]
+    vc = y[YVT] + (T[T_R] - T[T_LEVER] * delta) * y[YWB] + (T[T_R2] - T[T_LEVER] * delta) * y[YW2]
     if mode == STICK:
         f = spring_trial(y[YXI], 0.0, 0.0, vc, 0.0, 0.0, kt, gt)[0]
     else:
@@ -120,15 +129,19 @@ def rhs(P, T, phase, mode, x, y, f):
     delta, scale = overlap(P, phase, x, y)
     acc, fn, gamma, ft, vc, kt, gt, cap, kn = forces(P, T, mode, delta, y)
     u = y[YU]
+    # Two spheres: the line of centres (length d) turns at v / d, v the relative velocity along e
+    turning = y[YVT] / (T[T_D] - delta) if T[T_D] > 0.0 else 0.0
     f[Y0] = u if phase == TIME else scale
-    f[YU] = acc * scale
+    f[YU] = (acc - y[YVT] * turning) * scale
     f[YWN] = gamma * u * u * scale
     f[YXI] = vc * scale if mode == STICK else 0.0
-    f[YVT] = (ft / T[T_M] + T[T_G]) * scale
-    f[YWB] = (T[T_R] - delta) * ft / T[T_I] * scale
+    f[YVT] = (ft / T[T_M] + T[T_G] + u * turning) * scale
+    f[YWB] = (T[T_R] - T[T_LEVER] * delta) * ft / T[T_I] * scale
     f[YWT] = -ft * vc * scale
-    f[YP] = y[YVT] * scale
+    f[YP] = (turning if T[T_D] > 0.0 else y[YVT]) * scale
     f[YTH] = y[YWB] * scale
+    f[YW2] = (T[T_R2] - T[T_LEVER] * delta) * ft / T[T_I2] * scale
+    f[YTH2] = y[YW2] * scale
 
 
 @jit
@@ -245,11 +258,11 @@ def land(P, T, phase, mode, x, y, h, which, g0, g1, e, ws, floors):
 @jit
 def keep(P, T, phase, mode, x, y, trail):
     """The state after a step into the trail: (time, delta, rate, work, way, velocity, angle, spin,
-    F_n, F, mode)."""
+    F_n, F, mode, the other sphere's spin and angle)."""
     delta, _ = overlap(P, phase, x, y)
     acc, fn, gamma, ft, vc, kt, gt, cap, kn = forces(P, T, mode, delta, y)
     trail.append((x if phase == TIME else y[Y0], delta, y[YU], y[YWN] + y[YWT], y[YP], y[YVT], y[YTH], y[YWB],
-                  fn, ft, 2.0 if mode == STICK else 1.0))
+                  fn, ft, 2.0 if mode == STICK else 1.0, y[YW2], y[YTH2]))
 
 
 @jit
@@ -392,9 +405,11 @@ def rub(P, T, v_in, n_end, n_mid, limit, out, trail, y):
     ws = np.zeros((9, NY))
     floors = np.full(NY, 1e-300)
     floors[YU] = floors[YVT] = P[P_SPEED]
-    floors[YWB] = P[P_SPEED] / T[T_R]
+    floors[YWB] = floors[YW2] = P[P_SPEED] / T[T_R]
     floors[YXI] = floors[YP] = P[P_SPEED] * span
-    floors[YTH] = floors[YXI] / T[T_R]
+    floors[YTH] = floors[YTH2] = floors[YXI] / T[T_R]
+    if T[T_D] > 0.0:
+        floors[YP] /= T[T_D]
     floors[YWN] = floors[YWT] = 1e-17 * T[T_M] * v_in * v_in
     y0 = y.copy()
     count = np.zeros(2, np.int64)

@@ -166,16 +166,23 @@ def reference(case: dict) -> tuple[float, float]:
             return y[3], y[4] * R
         fn, kn, kt, gt, cap, slip, f = parts(y, mode, s)
         if len(sol.t_events[0]):
-            if mode == "slip":
-                y[2], mode = -s * cap / kt, "stick"
-            else:
-                s = math.copysign(1.0, f)
-                y[2] = -s * cap / kt
-                held = s * cap - gt * slip  # the spring held at the cap, its dashpot's share dropped
-                mode = "stick" if gt > 0.0 and s * slip >= 0.0 and abs(held) <= cap else "slip"
-                s = s if mode == "stick" or s * slip < 0.0 else math.copysign(1.0, held)
+            mode, s, y[2] = switched(mode, s, slip, f, cap, kt, gt)
         t += 1e-15 * max(t, 1e-9)  # past the located switch
     raise AssertionError("the reference contact did not end")
+
+
+def switched(mode: str, s: float, slip: float, f: float, cap: float, kt: float, gt: float) -> tuple[str, float, float]:
+    """The references' switch at a located stick or slip event: (mode, slip's sign, stretch).
+    Slip ends: stick, the stretch holding the cap. The spring reaches the cap: the stretch set to
+    hold it alone (the DEM kernel's rule); it sticks on where the point moves along the force and
+    the dashpot's share keeps it within the cap, else slips."""
+    if mode == "slip":
+        return "stick", s, -s * cap / kt
+    s = math.copysign(1.0, f)
+    held = s * cap - gt * slip  # the spring held at the cap, its dashpot's share dropped
+    mode = "stick" if gt > 0.0 and s * slip >= 0.0 and abs(held) <= cap else "slip"
+    stretch = -s * cap / kt
+    return mode, s if mode == "stick" or s * slip < 0.0 else math.copysign(1.0, held), stretch
 
 
 @pytest.mark.parametrize("case", _cases(6, seed=7))
