@@ -76,9 +76,10 @@ def test_a_run_takes_the_threads_asked_and_says_so(monkeypatch):
     DEM run steps on, reported in its result (the summary's `threads`), its outcome the same as on
     one thread; unset, a run takes every core from THREADS_FROM bodies and one below."""
     from collide.dem import run_threads
-    from collide.dem_threads import THREADS_FROM, cores
+    from collide.dem_threads import THREADS_FROM
     from collide.engine import tier
     from collide.run import run_scene
+    from collide.stepper import cores
 
     scene = parse_scene(_box(27, True, 0.0, seed=5))
     results = {}
