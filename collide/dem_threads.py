@@ -5,8 +5,9 @@ the one-thread order, so the run is the same bit for bit whatever the number of 
 Every thread runs `threads.run_share` at once; they meet at a spinning barrier once a step (a
 thread that needs another's part of a step waits for its flag: `collide.engine.dem.barrier`),
 and come back here only for what one thread does: coasting where nothing touches, the steps
-that record a frame, growing the record tables, and rebuilding the neighbour lists, whose
-search for pairs is split among the threads again (`_rebuild`). Where other work holds the
+that record a frame, growing the record tables, and rebuilding the neighbour lists and the
+threads' shares of them, whose passes over the bodies and pairs are split among the threads
+again (`_rebuild`, `_Shares`). Where other work holds the
 cores and the threads mostly wait for each other, the run goes on on one thread for a while
 (`_Pace`). Below THREADS_FROM bodies a run takes one thread by default: the meetings cost more
 than the split saves.
@@ -35,7 +36,6 @@ from collide.engine.dem.neighbours import (
     grid,
     keys_range,
     periodic_pairs,
-    rebuild,
     slot_regions,
     split_keys,
     wall_rows,
@@ -76,8 +76,9 @@ def _each(task, threads: int) -> None:
 
 
 class _Shares:
-    """The threads' shares of the current pair list (`threads.plan`) and their buffers; made as the
-    list is built, before any force pass on it. New contacts take their slots from the regions
+    """The threads' shares of the current pair list and their buffers (`threads.plan`, then the
+    passes over the pairs on the threads: `plan_count`, `plan_cross`); made as the list is
+    built, before any force pass on it. New contacts take their slots from the regions
     (SBB, BUMP: `neighbours.slot_regions`) of the list's shares among all threads, whatever
     threads a stretch of steps takes (`_Pace`): one set of regions a list, so no slot is taken
     twice (`slots`: the all-threads shares, whose regions these share; None for those)."""
@@ -200,8 +201,8 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads):
     rolling = _any_rolling(tabs, wtabs, spin)
     X0 = X.copy()
     none = np.zeros(0, np.int64)
-    PI, PJ, PS, HS, _, _, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin, none, none,
-                                           none, np.zeros((0, dk.NH)), ST, box)
+    PI, PJ, PS, HS, WL, WH = _rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin, none, none, none,
+                                      np.zeros((0, dk.NH)), ST, box, threads)
     kept = (bool(record), rest > 0.0)  # (whether the shares keep events, bodies' energies)
     balance = _Balance(threads)
     shares = {threads: _Shares(PI, PJ, PS, HS, WL, n, balance.cut(threads), *kept)}

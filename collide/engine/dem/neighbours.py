@@ -188,9 +188,22 @@ def _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, span, de
 
 
 @jit_inline
+def first_row(rows, value):
+    """The first of the ascending `rows` at or past value (a binary search)."""
+    lo, hi = 0, rows.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if rows[mid] < value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@jit_inline
 def _first_pair(PI, PJ, n, key):
-    """The old list's first row at or past key (a binary search): where a range of the new list
-    starts its walk through the old one."""
+    """`first_row` of the old pair list's keys: where a range of the new list starts its walk
+    through the old one."""
     lo, hi = 0, PI.shape[0]
     while lo < hi:
         mid = (lo + hi) // 2
@@ -276,19 +289,6 @@ def take_slot(PS, BUMP, BB, k, j):
     return PS[k]
 
 
-@jit_inline
-def _first_wall(WL, key):
-    """`_first_pair` in a wall list."""
-    lo, hi = 0, WL.shape[0]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if WL[mid, 3] < key:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
 @jit
 def wall_rows(X, Bd, WP, WL, WH, skin, lo, hi, at, NWL, NWH):
     """Bodies lo..hi's part of `wall_list`: with NWL holding rows, their body-wall pairs into NWL
@@ -298,7 +298,7 @@ def wall_rows(X, Bd, WP, WL, WH, skin, lo, hi, at, NWL, NWH):
     the pairs."""
     nw = WP.shape[0]
     fill = NWL.shape[0] > 0
-    a = _first_wall(WL, lo * nw)
+    a = first_row(WL[:, 3], lo * nw)
     count = 0
     for i in range(lo, hi):
         for w in range(nw):

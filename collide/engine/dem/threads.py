@@ -66,7 +66,7 @@ from collide.engine.dem.layout import (
     S_CONTACTS,
 )
 from collide.engine.dem.loop import _step_length
-from collide.engine.dem.neighbours import take_slot
+from collide.engine.dem.neighbours import first_row, take_slot
 from collide.engine.dem.verlet import _drift_body, _half_kick, kick_kick_drift, kinetic_parts
 from collide.engine.jit import jit, jit_inline
 
@@ -112,29 +112,16 @@ def plan(PI, WL, n, cut):
     wb = np.empty(threads + 1, np.int64)
     shares = np.empty(threads, np.int64)
     for t in range(threads + 1):
-        kb[t] = _first_row(PI, bounds[t])
-        wb[t] = _first_row(WL[:, 1], bounds[t])
+        kb[t] = first_row(PI, bounds[t])
+        wb[t] = first_row(WL[:, 1], bounds[t])
     for t in range(threads):
         shares[t] = (bounds[t + 1] - bounds[t]) + (kb[t + 1] - kb[t]) + (wb[t + 1] - wb[t])
     return bounds, kb, wb, shares
 
 
 @jit_inline
-def _first_row(rows, value):
-    """The first of the ascending `rows` at or past value."""
-    lo, hi = 0, rows.shape[0]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if rows[mid] < value:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@jit_inline
 def _work_before(PI, WL, a):
-    return a + _first_row(PI, a) + _first_row(WL[:, 1], a)
+    return a + first_row(PI, a) + first_row(WL[:, 1], a)
 
 
 @jit_inline
