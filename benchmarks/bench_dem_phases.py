@@ -48,26 +48,36 @@ def pour(spheres: int, duration: float) -> dict:
 
 
 def instrument(spent: dict) -> None:
-    """Time the threaded driver's phases (process CPU and wall) into spent[name] = [cpu, wall, calls]."""
+    """Time the threaded driver's phases into spent[name] = [CPU, wall, calls], each phase's own
+    time (a rebuild inside coasting counts as a rebuild, not as coasting)."""
     import collide.dem_threads as driver
+
+    inside: list[list[float]] = []  # (CPU, wall) of the phases within the running one
 
     def timed(name, function):
         def run(*args, **kwargs):
             c0, w0 = _cpu(), time.perf_counter()
+            inside.append([0.0, 0.0])
             try:
                 return function(*args, **kwargs)
             finally:
+                c, w = _cpu() - c0, time.perf_counter() - w0
+                nested = inside.pop()
                 entry = spent.setdefault(name, [0.0, 0.0, 0])
-                entry[0] += _cpu() - c0
-                entry[1] += time.perf_counter() - w0
+                entry[0] += c - nested[0]
+                entry[1] += w - nested[1]
                 entry[2] += 1
+                if inside:
+                    inside[-1][0] += c
+                    inside[-1][1] += w
         return run
 
-    driver._rebuild = timed("neighbour rebuilds (all)", driver._rebuild)
-    driver.grid = timed("  of which the cell grid (one thread)", driver.grid)
+    driver._rebuild = timed("neighbour rebuilds: the threads' passes (search, carry-over, wall list)",
+                            driver._rebuild)
+    driver.grid = timed("neighbour rebuilds: the cell grid (one thread)", driver.grid)
     driver._Shares.__init__ = timed("threads' shares of each list", driver._Shares.__init__)
     driver._Pace.run = timed("stretches of steps on the threads", driver._Pace.run)
-    driver._coast = timed("coasting (with its rebuild)", driver._coast)
+    driver._coast = timed("coasting (free flight)", driver._coast)
     driver._recorded_step = timed("recorded steps", driver._recorded_step)
 
 
@@ -101,7 +111,7 @@ def main() -> None:
     print("|---|---|---|---|---|")
     named = 0.0
     for name, (c, w, calls) in sorted(spent.items(), key=lambda item: -item[1][0]):
-        named += 0.0 if name.startswith("  ") else c
+        named += c
         print(f"| {name} | {c:.2f} | {c / cpu:.1%} | {w:.2f} | {calls} |")
     print(f"| the rest (set-up, the first force pass, the end) | {cpu - named:.2f} | {(cpu - named) / cpu:.1%} | | |")
     if driver.LAST_RUN.get("alone"):
