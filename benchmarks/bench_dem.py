@@ -170,9 +170,9 @@ def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
         print(f"| {count} | {wall:.3f} ({walls}) | {cpu:.3f} ({cpus}) | {load} | {spheres * steps / wall:.3g} | "
               f"{spheres * steps / cpu:.3g} | {base[0] / wall:.2f} | {base[1] / cpu:.2f} |")
     if any(where.values()):
-        print("\nThreaded runs (medians): seconds on one thread in the driver (rebuilds, coasting, hand-offs), "
-              "seconds a thread waited at the barrier and at other threads' flags (mean of the threads; each "
-              "thread's, of the run with the median mean), share of waits at which it slept, barrier meetings a "
+        print("\nThreaded runs (medians): seconds on one thread in the driver (the rebuilds' cell grid, coasting, "
+              "hand-offs), seconds a thread waited at the barrier and at other threads' flags (mean of the threads; "
+              "each thread's, of the run with the median mean), share of waits at which it slept, barrier meetings a "
               "step, flags waited for a step (all threads), stretches of steps taken on one thread as the threads "
               "waited too long (`dem_threads._Pace`)\n")
         print("| threads | driver s | waited s | each thread's | slept | meetings a step | flag waits a step | "

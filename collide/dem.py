@@ -33,10 +33,12 @@ from collide.model import (
 from collide.periodic import NEIGHBOUR_SKIN
 from collide.results import ContactLog, RunResult, Trajectory
 from collide.stepper import (
+    THREADS_VARIABLE,
     Progress,
     RunError,
     _pad3,
     approach_bound,
+    cores,
     run_members,
     step_limit_error,
 )
@@ -273,7 +275,7 @@ def _fill_final(model: Model, ends: tuple[np.ndarray, ...], b: int, X: np.ndarra
 def run_threads(n_bodies: int) -> int:
     """The threads one run of n_bodies steps on: COLLIDE_THREADS if set (`collide run
     --threads`), else every core from THREADS_FROM bodies and one below."""
-    from collide.dem_threads import THREADS_FROM, THREADS_VARIABLE, cores
+    from collide.dem_threads import THREADS_FROM
     from collide.engine.dem.barrier import HAVE_BARRIER
 
     if not HAVE_BARRIER:

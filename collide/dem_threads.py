@@ -5,8 +5,9 @@ the one-thread order, so the run is the same bit for bit whatever the number of 
 Every thread runs `threads.run_share` at once; they meet at a spinning barrier once a step (a
 thread that needs another's part of a step waits for its flag: `collide.engine.dem.barrier`),
 and come back here only for what one thread does: coasting where nothing touches, the steps
-that record a frame, growing the record tables, and rebuilding the neighbour lists, whose
-search for pairs is split among the threads again (`_rebuild`). Where other work holds the
+that record a frame, growing the record tables, and rebuilding the neighbour lists and the
+threads' shares of them, whose passes over the bodies and pairs are split among the threads
+again (`_rebuild`, `_Shares`). Where other work holds the
 cores and the threads mostly wait for each other, the run goes on on one thread for a while
 (`_Pace`). Below THREADS_FROM bodies a run takes one thread by default: the meetings cost more
 than the split saves.
@@ -30,11 +31,18 @@ from collide.engine.dem import threads as par
 from collide.engine.dem.flight import may_meet
 from collide.engine.dem.forces import forces
 from collide.engine.dem.loop import _any_rolling, _finish, _materials, _outputs, _step_length, flight, never_again
-from collide.engine.dem.neighbours import grid, keys_range, rebuild, relist, slot_regions, split_keys
+from collide.engine.dem.neighbours import (
+    carry_rows,
+    grid,
+    keys_range,
+    periodic_pairs,
+    slot_regions,
+    split_keys,
+    wall_rows,
+)
 from collide.engine.dem.records import energy_row, frame
 from collide.engine.dem.verlet import kick, kinetic
 from collide.engine.numerics import grow
-from collide.stepper import THREADS_VARIABLE  # (a batch's cap on its threads, a run's threads)
 
 # Bodies from which a run takes every core by default (below, one thread: the hand-offs cost
 # more than the split saves), measured with benchmarks/bench_dem.py --threads.
@@ -44,18 +52,6 @@ THREADS_FROM = 4000
 # one thread), stretches of steps it took on one thread (`_Pace`), and per thread the barrier's
 # meetings, the flags it waited for, its sleeps and cycles spent waiting (`barrier`).
 LAST_RUN: dict = {}
-
-
-def cores() -> int:
-    """The cores this process may use, capped by COLLIDE_THREADS if set."""
-    count = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    cap = os.environ.get(THREADS_VARIABLE, "")
-    return min(count, int(cap)) if cap.isdigit() and int(cap) > 0 else count
-
-
-def default_threads(n_bodies: int) -> int:
-    """The threads a run of n_bodies takes when none are asked for."""
-    return cores() if n_bodies >= THREADS_FROM else 1
 
 
 _POOL: list = []
@@ -80,8 +76,9 @@ def _each(task, threads: int) -> None:
 
 
 class _Shares:
-    """The threads' shares of the current pair list (`threads.plan`) and their buffers; made as the
-    list is built, before any force pass on it. New contacts take their slots from the regions
+    """The threads' shares of the current pair list and their buffers (`threads.plan`, then the
+    passes over the pairs on the threads: `plan_count`, `plan_cross`); made as the list is
+    built, before any force pass on it. New contacts take their slots from the regions
     (SBB, BUMP: `neighbours.slot_regions`) of the list's shares among all threads, whatever
     threads a stretch of steps takes (`_Pace`): one set of regions a list, so no slot is taken
     twice (`slots`: the all-threads shares, whose regions these share; None for those)."""
@@ -89,7 +86,12 @@ class _Shares:
     def __init__(self, PI, PJ, PS, HS, WL, n: int, cut: np.ndarray, record: bool, rest: bool, slots=None):
         self.PI = PI
         threads = len(cut) - 1
-        bounds, kb, wb, sb, ib, self.cross, self.inbound, starts, self.work = par.plan(PI, PJ, WL, n, cut)
+        bounds, kb, wb, self.work = par.plan(PI, WL, n, cut)
+        CNT = np.zeros((threads, threads), np.int64)
+        _each(lambda r: par.plan_count(PJ, bounds, kb, r, CNT), threads)
+        sb, ib, AT, starts = par.plan_slots(CNT)
+        self.cross, self.inbound = np.empty(sb[threads], np.int64), np.empty(sb[threads], np.int64)
+        _each(lambda r: par.plan_cross(PJ, bounds, kb, r, sb, AT, self.cross, self.inbound), threads)
         self.kb, self.wb = kb, wb
         self.SBB, self.BUMP = (bounds, slot_regions(PS, HS, starts)) if slots is None else (slots.SBB, slots.BUMP)
         self.RB = np.array([[bounds[r], bounds[r + 1], kb[r], kb[r + 1], wb[r], wb[r + 1], sb[r], sb[r + 1], ib[r],
@@ -199,8 +201,8 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads):
     rolling = _any_rolling(tabs, wtabs, spin)
     X0 = X.copy()
     none = np.zeros(0, np.int64)
-    PI, PJ, PS, HS, _, _, WL, WH = rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin, none, none,
-                                           none, np.zeros((0, dk.NH)), ST, box)
+    PI, PJ, PS, HS, WL, WH = _rebuild(X, X0, Bd, WP, np.zeros((0, 4), np.int64), WH, n, dim, skin, none, none, none,
+                                      np.zeros((0, dk.NH)), ST, box, threads)
     kept = (bool(record), rest > 0.0)  # (whether the shares keep events, bodies' energies)
     balance = _Balance(threads)
     shares = {threads: _Shares(PI, PJ, PS, HS, WL, n, balance.cut(threads), *kept)}
@@ -271,36 +273,53 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads):
 
 
 def _rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box, threads):
-    """`neighbours.rebuild`, its search for pairs (most of its time) split among the threads
-    (`_search`), the slots carried over on this thread (`neighbours.relist`). Returns (PI, PJ,
-    PS, HS, WL, WH)."""
+    """`neighbours.rebuild` with its work split among the threads by equal ranges of bodies (and
+    of the new pairs, each range's bodies' pairs): the search for pairs (`keys_range`), the keys
+    turned into pairs (`split_keys`), the engaged contacts' history carried over (`carry_rows`)
+    and the body-wall pairs listed (`wall_rows`), each range written from the counts of those
+    before it, so that the lists are `rebuild`'s, bit for bit, whatever the threads. The cell
+    grid (`grid`, a counting sort) and a periodic box's search are made on this thread. Returns
+    (PI, PJ, PS, HS, WL, WH)."""
+    bounds = [n * r // threads for r in range(threads + 1)]
     if box[BOX_ANY] != 0.0:
-        out = rebuild(X, X0, Bd, WP, WL, WH, n, dim, skin, PI, PJ, PS, HS, ST, box)
+        NI, NJ = periodic_pairs(X, Bd, n, dim, skin, box)
+        firsts, parts = np.searchsorted(NI, bounds), None
     else:
-        out = relist(X, X0, Bd, WP, WL, WH, n, skin, PI, PJ, PS, HS, ST, *_search(X, Bd, n, dim, skin, threads))
-    PI, PJ, PS, HS, _, _, WL, WH = out
-    return PI, PJ, PS, HS, WL, WH
+        cells, start, order, table, span, dense = grid(X, Bd, n, dim, skin)
+        parts = [None] * threads
 
+        def search(r: int) -> None:
+            parts[r] = keys_range(X, Bd, n, dim, skin, cells, start, order, table, span, dense, bounds[r],
+                                  bounds[r + 1])
 
-def _search(X, Bd, n, dim, skin, threads):
-    """`neighbours.build_pairs` with the bodies in equal ranges among the threads, whose keys, one
-    range's after the other's, are the list that one thread finds: (i, j). The grid and the
-    search buffers go when it returns, before the slots' table is made, as in `rebuild`."""
-    cells, start, order, table, span, dense = grid(X, Bd, n, dim, skin)
-    parts: list = [None] * threads
+        _each(search, threads)
+        del cells, start, order  # (the grid goes before the tables are made, as in `rebuild`)
+        firsts = np.cumsum([0] + [count for _, count in parts])
+        NI, NJ = np.empty(firsts[-1], np.int64), np.empty(firsts[-1], np.int64)
+    NS = np.empty(len(NI), np.int64)
+    carried, walls = np.zeros(threads + 1, np.int64), np.zeros(threads + 1, np.int64)
+    none = (np.empty((0, 4), np.int64), np.empty((0, dk.NH)))
 
-    def search(r: int) -> None:
-        parts[r] = keys_range(X, Bd, n, dim, skin, cells, start, order, table, span, dense, n * r // threads,
-                              n * (r + 1) // threads)
+    def count(r: int) -> None:
+        if parts is not None:
+            split_keys(*parts[r], bounds[r], n, NI, NJ, firsts[r])
+            parts[r] = None
+        carried[r + 1] = carry_rows(PI, PJ, PS, HS, NI, NJ, n, firsts[r], firsts[r + 1], 0, NS, none[1])
+        walls[r + 1] = wall_rows(X, Bd, WP, WL, WH, skin, bounds[r], bounds[r + 1], 0, *none)
 
-    _each(search, threads)
-    total = sum(count for _, count in parts)
-    NI, NJ = np.empty(total, np.int64), np.empty(total, np.int64)
-    at = 0
-    for r, (keys, count) in enumerate(parts):
-        split_keys(keys, count, n * r // threads, n, NI, NJ, at)
-        at += count
-    return NI, NJ
+    _each(count, threads)
+    carried, walls = np.cumsum(carried), np.cumsum(walls)
+    table = np.empty((carried[-1] + len(NI), dk.NH))
+    NWL, NWH = np.empty((walls[-1], 4), np.int64), np.empty((walls[-1], dk.NH))
+
+    def fill(r: int) -> None:
+        carry_rows(PI, PJ, PS, HS, NI, NJ, n, firsts[r], firsts[r + 1], carried[r], NS, table)
+        wall_rows(X, Bd, WP, WL, WH, skin, bounds[r], bounds[r + 1], walls[r], NWL, NWH)
+
+    _each(fill, threads)
+    X0[:, :] = X
+    ST[dk.S_BUILDS] += 1
+    return NI, NJ, NS, table, NWL, NWH
 
 
 def _coast(X, X0, V, W, Qo, F, Bd, WK, WP, grav, fl, fp, t, ever, lists, ST, KN, nkn, threads):

@@ -441,6 +441,14 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
                      attempts=stats[:, layout.S_ATTEMPTS].copy(), free_since=free_since)
 
 
+def cores() -> int:
+    """The cores this process may use, capped by COLLIDE_THREADS if set: a batch's threads, and
+    a DEM run's (`collide.dem.run_threads`)."""
+    count = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    cap = os.environ.get(THREADS_VARIABLE, "")
+    return min(count, int(cap)) if cap.isdigit() and int(cap) > 0 else count
+
+
 def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Progress | None,
                 watched: list[tuple[np.ndarray, int, float, int]]) -> list[tuple]:
     """run_member(b) for every member, in order. A batch of compiled runs goes side by side,
@@ -449,11 +457,7 @@ def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Prog
     cost 40 us of locking; COLLIDE_THREADS caps the threads). Interpreted kernels hold the GIL,
     and a run that reports progress (watched: each member's (fp, index of its time reached,
     end, index of its kinetic energy or -1)) is one member at a time."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    cap = os.environ.get(THREADS_VARIABLE, "")
-    if cap.isdigit() and int(cap) > 0:
-        cores = min(cores, int(cap))
-    threads = min(cores, b_count) if progress is None and tier.COMPILED else 1
+    threads = min(cores(), b_count) if progress is None and tier.COMPILED else 1
     if _STARTUP_PROBE[0]:
         _probe_startup()
     if threads < 2:

@@ -187,20 +187,31 @@ def _gather_pairs(P, Bd, n, dim, reach_pad, cells, start, order, table, span, de
     return count
 
 
-@jit
-def carry_history(old_keys, old_hist, new_keys):
-    """History rows of the new wall list: the old contact's where it was listed, else zero."""
-    hist = np.zeros((new_keys.shape[0], NH))
-    for k in range(new_keys.shape[0]):
-        hist[k, H_IV] = -1.0
-    a = 0
-    for k in range(new_keys.shape[0]):
-        while a < old_keys.shape[0] and old_keys[a] < new_keys[k]:
-            a += 1
-        if a < old_keys.shape[0] and old_keys[a] == new_keys[k]:
-            for c in range(NH):
-                hist[k, c] = old_hist[a, c]
-    return hist
+@jit_inline
+def first_row(rows, value):
+    """The first of the ascending `rows` at or past value (a binary search)."""
+    lo, hi = 0, rows.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if rows[mid] < value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@jit_inline
+def _first_pair(PI, PJ, n, key):
+    """`first_row` of the old pair list's keys: where a range of the new list starts its walk
+    through the old one."""
+    lo, hi = 0, PI.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if PI[mid] * n + PJ[mid] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
 @jit_inline
@@ -215,26 +226,39 @@ def _match(PI, PJ, PS, HS, a, key, n):
 
 
 @jit
+def carry_rows(PI, PJ, PS, HS, NI, NJ, n, k0, k1, e, NS, table):
+    """The new pairs k0..k1's part of `carry_slots`: with `table` holding rows, their slots into
+    NS and the engaged contacts they carry into table's rows from e on; without (no rows),
+    only counted. Ranges of the new list, each starting at its carried contacts' count before
+    it, make `carry_slots`'s table whatever the ranges (`dem_threads` runs them side by side).
+    Returns the contacts carried."""
+    fill = table.shape[0] > 0
+    a = _first_pair(PI, PJ, n, NI[k0] * n + NJ[k0]) if k0 < k1 else 0
+    start = e
+    for k in range(k0, k1):
+        a, s = _match(PI, PJ, PS, HS, a, NI[k] * n + NJ[k], n)
+        if fill:
+            NS[k] = -1
+            if s >= 0:
+                for c in range(NH):
+                    table[e, c] = HS[s, c]
+                NS[k] = e
+        e += s >= 0
+    return e - start
+
+
+@jit
 def carry_slots(PI, PJ, PS, HS, NI, NJ, n):
     """The new pair list's (NI, NJ) slots and history table: the contacts engaged in the old list
     (PI, PJ, PS, HS) that the new one lists, packed into its first rows in the new list's order,
     then room for a slot for every new pair (left unset and so not resident: `take_slot` starts
-    a row when it takes it). Returns (slots, table)."""
-    a, e = 0, 0
-    for k in range(NI.shape[0]):  # count first: no table of every pair even for a moment
-        a, s = _match(PI, PJ, PS, HS, a, NI[k] * n + NJ[k], n)
-        e += s >= 0
+    a row when it takes it). Counted first (`carry_rows`): no table of every pair even for a
+    moment. Returns (slots, table)."""
+    none = np.empty((0, NH))
     NS = np.empty(NI.shape[0], np.int64)
+    e = carry_rows(PI, PJ, PS, HS, NI, NJ, n, 0, NI.shape[0], 0, NS, none)
     table = np.empty((e + NI.shape[0], NH))
-    a, e = 0, 0
-    for k in range(NI.shape[0]):
-        a, s = _match(PI, PJ, PS, HS, a, NI[k] * n + NJ[k], n)
-        NS[k] = -1
-        if s >= 0:
-            for c in range(NH):
-                table[e, c] = HS[s, c]
-            NS[k] = e
-            e += 1
+    carry_rows(PI, PJ, PS, HS, NI, NJ, n, 0, NI.shape[0], 0, NS, table)
     return NS, table
 
 
@@ -266,28 +290,47 @@ def take_slot(PS, BUMP, BB, k, j):
 
 
 @jit
+def wall_rows(X, Bd, WP, WL, WH, skin, lo, hi, at, NWL, NWH):
+    """Bodies lo..hi's part of `wall_list`: with NWL holding rows, their body-wall pairs into NWL
+    and NWH from row at on (rows (m, i, w, i * walls + w), the history carried from the last
+    list (WL, WH) where it listed the pair, else none); without, only counted. Ranges of the
+    bodies, each from the count before it, make the whole list whatever the ranges. Returns
+    the pairs."""
+    nw = WP.shape[0]
+    fill = NWL.shape[0] > 0
+    a = first_row(WL[:, 3], lo * nw)
+    count = 0
+    for i in range(lo, hi):
+        for w in range(nw):
+            key = i * nw + w
+            while a < WL.shape[0] and WL[a, 3] < key:
+                a += 1
+            listed = a < WL.shape[0] and WL[a, 3] == key
+            engaged = listed and WH[WL[a, 0], H_ON] != 0.0
+            if wall_height(X, WP, i, w) - Bd[i, B_R] < skin or engaged:
+                if fill:
+                    m = at + count
+                    NWL[m, 0], NWL[m, 1], NWL[m, 2], NWL[m, 3] = m, i, w, key
+                    if listed:
+                        NWH[m, :] = WH[WL[a, 0], :]
+                    else:
+                        NWH[m, :] = 0.0
+                        NWH[m, H_IV] = -1.0
+                count += 1
+    return count
+
+
+@jit
 def wall_list(X, Bd, WP, WL, WH, n, skin):
     """Body-wall pairs within the skin of touching, and those still engaged (with the list rebuilt
     when a body has moved half the skin, no other can touch), in order: rows (m, i, w,
     i * walls + w), m the row of their history in the new WH, carried over from the last list
-    (WL, WH): the wall contacts' table sized from the contacts, not bodies x walls."""
-    nw = WP.shape[0]
-    count = 0
-    for step in range(2):  # count, then fill: no table of every body and wall even for a moment
-        out = np.empty((count if step else 0, 4), np.int64)
-        count = 0
-        a = 0
-        for i in range(n):
-            for w in range(nw):
-                key = i * nw + w
-                while a < WL.shape[0] and WL[a, 3] < key:
-                    a += 1
-                engaged = a < WL.shape[0] and WL[a, 3] == key and WH[WL[a, 0], H_ON] != 0.0
-                if wall_height(X, WP, i, w) - Bd[i, B_R] < skin or engaged:
-                    if step:
-                        out[count, 0], out[count, 1], out[count, 2], out[count, 3] = count, i, w, key
-                    count += 1
-    return out, carry_history(WL[:, 3].copy(), WH, out[:, 3].copy())
+    (WL, WH): the wall contacts' table sized from the contacts, not bodies x walls (counted
+    first, `wall_rows`, then filled)."""
+    count = wall_rows(X, Bd, WP, WL, WH, skin, 0, n, 0, np.empty((0, 4), np.int64), np.empty((0, NH)))
+    NWL, NWH = np.empty((count, 4), np.int64), np.empty((count, NH))
+    wall_rows(X, Bd, WP, WL, WH, skin, 0, n, 0, NWL, NWH)
+    return NWL, NWH
 
 
 @jit

@@ -66,7 +66,7 @@ from collide.engine.dem.layout import (
     S_CONTACTS,
 )
 from collide.engine.dem.loop import _step_length
-from collide.engine.dem.neighbours import take_slot
+from collide.engine.dem.neighbours import first_row, take_slot
 from collide.engine.dem.verlet import _drift_body, _half_kick, kick_kick_drift, kinetic_parts
 from collide.engine.jit import jit, jit_inline
 
@@ -86,77 +86,106 @@ NST_ROW = 24
 
 
 @jit
-def plan(PI, PJ, WL, n, cut):
-    """The threads' shares of a pair list: body bounds, pair bounds (by i), wall bounds, bounds of
-    each thread's cross-pair slots by i ("outgoing") and by j ("inbound"), each (threads + 1,);
-    each slot's pair (in the list's order); the inbound slots, thread by thread, each thread's
-    in the list's order; the slot regions' starts (`neighbours.slot_regions`: the pairs whose j
-    is in each share, before it); and each thread's work. A thread's work counts its bodies, the
-    pairs it works out (those whose j is its own) and its wall contacts; thread t's share of the
-    whole ends at the fraction cut[t + 1] (cut: (threads + 1,), from 0 to 1)."""
+def plan(PI, WL, n, cut):
+    """The threads' shares of a pair list: body bounds, pair bounds (by i) and wall bounds, each
+    (threads + 1,), and each thread's work: its bodies, the pairs whose i is its own and its
+    wall contacts (the pairs it works out are those whose j is its own: as many, but for the
+    few that join two shares, where the bodies are numbered in space; `dem_threads._Balance`
+    learns what the count misses). Thread t's share of the whole ends at the fraction cut[t + 1]
+    (cut: (threads + 1,), from 0 to 1). Binary searches in the sorted lists, no pass over them:
+    the driver's part of a plan; the passes over the pairs are the threads' (`plan_count`,
+    `plan_cross`)."""
     threads = cut.shape[0] - 1
-    npairs, nwall = PI.shape[0], WL.shape[0]
-    work = np.ones(n, np.int64)
-    for k in range(npairs):
-        work[PJ[k]] += 1
-    for m in range(nwall):
-        work[WL[m, 1]] += 1
-    total = n + npairs + nwall
+    total = n + PI.shape[0] + WL.shape[0]
     bounds = np.zeros(threads + 1, np.int64)
-    shares = np.zeros(threads, np.int64)
-    t, acc = 1, 0
-    for a in range(n):
-        while t < threads and acc >= cut[t] * total:
-            bounds[t] = a
-            t += 1
-        acc += work[a]
-        shares[t - 1] += work[a]
-    while t <= threads:
-        bounds[t] = n
-        t += 1
-    kb = _cuts(PI, bounds)
-    wb = _cuts(WL[:, 1], bounds)
-    owner = np.empty(n, np.int64)
-    for r in range(threads):
-        owner[bounds[r]:bounds[r + 1]] = r
+    bounds[threads] = n
+    for t in range(1, threads):
+        lo, hi = bounds[t - 1], n
+        while lo < hi:  # the first body whose work before it reaches the cut
+            mid = (lo + hi) // 2
+            if _work_before(PI, WL, mid) < cut[t] * total:
+                lo = mid + 1
+            else:
+                hi = mid
+        bounds[t] = lo
+    kb = np.empty(threads + 1, np.int64)
+    wb = np.empty(threads + 1, np.int64)
+    shares = np.empty(threads, np.int64)
+    for t in range(threads + 1):
+        kb[t] = first_row(PI, bounds[t])
+        wb[t] = first_row(WL[:, 1], bounds[t])
+    for t in range(threads):
+        shares[t] = (bounds[t + 1] - bounds[t]) + (kb[t + 1] - kb[t]) + (wb[t + 1] - wb[t])
+    return bounds, kb, wb, shares
+
+
+@jit_inline
+def _work_before(PI, WL, a):
+    return a + first_row(PI, a) + first_row(WL[:, 1], a)
+
+
+@jit_inline
+def _owner(bounds, r, j):
+    """The share of body j, at or past share r."""
+    while bounds[r + 1] <= j:
+        r += 1
+    return r
+
+
+@jit
+def plan_count(PJ, bounds, kb, r, CNT):
+    """Thread r's pairs (those whose i is its own) counted by the share of their j into CNT[r]."""
+    count = np.zeros(CNT.shape[1], np.int64)  # (a row of its own: no line shared with another thread)
+    for k in range(kb[r], kb[r + 1]):
+        count[_owner(bounds, r, PJ[k])] += 1
+    CNT[r, :] = count
+
+
+@jit
+def plan_slots(CNT):
+    """From every thread's counts (`plan_count`): bounds of each thread's cross-pair slots by i
+    ("outgoing", sb) and by j ("inbound", ib), each (threads + 1,); where thread r's cross pairs
+    with each share's j start in the inbound slots (AT: (threads, threads)); and the slot
+    regions' starts (`neighbours.slot_regions`: the pairs whose j is in each share, before
+    it)."""
+    threads = CNT.shape[0]
     sb = np.zeros(threads + 1, np.int64)
     ib = np.zeros(threads + 1, np.int64)
     starts = np.zeros(threads + 1, np.int64)
-    for k in range(npairs):
-        r, q = owner[PI[k]], owner[PJ[k]]
-        starts[q + 1] += 1
-        if q != r:
-            sb[r + 1] += 1
-            ib[q + 1] += 1
+    for r in range(threads):
+        for q in range(threads):
+            starts[q + 1] += CNT[r, q]
+            if q != r:
+                sb[r + 1] += CNT[r, q]
+                ib[q + 1] += CNT[r, q]
     for r in range(threads):
         sb[r + 1] += sb[r]
         ib[r + 1] += ib[r]
         starts[r + 1] += starts[r]
-    cross = np.empty(sb[threads], np.int64)
-    inbound = np.empty(sb[threads], np.int64)
-    fill = ib[:threads].copy()
-    s = 0
-    for k in range(npairs):
-        q = owner[PJ[k]]
-        if q != owner[PI[k]]:
-            cross[s] = k
-            inbound[fill[q]] = s
-            fill[q] += 1
-            s += 1
-    return bounds, kb, wb, sb, ib, cross, inbound, starts, shares
+    AT = np.zeros((threads, threads), np.int64)
+    for q in range(threads):
+        at = ib[q]
+        for r in range(threads):
+            if r != q:
+                AT[r, q] = at
+                at += CNT[r, q]
+    return sb, ib, AT, starts
 
 
 @jit
-def _cuts(rows, bounds):
-    """Where the ascending `rows` reach each of `bounds`."""
-    cuts = np.empty(bounds.shape[0], np.int64)
-    m = 0
-    for t in range(bounds.shape[0]):
-        while m < rows.shape[0] and rows[m] < bounds[t]:
-            m += 1
-        cuts[t] = m
-    cuts[bounds.shape[0] - 1] = rows.shape[0]
-    return cuts
+def plan_cross(PJ, bounds, kb, r, sb, AT, cross, inbound):
+    """Thread r's cross pairs (its i, another's j): each slot's pair into cross from sb[r] on (the
+    slots in the list's order), and the slot into the inbound slots of its j's share (each
+    share's in the list's order), from AT[r]."""
+    at = AT[r].copy()
+    s = sb[r]
+    for k in range(kb[r], kb[r + 1]):
+        q = _owner(bounds, r, PJ[k])
+        if q != r:
+            cross[s] = k
+            inbound[at[q]] = s
+            at[q] += 1
+            s += 1
 
 
 @jit_inline

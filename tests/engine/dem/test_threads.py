@@ -76,9 +76,10 @@ def test_a_run_takes_the_threads_asked_and_says_so(monkeypatch):
     DEM run steps on, reported in its result (the summary's `threads`), its outcome the same as on
     one thread; unset, a run takes every core from THREADS_FROM bodies and one below."""
     from collide.dem import run_threads
-    from collide.dem_threads import THREADS_FROM, cores
+    from collide.dem_threads import THREADS_FROM
     from collide.engine import tier
     from collide.run import run_scene
+    from collide.stepper import cores
 
     scene = parse_scene(_box(27, True, 0.0, seed=5))
     results = {}
@@ -181,3 +182,39 @@ def test_uneven_cuts_give_the_one_thread_run_bit_for_bit(monkeypatch):
     assert len(lists) > 4  # several lists, cut both ways
     for a, b in zip(one[:4] + expected, mine[:4] + got):
         assert np.asarray(a).tobytes() == np.asarray(b).tobytes()
+
+
+@pytest.mark.parametrize("threads", [2, 3])
+def test_a_rebuild_on_threads_makes_the_one_thread_lists(threads):
+    """`dem_threads._rebuild` (the pair search, the keys' split, the history carried over and the
+    body-wall list, each by ranges of bodies written from the counts before them) against the
+    one-thread `neighbours.rebuild`, from lists holding contacts engaged, closed and never
+    engaged: the same pairs, slots, carried history rows, wall list and wall history, bit for
+    bit."""
+    from collide.dem_threads import _rebuild
+    from collide.engine.broad import NO_BOX
+    from collide.engine.dem.layout import H_ON, NH, S_BUILDS
+    from collide.engine.dem.neighbours import rebuild
+
+    X, _, _, _, Bd, _, _, WP, _, _, _ = _args(_box(300, True, 0.0, seed=5), False, 0.0)
+    rng = np.random.default_rng(6)
+    n, skin = len(X), 0.008
+    none = np.zeros(0, np.int64)
+    ST = np.zeros(int(S_BUILDS) + 1, np.int64)
+    PI, PJ, PS, HS, _, _, WL, WH = rebuild(X, X.copy(), Bd, WP, np.zeros((0, 4), np.int64), np.zeros((0, int(NH))),
+                                           n, 3, skin, none, none, none, np.zeros((0, int(NH))), ST, NO_BOX)
+    taken = rng.random(len(PI)) < 0.6  # slots taken: engaged, or closed since
+    PS[taken] = rng.permutation(len(PI))[:taken.sum()]
+    HS[:] = rng.normal(size=HS.shape)
+    HS[:, H_ON] = rng.random(len(HS)) < 0.7
+    WH[:] = rng.normal(size=WH.shape)
+    WH[:, H_ON] = rng.random(len(WH)) < 0.7
+    assert len(WL) > 20 and taken.sum() > 100  # not vacuous
+    X = X + rng.uniform(-0.003, 0.003, X.shape)  # moved: pairs and wall pairs come and go
+    X0, mine = X.copy(), X.copy()
+    NI, NJ, NS, table, _, _, NWL, NWH = rebuild(X, X0, Bd, WP, WL, WH, n, 3, skin, PI, PJ, PS, HS, ST.copy(), NO_BOX)
+    got = _rebuild(X, mine, Bd, WP, WL, WH, n, 3, skin, PI, PJ, PS, HS, ST.copy(), NO_BOX, threads)
+    carried = len(table) - len(NS)
+    assert carried > 50 and (got[3].shape == table.shape)
+    for a, b in zip((NI, NJ, NS, table[:carried], NWL, NWH, X0), got[:3] + (got[3][:carried],) + got[4:] + (mine,)):
+        assert a.tobytes() == b.tobytes()
