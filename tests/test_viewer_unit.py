@@ -12,7 +12,7 @@ import pytest
 
 from collide import diagnostics as dg
 from collide.run import run_scene
-from collide.scene import Scene, SceneError, load_scene, parse_scene
+from collide.scene import Scene, SceneError, builtin_names, load_scene, parse_scene
 from collide.stepper import RunError
 from viewer import ensemble as ens
 from viewer import files
@@ -87,6 +87,16 @@ def test_defaults_rebuild_the_same_scene():
     rebuilt = build_scene(controls, controls.defaults(), controls.settings)
     assert rebuilt.bodies == scene.bodies and rebuilt.contact == scene.contact
     assert values_of(rebuilt, controls) == pytest.approx(controls.defaults())
+
+
+@pytest.mark.parametrize("name", builtin_names(heavy=False))
+def test_a_recordings_scene_shows_the_values_its_controls_show(name):
+    """Opening a recording sets the controls from its scene (`values_of`): for every built-in
+    they are the values the scene's own controls start at (a [contact] key left to the law, like
+    the pile's tangential ratio, shows the law's value, not nothing)."""
+    scene = load_scene(name)
+    controls = scene_controls(scene)
+    assert values_of(scene, controls) == pytest.approx(controls.defaults())
 
 
 def test_viewed_runs_go_on_as_long_after_the_contact_as_before_it():

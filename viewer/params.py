@@ -456,7 +456,7 @@ def values_of(scene: Scene, controls: Controls) -> dict[str, float]:
         elif parts[0] == "pair":
             value = getattr(scene.pairs[int(parts[1])], parts[2])
         elif parts[0] == "contact":
-            value = getattr(scene.contact, parts[1])
+            value = _contact_value(scene.contact, parts[1])  # as `scene_controls` shows it
         else:
             value = getattr(scene, parts[0])
         if isinstance(value, tuple):
