@@ -2,12 +2,14 @@
 (Hertz, the restitution's dashpot) in the event engine (`collide.engine.event.alone`).
 
 The event engine locates every contact and steps it at the composition's order; for the
-report's linear spring it runs every scene. Its island step does not take Hertz or a dashpot
-yet, but a sphere alone among walls never forms an island: each contact is one normal contact
-(`collide.engine.event.impact`, order 8) between closed-form flights, so such a scene runs
-there at full order whatever its tolerance; so do two spheres and no walls (`event.pair`, with a
-tangential spring and friction too). Scenes with these laws that neither these nor the islands
-take run in the fixed-step, first-order DEM kernel (docs/method.md, "Which engine runs a scene").
+report's linear spring it runs every scene, and its islands take Hertz and the restitution's
+dashpot with Coulomb friction (`collide.scene.island_blocker`). A sphere alone among walls
+never forms an island: each contact is one normal contact (`collide.engine.event.impact`, order
+8) between closed-form flights, with a tangential spring too, so such a scene runs there at full
+order whatever its tolerance; so do two spheres and no walls (`event.pair`: head-on, or with a
+tangential spring and friction at any angle; off-centre without one, the islands). Scenes with
+these laws that none of these take run in the fixed-step, first-order DEM kernel
+(docs/method.md, "Which engine runs a scene").
 """
 
 from __future__ import annotations
