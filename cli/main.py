@@ -345,8 +345,10 @@ def main() -> None:
     from collide.errors import RunError
     from collide.output import OutputError
     from collide.scene import SceneError
+    from collide.settings import check_count_settings
 
     try:
+        check_count_settings()
         with warnings.catch_warnings():
             warnings.simplefilter("error", RuntimeWarning)
             code = command_app(sys.argv[1:])(standalone_mode=False)

@@ -11,7 +11,6 @@ time: `contact_time` estimates the shortest one from the fastest approach the sc
 from __future__ import annotations
 
 import math
-import os
 import time
 
 import numpy as np
@@ -32,8 +31,8 @@ from collide.model import (
 )
 from collide.periodic import NEIGHBOUR_SKIN
 from collide.results import ContactLog, RunResult, Trajectory
+from collide.settings import FRAME_STEPS_VARIABLE, THREADS_VARIABLE, count_setting
 from collide.stepper import (
-    THREADS_VARIABLE,
     Progress,
     RunError,
     _pad3,
@@ -57,7 +56,6 @@ FRAME_BUDGET = 2_000_000  # body-frames a recording keeps at most
 # mostly fly: the cheapest steps; benchmarks/bench_recording.py --many). `collide run
 # --frame-steps K` (COLLIDE_FRAME_STEPS) asks for a frame each K steps.
 FRAME_STEPS, FRAME_STEPS_FROM = 100, 1000
-FRAME_STEPS_VARIABLE = "COLLIDE_FRAME_STEPS"
 SKIN = NEIGHBOUR_SKIN  # neighbour-list skin, in smallest radii (a periodic box's shortest period needs it)
 
 
@@ -280,9 +278,9 @@ def run_threads(n_bodies: int) -> int:
 
     if not HAVE_BARRIER:
         return 1
-    asked = os.environ.get(THREADS_VARIABLE, "")
-    if asked.isdigit() and int(asked) > 0:
-        return int(asked)
+    asked = count_setting(THREADS_VARIABLE)
+    if asked is not None:
+        return asked
     return cores() if n_bodies >= THREADS_FROM else 1
 
 
@@ -323,9 +321,9 @@ def kernel_args(model: Model, initial: State, b: int, *, dt: np.ndarray, duratio
 def frame_steps(n_bodies: int) -> tuple[int, bool]:
     """The least steps between a recorded run's frames, and whether the user asked for it
     (COLLIDE_FRAME_STEPS: then it is the frames' spacing, not only their least)."""
-    asked = os.environ.get(FRAME_STEPS_VARIABLE, "")
-    if asked.isdigit() and int(asked) > 0:
-        return int(asked), True
+    asked = count_setting(FRAME_STEPS_VARIABLE)
+    if asked is not None:
+        return asked, True
     return (FRAME_STEPS if n_bodies >= FRAME_STEPS_FROM else 1), False
 
 

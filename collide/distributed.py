@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from collide.batch import BatchError, ChunkResult, ChunkSettings, RunSpec, failure_row, run_chunk
-from collide.stepper import THREADS_VARIABLE
+from collide.settings import THREADS_VARIABLE
 
 CONNECT_TIMEOUT_S = 5.0  # an unreachable address fails within this, not after minutes
 WORKER_WAIT_S = 30.0  # a scheduler without workers: how long to wait for the first one

@@ -37,6 +37,7 @@ from collide.model import (
     turned_quaternions,
 )
 from collide.results import ContactLog, RunResult
+from collide.settings import THREADS_VARIABLE, count_setting
 from collide.trajectory import Trajectory
 
 if TYPE_CHECKING:
@@ -62,13 +63,11 @@ def step_limit_error(steps: int, t: float, open_ended: bool) -> RunError:
 # the kinetic energy over its peak so far: how far a run to rest has settled, NaN where unknown).
 Progress = Callable[[int, int, float, float, int, float, float], None]
 PROGRESS_PERIOD = 0.25
-# At most this many threads step a batch's members (default: every core the process may use);
-# a Dask worker sets 1, its cluster being shaped to the cores already.
-THREADS_VARIABLE = "COLLIDE_THREADS"
 # Set to a file name: the process appends one JSON line to it when its first kernel step starts,
 # with the process's CPU time so far (benchmarks/bench_startup.py measures start-up with it).
 STARTUP_PROBE_VARIABLE = "COLLIDE_STARTUP_PROBE"
 _STARTUP_PROBE = [os.environ.get(STARTUP_PROBE_VARIABLE, "")]
+
 
 
 @contextmanager
@@ -445,8 +444,8 @@ def cores() -> int:
     """The cores this process may use, capped by COLLIDE_THREADS if set: a batch's threads, and
     a DEM run's (`collide.dem.run_threads`)."""
     count = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    cap = os.environ.get(THREADS_VARIABLE, "")
-    return min(count, int(cap)) if cap.isdigit() and int(cap) > 0 else count
+    cap = count_setting(THREADS_VARIABLE)
+    return count if cap is None else min(count, cap)
 
 
 def run_members(b_count: int, run_member: Callable[[int], tuple], progress: Progress | None,

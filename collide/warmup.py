@@ -43,6 +43,10 @@ def warm() -> float:
 
     if not tier.COMPILED:
         raise RuntimeError("the engine was imported interpreted before COLLIDE_JIT=1 could apply")
+    from collide.settings import COUNT_VARIABLES
+
+    for name in COUNT_VARIABLES:  # the same kernels whatever the user's threads and frames
+        os.environ.pop(name, None)
     from collide.run import run_scene
     from collide.scene import parse_scene
 

@@ -96,6 +96,18 @@ def test_extreme_input_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPat
         assert "--help" in err  # usage errors point to the help, in the same one line
 
 
+@pytest.mark.parametrize("variable, value", [("COLLIDE_THREADS", "abc"), ("COLLIDE_THREADS", "0"),
+                                             ("COLLIDE_FRAME_STEPS", "-3"), ("COLLIDE_FRAME_STEPS", "1.5")])
+def test_a_malformed_count_in_the_environment_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                          capsys: pytest.CaptureFixture, variable: str,
+                                                          value: str) -> None:
+    """COLLIDE_THREADS and COLLIDE_FRAME_STEPS are checked before any command runs: a typo is
+    refused naming the variable, never run with the default."""
+    monkeypatch.setenv(variable, value)
+    code, out, err = _main(["run", "demo-bonus", "--no-record"], monkeypatch, capsys, tmp_path)
+    _one_line_error(code, out, err, f"{variable}: a whole number >= 1, got '{value}'")
+
+
 def test_range_limits_name_the_key() -> None:
     assert load_scene("demo-bonus", [f"contact.k={MAX_MAGNITUDE}"]).contact.k == MAX_MAGNITUDE
     for override in (f"contact.k={MAX_MAGNITUDE * 10}", "body.ball2.velocity.x=-1e31", "gravity=[0, 1e40]"):
