@@ -74,7 +74,10 @@ NT = 12
 # about b, the other sphere's spin about b and its angle turned
 Y0, YU, YWN, YXI, YVT, YWB, YWT, YP, YTH, YW2, YTH2 = range(11)
 NY = 11
-STICK, SLIP = 0, 1
+STICK, SLIP, HOLD = 0, 1, 2
+# HOLD (a slip that ends at once where the stick could not hold either, module docstring) lasts
+# until the point moves along the force at this many times P_SPEED (1e-12 of the approach speed)
+HOLD_SPEED = 1e5
 SWITCHES = 1000  # mode changes inside one step before the step counts as failed
 HELD, PLANE, CHATTER = 3.0, 4.0, 5.0  # O_END beyond impact's: a contact that does not separate; not in
 # one line; stick and slip alternating without end (a sliding mode of the DEM law's limit, not
@@ -191,6 +194,8 @@ def watched(P, T, phase, mode, x, y, which):
         return fn
     if mode == STICK:
         return cap - abs(ft)
+    if mode == HOLD:
+        return HOLD_SPEED * P[P_SPEED] - T[T_S] * vc
     if gt > 0.0:
         return -T[T_S] * vc
     # c' = d/dt (mu F_n / k_t), F_n elastic alone here (no dashpot): Hertz's k_n' = k_n / (2 delta)
@@ -204,11 +209,12 @@ def watched(P, T, phase, mode, x, y, which):
 
 
 @jit
-def switch(P, T, phase, mode, x, y):
-    """The mode after a located switch from `mode` at (x, y); sets the stretch and the slip's sign."""
+def switch(P, T, phase, mode, x, y, at_once):
+    """The mode after a located switch from `mode` at (x, y) (at_once: the mode did not hold from
+    there); sets the stretch and the slip's sign."""
     delta, _ = overlap(P, phase, x, y)
     acc, fn, gamma, ft, vc, kt, gt, cap, kn = forces(P, T, mode, delta, y)
-    if mode == SLIP:
+    if mode != STICK:
         y[YXI] = slip_stretch(T[T_S] * cap, kt)
         return STICK
     T[T_S] = 1.0 if ft > 0.0 or (ft == 0.0 and vc < 0.0) else -1.0
@@ -219,14 +225,15 @@ def switch(P, T, phase, mode, x, y):
         if abs(held) <= cap:
             return STICK
         T[T_S] = 1.0 if held > 0.0 else -1.0
+    if at_once and gt > 0.0 and -T[T_S] * vc <= HOLD_SPEED * P[P_SPEED]:
+        return HOLD  # the slip would end at once too: the force held at the cap (module docstring)
     return SLIP
 
 
 @jit
-def changed(P, T, phase, mode, x, y, count):
-    """`switch`, counting changes between stick and slip in count[1]: (mode, ok), ok False
-    beyond CHANGES."""
-    after = switch(P, T, phase, mode, x, y)
+def changed(P, T, phase, mode, x, y, count, at_once):
+    """`switch`, counting changes of mode in count[1]: (mode, ok), ok False beyond CHANGES."""
+    after = switch(P, T, phase, mode, x, y, at_once)
     if after != mode:
         count[1] += 1
     return after, count[1] <= CHANGES
@@ -290,7 +297,7 @@ def advance(P, T, phase, mode, x, end, y, ws, floors, trail, count):
         if g1 < 0.0:
             g0 = watched(P, T, phase, mode, x, y, 0)
             if g0 <= 0.0:  # the mode does not hold from here (at touch, or just switched): the other
-                mode, ok = changed(P, T, phase, mode, x, y, count)
+                mode, ok = changed(P, T, phase, mode, x, y, count, True)
                 if not ok:
                     return x, mode, 4
                 at_kink = False
@@ -314,7 +321,7 @@ def advance(P, T, phase, mode, x, end, y, ws, floors, trail, count):
         if stopped:
             return x, mode, 2
         if switched:
-            mode, ok = changed(P, T, phase, mode, x, y, count)
+            mode, ok = changed(P, T, phase, mode, x, y, count, False)
             if not ok:
                 return x, mode, 4
         elif not kink:

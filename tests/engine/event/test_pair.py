@@ -20,7 +20,7 @@ from collide.engine.layout import R_MODE
 from collide.errors import RunError
 from collide.run import run_scene
 from collide.scene import parse_scene
-from tests.engine.event.test_oblique import switched
+from tests.engine.event.test_oblique import HOLD_SPEED, after_event
 from tests.test_event_laws import reference_contact
 
 
@@ -183,6 +183,8 @@ def rub_reference(case: dict) -> np.ndarray:
         n, t, delta, u, fn, kt, gt, cap, lever, slip, f = parts(y, mode, s)
         if mode == "stick":
             return cap - abs(f)
+        if mode == "hold":
+            return HOLD_SPEED * SPEED - s * slip
         if gt > 0.0:
             return -s * slip
         return -s * slip - (2.0 / 3.0 if hertz else 1.0) * mu / ratio * u  # c' with c = mu F_n / k_t
@@ -207,7 +209,7 @@ def rub_reference(case: dict) -> np.ndarray:
     atol = 1e-16 * np.array([r[0], r[0], SPEED, SPEED, SPEED / r[0], r[0], r[0], SPEED, SPEED, SPEED / r[1],
                              1e-3 * r[0]])
     t = 0.0
-    for _ in range(2000):
+    for _ in range(20000):
         sol = solve_ivp(rhs, (t, t + 1.0), y, method="DOP853", rtol=1e-13, atol=atol, args=(mode, s),
                         events=(leaves, apart), max_step=1e-6)
         t, y = sol.t[-1], sol.y[:, -1].copy()
@@ -215,7 +217,8 @@ def rub_reference(case: dict) -> np.ndarray:
             return np.concatenate([y[2:4], y[7:9], y[[4, 9]] * r]) / SPEED
         n, tt, delta, u, fn, kt, gt, cap, lever, slip, f = parts(y, mode, s)
         if len(sol.t_events[0]):
-            mode, s, y[10] = switched(mode, s, slip, f, cap, kt, gt)
+            mode, s, y[10] = after_event(mode, s, slip, f, cap, kt, gt, lambda x: leaves(t, x, "stick", s),
+                                         lambda x: rhs(t, x, "stick", s), y, 10)
         t += 1e-15 * max(t, 1e-9)  # past the located switch
     raise AssertionError("the reference contact did not end")
 
