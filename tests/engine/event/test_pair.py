@@ -20,7 +20,7 @@ from collide.engine.layout import R_MODE
 from collide.errors import RunError
 from collide.run import run_scene
 from collide.scene import parse_scene
-from tests.engine.event.test_oblique import HOLD_SPEED, after_event
+from tests.engine.event.test_oblique import after_event
 from tests.test_event_laws import reference_contact
 
 
@@ -140,8 +140,10 @@ def rub_outcome(res) -> np.ndarray:
     return np.concatenate([v.ravel(), w]) / SPEED
 
 
-def rub_reference(case: dict) -> np.ndarray:
-    """The case by DOP853 at rtol 1e-13 from touching to separating, as `rub_outcome`."""
+def rub_reference(case: dict, hold: float = 1e-7) -> np.ndarray:
+    """The case by DOP853 at rtol 1e-13 from touching to separating, as `rub_outcome` (its stick,
+    slip and hold as `test_oblique.reference`, the hold until the point moves along the force at
+    hold of the speed)."""
     from collide.chung_ooi import Material, effective_modulus, sphere_mass
 
     r = np.array(case["radius"])
@@ -184,7 +186,7 @@ def rub_reference(case: dict) -> np.ndarray:
         if mode == "stick":
             return cap - abs(f)
         if mode == "hold":
-            return HOLD_SPEED * SPEED - s * slip
+            return hold * SPEED - s * slip
         if gt > 0.0:
             return -s * slip
         return -s * slip - (2.0 / 3.0 if hertz else 1.0) * mu / ratio * u  # c' with c = mu F_n / k_t
@@ -217,8 +219,7 @@ def rub_reference(case: dict) -> np.ndarray:
             return np.concatenate([y[2:4], y[7:9], y[[4, 9]] * r]) / SPEED
         n, tt, delta, u, fn, kt, gt, cap, lever, slip, f = parts(y, mode, s)
         if len(sol.t_events[0]):
-            mode, s, y[10] = after_event(mode, s, slip, f, cap, kt, gt, lambda x: leaves(t, x, "stick", s),
-                                         lambda x: rhs(t, x, "stick", s), y, 10)
+            mode, s, y[10] = after_event(mode, s, (slip, f, cap, kt, gt), leaves, rhs, t, y, 10)
         t += 1e-15 * max(t, 1e-9)  # past the located switch
     raise AssertionError("the reference contact did not end")
 
