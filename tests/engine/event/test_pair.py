@@ -265,20 +265,33 @@ def test_the_sticking_and_sliding_cases_stick_and_slide():
 def test_random_oblique_pairs_agree_across_tolerances_and_their_error_holds():
     """Twelve random cases (scripts/pair_oblique.py runs 120): outcomes at tol 1e-6 and 1e-9
     within 1e-6, the 1e-6 run's difference from the 1e-9 run at most 10 times its estimate. A
-    case whose stick and slip alternate without end (a sliding mode of the law, as for a sphere on
-    a wall: tests/engine/event/test_oblique.py) is handed on with that cause, never answered."""
+    case whose damped slip ends into a saw whose phase the law leaves open (as for a sphere on a
+    wall: tests/engine/event/test_oblique.py) is handed on with that cause, never answered."""
     counted = 0
     for seed in range(100, 112):
         case = rub_case(seed)
         try:
             (coarse, estimate, _), (fine, _, _) = rub_run(case, 1e-6), rub_run(case, 1e-9)
         except RunError as exc:
-            assert "alternates between stick and slip" in str(exc), str(exc)
+            assert "could not be confirmed" in str(exc) or "alternates between" in str(exc), str(exc)
             continue
         counted += 1
         diff = np.abs(coarse - fine).max()
         assert diff <= 1e-6 and diff <= 10.0 * estimate, (seed, diff, estimate)
     assert counted >= 10
+
+
+def test_a_pair_whose_saw_phase_moves_the_outcome_is_refused_with_its_cause():
+    """Seed 108 alternated between stick and slip without end before the hold: a damped slip
+    ending where the stick cannot hold either. Its saw's phase, which the law does not fix
+    (collide/engine/event/oblique.py), moves the outcome by more than 1e-4 of the speed between
+    DOP853 references starting the saw at 1e-7 and 2e-7 of the speed; the event engine's
+    measurement (its run at a tenth of --tol starts the saw elsewhere) does not confirm a run at
+    tol 1e-6, which is handed on with that cause, not answered."""
+    case = rub_case(108)
+    assert np.abs(rub_reference(case) - rub_reference(case, 2e-7)).max() > 1e-4
+    with pytest.raises(RunError, match="could not be confirmed"):
+        rub_run(case, 1e-6)
 
 
 def test_a_pair_out_of_one_plane_goes_to_dem_with_its_cause():
