@@ -257,8 +257,8 @@ def _check(model: Model, st: np.ndarray, fg: np.ndarray, t: float, open_ended: b
         pair.PAIR_FAILED: "the spheres' contact at {at} could not be integrated (its steps did not converge)",
         pair.PAIR_HELD: "the spheres' contact at {at} does not separate: such a contact with a tangential spring is "
                         "DEM's so far",
-        pair.PAIR_CHATTER: "the spheres' contact at {at} alternates between stick and slip without end (a sliding "
-                           "mode of the spring's law, which the event engine does not take yet)",
+        pair.PAIR_CHATTER: "the spheres' contact at {at} alternates between stick and slip without end (beyond "
+                           "the sliding and the saw of the spring's law that the event engine takes)",
         pair.PAIR_PLANE: "the spheres' slip at {at} is not along one line (their motion not in one plane): such a "
                          "contact is DEM's so far",
         alone.ALONE_WALLS: "the sphere's contact with wall {wall} at {at} comes within reach of another wall: "
@@ -266,8 +266,8 @@ def _check(model: Model, st: np.ndarray, fg: np.ndarray, t: float, open_ended: b
         alone.ALONE_HELD: "the sphere's contact with wall {wall} at {at} does not separate (held on the wall, "
                           "rolling or resting): such a contact with a tangential spring is DEM's so far",
         alone.ALONE_CHATTER: "the sphere's contact with wall {wall} at {at} alternates between stick and slip "
-                             "without end (a sliding mode of the spring's law, which the event engine does not take "
-                             "yet)",
+                             "without end (beyond the sliding and the saw of the spring's law that the event engine "
+                             "takes)",
         alone.ALONE_PLANE: "the sphere's slip on wall {wall} at {at} is not along one line of the wall (spin about "
                            "an axis along it, or gravity across it): such a contact is DEM's so far",
     }

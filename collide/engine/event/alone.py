@@ -249,7 +249,7 @@ def take_rubbing(G, WP, LAW, TW, grav, fl, w, t, t_end, ends, steps_left, out, t
     if not in_line:
         return t, False, True, KN, RC, ALONE_PLANE
     T = np.array([TW[w, 0], TW[w, 1], TW[w, 2], G[0, G_M], G[0, G_I], G[0, G_R],
-                  grav[0] * e[0] + grav[1] * e[1] + grav[2] * e[2], 1.0, 1.0, math.inf, 0.0, 0.0])
+                  grav[0] * e[0] + grav[1] * e[1] + grav[2] * e[2], 1.0, 1.0, math.inf, 0.0, 0.0, 0.0])
     y = np.zeros(NY)
     y[YVT] = v[0] * e[0] + v[1] * e[1] + v[2] * e[2]
     y[YWB] = spin[0] * b[0] + spin[1] * b[1] + spin[2] * b[2]

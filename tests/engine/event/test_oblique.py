@@ -55,8 +55,8 @@ def _cases(n: int, seed: int) -> list[dict]:
 
 
 # What the event engine says when it hands a contact on (to DEM, which refuses tolerances this
-# fine for a stiff steel contact): a sliding mode of the spring's law, a measurement that does not
-# confirm the run, or steps that do not converge.
+# fine for a stiff steel contact): modes alternating without end, a measurement that does not
+# confirm the run (mostly a saw whose phase the law leaves open), or steps that do not converge.
 HANDED_ON = ("alternates between stick and slip", "could not be confirmed", "could not be integrated")
 
 
@@ -83,8 +83,8 @@ def test_random_oblique_impacts_agree_across_tolerances_and_their_error_holds():
     """130 cases, of which at least 100 run in the event engine at both tolerances: their outcomes
     (rebound velocity, spin times the radius) at tol 1e-6 and 1e-9 within 1e-6 of the speed, and
     the 1e-6 run's difference from the 1e-9 run at most 10 times its reported estimate. The rest
-    are handed on with their cause (mostly stick and slip alternating without end, a sliding mode
-    the event engine does not take), never answered unconfirmed."""
+    are handed on with their cause (mostly a damped slip ending into a saw of sticks whose phase the
+    law leaves open: collide/engine/event/oblique.py), never answered unconfirmed."""
     worst, worst_ratio, counted, handed_on = 0.0, 0.0, 0, 0
     for case in _cases(130, seed=51):
         coarse, fine = _outcome(case, 1e-6), _outcome(case, 1e-9)
@@ -102,11 +102,12 @@ def test_random_oblique_impacts_agree_across_tolerances_and_their_error_holds():
     assert counted >= 100
 
 
-def reference(case: dict) -> tuple[float, float]:
+def reference(case: dict, hold: float = 1e-7) -> tuple[float, float]:
     """The same contact by DOP853 at rtol 1e-12: normal overlap and rate, the stretch, the
     centre's velocity along the wall and the spin, in stick or slip; each switch (the spring's
     force reaching mu F_n; slip stopping) located by scipy's events and the integration restarted
-    there. Returns (velocity along the wall, spin times R) after it."""
+    there; a hold (`after_event`) until the point moves along the force at hold of the speed.
+    Returns (velocity along the wall, spin times R) after it."""
     hertz = case["model"] == "hertz"
     estar = E / (1.0 - NU * NU)
     zeta = float(damping_ratio(np.array(case["e"]), hertz))
@@ -138,6 +139,8 @@ def reference(case: dict) -> tuple[float, float]:
         fn, kn, kt, gt, cap, slip, f = parts(y, mode, s)
         if mode == "stick":
             return cap - abs(f)
+        if mode == "hold":
+            return hold * SPEED - s * slip
         if gt > 0.0:
             return -s * slip
         # c = mu F_n / k_t: (2/3) (mu / ratio) delta for Hertz, (mu / ratio) delta for the spring
@@ -158,7 +161,7 @@ def reference(case: dict) -> tuple[float, float]:
     mode = "stick" if abs(kt * slip0 * d / u0 + gt * slip0) <= cap else "slip"
     s = -math.copysign(1.0, slip0)
     y, t = [0.0, u0, 0.0, v0, w0], 0.0
-    for _ in range(2000):
+    for _ in range(20000):
         sol = solve_ivp(rhs, (t, t + 1.0), y, method="DOP853", rtol=1e-12, atol=1e-30, args=(mode, s),
                         events=(leaves, apart), max_step=1e-6)
         t, y = sol.t[-1], list(sol.y[:, -1])
@@ -166,9 +169,43 @@ def reference(case: dict) -> tuple[float, float]:
             return y[3], y[4] * R
         fn, kn, kt, gt, cap, slip, f = parts(y, mode, s)
         if len(sol.t_events[0]):
-            mode, s, y[2] = switched(mode, s, slip, f, cap, kt, gt)
+            mode, s, y[2] = after_event(mode, s, (slip, f, cap, kt, gt), leaves, rhs, t, np.array(y), 2)
         t += 1e-15 * max(t, 1e-9)  # past the located switch
     raise AssertionError("the reference contact did not end")
+
+
+# The references' hold (`after_event`) lasts from a slip's end, where the stick cannot hold
+# either, until the point moves along the force at `hold` of the speed (1e-7 by default; the
+# engine's is about 1e-14 n_mid; scipy's events are located to 1e-15 s, longer than the first
+# sticks from a smaller one). While it lasts the DEM law's force lies between the cap and the cap
+# less gamma_t times that slip, so the hold itself moves the outcome by at most gamma_t hold^2 /
+# (mu F_n) of the speed (the hold lasts hold over the slip's acceleration, about 3.5 mu F_n / m):
+# below 1e-13 here. Where the saw of sticks begins sets its phase, which the law does not fix
+# (collide/engine/event/oblique.py): the tests measure that spread with a second hold.
+
+
+def after_event(mode: str, s: float, at: tuple, leaves, rhs, t: float, y: np.ndarray,
+                stretch: int) -> tuple[str, float, float]:
+    """The references' mode after a located event (`switched`, at = (slip, f, cap, k_t,
+    gamma_t) there), with the hold: where a slip ends (damped) and the stick, its stretch holding
+    the cap, would leave the cap at once (`leaves` in stick below zero a short Euler step of its
+    `rhs` on), the force is held at the cap (as in slip) until the point moves along it at the
+    hold's speed (`leaves` in "hold"); the stretch then holds the cap and the contact sticks (the
+    DEM law's limit: its dashpot's share is dropped at each return to the cap, so from there the
+    force runs between the cap and the cap less gamma_t v_t, the sticks growing from zero
+    length). A stick that cannot hold even after the hold (the cap zero where the damped normal
+    force pulls: its event, looking for a crossing, would miss a stick over the cap from its start)
+    slips instead."""
+    slip, f, cap, kt, gt = at
+    after, s_after, xi = ("stick", s, -s * cap / kt) if mode == "hold" else switched(mode, s, slip, f, cap, kt, gt)
+    if mode != "stick" and gt > 0.0:
+        probe = y.copy()
+        probe[stretch] = xi
+        probe = probe + 1e-12 * np.asarray(rhs(t, probe, "stick", s))
+        if leaves(t, probe, "stick", s) < 0.0:
+            # neither lasts: a slip's end is held; after a hold (the cap zero, F_n pulling) it slips
+            return ("hold", s, xi) if mode == "slip" else ("slip", -math.copysign(1.0, slip), xi)
+    return after, s_after, xi
 
 
 def switched(mode: str, s: float, slip: float, f: float, cap: float, kt: float, gt: float) -> tuple[str, float, float]:
@@ -193,6 +230,40 @@ def test_oblique_impacts_match_dop853(case):
     ref_v, ref_w = reference(case)
     assert v[0] == pytest.approx(ref_v, abs=1e-8 * SPEED)
     assert w * R == pytest.approx(ref_w, abs=1e-8 * SPEED)
+
+
+SAWS = _cases(130, seed=51)  # 110: a hold whose saw's phase barely matters; 94: one whose phase moves it 6e-3
+
+
+def test_a_damped_slip_ending_where_the_stick_cannot_hold_is_held_then_sawn():
+    """A case the event engine could not take before the hold (a damped slip ending late in the
+    contact, where the stick cannot hold either; its steps did not converge there) against
+    DOP853 taking the same hold by hand (`after_event`): within 1e-8 of the speed at tol 1e-10,
+    plus the spread of the saw's phase, which the law leaves open and the reference measures by
+    starting its hold's end at twice the speed (2.4e-11 here)."""
+    case = SAWS[110]
+    v, w, _, _ = _run(case, 1e-10)
+    (ref_v, ref_w), (other_v, other_w) = reference(case), reference(case, 2e-7)
+    spread = max(abs(ref_v - other_v), abs(ref_w - other_w))
+    assert spread <= 1e-9 * SPEED  # the saw's phase matters little here (else the case proves nothing)
+    assert v[0] == pytest.approx(ref_v, abs=1e-8 * SPEED + spread)
+    assert w * R == pytest.approx(ref_w, abs=1e-8 * SPEED + spread)
+
+
+def test_a_saw_whose_phase_moves_the_outcome_is_refused_with_its_cause():
+    """A case whose saw's phase, which the law does not fix, moves the outcome by 6e-3 of the
+    speed between DOP853 references starting it at 1e-7 and 2e-7 of the speed: the event
+    engine's measurement (its run at a tenth of --tol starts the saw elsewhere) does not confirm
+    a run at tol 1e-6, which is handed on with that cause, not answered."""
+    case = SAWS[94]
+    (ref_v, ref_w), (other_v, other_w) = reference(case), reference(case, 2e-7)
+    assert max(abs(ref_v - other_v), abs(ref_w - other_w)) > 1e-4 * SPEED
+    try:
+        run = run_scene(parse_scene(copy.deepcopy(_scene(case, 1e-6))), record=False)
+    except RunError as exc:
+        assert "could not be confirmed" in str(exc), str(exc)
+        return
+    assert run.result.engine == "dem" and "could not be confirmed" in run.result.engine_reason
 
 
 def test_a_slip_off_one_line_goes_to_dem_with_its_cause():

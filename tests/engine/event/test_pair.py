@@ -20,7 +20,7 @@ from collide.engine.layout import R_MODE
 from collide.errors import RunError
 from collide.run import run_scene
 from collide.scene import parse_scene
-from tests.engine.event.test_oblique import switched
+from tests.engine.event.test_oblique import after_event
 from tests.test_event_laws import reference_contact
 
 
@@ -140,8 +140,10 @@ def rub_outcome(res) -> np.ndarray:
     return np.concatenate([v.ravel(), w]) / SPEED
 
 
-def rub_reference(case: dict) -> np.ndarray:
-    """The case by DOP853 at rtol 1e-13 from touching to separating, as `rub_outcome`."""
+def rub_reference(case: dict, hold: float = 1e-7) -> np.ndarray:
+    """The case by DOP853 at rtol 1e-13 from touching to separating, as `rub_outcome` (its stick,
+    slip and hold as `test_oblique.reference`, the hold until the point moves along the force at
+    hold of the speed)."""
     from collide.chung_ooi import Material, effective_modulus, sphere_mass
 
     r = np.array(case["radius"])
@@ -183,6 +185,8 @@ def rub_reference(case: dict) -> np.ndarray:
         n, t, delta, u, fn, kt, gt, cap, lever, slip, f = parts(y, mode, s)
         if mode == "stick":
             return cap - abs(f)
+        if mode == "hold":
+            return hold * SPEED - s * slip
         if gt > 0.0:
             return -s * slip
         return -s * slip - (2.0 / 3.0 if hertz else 1.0) * mu / ratio * u  # c' with c = mu F_n / k_t
@@ -207,7 +211,7 @@ def rub_reference(case: dict) -> np.ndarray:
     atol = 1e-16 * np.array([r[0], r[0], SPEED, SPEED, SPEED / r[0], r[0], r[0], SPEED, SPEED, SPEED / r[1],
                              1e-3 * r[0]])
     t = 0.0
-    for _ in range(2000):
+    for _ in range(20000):
         sol = solve_ivp(rhs, (t, t + 1.0), y, method="DOP853", rtol=1e-13, atol=atol, args=(mode, s),
                         events=(leaves, apart), max_step=1e-6)
         t, y = sol.t[-1], sol.y[:, -1].copy()
@@ -215,7 +219,7 @@ def rub_reference(case: dict) -> np.ndarray:
             return np.concatenate([y[2:4], y[7:9], y[[4, 9]] * r]) / SPEED
         n, tt, delta, u, fn, kt, gt, cap, lever, slip, f = parts(y, mode, s)
         if len(sol.t_events[0]):
-            mode, s, y[10] = switched(mode, s, slip, f, cap, kt, gt)
+            mode, s, y[10] = after_event(mode, s, (slip, f, cap, kt, gt), leaves, rhs, t, y, 10)
         t += 1e-15 * max(t, 1e-9)  # past the located switch
     raise AssertionError("the reference contact did not end")
 
@@ -261,20 +265,33 @@ def test_the_sticking_and_sliding_cases_stick_and_slide():
 def test_random_oblique_pairs_agree_across_tolerances_and_their_error_holds():
     """Twelve random cases (scripts/pair_oblique.py runs 120): outcomes at tol 1e-6 and 1e-9
     within 1e-6, the 1e-6 run's difference from the 1e-9 run at most 10 times its estimate. A
-    case whose stick and slip alternate without end (a sliding mode of the law, as for a sphere on
-    a wall: tests/engine/event/test_oblique.py) is handed on with that cause, never answered."""
+    case whose damped slip ends into a saw whose phase the law leaves open (as for a sphere on a
+    wall: tests/engine/event/test_oblique.py) is handed on with that cause, never answered."""
     counted = 0
     for seed in range(100, 112):
         case = rub_case(seed)
         try:
             (coarse, estimate, _), (fine, _, _) = rub_run(case, 1e-6), rub_run(case, 1e-9)
         except RunError as exc:
-            assert "alternates between stick and slip" in str(exc), str(exc)
+            assert "could not be confirmed" in str(exc) or "alternates between" in str(exc), str(exc)
             continue
         counted += 1
         diff = np.abs(coarse - fine).max()
         assert diff <= 1e-6 and diff <= 10.0 * estimate, (seed, diff, estimate)
     assert counted >= 10
+
+
+def test_a_pair_whose_saw_phase_moves_the_outcome_is_refused_with_its_cause():
+    """Seed 108 alternated between stick and slip without end before the hold: a damped slip
+    ending where the stick cannot hold either. Its saw's phase, which the law does not fix
+    (collide/engine/event/oblique.py), moves the outcome by more than 1e-4 of the speed between
+    DOP853 references starting the saw at 1e-7 and 2e-7 of the speed; the event engine's
+    measurement (its run at a tenth of --tol starts the saw elsewhere) does not confirm a run at
+    tol 1e-6, which is handed on with that cause, not answered."""
+    case = rub_case(108)
+    assert np.abs(rub_reference(case) - rub_reference(case, 2e-7)).max() > 1e-4
+    with pytest.raises(RunError, match="could not be confirmed"):
+        rub_run(case, 1e-6)
 
 
 def test_a_pair_out_of_one_plane_goes_to_dem_with_its_cause():
