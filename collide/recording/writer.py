@@ -25,7 +25,7 @@ from collide.output import OutputError, check_file, write_atomic
 from collide.recording.columns import _any_column
 from collide.recording.draw import _Drawing
 from collide.recording.frames import _Frames, _one_run, frame_times
-from collide.recording.integrity import _messages, _placeholder, _seal, _unsealed_sha256
+from collide.recording.integrity import _file_messages, _placeholder, _seal, _unsealed_sha256
 from collide.recording.spec import (
     APP_ID,
     DISSIPATION_PARTS,
@@ -236,12 +236,12 @@ class _Writer(_Drawing):
     def check(self, path: Path) -> None:
         """The file on disk is whole: Rerun's framing complete to its footer and every byte as
         sealed (a write that failed without an error is refused here)."""
+        digest = self.sealed
         try:
-            data = path.read_bytes()
+            whole = _file_messages(path) is not None and not (self.seal and _unsealed_sha256(path, digest) != digest)
         except OSError as exc:
             raise OutputError(f"could not write {path}: {exc.strerror or exc}") from None
-        digest = self.sealed
-        if _messages(data) is None or self.seal and _unsealed_sha256(data, digest) != digest:
+        if not whole:
             raise OutputError(f"could not write {path}: the file came out incomplete (cut short); "
                               "is the disk full?")
 
