@@ -16,12 +16,12 @@ import numpy as np
 
 from collide import diagnostics as dg
 from collide.contact_forces import peak_normal_force
+from collide.contact_index import SLICE, ContactIndex
 from collide.engine import layout
 from collide.model import State
 from collide.periodic import nearest_image, wrap
 from collide.run import SceneRun
 from collide.trajectory import Knots
-from viewer.contacts import SLICE, ContactIndex
 from viewer.geometry import embed3, orientation_wxyz
 
 MAX_PLOT_POINTS = 400
@@ -600,6 +600,10 @@ class ViewRun:
         else:
             lines.append("contact: none")
         lines.append(self.error_line())
+        if self.n_bodies > CONTACT_LIST_BODIES:
+            # Nothing is held per frame: a frame is sampled from the trajectory when it is shown.
+            lines.append(f"{self.n_bodies:,} bodies: each frame rebuilt from the trajectory as the time moves, "
+                         f"plots at {len(self.times)} times")
         return lines
 
     def error_line(self) -> str:
