@@ -11,6 +11,7 @@ import pytest
 import viewer.state as state
 from collide.run import run_scene
 from tests.test_viewer_inside import small_pile
+from viewer.geometry import embed3
 
 
 @pytest.fixture(scope="module")
@@ -60,6 +61,9 @@ def test_the_status_says_frames_are_rebuilt_above_the_contact_list(pile_run, mon
     monkeypatch.setattr(state, "CONTACT_LIST_BODIES", 30)
     many = state.ViewRun(pile_run)
     assert many.paths is None
-    np.testing.assert_array_equal(many.bounds()[0], view.bounds()[0])
+    # The box the bodies sweep, without their paths: every body at every path time, padded.
+    s = embed3(many.sample(many.path_times).s[:, 0])
+    np.testing.assert_array_equal(many.bounds()[0], (s - many.radius[None, :, None]).min(axis=(0, 1)))
+    np.testing.assert_array_equal(many.bounds()[1], (s + many.radius[None, :, None]).max(axis=(0, 1)))
     said = f"{many.n_bodies} bodies: each frame rebuilt from the trajectory as the time moves"
     assert said in many.status_lines()[-1]
