@@ -135,6 +135,14 @@ def bench_view(path: Path, shot: str | None) -> None:
         wall, cpu = time.perf_counter(), time.process_time()
         ok = session.open_recording(path)
         t_server = time.perf_counter() - wall
+        print(f"{path.name}: opened {ok} in {t_server:.1f} s (load {os.getloadavg()[0]:.1f}); "
+              f"server peak {peak['server'] - base:.0f} MB above its {base:.0f} MB", flush=True)
+        if not ok:
+            stop.append(1)
+            print("  " + session.panel.status.content.replace("\n", " ")[:300])
+            browser.close()
+            app.stop()
+            return
         page.wait_for_function("(t) => document.body.innerText.includes(t)", arg=f"recording {path.name}",
                                timeout=900_000, polling=100)
         page.evaluate("() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame("
