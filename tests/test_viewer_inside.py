@@ -26,7 +26,7 @@ def small_pile(n: int = 36, duration: float = 1.5, rest: float | None = 1e-6, se
     bodies = [{"name": f"g{m + 1}", "material": "glass", "radius": 0.005,
                "position": [(i + 0.5) * 0.011 + rng.uniform(-1e-4, 1e-4), (j + 0.5) * 0.011 + rng.uniform(-1e-4, 1e-4),
                             0.007 + k * 0.011],
-               "velocity": [*rng.normal(0.0, 0.05, 2), 0.0]} for m, (i, j, k) in enumerate(cells)]
+               "velocity": [*rng.normal(0.0, 0.05, 2).tolist(), 0.0]} for m, (i, j, k) in enumerate(cells)]
     side = per * 0.011
     walls = [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]
     walls += [{"point": [side * (s < 0) if a == c else 0.0 for c in range(3)],

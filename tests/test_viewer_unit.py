@@ -837,8 +837,8 @@ def test_sampling_is_exact_at_every_knot_and_free_rows_follow_the_knots():
 def test_engaged_contacts_match_the_dense_contact_series():
     """The contacts found from the run's intervals are those diagnostics.contact_series finds
     pressed at every time (DEM too: its frames are far apart), with the same values."""
+    from collide.contact_index import ContactIndex
     from collide.trajectory import Knots
-    from viewer.contacts import ContactIndex
     from viewer.state import ROUND_OFF
 
     for scene in (load_scene("demo-bonus"), load_scene("billiards-break"), load_scene("break-3d"), _gas(30, 0.2)):

@@ -6,6 +6,7 @@ byte, and `read_recording` survives a file that crashes Rerun's reader."""
 from __future__ import annotations
 
 import csv
+import hashlib
 import os
 import resource
 import signal
@@ -309,11 +310,37 @@ def test_the_seal_itself_is_covered(tmp_path: Path, bonus: object) -> None:
     chunks = rec_reader._load_chunks(path)
     digest = rec_reader._columns(chunks, rec.INTEGRITY)["sha256"][0].to_pylist()[0][0]
     at = data.index(digest.encode())
-    assert rec_integrity._unsealed_sha256(data, digest) == digest
+    assert rec_integrity._unsealed_sha256(path, digest) == digest
+    copy = tmp_path / "damaged.rrd"
     for pos in (at, at + 31, at + 63, at - 1, at + 64, len(data) - 1):
         damaged = bytearray(data)
         damaged[pos] ^= 2
-        assert rec_integrity._unsealed_sha256(bytes(damaged), digest) != digest
+        copy.write_bytes(bytes(damaged))
+        assert rec_integrity._unsealed_sha256(copy, digest) != digest
+
+
+@pytest.mark.parametrize("block", [7, 64, 100, 1 << 24])
+def test_the_seal_is_found_and_hashed_in_blocks(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, block: int) -> None:
+    # A large recording is sealed and checked from its file in blocks: the placeholder found
+    # wherever the blocks cut it, and the hash that of the whole file with zeros in its place.
+    monkeypatch.setattr(rec_integrity, "_BLOCK", block)
+    rng = np.random.default_rng(block)
+    key = rec_integrity._placeholder()
+    path = tmp_path / "f.bin"
+    for at in (0, 5, 63, 64, 99, 100, 101, 150, 936):
+        data = bytearray(rng.integers(0, 256, 1000, dtype=np.uint8).tobytes())
+        data[at:at + 64] = key.encode()
+        path.write_bytes(bytes(data))
+        expected = hashlib.sha256(bytes(data[:at]) + b"0" * 64 + bytes(data[at + 64:])).hexdigest()
+        assert rec_integrity._find_once(path, key.encode()) == at
+        assert rec_integrity._seal(path, key) == expected
+        sealed = path.read_bytes()
+        assert sealed[at:at + 64] == expected.encode()
+        assert sealed[:at] == data[:at] and sealed[at + 64:] == data[at + 64:]
+        assert rec_integrity._unsealed_sha256(path, expected) == expected
+        twice = bytes(data) + key.encode()
+        path.write_bytes(twice)
+        assert rec_integrity._find_once(path, key.encode()) is None and rec_integrity._seal(path, key) == ""
 
 
 def test_read_recording_survives_a_file_that_crashes_rerun() -> None:

@@ -86,13 +86,14 @@ class ViewerApp:
 
     def __init__(self, initial: str | Path | None = None, *, host: str = "127.0.0.1", port: int = 8080,
                  recordings_dir: str | Path = "recordings", scenes_dir: str | Path | None = None,
-                 max_upload_bytes: int = files.MAX_UPLOAD_BYTES) -> None:
+                 max_upload_bytes: int = files.MAX_UPLOAD_BYTES, point_bodies: int | None = None) -> None:
         self.initial = str(initial) if initial is not None else "demo-bonus"
         self.host = host
         self.port = port
         self.recordings_dir = Path(recordings_dir)
         self.scenes_dir = Path(scenes_dir) if scenes_dir is not None else None
         self.max_upload_bytes = max_upload_bytes
+        self.point_bodies = point_bodies  # bodies above which "auto" draws points (None: the viewer's default)
         self.server: viser.ViserServer | None = None
         self.tabs = Tabs(self._build_session)
         self.initial_scene: Scene | None = None
@@ -190,7 +191,8 @@ class ViewerApp:
 
     def session_config(self) -> SessionConfig:
         """What each tab's session needs from the app (after `prepare`)."""
-        return SessionConfig(self.recordings_dir, self.max_upload_bytes, tuple(self.scene_choices), self.initial_cost)
+        return SessionConfig(self.recordings_dir, self.max_upload_bytes, tuple(self.scene_choices), self.initial_cost,
+                             self.point_bodies)
 
     def _build_session(self, client: viser.ClientHandle, closed: Callable[[], bool]) -> Session:
         """A new tab's session, showing the initial scene or recording (on a set-up thread);

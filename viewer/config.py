@@ -17,3 +17,4 @@ class SessionConfig:
     max_upload_bytes: int
     scene_choices: tuple[SceneChoice, ...]  # the scene picker's entries
     initial_cost: float | None  # s: wall time of the first scene's run (chooses previews)
+    point_bodies: int | None = None  # bodies above which "auto" draws points (None: scene3d.POINT_BODIES)

@@ -54,6 +54,7 @@ class Panel:
 
     def __init__(self, gui: viser.GuiApi, config: SessionConfig, options: DrawOptions) -> None:
         self._recordings_dir = config.recordings_dir
+        self._point_bodies = POINT_BODIES if config.point_bodies is None else config.point_bodies
         gui.main_panel.dock_right()
         gui.main_panel.set_width(340)
         gui.add_html(STYLE, order=-1)
@@ -104,7 +105,7 @@ class Panel:
         self.show_shadows = gui.add_checkbox("shadows", initial_value=opts.shadows, visible=False,
                                              hint="each sphere's shadow on the floor")
         self.draw_as = gui.add_dropdown("draw bodies as", list(BODY_DRAWINGS), initial_value=opts.bodies,
-                                        visible=False, hint=f"auto: spheres up to {POINT_BODIES:,} bodies, "
+                                        visible=False, hint=f"auto: spheres up to {self._point_bodies:,} bodies, "
                                                             "points (one per body, sized by the radius) above")
         self.legend = gui.add_markdown("")
         self.colour_legend = gui.add_html("")

@@ -4,7 +4,7 @@ Pure numpy (no viser). The browser sends the click as a ray (origin, direction) 
 coordinates; `pick_sphere` intersects it with every sphere shown (the drawing's own positions),
 whatever way they are drawn. `sphere_report` reads the picked sphere's values at a time: its
 state from the run's samples, its contacts and their forces from the engine's records
-(`viewer.contacts.ContactIndex`, `collide.contact_forces`): nothing here evaluates a law.
+(`collide.contact_index.ContactIndex`, `collide.contact_forces`): nothing here evaluates a law.
 """
 
 from __future__ import annotations

@@ -15,15 +15,24 @@ from collide.recording import RecordingError, read_recording_safely
 from collide.run import SceneRun
 
 TIMEOUT_S = 60.0
+# And this many seconds more per byte of the file: a 100 000-sphere pour's recording (1.1 GB)
+# takes minutes to read on a loaded machine, where a small one's hang is still caught in a minute.
+TIMEOUT_PER_BYTE = 1.0 / 5e6
 MEMORY_MB = 6144  # address space of the child: rerun and numpy reserve much more than they use
 
 
-def read_untrusted(path: str | Path, *, name: str | None = None, timeout_s: float = TIMEOUT_S,
+def read_untrusted(path: str | Path, *, name: str | None = None, timeout_s: float | None = None,
                    memory_mb: int = MEMORY_MB) -> SceneRun:
     """Read a recording in a child process. `name` is how the file is shown in messages
-    (default: its file name). Raises `RecordingError` (one line) for anything that goes wrong:
-    not a recording, damaged, a reader crash, a hang, too much memory."""
+    (default: its file name); `timeout_s` defaults to TIMEOUT_S and TIMEOUT_PER_BYTE of the
+    file's size. Raises `RecordingError` (one line) for anything that goes wrong: not a
+    recording, damaged, a reader crash, a hang, too much memory."""
     path = Path(path)
+    if timeout_s is None:
+        try:
+            timeout_s = TIMEOUT_S + path.stat().st_size * TIMEOUT_PER_BYTE
+        except OSError:
+            timeout_s = TIMEOUT_S  # the reader says what is wrong with it
     try:
         return read_recording_safely(path, timeout_s=timeout_s, memory_mb=memory_mb)
     except RecordingError as exc:

@@ -182,8 +182,10 @@ class ArrowSet:
 class SceneDrawer:
     """Draws runs into one client's (or the server's) scene."""
 
-    def __init__(self, scene: viser.SceneApi) -> None:
+    def __init__(self, scene: viser.SceneApi, point_bodies: int | None = None) -> None:
         self.scene = scene
+        # Bodies above which "auto" draws points (the level of detail; tests lower it).
+        self.point_bodies = POINT_BODIES if point_bodies is None else int(point_bodies)
         self.view: ViewRun | None = None
         self.options = DrawOptions()
         self.many = False
@@ -239,7 +241,7 @@ class SceneDrawer:
         walls = list(view.walls)
         self.many = view.n_bodies > FEW_BODIES
         self.points = self.many and (self.options.bodies == "points" or (
-            self.options.bodies == "auto" and view.n_bodies > POINT_BODIES))
+            self.options.bodies == "auto" and view.n_bodies > self.point_bodies))
         if self._fill_light is None:
             self._configure_lights()
         self._floor = None
@@ -388,7 +390,7 @@ class SceneDrawer:
         lines = []
         if self.points:
             lines.append(f"{view.n_bodies:,} bodies drawn as points, sized by the median radius (level of detail: "
-                         f"'draw bodies as' switches to spheres; auto above {POINT_BODIES:,} bodies); no force "
+                         f"'draw bodies as' switches to spheres; auto above {self.point_bodies:,} bodies); no force "
                          "chains or shadows")
         if self.options.forces and view.max_normal_force > 0 and (self.options.chains or not self.many) and \
                 not self.points:

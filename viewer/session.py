@@ -130,7 +130,7 @@ class Session:
         self.runs_drawn = 0
         self.last_latency: float | None = None
         self._plot_window = "whole run"
-        self.drawer = SceneDrawer(client.scene)
+        self.drawer = SceneDrawer(client.scene, config.point_bodies)
         self.panel = panel = Panel(client.gui, config, self.drawer.options)
         self.messages = Messages(panel.status, panel.progress, panel.notice, panel.file_message, self._closed)
         self._typing = Typing()

@@ -16,12 +16,12 @@ import numpy as np
 
 from collide import diagnostics as dg
 from collide.contact_forces import peak_normal_force
+from collide.contact_index import SLICE, ContactIndex
 from collide.engine import layout
 from collide.model import State
 from collide.periodic import nearest_image, wrap
 from collide.run import SceneRun
 from collide.trajectory import Knots
-from viewer.contacts import SLICE, ContactIndex
 from viewer.geometry import embed3, orientation_wxyz
 
 MAX_PLOT_POINTS = 400
@@ -30,7 +30,14 @@ MAX_PATH_POINTS = 400
 ROUND_OFF = 1e-12  # relative: overlaps and spreads below this are float64 round-off, not physics
 FLAT = 1e-9  # relative spread below which a conserved line is drawn flat (round-off accumulates)
 MAX_COMPRESSION_LINES = 6
-CONTACT_LIST_BODIES = 200  # above this, a frame's contacts are arrays only (Frame.links)
+CONTACT_LIST_BODIES = 200  # above this, a frame's contacts are arrays only (Frame.links); no paths kept
+# A run is prepared a block of plot times at a time, at most this many body states at once:
+# 120 times of 100 000 bodies held whole were 1.2 GB, and their contacts as many entries again.
+SAMPLE_BODY_TIMES = 1 << 19
+# Engaged (time, contact) entries kept for the compression plot's per-contact lines; a run with
+# more (a bed of 100 000 spheres: 300 000 contacts at each of 120 times) plots the largest
+# compression over all its contacts instead.
+COMPRESSION_ENTRIES = 1 << 22
 
 
 @dataclass
@@ -146,6 +153,34 @@ def _subsample(times: np.ndarray, n: int) -> np.ndarray:
     return times[np.linspace(0, len(times) - 1, n).round().astype(int)]
 
 
+@dataclass
+class _Swept:
+    """What one pass over a run's plot times gathers (`ViewRun._sweep`)."""
+
+    conserved: dg.Conserved
+    p_scale: np.ndarray  # (T,) sum of m |v|
+    arm: np.ndarray | None  # (T,) the angular momentum's natural size
+    paths: np.ndarray | None  # (T_p, N, 3) at the path times (a few bodies only)
+    com_path: np.ndarray  # (T_p, 3)
+    box: tuple[np.ndarray, np.ndarray]  # around every body at the path times, padded by its radius
+    max_speed: float
+    max_momentum: float
+    max_body_energy: float
+    max_contacts: int
+    max_links: int
+    peak: np.ndarray  # (C,) each contact's largest compression, mm
+    most: np.ndarray  # (T,) the largest compression of any contact at each time, mm
+    entries: tuple[np.ndarray, np.ndarray, np.ndarray] | None  # (tk, ck, compression mm), if few enough
+    end_values: dict[float, dict[str, np.ndarray]]
+
+
+def _joined(parts: list[dg.Conserved]) -> dg.Conserved:
+    """Per-time totals computed a block of times at a time, as one."""
+    fields = [getattr(parts[0], f) for f in dg.Conserved.__dataclass_fields__]
+    return dg.Conserved(*(None if first is None else np.concatenate([getattr(p, f) for p in parts])
+                          for f, first in zip(dg.Conserved.__dataclass_fields__, fields)))
+
+
 # What the status says while a run's error is measured (viewer.live shows the run first).
 MEASURING = "pending, being measured (the run again at a tenth of the tolerance)"
 
@@ -180,43 +215,31 @@ class ViewRun:
         self.t0, self.t1 = float(t[0]), float(t[-1])
         self._free = ~self._knots.stepped(t)
         self.times = plot_times(t, self._free, plot_points(self.n_bodies))
-        states = self.sample(self.times)
-        engaged = self._contacts.overlaps(self.times, states.s[:, 0])
-        self.plots = self._make_plots(states, engaged)
         path_k = _subsample(np.arange(len(self.times)), MAX_PATH_POINTS)
         self.path_times = self.times[path_k]
-        path_s = embed3(states.s[path_k, 0])
-        self.paths = self._wrapped(path_s).transpose(1, 0, 2)
-        self.com_path = (self.mass[None, :, None] * path_s).sum(axis=1) / self.mass.sum()
+        swept = self._sweep(path_k)
+        self.plots = self._make_plots(swept)
+        # Each body's path (trails: a few bodies); many bodies keep the box they sweep only.
+        self.paths = None if swept.paths is None else swept.paths.transpose(1, 0, 2)
+        self._box = swept.box
+        self.com_path = swept.com_path
         self.walls = [(embed3(np.asarray(w.point, float)), embed3(np.asarray(w.normal, float)))
                       for w in self.scene.walls]
-        speed = np.linalg.norm(states.v[:, 0], axis=-1)
         # The arrows' scales: the fastest on the plot grid or at any knot (free flight's speed
         # is largest at its ends), so that no velocity arrow is longer than the legend says.
         knots = self.traj.knots
         at_knots = np.linalg.norm(knots[:, layout.K_V:layout.K_V + 3], axis=-1)
         body = knots[:, layout.K_BODY].astype(np.int64)
-        self.max_speed = float(max(np.max(speed, initial=0.0), np.max(at_knots, initial=0.0)))
-        self.max_momentum = float(max(np.max(speed * self.mass, initial=0.0),
-                                      np.max(at_knots * self.mass[body], initial=0.0)))
-        energy = 0.5 * self.mass * speed**2
-        if states.w.shape[-1]:
-            energy = energy + 0.5 * self.model.inertia[0] * np.sum(states.w[:, 0] ** 2, axis=-1)
-        self.max_body_energy = float(np.max(energy, initial=0.0))
+        self.max_speed = float(max(swept.max_speed, np.max(at_knots, initial=0.0)))
+        self.max_momentum = float(max(swept.max_momentum, np.max(at_knots * self.mass[body], initial=0.0)))
+        self.max_body_energy = swept.max_body_energy
         res = dg.residuals(result)
         self.residuals = {"energy": float(res.energy[0]), "momentum": float(res.momentum[0]),
                           "angular_momentum": float(res.angular_momentum[0])}
-        tk, ck, overlap = engaged
         # The run's peak as the engine has it (the JSON summary's max_normal_force): the legend
         # and the arrows' scale; no force drawn exceeds it.
         self.max_normal_force = peak_normal_force(result, self._contacts.forces)
-        touching = overlap > ROUND_OFF * float(self.radius.max())
-        tk, ck = tk[touching], ck[touching]
-        i, j = self._contacts.pairs[ck, 0], self._contacts.pairs[ck, 1]
-        n = self.n_bodies
-        ends = np.concatenate((tk * n + i, (tk * n + j)[j >= 0]))
-        self.max_contacts = int(np.bincount(ends, minlength=1).max(initial=0))
-        self.max_links = int(np.bincount(tk, minlength=1).max(initial=0))  # contacts at once, at most
+        self.max_contacts, self.max_links = swept.max_contacts, swept.max_links
         records = self.traj.records
         if self.model.friction and len(records):
             force = records[:, layout.R_FX:layout.R_FX + self.dim]
@@ -229,9 +252,7 @@ class ViewRun:
         self.step_times = np.union1d(t[:-1][on], t[1:][on])
         # The values at the run's ends (the table's before and after, asked at every draw): the
         # plot grid's first and last rows.
-        self._end_values = {float(self.times[k]): body_values_arrays(self.mass, self.model.inertia[0],
-                                                                     states.v[k, 0], states.w[k, 0])
-                            for k in (0, -1) if float(self.times[k]) in (self.t0, self.t1)}
+        self._end_values = swept.end_values
 
     # ------------------------------------------------------------------------------------------
     # A periodic box (docs/design.md section 10): bodies drawn wrapped into it, with a copy across
@@ -272,6 +293,92 @@ class ViewRun:
         """States at these times (T, 1, N, D): exact in free flight, quintic inside contact steps
         (`collide.trajectory.Knots`: all bodies at once)."""
         return self._knots.sample(np.asarray(times, dtype=float))
+
+    def _chunks(self, times: np.ndarray):  # noqa: ANN202 - a generator of (slice, State)
+        """States at `times` a block of times at a time (at most SAMPLE_BODY_TIMES body states)."""
+        rows = max(1, SAMPLE_BODY_TIMES // max(self.n_bodies, 1))
+        for a in range(0, len(times), rows):
+            part = slice(a, min(a + rows, len(times)))
+            yield part, self.sample(times[part])
+
+    def _sweep(self, path_k: np.ndarray) -> _Swept:
+        """One pass over the plot times, a block at a time: the plots' totals, the paths (a few
+        bodies) or the box the bodies sweep, the largest speed, energy and contact counts, and
+        the contacts' compression; memory bounded by the block, not by bodies x times."""
+        times, n = self.times, self.n_bodies
+        n_t, inertia = len(times), self.model.inertia[0]
+        is_path = np.zeros(n_t, bool)
+        is_path[path_k] = True
+        parts, arms, paths, coms = [], [], [], []
+        spring, p_scale, most = np.zeros(n_t), np.zeros(n_t), np.zeros(n_t)
+        peak = np.zeros(len(self._contacts))
+        entries: list | None = []
+        kept = 0
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        speed_max = momentum_max = energy_max = 0.0
+        contacts_max = links_max = 0
+        ends: dict[float, dict[str, np.ndarray]] = {}
+        touch = ROUND_OFF * float(self.radius.max())
+        for part, st in self._chunks(times):
+            s, v, w = st.s[:, 0], st.v[:, 0], st.w[:, 0]
+            tk, ck, overlap = self._contacts.overlaps(times[part], s)
+            rows = part.stop - part.start
+            for a in range(0, len(tk), SLICE):  # in slices: the law's temporaries, a million entries
+                cut = slice(a, a + SLICE)
+                held = dg.elastic_energy(self.model, self._contacts.pairs[ck[cut]], np.maximum(overlap[cut], 0.0))[0]
+                spring[part] += np.bincount(tk[cut], weights=held, minlength=rows)
+            parts.append(dg.conserved(self.model, st.t, st.s, st.v, st.w, st.work, np.zeros((0, 2), np.int64),
+                                      stored=spring[part][:, None]))
+            speed = np.linalg.norm(v, axis=-1)
+            p_scale[part] = np.sum(self.mass * speed, axis=-1)
+            if self.dim > 1:
+                arms.append(dg.angular_scale(self.model, s, v, w))
+            speed_max = max(speed_max, float(np.max(speed, initial=0.0)))
+            momentum_max = max(momentum_max, float(np.max(speed * self.mass, initial=0.0)))
+            energy = 0.5 * self.mass * speed**2
+            if w.shape[-1]:
+                energy = energy + 0.5 * inertia * np.sum(w**2, axis=-1)
+            energy_max = max(energy_max, float(np.max(energy, initial=0.0)))
+            here = np.flatnonzero(is_path[part])
+            if len(here):
+                path_s = embed3(s[here])
+                coms.append((self.mass[None, :, None] * path_s).sum(axis=1) / self.mass.sum())
+                wrapped = self._wrapped(path_s)
+                lo = np.minimum(lo, (wrapped - self.radius[None, :, None]).min(axis=(0, 1)))
+                hi = np.maximum(hi, (wrapped + self.radius[None, :, None]).max(axis=(0, 1)))
+                if n <= CONTACT_LIST_BODIES:
+                    paths.append(wrapped)
+            for k in (0, n_t - 1):
+                if part.start <= k < part.stop and float(times[k]) in (self.t0, self.t1):
+                    ends[float(times[k])] = body_values_arrays(self.mass, inertia, v[k - part.start],
+                                                               w[k - part.start])
+            touching = overlap > touch
+            i, j = self._contacts.pairs[ck[touching], 0], self._contacts.pairs[ck[touching], 1]
+            at = tk[touching]
+            ends_of = np.concatenate((at * n + i, (at * n + j)[j >= 0]))
+            contacts_max = max(contacts_max, int(np.bincount(ends_of, minlength=1).max(initial=0)))
+            links_max = max(links_max, int(np.bincount(at, minlength=1).max(initial=0)))  # contacts at once
+            comp = self._contacts.compression(ck, overlap) * 1e3
+            np.maximum.at(peak, ck, comp)
+            np.maximum.at(most, tk + part.start, comp)
+            kept += len(tk)
+            entries = entries if entries is not None and kept <= COMPRESSION_ENTRIES else None
+            if entries is not None:
+                entries.append((tk + part.start, ck, comp))
+        joined = None if entries is None else tuple(np.concatenate([e[k] for e in entries]) if entries else
+                                                    np.zeros(0) for k in range(3))
+        if self.dim < 3:
+            r = float(self.radius.max())
+            lo[2], hi[2] = -r, r
+        return _Swept(_joined(parts), p_scale, np.concatenate(arms) if arms else None,
+                      np.concatenate(paths) if n <= CONTACT_LIST_BODIES else None, np.concatenate(coms), (lo, hi),
+                      speed_max, momentum_max, energy_max, contacts_max, links_max, peak, most, joined, ends)
+
+    def _angular_at(self, times: np.ndarray) -> np.ndarray:
+        """The angular momentum (T, L) at sorted `times`, a block of times at a time."""
+        rows = [dg.conserved(self.model, st.t, st.s, st.v, st.w, st.work, np.zeros((0, 2), np.int64))
+                .angular_momentum[:, 0] for _, st in self._chunks(times)]
+        return np.concatenate(rows)
 
     # ------------------------------------------------------------------------------------------
     # Frames
@@ -346,16 +453,9 @@ class ViewRun:
     # ------------------------------------------------------------------------------------------
     # Plots
 
-    def _make_plots(self, states: State, engaged: tuple[np.ndarray, np.ndarray, np.ndarray]) -> PlotData:
-        # The springs' energy summed over the contacts engaged at each time (no others hold any).
-        tk, ck, overlap = engaged
-        spring = np.zeros(len(self.times))
-        for a in range(0, len(tk), SLICE):  # in slices: the law's temporaries, a million entries
-            part = slice(a, a + SLICE)
-            held = dg.elastic_energy(self.model, self._contacts.pairs[ck[part]], np.maximum(overlap[part], 0.0))[0]
-            spring += np.bincount(tk[part], weights=held, minlength=len(self.times))
-        con = dg.conserved(self.model, states.t, states.s, states.v, states.w, states.work,
-                           np.zeros((0, 2), np.int64), stored=spring[:, None])
+    def _make_plots(self, swept: _Swept) -> PlotData:
+        # The springs' energy is summed over the contacts engaged at each time (no others hold any).
+        con = swept.conserved
         energy = {"kinetic": con.kinetic[:, 0]}
         if con.rotational is not None:
             energy["rotational"] = con.rotational[:, 0]
@@ -366,11 +466,9 @@ class ViewRun:
         if con.dissipated is not None:
             energy["dissipated"] = con.dissipated[:, 0]
             energy["total + dissipated"] = con.balance[:, 0]
-        mass = self.mass[None, :, None]
-        v, s = states.v[:, 0], states.s[:, 0]
         axes = "xyz"[: self.dim]
         momentum = {f"p{a}": con.momentum[:, 0, k] for k, a in enumerate(axes)}
-        p_scale = float(np.max(np.sum(mass[..., 0] * np.linalg.norm(v, axis=-1), axis=-1), initial=0.0))
+        p_scale = float(np.max(swept.p_scale, initial=0.0))
         angular = None
         if con.angular_momentum is not None:
             # Inside a contact step, straight between the steps' own values: interpolated spins
@@ -382,18 +480,15 @@ class ViewRun:
             values = con.angular_momentum[:, 0].copy()
             if inside.any():
                 ends = np.union1d(t[k[inside]], t[np.minimum(k[inside] + 1, len(t) - 1)])
-                at = self.sample(ends)
-                rows = dg.conserved(self.model, at.t, at.s, at.v, at.w, at.work,
-                                    np.zeros((0, 2), np.int64)).angular_momentum[:, 0]
+                rows = self._angular_at(ends)
                 for c in range(values.shape[-1]):
                     values[inside, c] = np.interp(self.times[inside], ends, rows[:, c])
             comps = ("z",) if values.shape[-1] == 1 else ("x", "y", "z")
             # Its natural size (the residual's scale), largest over the run.
-            arm = dg.angular_scale(self.model, s, v, states.w[:, 0])
             angular = _conserved_series("angular momentum", "kg m²/s",
                                         {f"L{a}": values[:, c] for c, a in enumerate(comps)},
-                                        float(np.max(arm, initial=0.0)))
-        compression = self._compression_lines(engaged)
+                                        float(np.max(swept.arm, initial=0.0)))
+        compression = self._compression_lines(swept)
         e_scale = float(np.max(np.abs(energy["total"]), initial=0.0))
         energy_series = _conserved_series("energy", "J", energy, e_scale)
         plots = PlotData(self.times, energy_series, _conserved_series("momentum", "kg m/s", momentum, p_scale),
@@ -404,16 +499,16 @@ class ViewRun:
                      if s is not None]
         return plots
 
-    def _compression_lines(self, engaged: tuple[np.ndarray, np.ndarray, np.ndarray]) -> dict[str, np.ndarray]:
+    def _compression_lines(self, swept: _Swept) -> dict[str, np.ndarray]:
         """Compression (mm) of each contact that was pressed beyond round-off, in the order the
         contacts began; above MAX_COMPRESSION_LINES the largest ones and an 'others (max)' line
-        (a pile has thousands of contacts)."""
-        n_t, c = len(self.times), len(self._contacts)
-        tk, ck, overlap = engaged
-        comp = self._contacts.compression(ck, overlap) * 1e3
-        peak = np.zeros(c)
-        np.maximum.at(peak, ck, comp)
+        (a pile has thousands of contacts); with more engaged entries than COMPRESSION_ENTRIES,
+        the largest of all contacts' at each time."""
+        n_t, peak = len(self.times), swept.peak
         pressed = np.flatnonzero(peak > ROUND_OFF * self.radius.max() * 1e3)
+        if swept.entries is None:
+            return {f"{len(pressed)} contacts (max)": swept.most} if len(pressed) else {}
+        tk, ck, comp = swept.entries
         if len(pressed) > MAX_COMPRESSION_LINES:
             top = pressed[np.argsort(-peak[pressed], kind="stable")]
             shown, rest = top[: MAX_COMPRESSION_LINES - 1], top[MAX_COMPRESSION_LINES - 1:]
@@ -466,12 +561,8 @@ class ViewRun:
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Box around every body's path, padded by its radius (m, 3D)."""
-        r = self.radius[:, None, None]
-        lo = (self.paths - r).min(axis=(0, 1))
-        hi = (self.paths + r).max(axis=(0, 1))
-        if self.dim < 3:
-            lo[2], hi[2] = -float(self.radius.max()), float(self.radius.max())
-        return lo, hi
+        lo, hi = self._box
+        return lo.copy(), hi.copy()
 
     def contact_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Box around the bodies while they touch (the first contact), padded by three radii;
@@ -481,9 +572,12 @@ class ViewRun:
         a, b = self.contact_windows[0]
         pad = 0.25 * (b - a)
         t = np.linspace(max(self.t0, a - pad), min(self.t1, b + pad), 50)
-        s = embed3(self.sample(t).s[:, 0])
         r = float(self.radius.max())
-        lo, hi = s.min(axis=(0, 1)) - 2.5 * r, s.max(axis=(0, 1)) + 2.5 * r
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for _, st in self._chunks(t):
+            s = embed3(st.s[:, 0])
+            lo, hi = np.minimum(lo, s.min(axis=(0, 1))), np.maximum(hi, s.max(axis=(0, 1)))
+        lo, hi = lo - 2.5 * r, hi + 2.5 * r
         if self.dim < 3:
             lo[2], hi[2] = -r, r
         return lo, hi
@@ -506,6 +600,10 @@ class ViewRun:
         else:
             lines.append("contact: none")
         lines.append(self.error_line())
+        if self.n_bodies > CONTACT_LIST_BODIES:
+            # Nothing is held per frame: a frame is sampled from the trajectory when it is shown.
+            lines.append(f"{self.n_bodies:,} bodies: each frame rebuilt from the trajectory as the time moves, "
+                         f"plots at {len(self.times)} times")
         return lines
 
     def error_line(self) -> str:

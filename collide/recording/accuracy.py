@@ -11,7 +11,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from collide.output import OutputError, write_atomic
-from collide.recording.integrity import _messages
+from collide.recording.integrity import _file_messages
 from collide.recording.spec import APP_ID
 from collide.recording.stream import rrd_file
 
@@ -24,7 +24,7 @@ def write_accuracy_recording(wp: Any, path: Path) -> Path:
         _write_accuracy(wp, tmp)
 
     def check(tmp: Path) -> None:
-        if _messages(tmp.read_bytes()) is None:
+        if _file_messages(tmp) is None:
             raise OutputError(f"could not write {tmp}: the file is incomplete (cut short); is the disk full?")
 
     return write_atomic(Path(path), produce, check)

@@ -230,19 +230,19 @@ class _Drawing:
     def _write_many_contacts(self) -> None:
         """Every contact at once: points and normal (and friction) force arrows of all contacts
         pressed at each frame, and how many there are as a plot."""
-        view = self.view.contacts
-        on = view.overlap[:, 0] > self.pressed  # (T, C)
-        lengths = on.sum(axis=1).astype(np.int32)
-        point = _pad3(view.point[:, 0][on])
+        view = self.view.engaged  # entries ordered by time, then contact
+        on = view.overlap > self.pressed
+        lengths = np.bincount(view.tk[on], minlength=len(self.view.times)).astype(np.int32)
+        point = _pad3(view.point[on])
         radius = float(self.model.radius.mean())
         self._static("/world/contacts/points", rr.Points3D.from_fields(colors=[(0, 0, 0)], radii=0.05 * radius))
         self._send("/world/contacts/points", rr.Points3D.columns(positions=point).partition(lengths), self.view.index)
-        self._arrows("/world/contacts/normal_force", _pad3(view.normal_force[:, 0][on]), point, lengths, 1,
-                     (255, 215, 0))
+        self._arrows("/world/contacts/normal_force", _pad3(view.normal_force[on]), point, lengths, 1, (255, 215, 0))
         if self.friction and view.friction_force is not None:
-            self._arrows("/world/contacts/friction_force", _pad3(view.friction_force[:, 0][on]), point, lengths, 1,
+            self._arrows("/world/contacts/friction_force", _pad3(view.friction_force[on]), point, lengths, 1,
                          (255, 64, 160))
-        exact_on = (self.exact.contacts.overlap[:, 0] > self.pressed).sum(axis=1).astype(float)
+        exact = self.exact.engaged
+        exact_on = np.bincount(exact.tk[exact.overlap > self.pressed], minlength=len(self.exact.times)).astype(float)
         self._send("/contacts/count", rr.Scalars.columns(scalars=exact_on), self.exact.index)
 
     def _arrows(self, entity: str, force: np.ndarray, point: np.ndarray, lengths: np.ndarray,

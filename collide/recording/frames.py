@@ -10,6 +10,7 @@ import numpy as np
 import rerun as rr
 
 from collide import diagnostics as dg
+from collide.contact_index import Engaged
 from collide.engine import layout
 from collide.model import Model, State
 from collide.results import Trajectory
@@ -60,8 +61,9 @@ class _Frames:
 
     times: np.ndarray
     state: State
-    contacts: dg.ContactSeries
+    contacts: dg.ContactSeries | None  # None for many contacts: `engaged` holds them
     index: rr.TimeColumn
+    engaged: Engaged | None = None  # many contacts: only those engaged at each time
 
 
 def _contact_segments(traj: Trajectory) -> np.ndarray:

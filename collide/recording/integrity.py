@@ -3,6 +3,8 @@ SHA-256 of the whole file, stored in the file at a placeholder that is filled in
 
 from __future__ import annotations
 
+import hashlib
+import mmap
 import re
 import struct
 from pathlib import Path
@@ -14,6 +16,9 @@ _RRD_HEADER = 12
 _MESSAGE = struct.Struct("<QQ")
 _TRAILER = struct.Struct("<QQI8sI")
 _END, _ARROW = 0, 2
+# A recording is checked and sealed from its file in blocks of this many bytes: a large one (a
+# 100 000-sphere pour's, 1 GB) was read whole, and sealing held three copies of it at once.
+_BLOCK = 1 << 24
 
 
 def _messages(data: bytes | memoryview) -> list[tuple[int, int, int]] | None:
@@ -37,6 +42,16 @@ def _messages(data: bytes | memoryview) -> list[tuple[int, int, int]] | None:
     return None
 
 
+def _file_messages(path: Path) -> list[tuple[int, int, int]] | None:
+    """`_messages` of a file, read where its framing is (mapped, not loaded: the file can be
+    larger than the memory to spare)."""
+    with open(path, "rb") as f:
+        if f.seek(0, 2) == 0:
+            return None
+        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            return _messages(data)
+
+
 _HEX = re.compile(rb"[0-9a-f]{64}")
 
 
@@ -53,35 +68,54 @@ def _placeholder() -> str:
             return text
 
 
-def _unsealed_sha256(data: bytes, digest: str) -> str | None:
-    """SHA-256 of the file with its one copy of `digest` (the seal) read as 64 zeros; None if
-    the digest is not in the file exactly once."""
-    key = digest.encode()
-    at = data.find(key)
-    if at < 0 or data.find(key, at + 1) >= 0:
-        return None
-    import hashlib
+def _find_once(path: Path, key: bytes) -> int | None:
+    """Where `key` is in the file, read in blocks; None unless it is there exactly once."""
+    found: list[int] = []
+    keep = len(key) - 1  # a key across two blocks is found in the second with this much before it
+    with open(path, "rb") as f:
+        tail, pos = b"", 0
+        while block := f.read(_BLOCK):
+            data = tail + block
+            at = data.find(key)
+            while at >= 0:
+                found.append(pos - len(tail) + at)
+                if len(found) > 1:
+                    return None
+                at = data.find(key, at + 1)
+            tail, pos = data[-keep:], pos + len(block)
+    return found[0] if found else None
 
-    h = hashlib.sha256(memoryview(data)[:at])
-    h.update(b"0" * 64)
-    h.update(memoryview(data)[at + 64:])
+
+def _zeroed_sha256(path: Path, at: int) -> str:
+    """SHA-256 of the file, read in blocks, with its 64 bytes from `at` read as zeros."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        pos = 0
+        while block := f.read(_BLOCK):
+            lo, hi = max(at - pos, 0), min(at + 64 - pos, len(block))
+            if lo < hi:
+                block = block[:lo] + b"0" * (hi - lo) + block[hi:]
+            h.update(block)
+            pos += len(block)
     return h.hexdigest()
+
+
+def _unsealed_sha256(path: Path, digest: str) -> str | None:
+    """SHA-256 of the file with its one copy of `digest` (the seal) read as 64 zeros, read in
+    blocks; None if the digest is not in the file exactly once."""
+    at = _find_once(path, digest.encode())
+    return None if at is None else _zeroed_sha256(path, at)
 
 
 def _seal(path: Path, placeholder: str) -> str:
     """Replace the placeholder (stored verbatim once) by the SHA-256 of the file as it is with
     64 zeros there: every byte of the file is then covered, the seal's own included (a changed
     seal no longer matches the rest). "" if LZ4 did not keep the placeholder verbatim."""
-    data = path.read_bytes()
-    key = placeholder.encode()
-    at = data.find(key)
-    if at < 0 or data.find(key, at + 1) >= 0:
+    at = _find_once(path, placeholder.encode())
+    if at is None:
         return ""
-    data = data[:at] + b"0" * 64 + data[at + 64:]
-    import hashlib
-
-    digest = hashlib.sha256(data).hexdigest().encode()
+    digest = _zeroed_sha256(path, at)
     with open(path, "r+b") as f:
         f.seek(at)
-        f.write(digest)
-    return digest.decode()
+        f.write(digest.encode())
+    return digest

@@ -18,7 +18,7 @@ import numpy as np
 import pyarrow as pa
 
 from collide.model import State, compile_scenes
-from collide.recording.integrity import _HEX, _messages, _unsealed_sha256
+from collide.recording.integrity import _HEX, _file_messages, _unsealed_sha256
 from collide.recording.spec import (
     _TABLES,
     DISSIPATION_PARTS,
@@ -34,7 +34,9 @@ from collide.run import SceneRun
 from collide.scene import SceneError, parse_scene
 
 
-def _load_chunks(path: Path) -> list:
+def _load_chunks(path: Path, under: str = "") -> list:
+    """The recording's chunks (those of entities under `under` only, when given: reading a run
+    back keeps /collide/ and lets what is drawn go as it is read)."""
     from rerun.chunk import RrdReader
 
     if not path.exists():
@@ -47,7 +49,7 @@ def _load_chunks(path: Path) -> list:
             reader = RrdReader(path)
             if not reader.recordings():
                 raise _fail(path, "not a collide recording (the file holds no Rerun recording)")
-            return list(reader.stream())
+            return [c for c in reader.stream() if c.entity_path.startswith(under)]
     except RecordingError:
         raise
     except Exception as exc:  # rerun raises several kinds for damaged input
@@ -93,8 +95,7 @@ def _check_integrity(path: Path, chunks: list) -> bool:
             raise ValueError
     except (ValueError, IndexError, TypeError, UnicodeEncodeError):
         raise _fail(path, "damaged collide recording (its integrity record is malformed)") from None
-    data = path.read_bytes()
-    if _messages(data) is None or _unsealed_sha256(data, digest) != digest:
+    if _file_messages(path) is None or _unsealed_sha256(path, digest) != digest:
         raise _fail(path, "damaged collide recording (checksum mismatch: its bytes changed after it was "
                           "written)")
     return True
@@ -147,16 +148,23 @@ def _tables(path: Path, chunks: list, meta: dict[str, Any]) -> dict[str, np.ndar
             out[name] = np.zeros((0, width))
             continue
         columns = _columns(chunks, entity)
-        if "values" not in columns or "row" not in columns:
+        if "values" not in columns or "row" not in columns or len(columns["values"]) != len(columns["row"]):
             raise _fail(path, f"incomplete collide recording ({entity} is missing)")
-        values, order = _flat(columns["values"]), _flat(columns["row"])
-        if values.size != rows * width or order.size != rows:
-            raise _fail(path, f"incomplete collide recording ({entity} has {order.size} of {rows} rows)")
-        order = order.astype(np.int64)
-        if not np.array_equal(np.sort(order), np.arange(rows)):
-            raise _fail(path, f"damaged collide recording ({entity}'s row numbers are not 0..{rows - 1})")
+        # Each chunk's rows put in place as they come (no copy of the whole table beside it).
         table = np.empty((rows, width))
-        table[order] = values.reshape(rows, width)
+        seen = np.zeros(rows, bool)
+        found = 0
+        for values, order in zip(columns["values"], columns["row"]):
+            values, order = _flat([values]), _flat([order]).astype(np.int64)
+            if values.size != order.size * width or order.size and (order.min() < 0 or order.max() >= rows):
+                raise _fail(path, f"damaged collide recording ({entity}'s row numbers are not 0..{rows - 1})")
+            if seen[order].any() or len(np.unique(order)) != order.size:
+                raise _fail(path, f"damaged collide recording ({entity}'s row numbers are not 0..{rows - 1})")
+            seen[order] = True
+            found += order.size
+            table[order] = values.reshape(-1, width)
+        if found != rows:
+            raise _fail(path, f"incomplete collide recording ({entity} has {found} of {rows} rows)")
         out[name] = table
     return out
 
@@ -182,7 +190,7 @@ def _verified_tables(path: Path, chunks: list, meta: dict[str, Any]) -> dict[str
 def read_trusted(path: Path) -> SceneRun:
     """`read_recording` in this process (its `trusted=True`): for files this program has just
     written itself, and in the reader process (`sandbox`), where a crash costs only that process."""
-    chunks = _load_chunks(path)
+    chunks = _load_chunks(path, "/collide/")
     try:
         meta = _meta(path, chunks)
         return _rebuild(path, _verified_tables(path, chunks, meta), meta)
@@ -195,7 +203,7 @@ def read_trusted(path: Path) -> SceneRun:
 
 def verify_trusted(path: Path) -> None:
     """`verify_recording` in this process (its `trusted=True`)."""
-    chunks = _load_chunks(path)
+    chunks = _load_chunks(path, "/collide/")
     try:
         _verified_tables(path, chunks, _meta(path, chunks))
     except RecordingError:

@@ -71,6 +71,23 @@ def _send_message(stream: Any, obj: Any) -> None:
     stream.flush()
 
 
+_ANSWER = struct.Struct("!QQ")  # the answer's pickle length, how many out-of-band buffers follow it
+
+
+def _send_answer(stream: Any, obj: Any) -> None:
+    """An answer with its arrays out of band (pickle protocol 5): each array's bytes follow the
+    pickle as they are, and the parent reads them into buffers the arrays then use, so a large
+    run is held once while it is passed, not twice (the message and the arrays made from it)."""
+    buffers: list[pickle.PickleBuffer] = []
+    data = pickle.dumps(obj, protocol=5, buffer_callback=buffers.append)
+    views = [b.raw() for b in buffers]
+    stream.write(_ANSWER.pack(len(data), len(views)) + b"".join(_HEADER.pack(v.nbytes) for v in views))
+    stream.write(data)
+    for view in views:
+        stream.write(view)
+    stream.flush()
+
+
 def _serve_reads() -> None:
     """The reader process: read (path, memory_mb) requests on stdin, answer on stdout.
 
@@ -106,8 +123,12 @@ def _serve_reads() -> None:
             message = ("error", f"{path}: reading it needs more than {memory_mb} MB of memory")
         except Exception as exc:  # whatever a damaged file makes the reader raise
             message = ("error", f"{path}: damaged or not a collide recording ({type(exc).__name__}: {exc})")
-        _send_message(out, message)
+        _send_answer(out, message)
         del message  # not held while idle
+
+
+class _Stopped(Exception):
+    """A read given up: the reader died or went past a limit (the message says which)."""
 
 
 class _Reader:
@@ -139,38 +160,42 @@ class _Reader:
             _send_message(self.proc.stdin, (str(path), int(memory_mb), mode))
         except OSError:
             return "failed", self._died()
-        fd = self.proc.stdout.fileno()
         deadline = time.monotonic() + timeout_s
-        # A bytearray grows in place: `bytes +=` copied everything read so far for every 64 kB
-        # the pipe gives (a 1 000-sphere recording: 10-70 s of copying, quadratic in its size).
-        data = bytearray()
-        need = _HEADER.size
-        length = None
-        while True:
-            ready, _, _ = select.select([fd], [], [], _POLL_S)
-            if ready:
-                chunk = os.read(fd, max(need - len(data), 1 << 16))
-                if not chunk:
-                    return "failed", self._died()
-                data += chunk
-                if length is None and len(data) >= _HEADER.size:
-                    length = _HEADER.unpack(bytes(data[:_HEADER.size]))[0]
-                    need = _HEADER.size + length
-                if length is not None and len(data) >= need:
-                    # Limits hold for reads quicker than one check too.
-                    if time.monotonic() > deadline:
-                        return "failed", f"reading it took longer than {timeout_s:g} s (stopped)"
-                    if self.rss_mb() > memory_mb:
-                        return "failed", f"reading it needs more than {memory_mb} MB of memory (stopped)"
-                    try:
-                        return pickle.loads(memoryview(data)[_HEADER.size:need])
-                    except Exception as exc:
-                        return "failed", f"its contents could not be passed back ({type(exc).__name__})"
-                continue
-            if time.monotonic() > deadline:
-                return "failed", f"reading it took longer than {timeout_s:g} s (stopped)"
-            if self.rss_mb() > memory_mb:
+        try:
+            head = self._receive(bytearray(_ANSWER.size), deadline, timeout_s, memory_mb)
+            length, count = _ANSWER.unpack(bytes(head))
+            sizes = self._receive(bytearray(_HEADER.size * count), deadline, timeout_s, memory_mb)
+            lengths = [_HEADER.unpack_from(sizes, _HEADER.size * k)[0] for k in range(count)]
+            if length + sum(lengths) > memory_mb * 2**20:  # more than the reader may hold: not an answer
                 return "failed", f"reading it needs more than {memory_mb} MB of memory (stopped)"
+            data = self._receive(bytearray(length), deadline, timeout_s, memory_mb)
+            buffers = [self._receive(bytearray(size), deadline, timeout_s, memory_mb) for size in lengths]
+        except _Stopped as stop:
+            return "failed", str(stop)
+        try:
+            return pickle.loads(data, buffers=buffers)
+        except Exception as exc:
+            return "failed", f"its contents could not be passed back ({type(exc).__name__})"
+
+    def _receive(self, into: bytearray, deadline: float, timeout_s: float, memory_mb: int) -> bytearray:
+        """Fill `into` from the reader's answers (read straight into it: no copies grown as it
+        comes), within the time and memory limits, checked between reads and at the end."""
+        fd = self.proc.stdout.fileno()
+        view, filled = memoryview(into), 0
+        while True:
+            if filled < len(into) and select.select([fd], [], [], _POLL_S)[0]:
+                got = os.readv(fd, [view[filled:]])
+                if not got:
+                    raise _Stopped(self._died())
+                filled += got
+                if filled < len(into):
+                    continue
+            if time.monotonic() > deadline:
+                raise _Stopped(f"reading it took longer than {timeout_s:g} s (stopped)")
+            if self.rss_mb() > memory_mb:
+                raise _Stopped(f"reading it needs more than {memory_mb} MB of memory (stopped)")
+            if filled == len(into):
+                return into
 
     def _died(self) -> str:
         code = self.proc.wait()

@@ -19,13 +19,14 @@ import rerun as rr
 
 from collide import diagnostics as dg
 from collide.contact_forces import peak_normal_force
+from collide.contact_index import ContactIndex
 from collide.engine import layout
 from collide.model import State
 from collide.output import OutputError, check_file, write_atomic
 from collide.recording.columns import _any_column
 from collide.recording.draw import _Drawing
 from collide.recording.frames import _Frames, _one_run, frame_times
-from collide.recording.integrity import _messages, _placeholder, _seal, _unsealed_sha256
+from collide.recording.integrity import _file_messages, _placeholder, _seal, _unsealed_sha256
 from collide.recording.spec import (
     APP_ID,
     DISSIPATION_PARTS,
@@ -143,9 +144,14 @@ class _Writer(_Drawing):
 
     def _frames(self, times: np.ndarray) -> _Frames:
         st = dg.sample(self.model, self.traj, times, 0)
-        contacts = dg.contact_series(self.model, self.traj, times, st)
         index = rr.TimeColumn(TIMELINE, duration=times)
-        return _Frames(times, _one_run(st), contacts, index)
+        if self.many_contacts:
+            # Only the contacts engaged at each frame: every contact of the run at every frame
+            # (a 100 000-sphere bed: a million contacts) was gigabytes held through the write.
+            frames = _one_run(st)
+            engaged = ContactIndex(self.model, self.traj, self.traj.index).at(times, frames.s)
+            return _Frames(times, frames, None, index, engaged)
+        return _Frames(times, _one_run(st), dg.contact_series(self.model, self.traj, times, st), index)
 
     def _states(self, times: np.ndarray) -> State:
         return _one_run(dg.sample(self.model, self.traj, times, 0))
@@ -169,24 +175,25 @@ class _Writer(_Drawing):
         return exact
 
     def _prepare(self) -> None:
+        # Every contact that ever engaged (from the run's contact intervals: a frame could miss one).
+        pairs = self.traj.contacts_touched()
+        self.touched = np.arange(len(pairs))
+        self.many_contacts = len(self.touched) >= MANY_CONTACTS
         exact, view = frame_times(self.traj, self.fps, self.stride, self.contact_frames, self.many)
         self.exact = self._frames(exact)
         self.view = self.exact if np.array_equal(view, exact) else self._frames(view)
-        # Every contact that ever engaged (from the run's contact intervals: a frame could miss one).
-        self.touched = np.arange(len(self.exact.contacts.names))
-        self.many_contacts = len(self.touched) >= MANY_CONTACTS
         # A contact counts as pressed past the engine's touching tolerance: a tight rack turned
         # into a tilted plane touches with round-off overlaps (1e-17 m) that press nothing.
         self.pressed = float(layout.TOUCH_TOL) * 2.0 * float(self.model.radius.max())
         # Force arrows: the run's largest normal force (the engine's, as the JSON summary's
         # max_normal_force) is drawn as long as a sphere's diameter; the arrows are the recorded
         # forces (collide.contact_forces), none above it.
-        normal = self.exact.contacts.normal_force[:, 0]
+        normal = self.exact.engaged.normal_force if self.many_contacts else self.exact.contacts.normal_force[:, 0]
         drawn = float(np.max(np.linalg.norm(normal, axis=-1))) if normal.size else 0.0
         peak = max(peak_normal_force(self.result), drawn)
         self.force_scale = 2.0 * float(self.model.radius.mean()) / peak if peak > 0 else 1.0
         st = self.exact.state
-        self.conserved = dg.conserved(self.model, st.t, st.s, st.v, st.w, st.work, self.exact.contacts.pairs)
+        self.conserved = dg.conserved(self.model, st.t, st.s, st.v, st.w, st.work, pairs)
 
     def _send(self, entity: str, columns: Any, index: rr.TimeColumn) -> None:
         self.rec.send_columns(entity, indexes=[index], columns=columns, strict=True)
@@ -236,12 +243,12 @@ class _Writer(_Drawing):
     def check(self, path: Path) -> None:
         """The file on disk is whole: Rerun's framing complete to its footer and every byte as
         sealed (a write that failed without an error is refused here)."""
+        digest = self.sealed
         try:
-            data = path.read_bytes()
+            whole = _file_messages(path) is not None and not (self.seal and _unsealed_sha256(path, digest) != digest)
         except OSError as exc:
             raise OutputError(f"could not write {path}: {exc.strerror or exc}") from None
-        digest = self.sealed
-        if _messages(data) is None or self.seal and _unsealed_sha256(data, digest) != digest:
+        if not whole:
             raise OutputError(f"could not write {path}: the file came out incomplete (cut short); "
                               "is the disk full?")
 

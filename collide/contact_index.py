@@ -1,4 +1,5 @@
-"""The contacts of a run for the viewer: only those engaged at the times asked.
+"""A run's contacts at given times, only those engaged there: the viewer's frames and plots, and
+a recording's frames of many contacts.
 
 `diagnostics.contact_series` evaluates every contact the run ever had at every time asked:
 (times x contacts), and a scan of every record per contact for friction. A gas of 1 000
