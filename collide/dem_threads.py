@@ -213,7 +213,7 @@ def _run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp, threads):
         IV, REC = grow(IV, most), grow(REC, most)
     slots = shares[threads]
     engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, slots.SBB, slots.BUMP, WL, WH, WP, tabs, wt,
-                                grav, fl, 0.0, 0.0, n, FG, ST, IV, 0, REC, 0, record != 0, scratch, box, False)
+                                grav, fl, 0.0, 0.0, n, FG, ST, IV, 0, REC, 0, record != 0, scratch, box)
     if record:
         KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, 0.0, n, 0.0)
         EP = grow(EP, nep)
@@ -356,7 +356,7 @@ def _recorded_step(state, C, IV, REC, KN, nkn, EP, nep):
     if nrec + most >= REC.shape[0]:
         REC = grow(REC, nrec + most)
     engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs, wt, grav, fl,
-                                h, t, n, FG, ST, IV, niv, REC, nrec, True, scratch, fp[dk.P_BOX:dk.P_BOX + NBOX], False)
+                                h, t, n, FG, ST, IV, niv, REC, nrec, True, scratch, fp[dk.P_BOX:dk.P_BOX + NBOX])
     kinetic_now = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, True)
     ever = C[par.C_EVER] != 0.0 or engaged > 0
     if engaged:

@@ -11,6 +11,7 @@ from collide.engine.broad import BOX_ANY, nearest
 from collide.engine.dem.contact import contact_force
 from collide.engine.dem.geometry import wall_height
 from collide.engine.dem.layout import (
+    B_M,
     B_R,
     F_RECORD,
     G_FIRST,
@@ -25,13 +26,12 @@ from collide.engine.dem.layout import (
     S_CONTACTS,
 )
 from collide.engine.dem.neighbours import take_slot
-from collide.engine.dem.verlet import weigh_bodies
 from collide.engine.jit import jit, jit_inline
 
 
 @jit
 def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs, wtabs, grav, fl, dt, t, n, FG, ST,
-           IV, niv, REC, nrec, record_now, out, box, weighed):
+           IV, niv, REC, nrec, record_now, out, box):
     """Forces and torques of every engaged contact (F, T, and by part PT) and the run's contact
     figures, over the listed pairs (PI, PJ; their history in HS at slots PS, new contacts' slots
     taken from the regions BB, BUMP: `neighbours.take_slot`) and body-wall pairs (WL: rows
@@ -39,11 +39,15 @@ def forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tab
     the wall table as (materials, 1, columns). IV and REC have room for every listed contact
     (the caller grows them); out is scratch (4,). Returns (engaged, niv, nrec): no array is made
     or returned here, which at a few bodies costs a step as much as its contacts. In a periodic
-    box (`box`) a pair meets at its nearest images. The forces start from the weights, set here
-    unless `weighed` (by the last step's `verlet.kick_kick_drift`)."""
+    box (`box`) a pair meets at its nearest images."""
     record = fl[F_RECORD]
-    if not weighed:
-        weigh_bodies(F, T, PT, Bd, grav, 0, n)
+    g0, g1, g2 = grav[0], grav[1], grav[2]
+    # Whole-array fills: stored element by element with F's, they took twice as long.
+    T[:, :] = 0.0
+    PT[:, :] = 0.0
+    for a in range(n):
+        m = Bd[a, B_M]
+        F[a, 0], F[a, 1], F[a, 2] = m * g0, m * g1, m * g2
     # The pair pass in two copies, the nearest-image test folded away in the one without: a scene
     # with no periodic axis runs the pass it ran before periodic boundaries.
     if box[BOX_ANY] != 0.0:

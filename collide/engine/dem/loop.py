@@ -201,7 +201,7 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
         IV = grow(IV, niv + most)
         REC = grow(REC, nrec + most)
     engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs, wt, grav,
-                                fl, 0.0, t, n, FG, ST, IV, niv, REC, nrec, record != 0, scratch, box, False)
+                                fl, 0.0, t, n, FG, ST, IV, niv, REC, nrec, record != 0, scratch, box)
     if record:
         KN, nkn = frame(KN, nkn, X, V, W, Qo, F, Bd, WK, t, n, 0.0)
         EP = grow(EP, nep)
@@ -238,20 +238,16 @@ def dem_run(X, V, W, Qo, Bd, tabs, wtabs, WP, grav, fl, fp):
             IV = grow(IV, niv + most)
         if record and nrec + most >= REC.shape[0]:  # a frame's records, or the peaks of phases that end
             REC = grow(REC, nrec + most)
-        weighed = fused and record == 0  # (a name: a condition among a call's many arguments does not compile)
         engaged, niv, nrec = forces(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, WL, WH, WP, tabs, wt,
-                                    grav, fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now, scratch, box,
-                                    weighed)
+                                    grav, fl, h, t, n, FG, ST, IV, niv, REC, nrec, record_now, scratch, box)
         # The closing kick and, where nothing before the next step reads the velocities at this
         # step's end (no frame to record, no free flight, no end or rest to test), the next
         # step's opening kick and drift with it, in one pass over the bodies.
         h_next, _ = _step_length(t, dt, t_end)  # as the next step will take it
         fused = engaged != 0 and not last and not record_now and h_next > 0.0 and rest <= 0.0 and steps < fl[F_MAXSTEPS]
         if fused:
-            # (Unrecorded, nothing reads the forces before the next pass: they are set to the
-            # weights as each body is left.)
             kinetic_now, moved = kick_kick_drift(X, X0, V, W, Qo, F, T, PT, Bd, WK, 0.5 * h, 0.5 * h_next, h_next,
-                                                 0, n, rolling, spin, planar, grav, record == 0)
+                                                 0, n, rolling, spin, planar)
         else:
             kinetic_now = kick(V, W, F, T, PT, Bd, 0.5 * h, n, WK, rolling, True)
         if engaged:

@@ -25,9 +25,6 @@ HASH_PRIMES = (73856093, 19349663, 83492791)
 # The neighbour search's grid is dense (not hashed) where it has at most this many cells a body:
 # 128 bytes a body at most, less than its state takes (a settling box has about 4).
 DENSE_CELLS = np.int64(16)
-# A share's bump pointer (`slot_regions`) every this many int64s: a cache line (64 bytes) apart,
-# so that threads taking slots never write the same line.
-BUMP_STRIDE = np.int64(8)
 
 
 @jit_inline
@@ -270,12 +267,11 @@ def slot_regions(PS, HS, starts):
     """Where each share of the bodies takes its new contacts' slots: share r's pairs are those
     whose second body is its own (`starts[r]` of them before its: `threads.plan`), from the
     table's row `carried + starts[r]` on (`carry_slots` left a slot a pair after the carried
-    contacts), so that threads take slots without meeting. Share r's pointer is element
-    r * BUMP_STRIDE."""
+    contacts), so that threads take slots without meeting."""
     carried = HS.shape[0] - PS.shape[0]
-    bump = np.zeros((starts.shape[0] - 1) * BUMP_STRIDE, np.int64)
-    for r in range(starts.shape[0] - 1):
-        bump[r * BUMP_STRIDE] = carried + starts[r]
+    bump = np.empty(starts.shape[0] - 1, np.int64)
+    for r in range(bump.shape[0]):
+        bump[r] = carried + starts[r]
     return bump
 
 
@@ -288,8 +284,8 @@ def take_slot(PS, BUMP, BB, k, j):
         r = 0
         while BB[r + 1] <= j:
             r += 1
-        PS[k] = BUMP[r * BUMP_STRIDE]
-        BUMP[r * BUMP_STRIDE] += 1
+        PS[k] = BUMP[r]
+        BUMP[r] += 1
     return PS[k]
 
 

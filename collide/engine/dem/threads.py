@@ -6,8 +6,7 @@ contacts (`plan`). Each pair (i, j), i < j, is worked out by the thread that own
 is sorted by i. A pair whose i is another thread's (a "cross" pair: a few where the bodies are
 numbered in space, as a filled box) gives i's share to a buffer. A step:
 
-1. `verlet.weigh_bodies` (unless its last kicks did: `verlet.kick_kick_drift`) then `inbound_pass`:
-   each thread sets its bodies' forces to their weights, then works
+1. `weights` then `inbound_pass`: each thread sets its bodies' forces to their weights, then works
    out its inbound cross pairs in the list's order: j's share added to its own rows, i's share
    into the buffer, every element of it written once onto -0.0 (adding -0.0 changes nothing, not
    even a zero's sign); then it raises its flag (`barrier.raise_flag`);
@@ -38,6 +37,7 @@ from collide.engine.dem.geometry import wall_height
 from collide.engine.dem.layout import (
     B_II,
     B_IM,
+    B_M,
     B_R,
     F_DIM,
     F_MAXSTEPS,
@@ -67,7 +67,7 @@ from collide.engine.dem.layout import (
 )
 from collide.engine.dem.loop import _step_length
 from collide.engine.dem.neighbours import first_row, take_slot
-from collide.engine.dem.verlet import _drift_body, _half_kick, kick_kick_drift, kinetic_parts, weigh_bodies
+from collide.engine.dem.verlet import _drift_body, _half_kick, kick_kick_drift, kinetic_parts
 from collide.engine.jit import jit, jit_inline
 
 # A cross pair's buffer row, i's share: force (3), friction torque (3), rolling torque (3), parts
@@ -313,6 +313,18 @@ def _inbound(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, BB, BUMP, tabs, fl, dt,
     _keep(STT, row, tally)
 
 
+@jit
+def weights(F, T, PT, Bd, grav, lo, hi):
+    """Bodies lo..hi's forces set to their weights, torques and parts to zero, as `forces.forces`
+    starts (one fill of the share's rows, as it fills all)."""
+    g0, g1, g2 = grav[0], grav[1], grav[2]
+    T[lo:hi, :] = 0.0
+    PT[lo:hi, :] = 0.0
+    for a in range(lo, hi):
+        m = Bd[a, B_M]
+        F[a, 0], F[a, 1], F[a, 2] = m * g0, m * g1, m * g2
+
+
 @jit_inline
 def _take(XB, s, F, T, PT, a):
     """A cross pair's share for its body i, added in the one-thread pass's order (friction
@@ -448,25 +460,23 @@ def events(EVP, EVW, kb, wb, STT, PI, PJ, WL, PS, HS, WH, IV, niv, REC, nrec, t,
 
 @jit
 def kick_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, lo, hi, rolling, spin, planar, close, fuse, EB,
-               STT, row, grav, weigh):
+               STT, row):
     """Bodies lo..hi: the closing half kick h_close (if `close`) and the next step's opening half
     kick h_open and drift h (if `fuse`), body by body as `verlet.kick_kick_drift` makes them. Into
     STT: the kinetic energy after the closing kick (each body's also into EB (N, 2) if it has
     rows), the largest squared distance from X0 after the drift, and whether it drifted. The
     usual case (both kicks, no body's energy kept) is the one-thread loop's own pass
-    (`verlet.kick_kick_drift` on the share's range, setting the next pass's weights if `weigh`):
-    a copy of it here, its tests folded in another way, took 13 % longer. Returns whether the
-    share's weights are set."""
+    (`verlet.kick_kick_drift` on the share's range): a copy of it here, its tests folded in
+    another way, took 13 % longer."""
     if close and fuse and EB.shape[0] == 0:
         e, moved = kick_kick_drift(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, lo, hi, rolling, spin,
-                                   planar, grav, weigh)
+                                   planar)
         STT[row, ST_E] = e
         STT[row, ST_FUSED] = 1.0
         STT[row, ST_MOVED] = max(STT[row, ST_MOVED], moved)
-        return weigh
-    _kicks(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, lo, hi, rolling, spin, planar, close, fuse, EB,
-           EB.shape[0] > 0, STT, row)
-    return False
+    else:
+        _kicks(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, lo, hi, rolling, spin, planar, close, fuse, EB,
+               EB.shape[0] > 0, STT, row)
 
 
 @jit_inline
@@ -574,7 +584,6 @@ def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS
     lo, hi = RB[r, 0], RB[r, 1]
     box = fp[P_BOX:P_BOX + NBOX]
     reason = R_END
-    weighed = False  # the share's forces set to the weights by its last kicks (unrecorded)
     while True:
         if engaged == 0 and not opened and not stay:
             reason = R_COAST
@@ -609,15 +618,14 @@ def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS
         fuse_ok = not last and h_next > 0.0 and rest <= 0.0 and steps < fl[F_MAXSTEPS]
         S = STT[p]
         S[r, :] = 0.0
-        if not weighed:
-            weigh_bodies(F, T, PT, Bd, grav, lo, hi)
+        weights(F, T, PT, Bd, grav, lo, hi)
         inbound_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, SBB, BUMP, tabs, fl, h, t, record, RB[r, 8],
                      RB[r, 9], inbound, cross, XB, SF, S, r, outs[r], box)
         raise_flag(barrier)
         own_pass(X, V, W, F, T, PT, Bd, MAT, PI, PJ, PS, HS, SBB, BUMP, WL, WH, WP, tabs, wtabs, fl, h, t,
                  record, RB[r], r, XB, SF, S, EVP, EVW, outs[r], box, barrier)
-        weighed = kick_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, 0.5 * h, 0.5 * h_next, h_next, lo, hi, rolling, spin,
-                             planar, True, fuse_ok and S[r, ST_ENG] > 0.0, EB, S, r, grav, not record)
+        kick_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, 0.5 * h, 0.5 * h_next, h_next, lo, hi, rolling, spin, planar,
+                   True, fuse_ok and S[r, ST_ENG] > 0.0, EB, S, r)
         barrier_wait(barrier)
         engaged = np.int64(_sum_col(S, ST_ENG))
         fused = engaged != 0 and fuse_ok
@@ -626,7 +634,7 @@ def run_share(r, barrier, X, X0, V, W, Qo, F, T, PT, Bd, MAT, WK, PI, PJ, PS, HS
             behind |= fused and S[q, ST_FUSED] == 0.0
         if behind and S[r, ST_FUSED] == 0.0:
             kick_share(X, X0, V, W, Qo, F, T, PT, Bd, WK, 0.5 * h, 0.5 * h_next, h_next, lo, hi, rolling, spin,
-                       planar, False, True, EB, S, r, grav, False)
+                       planar, False, True, EB, S, r)
         kinetic_now = energy_sum(EB, n) if rest > 0.0 else _sum_col(S, ST_E)
         if r == 0:
             _figures(S, ST, FG, t, record)

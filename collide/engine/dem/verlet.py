@@ -83,20 +83,14 @@ def drift(X, X0, V, W, Qo, h, n, spin, planar):
 
 
 @jit
-def kick_kick_drift(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, lo, hi, rolling, spin, planar, grav,
-                    weigh):
+def kick_kick_drift(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, lo, hi, rolling, spin, planar):
     """One step's closing half kick (h_close), the next step's opening half kick (h_open) and its
     drift (h) in one pass over bodies lo..hi, each body's numbers as `kick`, `kick` and `drift`
     make them (bit for bit): as three passes they took 1.2-1.3 times as long (1 000 bodies). The
-    one-thread loop and each thread's share (`threads.kick_share`) run this same pass. With
-    `weigh`, each body's force is then set to its weight and its torque and parts to zero, as the
-    next force pass starts (`weigh_bodies`), while its rows are at hand: that pass then skips its
-    own pass over them (nothing reads the forces in between when the run records no frames).
-    Returns (the kinetic energy between the kicks, summed body by body as `kick` sums it;
-    `drift`'s moved)."""
+    one-thread loop and each thread's share (`threads.kick_share`) run this same pass. Returns (the
+    kinetic energy between the kicks, summed body by body as `kick` sums it; `drift`'s moved)."""
     e = 0.0
     moved = 0.0
-    g0, g1, g2 = grav[0], grav[1], grav[2]
     for a in range(lo, hi):
         im, ii, spins = Bd[a, B_IM], Bd[a, B_II], Bd[a, B_II] > 0.0
         v0, v1, v2, w0, w1, w2 = _half_kick(WK, a, h_close, im, ii, spins, F, T, PT, rolling,
@@ -107,34 +101,8 @@ def kick_kick_drift(X, X0, V, W, Qo, F, T, PT, Bd, WK, h_close, h_open, h, lo, h
         v0, v1, v2, w0, w1, w2 = _half_kick(WK, a, h_open, im, ii, spins, F, T, PT, rolling, v0, v1, v2, w0, w1, w2)
         V[a, 0], V[a, 1], V[a, 2] = v0, v1, v2
         W[a, 0], W[a, 1], W[a, 2] = w0, w1, w2
-        if weigh:
-            _weigh(F, T, PT, Bd, a, g0, g1, g2)
         moved = max(moved, _drift_body(X, X0, Qo, a, v0, v1, v2, w0, w1, w2, h, spin, planar))
     return e, moved
-
-
-@jit_inline
-def _weigh(F, T, PT, Bd, a, g0, g1, g2):
-    """Body a's force set to its weight, its torque and parts to zero: where a force pass starts."""
-    m = Bd[a, B_M]
-    F[a, 0], F[a, 1], F[a, 2] = m * g0, m * g1, m * g2
-    for d in range(3):
-        T[a, d] = 0.0
-    for c in range(PT.shape[1]):
-        PT[a, c] = 0.0
-
-
-@jit
-def weigh_bodies(F, T, PT, Bd, grav, lo, hi):
-    """Bodies lo..hi's forces set to their weights, torques and parts to zero: where every force
-    pass starts (`forces.forces`, each thread's share in `threads`), unless the last
-    `kick_kick_drift` did it (`weigh`)."""
-    g0, g1, g2 = grav[0], grav[1], grav[2]
-    T[lo:hi, :] = 0.0
-    PT[lo:hi, :] = 0.0
-    for a in range(lo, hi):
-        m = Bd[a, B_M]
-        F[a, 0], F[a, 1], F[a, 2] = m * g0, m * g1, m * g2
 
 
 @jit
