@@ -36,7 +36,7 @@ from collide.engine.event.impact import (
 )
 from collide.engine.event.oblique import CHATTER, HELD, NY, YVT, YWB, frame, rub
 from collide.engine.flight import bring, touch_time, turn
-from collide.engine.jit import jit
+from collide.engine.jit import jit, jit_call
 from collide.engine.layout import (
     CN_IVALS,
     CN_KNOTS,
@@ -147,7 +147,7 @@ def knot(KN, CNT, G, t, free, acc, a_next):
     return KN
 
 
-@jit
+@jit_call
 def place(G, X, n, s0, vt, gt, tau, delta, u, fl):
     """X's row 0: the sphere of G (at the contact's touch) tau later, pressed delta into the wall
     of normal n at the rate u (along the wall as in free flight, its spin kept)."""
@@ -373,4 +373,5 @@ def alone_run(G, WP, LAW, TW, grav, fl, fp, ends):
         bring(G, 0, t, grav, fl)
         if record:
             KN = knot(KN, CNT, G, t, 1.0, grav, grav)
-    return t, KN[:CNT[CN_KNOTS]].copy(), RC[:CNT[CN_RECS]].copy(), IV[:CNT[CN_IVALS]].copy(), ST, FG
+    # The buffers' filled rows, not copies of them: nothing writes to them after the run
+    return t, KN[:CNT[CN_KNOTS]], RC[:CNT[CN_RECS]], IV[:CNT[CN_IVALS]], ST, FG

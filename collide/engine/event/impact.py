@@ -21,6 +21,10 @@ integrated over time. Every step is one of Dormand and Prince's explicit order-8
 error). The largest overlap (delta' = 0) and
 the largest force (dF/dt = 0) are landed by re-taking the step that contains them at the
 length that puts the root at its end (secant steps), so they keep the step's order too.
+
+The law and the stage evaluations are copied into the step (`jit_inline`), and the step, the
+landing and the stop are called without reference counting (`jit_call`); each step's end is
+evaluated once for the force and the watched rates, and the next step starts from it.
 """
 
 from __future__ import annotations
@@ -31,7 +35,7 @@ import numpy as np
 
 from collide.engine.dem.damping import dashpot
 from collide.engine.dem.normal import normal_elastic
-from collide.engine.jit import jit
+from collide.engine.jit import jit, jit_call, jit_inline
 from collide.engine.numerics import illinois
 
 # Dormand and Prince's explicit Runge-Kutta pair of order 8 (DOP853, Hairer, Norsett and Wanner,
@@ -78,7 +82,7 @@ NP = 10
 ENDED, STOPPED, FAILED = 1.0, 2.0, 0.0  # O_END: separated, stopped at P_STOP, not answered
 
 
-@jit
+@jit_inline
 def law_stiff(P, delta, u):
     """(acceleration of delta, normal force, dashpot gamma, stiffness dF_el / d delta) at overlap
     delta and rate u. P: hertz flag, k, E*, R*, m*, zeta, a, p. Hertz past touching (a trial
@@ -92,14 +96,14 @@ def law_stiff(P, delta, u):
     return P[6] - fn / P[4], fn, gamma, kn
 
 
-@jit
+@jit_inline
 def law(P, delta, u):
     """`law_stiff` without the stiffness: (acceleration of delta, normal force, dashpot gamma)."""
     acc, fn, gamma, _ = law_stiff(P, delta, u)
     return acc, fn, gamma
 
 
-@jit
+@jit_inline
 def overlap(P, x):
     """delta = x^p at sigma = x: by products for Hertz's 4 and the linear spring's 1 (a power with
     a float exponent cost more than the rest of an evaluation, measured)."""
@@ -112,7 +116,7 @@ def overlap(P, x):
     return x ** p
 
 
-@jit
+@jit_inline
 def rhs(P, phase, x, y0, y1, y2):
     """The derivatives over the phase's variable x. TIME: y = (delta, u, work); SIGMA:
     y = (t, u, work) at delta = x^p."""
@@ -132,7 +136,7 @@ def rhs(P, phase, x, y0, y1, y2):
     return jac / y1, acc * jac / y1, gamma * y1 * jac
 
 
-@jit
+@jit_call
 def rk_step(P, phase, x, y0, y1, y2, h):
     """One step of h from (x, y) by DOP853's order-8 solution, its stages written out with the
     coefficients folded in (a loop over RK_A took 1.5 times as long: kernel time of ten bounces).
@@ -210,7 +214,7 @@ def rk_step(P, phase, x, y0, y1, y2, h):
     return e0, e1, e2, math.isfinite(e0) and math.isfinite(e1) and math.isfinite(e2)
 
 
-@jit
+@jit_inline
 def force_rate(P, delta, u):
     """(normal force, its rate dF/dt) at overlap delta and rate u, from one evaluation of the law
     (Hertz's dashpot grows as delta^(1/4): gamma' = gamma / (4 delta))."""
@@ -219,7 +223,7 @@ def force_rate(P, delta, u):
     return fn, kn * u + slope * u * u + gamma * acc
 
 
-@jit
+@jit_inline
 def watched(P, phase, x, y0, y1, which):
     """The watched function at a state: which 0, the overlap's rate; 1, the force's rate dF/dt;
     2, the time past the stop P_STOP."""
@@ -230,7 +234,7 @@ def watched(P, phase, x, y0, y1, which):
     return force_rate(P, y0 if phase == TIME else overlap(P, x), y1)[1]
 
 
-@jit
+@jit_inline
 def probe(P, phase, x, y0, y1):
     """What `watch_step` reads at a step's end, and the next step takes at its start: (normal
     force, overlap's rate, force's rate)."""
@@ -238,14 +242,14 @@ def probe(P, phase, x, y0, y1):
     return fn, y1, rate
 
 
-@jit
+@jit_inline
 def force_at(P, phase, x, y0, y1):
     """The normal force at a state."""
     delta = y0 if phase == TIME else overlap(P, x)
     return law(P, delta, y1)[1]
 
 
-@jit
+@jit_call
 def land(P, phase, x, y0, y1, y2, h, which, g0, g1):
     """The state where the watched function, g0 at the step's start and g1 at its end (of
     opposite signs), is zero, by secant (Illinois) steps on the step's length. Returns
@@ -312,7 +316,7 @@ def watch_step(P, phase, x, y0, y1, y2, h, e0, e1, e2, at, peaks, trail):
 FAIL, DONE, STOP, TURNED = 0, 1, 2, 3
 
 
-@jit
+@jit_call
 def stop_inside(P, phase, x, y0, y1, y2, h, e0):
     """Whether a step from (x, y) of h passes the stop P_STOP: then the state there (landed on
     it by secant steps), as (x, y0, y1, y2, ok, True); else (..., True, False)."""
@@ -408,7 +412,7 @@ def fall(P, t, sigma, u, w, n, peaks, trail):
     return 0.0, t, u, w, n, DONE
 
 
-@jit
+@jit_inline
 def estimate(P, v_in):
     """The largest overlap and the contact time without damping or the pressing acceleration:
     Hertz's closed forms (the time 2 delta_max / v times the integral of (1 - x^2.5)^(-1/2)
