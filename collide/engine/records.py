@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from collide.engine.jit import jit
+from collide.engine.jit import jit, jit_call
 from collide.engine.layout import (
     C_DELTA,
     C_FF,
@@ -64,6 +64,14 @@ from collide.engine.numerics import grow
 def add_knot(KN, CNT, t, g, free, X, a, sc, vc, wc, qc, acc, work):
     """Append body g's state at t from row a of X (or of G, with the columns given)."""
     KN = grow(KN, CNT[CN_KNOTS])
+    put_knot(KN, CNT, t, g, free, X, a, sc, vc, wc, qc, acc, work)
+    return KN
+
+
+@jit_call
+def put_knot(KN, CNT, t, g, free, X, a, sc, vc, wc, qc, acc, work):
+    """`add_knot` into a KN with room for it (a caller that grew it once for many knots; called
+    without reference counting)."""
     r = CNT[CN_KNOTS]
     KN[r, K_T] = t
     KN[r, K_BODY] = g
@@ -78,7 +86,6 @@ def add_knot(KN, CNT, t, g, free, X, a, sc, vc, wc, qc, acc, work):
         KN[r, K_Q + d] = X[a, qc + d]
     KN[r, K_WORK] = work
     CNT[CN_KNOTS] += 1
-    return KN
 
 
 @jit

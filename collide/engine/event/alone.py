@@ -36,7 +36,7 @@ from collide.engine.event.impact import (
 )
 from collide.engine.event.oblique import CHATTER, HELD, NY, YVT, YWB, frame, rub
 from collide.engine.flight import bring, touch_time, turn
-from collide.engine.jit import jit
+from collide.engine.jit import jit, jit_call
 from collide.engine.layout import (
     CN_IVALS,
     CN_KNOTS,
@@ -87,7 +87,7 @@ from collide.engine.layout import (
     V_START,
 )
 from collide.engine.numerics import grow
-from collide.engine.records import add_knot, tail_after
+from collide.engine.records import put_knot, tail_after
 
 # S_STATUS: a second wall within a contact; a contact not answered; a rubbing contact held on its
 # wall (not separating); a rubbing contact's tangential motion not in one line; its stick and slip
@@ -130,24 +130,37 @@ def clear_of(WP, w, s, vt, gt, span, depth):
 @jit
 def add_record(RC, CNT, t, w, delta, fn):
     RC = grow(RC, CNT[CN_RECS])
+    put_record(RC, CNT, t, w, delta, fn)
+    return RC
+
+
+@jit_call
+def put_record(RC, CNT, t, w, delta, fn):
+    """`add_record` into an RC with room for it (called without reference counting)."""
     r = CNT[CN_RECS]
     for c in range(NR):
         RC[r, c] = 0.0
     RC[r, R_T], RC[r, R_I], RC[r, R_J], RC[r, R_DELTA], RC[r, R_FN] = t, 0.0, -1.0 - w, delta, fn
     CNT[CN_RECS] += 1
-    return RC
 
 
 @jit
 def knot(KN, CNT, G, t, free, acc, a_next):
     """A knot of the sphere's state in G at t: arriving under acc, leaving under a_next."""
-    KN = add_knot(KN, CNT, t, 0, free, G, 0, G_S, G_V, G_W, G_Q, acc, G[0, G_WK])
-    for d in range(3):
-        KN[CNT[CN_KNOTS] - 1, K_AN + d] = a_next[d]
+    KN = grow(KN, CNT[CN_KNOTS])
+    put_sphere_knot(KN, CNT, G, t, free, acc, a_next)
     return KN
 
 
-@jit
+@jit_call
+def put_sphere_knot(KN, CNT, G, t, free, acc, a_next):
+    """`knot` into a KN with room for it (called without reference counting)."""
+    put_knot(KN, CNT, t, 0, free, G, 0, G_S, G_V, G_W, G_Q, acc, G[0, G_WK])
+    for d in range(3):
+        KN[CNT[CN_KNOTS] - 1, K_AN + d] = a_next[d]
+
+
+@jit_call
 def place(G, X, n, s0, vt, gt, tau, delta, u, fl):
     """X's row 0: the sphere of G (at the contact's touch) tau later, pressed delta into the wall
     of normal n at the rate u (along the wall as in free flight, its spin kept)."""
@@ -165,6 +178,10 @@ def contact_knots(KN, RC, CNT, G, X, P, n, s0, vt, gt, t, w, trail, ended, grav,
     """A knot and a contact record after every step of the contact on wall w touched at t (G's
     state then), from its trail; the last knot of a contact that ended starts a free flight."""
     acc = np.empty(3)
+    # Room for every step's knot and record at once, each then written in place (no growing nor
+    # reference counting step by step).
+    KN = grow(KN, CNT[CN_KNOTS] + len(trail))
+    RC = grow(RC, CNT[CN_RECS] + len(trail))
     for k in range(len(trail)):
         tau, delta, u, work = trail[k]
         place(G, X, n, s0, vt, gt, tau, delta, u, fl)
@@ -173,8 +190,8 @@ def contact_knots(KN, RC, CNT, G, X, P, n, s0, vt, gt, t, w, trail, ended, grav,
         for d in range(3):
             acc[d] = grav[d] + fn / P[4] * n[d]
         last = ended and k == len(trail) - 1
-        KN = knot(KN, CNT, X, t + tau, 1.0 if last else 0.0, acc, grav if last else acc)
-        RC = add_record(RC, CNT, t + tau, w, delta, fn)
+        put_sphere_knot(KN, CNT, X, t + tau, 1.0 if last else 0.0, acc, grav if last else acc)
+        put_record(RC, CNT, t + tau, w, delta, fn)
     return KN, RC
 
 
@@ -373,4 +390,5 @@ def alone_run(G, WP, LAW, TW, grav, fl, fp, ends):
         bring(G, 0, t, grav, fl)
         if record:
             KN = knot(KN, CNT, G, t, 1.0, grav, grav)
-    return t, KN[:CNT[CN_KNOTS]].copy(), RC[:CNT[CN_RECS]].copy(), IV[:CNT[CN_IVALS]].copy(), ST, FG
+    # The buffers' filled rows, not copies of them: nothing writes to them after the run
+    return t, KN[:CNT[CN_KNOTS]], RC[:CNT[CN_RECS]], IV[:CNT[CN_IVALS]], ST, FG

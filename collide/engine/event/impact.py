@@ -21,6 +21,10 @@ integrated over time. Every step is one of Dormand and Prince's explicit order-8
 error). The largest overlap (delta' = 0) and
 the largest force (dF/dt = 0) are landed by re-taking the step that contains them at the
 length that puts the root at its end (secant steps), so they keep the step's order too.
+
+The law and the stage evaluations are copied into the step (`jit_inline`), and the step, the
+landing and the stop are called without reference counting (`jit_call`); each step's end is
+evaluated once for the force and the watched rates, and the next step starts from it.
 """
 
 from __future__ import annotations
@@ -31,7 +35,7 @@ import numpy as np
 
 from collide.engine.dem.damping import dashpot
 from collide.engine.dem.normal import normal_elastic
-from collide.engine.jit import jit
+from collide.engine.jit import jit, jit_call, jit_inline
 from collide.engine.numerics import illinois
 
 # Dormand and Prince's explicit Runge-Kutta pair of order 8 (DOP853, Hairer, Norsett and Wanner,
@@ -78,20 +82,28 @@ NP = 10
 ENDED, STOPPED, FAILED = 1.0, 2.0, 0.0  # O_END: separated, stopped at P_STOP, not answered
 
 
-@jit
-def law(P, delta, u):
-    """(acceleration of delta, normal force, dashpot gamma) at overlap delta and rate u. P: hertz
-    flag, k, E*, R*, m*, zeta, a, p. Hertz past touching (a trial stage beyond the contact's
-    end) has no force: NaN, which fails the step so that it is taken shorter."""
+@jit_inline
+def law_stiff(P, delta, u):
+    """(acceleration of delta, normal force, dashpot gamma, stiffness dF_el / d delta) at overlap
+    delta and rate u. P: hertz flag, k, E*, R*, m*, zeta, a, p. Hertz past touching (a trial
+    stage beyond the contact's end) has no force: NaN, which fails the step so that it is taken
+    shorter."""
     if P[0] > 0.0 and delta < 0.0:
-        return math.nan, math.nan, math.nan
+        return math.nan, math.nan, math.nan, math.nan
     elastic, kn = normal_elastic(P[0] > 0.0, P[1], P[2], P[3], delta)
     gamma = dashpot(P[5], P[4], kn) if P[5] > 0.0 else 0.0
     fn = elastic + gamma * u
-    return P[6] - fn / P[4], fn, gamma
+    return P[6] - fn / P[4], fn, gamma, kn
 
 
-@jit
+@jit_inline
+def law(P, delta, u):
+    """`law_stiff` without the stiffness: (acceleration of delta, normal force, dashpot gamma)."""
+    acc, fn, gamma, _ = law_stiff(P, delta, u)
+    return acc, fn, gamma
+
+
+@jit_inline
 def overlap(P, x):
     """delta = x^p at sigma = x: by products for Hertz's 4 and the linear spring's 1 (a power with
     a float exponent cost more than the rest of an evaluation, measured)."""
@@ -104,7 +116,7 @@ def overlap(P, x):
     return x ** p
 
 
-@jit
+@jit_inline
 def rhs(P, phase, x, y0, y1, y2):
     """The derivatives over the phase's variable x. TIME: y = (delta, u, work); SIGMA:
     y = (t, u, work) at delta = x^p."""
@@ -124,7 +136,7 @@ def rhs(P, phase, x, y0, y1, y2):
     return jac / y1, acc * jac / y1, gamma * y1 * jac
 
 
-@jit
+@jit_call
 def rk_step(P, phase, x, y0, y1, y2, h):
     """One step of h from (x, y) by DOP853's order-8 solution, its stages written out with the
     coefficients folded in (a loop over RK_A took 1.5 times as long: kernel time of ten bounces).
@@ -202,30 +214,42 @@ def rk_step(P, phase, x, y0, y1, y2, h):
     return e0, e1, e2, math.isfinite(e0) and math.isfinite(e1) and math.isfinite(e2)
 
 
-@jit
+@jit_inline
+def force_rate(P, delta, u):
+    """(normal force, its rate dF/dt) at overlap delta and rate u, from one evaluation of the law
+    (Hertz's dashpot grows as delta^(1/4): gamma' = gamma / (4 delta))."""
+    acc, fn, gamma, kn = law_stiff(P, delta, u)
+    slope = gamma / (4.0 * delta) if P[0] > 0.0 and delta > 0.0 else 0.0
+    return fn, kn * u + slope * u * u + gamma * acc
+
+
+@jit_inline
 def watched(P, phase, x, y0, y1, which):
-    """The watched function at a state: which 0, the overlap's rate; 1, the force's rate dF/dt
-    (Hertz's dashpot grows as delta^(1/4): gamma' = gamma / (4 delta)); 2, the time past the
-    stop P_STOP."""
+    """The watched function at a state: which 0, the overlap's rate; 1, the force's rate dF/dt;
+    2, the time past the stop P_STOP."""
     if which == 2:
         return (x if phase == TIME else y0) - P[P_STOP]
-    delta, u = (y0, y1) if phase == TIME else (overlap(P, x), y1)
     if which == 0:
-        return u
-    acc, _, gamma = law(P, delta, u)
-    _, kn = normal_elastic(P[0] > 0.0, P[1], P[2], P[3], delta)
-    slope = gamma / (4.0 * delta) if P[0] > 0.0 and delta > 0.0 else 0.0
-    return kn * u + slope * u * u + gamma * acc
+        return y1
+    return force_rate(P, y0 if phase == TIME else overlap(P, x), y1)[1]
 
 
-@jit
+@jit_inline
+def probe(P, phase, x, y0, y1):
+    """What `watch_step` reads at a step's end, and the next step takes at its start: (normal
+    force, overlap's rate, force's rate)."""
+    fn, rate = force_rate(P, y0 if phase == TIME else overlap(P, x), y1)
+    return fn, y1, rate
+
+
+@jit_inline
 def force_at(P, phase, x, y0, y1):
     """The normal force at a state."""
     delta = y0 if phase == TIME else overlap(P, x)
     return law(P, delta, y1)[1]
 
 
-@jit
+@jit_call
 def land(P, phase, x, y0, y1, y2, h, which, g0, g1):
     """The state where the watched function, g0 at the step's start and g1 at its end (of
     opposite signs), is zero, by secant (Illinois) steps on the step's length. Returns
@@ -251,12 +275,14 @@ def land(P, phase, x, y0, y1, y2, h, which, g0, g1):
 
 
 @jit
-def watch_step(P, phase, x, y0, y1, y2, h, e0, e1, e2, peaks, trail):
-    """After a step from (x, y) to (x + h, e): the largest force so far at its end, and where the
-    overlap's rate (peaks[0]: the largest overlap) or the force's rate (peaks[1]) changes sign
-    from + to - inside it, that peak landed and its state added to trail (in time order, before
-    the step's end that the caller adds). Returns ok."""
-    peaks[1] = max(peaks[1], force_at(P, phase, x + h, e0, e1))
+def watch_step(P, phase, x, y0, y1, y2, h, e0, e1, e2, at, peaks, trail):
+    """After a step from (x, y) to (x + h, e), `at` the `probe` at its start: the largest force so
+    far at its end, and where the overlap's rate (peaks[0]: the largest overlap) or the force's
+    rate (peaks[1]) changes sign from + to - inside it, that peak landed and its state added to
+    trail (in time order, before the step's end that the caller adds). Returns (ok, the probe at
+    the step's end): each state is probed once, the law evaluated once there."""
+    end = probe(P, phase, x + h, e0, e1)
+    peaks[1] = max(peaks[1], end[0])
     if phase == SIGMA:
         peaks[0] = max(peaks[0], overlap(P, x + h))
     else:
@@ -264,12 +290,12 @@ def watch_step(P, phase, x, y0, y1, y2, h, e0, e1, e2, peaks, trail):
     first = (math.inf, 0.0, 0.0, 0.0)
     second = (math.inf, 0.0, 0.0, 0.0)
     for which in range(2):
-        g0 = watched(P, phase, x, y0, y1, which)
-        g1 = watched(P, phase, x + h, e0, e1, which)
+        g0 = at[1 + which]
+        g1 = end[1 + which]
         if g0 > 0.0 and g1 < 0.0:
             lx, l0, l1, l2, ok = land(P, phase, x, y0, y1, y2, h, which, g0, g1)
             if not ok:
-                return False
+                return False, end
             if which == 0:
                 peaks[0] = max(peaks[0], l0 if phase == TIME else overlap(P, lx))
             else:
@@ -283,14 +309,14 @@ def watch_step(P, phase, x, y0, y1, y2, h, e0, e1, e2, peaks, trail):
         trail.append(first)
     if second[0] < math.inf:
         trail.append(second)
-    return True
+    return True, end
 
 
 # How a phase ended (`rise`, `middle`, `fall`).
 FAIL, DONE, STOP, TURNED = 0, 1, 2, 3
 
 
-@jit
+@jit_call
 def stop_inside(P, phase, x, y0, y1, y2, h, e0):
     """Whether a step from (x, y) of h passes the stop P_STOP: then the state there (landed on
     it by secant steps), as (x, y0, y1, y2, ok, True); else (..., True, False)."""
@@ -309,6 +335,7 @@ def rise(P, v_in, sigma1, n, peaks, trail):
     lies too deep)."""
     h = sigma1 / n
     t, u, w = 0.0, v_in, 0.0
+    at = probe(P, SIGMA, 0.0, t, u)
     for s in range(n):
         x = s * h
         e0, e1, e2, ok = rk_step(P, SIGMA, x, t, u, w, h)
@@ -316,11 +343,12 @@ def rise(P, v_in, sigma1, n, peaks, trail):
             return x, t, u, w, s, FAIL
         lx, l0, l1, l2, ok, stopped = stop_inside(P, SIGMA, x, t, u, w, h, e0)
         if stopped:
-            if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, peaks, trail):
+            if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, at, peaks, trail)[0]:
                 return x, t, u, w, s, FAIL
             trail.append((P[P_STOP], overlap(P, lx), l1, l2))
             return lx, P[P_STOP], l1, l2, s + 1, STOP
-        if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks, trail):
+        ok, at = watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, at, peaks, trail)
+        if not ok:
             return x, t, u, w, s, FAIL
         t, u, w = e0, e1, e2
         trail.append((t, overlap(P, x + h), u, w))
@@ -334,6 +362,7 @@ def middle(P, t, delta1, d, u, w, h, limit, peaks, trail):
     FAIL where the limit is reached."""
     steps = 0
     size = h
+    at = probe(P, TIME, t, d, u)
     while steps < limit:
         stopping = P[P_STOP] - t <= h
         step = P[P_STOP] - t if stopping else h
@@ -344,7 +373,8 @@ def middle(P, t, delta1, d, u, w, h, limit, peaks, trail):
                 break
             continue
         steps += 1
-        if not watch_step(P, TIME, t, d, u, w, step, e0, e1, e2, peaks, trail):
+        ok, at = watch_step(P, TIME, t, d, u, w, step, e0, e1, e2, at, peaks, trail)
+        if not ok:
             break
         t, d, u, w = P[P_STOP] if stopping else t + step, e0, e1, e2
         trail.append((t, d, u, w))
@@ -362,6 +392,7 @@ def fall(P, t, sigma, u, w, n, peaks, trail):
     (sigma, t, u, work, steps, how); TURNED (the state before the step that failed) where the
     separation stops before the overlap is gone."""
     h = -sigma / n
+    at = probe(P, SIGMA, sigma, t, u)
     for s in range(n):
         x = sigma + s * h
         e0, e1, e2, ok = rk_step(P, SIGMA, x, t, u, w, h)
@@ -369,18 +400,19 @@ def fall(P, t, sigma, u, w, n, peaks, trail):
             return x, t, u, w, s, TURNED
         lx, l0, l1, l2, ok, stopped = stop_inside(P, SIGMA, x, t, u, w, h, e0)
         if stopped:
-            if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, peaks, trail):
+            if not ok or not watch_step(P, SIGMA, x, t, u, w, lx - x, l0, l1, l2, at, peaks, trail)[0]:
                 return x, t, u, w, s, TURNED
             trail.append((P[P_STOP], overlap(P, lx), l1, l2))
             return lx, P[P_STOP], l1, l2, s + 1, STOP
-        if not watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, peaks, trail):
+        ok, at = watch_step(P, SIGMA, x, t, u, w, h, e0, e1, e2, at, peaks, trail)
+        if not ok:
             return x, t, u, w, s, TURNED
         t, u, w = e0, e1, e2
         trail.append((t, 0.0 if s == n - 1 else overlap(P, x + h), u, w))
     return 0.0, t, u, w, n, DONE
 
 
-@jit
+@jit_inline
 def estimate(P, v_in):
     """The largest overlap and the contact time without damping or the pressing acceleration:
     Hertz's closed forms (the time 2 delta_max / v times the integral of (1 - x^2.5)^(-1/2)
