@@ -369,6 +369,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
                        for pair, wall in tables])
     fl[:, layout.FL_DAMPED] = damped
     fl[:, layout.FL_HERTZ] = model.hertz
+    fl[:, layout.FL_SPRING] = friction & model.tangential_spring
     fl[:, layout.FL_FRICTION] |= damped
     t_end = np.where(np.isfinite(duration), duration, np.inf)
     fp = np.zeros((b_count, int(layout.NFP)))
