@@ -38,8 +38,9 @@ def _contacts(model, n, walls):
     return out
 
 
-def reference(scene, rtol=1e-12):
-    """The scene's final velocities and spins times radius (`accuracy.outcome`'s order) by DOP853."""
+def reference(scene, rtol=1e-12, log=None):
+    """The scene's final velocities and spins times radius (`accuracy.outcome`'s order) by DOP853;
+    each event into `log` (time, contact, what, mode after)."""
     model, state = compile_scenes([scene])
     n, hertz = model.n_bodies, bool(model.hertz)
     m, r, inertia = model.mass[0], model.radius[0], model.inertia[0]
@@ -199,6 +200,8 @@ def reference(scene, rtol=1e-12):
             _, cap, kt, _, _, _ = law(y, c)
             y[5 * n + c] = -side[c] * cap / kt if kt > 0 else 0.0
             mode[c] = STUCK
+        if log is not None:
+            log.append((t, c, what, mode[c]))
     else:
         raise AssertionError("too many events")
     v = y[2 * n:4 * n]

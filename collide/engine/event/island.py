@@ -123,6 +123,7 @@ from collide.engine.layout import (
     SINGULAR,
     SIXTH7_ERROR,
     SLIDE,
+    SPRING,
     STALL,
     STALL_LIMIT,
     STIFF_SLIDE_POWER,
@@ -216,6 +217,7 @@ def gather(G, GI, X, XI, C, CI, Q, QF, nq, bodies_params, hertz, spring):
         for d in range(3):
             C[nc, C_SH + d] = QF[k, QF_SH + d]
         C[nc, C_KTR] = (ptab[mi, mj, TP_KTR] if gj >= 0 else wtab[mi, TP_KTR]) if spring else 0.0
+        CI[nc, CI_MODE] = SPRING  # a spring's mode comes from its stretch (`spring_mode`), kept across phases
         nc += 1
     return na, nc
 

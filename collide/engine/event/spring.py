@@ -131,7 +131,10 @@ def spring_mode(X, C, CI, c, spin, tol):
     """Contact c's mode at this state (C_FN this state's): SPRING while the spring's force is
     within the cap; at or past it (within the event tolerance `tol`, a speed) the stretch is set
     to hold the capped force, and the contact slides unless its point moves along the force and
-    the spring then holds within the cap (`oblique.switch`)."""
+    the spring then holds within the cap (`oblique.switch`). A slide's stretch is not stepped:
+    it is first set to the one that holds its force here."""
+    if CI[c, CI_MODE] == SLIDE:
+        set_slide(C, c, slide_sign(C, c))
     f, v = spring_force(X, C, CI, c, X_V, X_W, spin)
     limit = friction_cap(C[c, C_MU], C[c, C_FN])
     force_tol = tol / (response(X, C, CI, c, spin) * STICK_SCALE)
