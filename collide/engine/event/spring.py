@@ -127,6 +127,21 @@ def slide_value(X, C, CI, c, s, v):
 
 
 @jit_inline
+def weighted(X, C, CI, c, f, v, limit, force_tol):
+    """(F, cap, tolerance) as `spring_mode` compares them. Under Hertz's dashpot both F and the cap
+    vanish at touching as gamma does (delta^(1/4)): they are compared over gamma (the tolerance
+    over its bound C_GAMMA), and where gamma is zero by their limits there, -sqrt(ratio) v_e and
+    mu max(delta', 0) (the spring's share and the elastic force vanish faster)."""
+    if not (C[c, C_GAMMA] > 0.0 and C[c, C_ESTAR] > 0.0):
+        return f, limit, force_tol
+    gamma = dashpot(C[c, C_ZETA], C[c, C_MSTAR], elastic(C, c)[1])
+    tol = force_tol / C[c, C_GAMMA]
+    if gamma > 0.0:
+        return f / gamma, limit / gamma, tol
+    return -math.sqrt(C[c, C_KTR]) * v, C[c, C_MU] * max(closing_rate(X, CI, C, c), 0.0), tol
+
+
+@jit_inline
 def spring_mode(X, C, CI, c, spin, tol):
     """Contact c's mode at this state (C_FN this state's): SPRING while the spring's force is
     within the cap; at or past it (within the event tolerance `tol`, a speed) the stretch is set
@@ -136,8 +151,8 @@ def spring_mode(X, C, CI, c, spin, tol):
     if CI[c, CI_MODE] == SLIDE:
         set_slide(C, c, slide_sign(C, c))
     f, v = spring_force(X, C, CI, c, X_V, X_W, spin)
-    limit = friction_cap(C[c, C_MU], C[c, C_FN])
     force_tol = tol / (response(X, C, CI, c, spin) * STICK_SCALE)
+    f, limit, force_tol = weighted(X, C, CI, c, f, v, friction_cap(C[c, C_MU], C[c, C_FN]), force_tol)
     if abs(f) < limit - force_tol:
         CI[c, CI_MODE] = SPRING
         return
@@ -148,6 +163,7 @@ def spring_mode(X, C, CI, c, spin, tol):
             CI[c, CI_MODE] = SLIDE
             return
         held = spring_force(X, C, CI, c, X_V, X_W, spin)[0]
+        held = weighted(X, C, CI, c, held, v, 0.0, 0.0)[0]
         if abs(held) <= limit + force_tol or C[c, C_GAMMA] == 0.0:
             break
         # The dashpot's share carries the force past the cap on the other side: a slide there.
