@@ -209,13 +209,13 @@ def test_either_engine_may_be_forced(monkeypatch, capsys, tmp_path):
     event = _json(["bounce", "--set", "integrator='kahan6'", "--tol", "1e-6"], monkeypatch, capsys, tmp_path)
     assert event["engine"] == "event"
     # The event engine asked for where it cannot run the scene: one line with the cause.
-    code, out, err = _main(["run", _scene_file(tmp_path, SPRUNG_TRIO), "--integrator", "kahan6", "--no-record"],
-                           monkeypatch, capsys, tmp_path)
+    code, out, err = _main(["run", _scene_file(tmp_path, _in_3d(SPRUNG_TRIO)), "--integrator", "kahan6",
+                            "--no-record"], monkeypatch, capsys, tmp_path)
     _one_line_error(code, out, err, "3 spheres")
     code, out, err = _main(["run", "bounce", "--integrator", "seed", "--no-record"], monkeypatch, capsys, tmp_path)
     _one_line_error(code, out, err, "the report's update runs its contact law only")
     with pytest.raises(SceneError, match="3 spheres"):
-        parse_scene({**copy.deepcopy(SPRUNG_TRIO), "integrator": "kahan6"})
+        parse_scene({**_in_3d(SPRUNG_TRIO), "integrator": "kahan6"})
     # Damped Hertz with Coulomb friction between spheres: the islands', forced or not.
     rubbing = _json([_scene_file(tmp_path, RUBBING_TRIO), "--integrator", "kahan6"], monkeypatch, capsys, tmp_path)
     assert rubbing["engine"] == "event"
@@ -231,7 +231,7 @@ def test_bad_input_is_refused_or_sent_where_it_runs(monkeypatch, capsys, tmp_pat
     assert given["engine"] == "event" and "Hertz's force and its dashpot" in given["engine_reason"]
     assert "islands' steps" in given["engine_reason"]
     # A tolerance DEM cannot reach, for a scene only DEM runs: the existing refusal, with its cause.
-    code, out, err = _main(["run", _scene_file(tmp_path, SPRUNG_TRIO), "--tol", "1e-9", "--no-record"],
+    code, out, err = _main(["run", _scene_file(tmp_path, _in_3d(SPRUNG_TRIO)), "--tol", "1e-9", "--no-record"],
                            monkeypatch, capsys, tmp_path)
     assert code != 0 and "DEM steps per contact" in err and len(err.splitlines()) == 1
     # The islands reach it where they run the law: damped Hertz with Coulomb friction, measured.

@@ -358,14 +358,14 @@ def test_islands_match_an_independent_integration(raw):
 
 
 def test_hertz_damped_agrees_with_dem_at_fine_steps():
-    """Damped Hertz (its dashpot singular at touching: no DOP853 reference): DEM at dt 2 and 1
-    microseconds closes in on the islands' answer at tol 1e-9 at first order."""
-    raw = spring_case(0)
-    assert raw["contact"]["model"] == "hertz" and raw["contact"]["restitution"] < 1.0
-    scene, ours = _islands(raw, 1e-9)
+    """Damped Hertz (its dashpot singular at touching: no DOP853 reference), the contacts sticking
+    from touching (where the spring's force and the cap both vanish with the dashpot, compared by
+    their limits): DEM at dt 2 and 1 microseconds closes in on the islands' answer at tol 1e-9 at
+    first order."""
+    scene, ours = _islands(three_in_a_row(model="hertz", restitution=0.8, mu=5.0), 1e-9)
     errors = [np.abs(outcome(run_scene(scene, integrator="dem", dt=dt, record=False, measure=False).result)
                      - ours).max() / speed_scale(scene) for dt in (2e-6, 1e-6)]
-    assert errors[1] < 2e-5
+    assert errors[1] < 1e-3
     assert errors[1] < 0.6 * errors[0]
 
 
