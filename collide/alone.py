@@ -3,7 +3,8 @@
 
 The event engine locates every contact and steps it at the composition's order; for the
 report's linear spring it runs every scene, and its islands take Hertz and the restitution's
-dashpot with Coulomb friction (`collide.scene.island_blocker`). A sphere alone among walls
+dashpot with Coulomb friction, and in 2D a tangential spring (`collide.scene.island_blocker`,
+`collide.engine.event.spring`). A sphere alone among walls
 never forms an island: each contact is one normal contact (`collide.engine.event.impact`, order
 8) between closed-form flights, with a tangential spring too, so such a scene runs there at full
 order whatever its tolerance; so do two spheres and no walls (`event.pair`: head-on, or with a
