@@ -732,9 +732,9 @@ def dem_reason(scene: Scene) -> str:
 # A damped scene of more bodies than this under gravity among walls settles into lasting contacts
 # (a pile): DEM's, whose cost does not grow with the contacts' events.
 ISLAND_PILE = 50
-# Bodies at most for the islands' tangential springs: their stretches are kept in an N x (N + W)
-# table of pairs (the event engine's `windows`); more are DEM's.
-SPRING_BODIES = 2000
+# Bodies at most for the islands' tangential springs, as collide.measure.MEASURED_MAX_BODIES: each
+# such run is confirmed by one at a tenth of --tol, and beyond this many final states decorrelate.
+SPRING_BODIES = 64
 
 
 def island_blocker(scene: Scene) -> str | None:
@@ -747,8 +747,8 @@ def island_blocker(scene: Scene) -> str | None:
         return ("a tangential spring between spheres inside an island (three or more, or two with walls) in 3D is "
                 "DEM's so far: in 2D the islands take it, and in 3D two spheres and no walls")
     if c.tangential != "coulomb" and len(scene.bodies) > SPRING_BODIES:
-        return (f"{len(scene.bodies)} spheres with a tangential spring: the islands keep the springs' stretches "
-                f"for at most {SPRING_BODIES}")
+        return (f"{len(scene.bodies)} spheres with a tangential spring: the islands take at most {SPRING_BODIES} "
+                "(each run confirmed by one at a tenth of --tol, and beyond that many final states decorrelate)")
     if len(scene.bodies) > ISLAND_PILE and scene.gravity is not None and scene.walls:
         what = "damped" if c.model == "linear" else "Hertz"
         return (f"{len(scene.bodies)} {what} spheres under gravity among walls settle into lasting contacts "

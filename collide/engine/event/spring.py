@@ -13,10 +13,10 @@ vanishing step, as `oblique` takes it for a sphere alone or two spheres:
 
 Reaching the cap (`spring_mode`, as `oblique.switch`): the stretch is set to hold the capped
 force, and the contact slips, or sticks on where the point moves along the force. The stretch
-stays with its pair across phases and windows (the N x (N + W) table SP: `load_stretches`,
-`keep_stretches`); a contact that ends loses it, as the DEM kernel's history does. The stretch
-keeps its length as the normal turns (the DEM kernel's projection): in the plane it is the scalar
-along e.
+stays with its pair across phases and windows (the N x (N + W) table SP, at most 64 bodies:
+`load_stretches`, `keep_stretches`); a contact that ends loses it, as the DEM kernel's history
+does. The stretch keeps its length as the normal turns (the DEM kernel's projection): in the plane
+it is the scalar along e.
 """
 
 from __future__ import annotations
