@@ -16,7 +16,7 @@ from collide.engine.event.contact import engaged, geometry, overlap, springs, st
 from collide.engine.event.locate import step_events, stiff_slide
 from collide.engine.event.modes import decide, flips, mode_events
 from collide.engine.event.rest import rest_phase, rest_ready
-from collide.engine.event.spring import held, keep_stretches, load_stretches, stretch_start
+from collide.engine.event.spring import held, keep_stretches, load_stretches, sawtooth, stretch_start
 from collide.engine.flight import bring, touch_time
 from collide.engine.jit import jit, jit_call, jit_inline, jit_part
 from collide.engine.layout import (
@@ -119,6 +119,7 @@ from collide.engine.layout import (
     S_STATUS,
     S_STEPS,
     S_UNLOCATED,
+    SAWTOOTH,
     SHORT_SHARE,
     SINGULAR,
     SIXTH7_ERROR,
@@ -756,6 +757,10 @@ def run_island(G, GI, Q, QF, T, W, tables, SP, WP, grav, weights, fl, fp, bufs, 
                 continue
             if not start_modes(G, X, XI, C, CI, E, na, nc, stuck, A, b, WP, grav, fl, scale, carried, stepped):
                 ST[S_STATUS] = SINGULAR
+                FG[F_STATUS_T] = t
+                break
+            if sawtooth(CI, nc, fl[FL_SPRING]):
+                ST[S_STATUS] = SAWTOOTH
                 FG[F_STATUS_T] = t
                 break
             mark_start(G, GI, X, XI, Q, QF, KN, na, nq, t, WP, grav, fric, record)

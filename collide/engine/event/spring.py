@@ -41,6 +41,7 @@ from collide.engine.layout import (
     C_XI,
     C_XI0,
     C_ZETA,
+    CI_EDGE,
     CI_GI,
     CI_GJ,
     CI_I,
@@ -53,6 +54,7 @@ from collide.engine.layout import (
     SLIDE,
     SPRING,
     STICK_SCALE,
+    TOOTH,
     X_R,
     X_S,
     X_V,
@@ -168,6 +170,9 @@ def spring_mode(X, C, CI, c, spin, tol):
             break
         # The dashpot's share carries the force past the cap on the other side: a slide there.
         s = 1.0 if held > 0.0 else -1.0
+    if CI[c, CI_MODE] == SPRING and C[c, C_GAMMA] > 0.0:
+        # A damped spring that sticks on at the cap it reached: a tooth of the sawtooth (SAWTOOTH).
+        CI[c, CI_EDGE] = TOOTH
     CI[c, CI_MODE] = SPRING
 
 
@@ -239,6 +244,15 @@ def keep_stretches(G, GI, X, SP, C, CI, Q, QF, nc, t, WP, grav, n):
         d, r = overlap(G, GI, X, Q, QF, k, t, WP, grav)
         row, col = stretch_rows(SP, CI, c, n)
         SP[row, col] = C[c, C_XI] if engaged(Q, k, d, r, WP, grav) else 0.0
+
+
+@jit_call
+def sawtooth(CI, nc, spring):
+    """Whether a damped spring stuck on at a cap it reached (`spring_mode`'s TOOTH)."""
+    for c in range(nc if spring else 0):
+        if CI[c, CI_EDGE] == TOOTH:
+            return True
+    return False
 
 
 @jit_inline
