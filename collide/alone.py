@@ -3,7 +3,8 @@
 
 The event engine locates every contact and steps it at the composition's order; for the
 report's linear spring it runs every scene, and its islands take Hertz and the restitution's
-dashpot with Coulomb friction (`collide.scene.island_blocker`). A sphere alone among walls
+dashpot with Coulomb friction, and in 2D a tangential spring (`collide.scene.island_blocker`,
+`collide.engine.event.spring`). A sphere alone among walls
 never forms an island: each contact is one normal contact (`collide.engine.event.impact`, order
 8) between closed-form flights, with a tangential spring too, so such a scene runs there at full
 order whatever its tolerance; so do two spheres and no walls (`event.pair`: head-on, or with a
@@ -55,16 +56,21 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
     if integrator == "seed":
         return SEED, "integrator 'seed' asked for: the report's own update on its fixed grid"
     islands = islands or alone_blocker(scene) is not None
+    # The tangential spring in the islands: its stretches stepped with the bodies, stick (the spring)
+    # and slip (the cap) each change located.
+    sprung = (" with the tangential spring (its stretches stepped with the bodies, the cap reached and each "
+              "slip's end located)" if scene.contact.tangential == "spring" and scene.has_friction else "")
     if scene.needs_dem and islands and scene.contact.model != "linear":
         damped = " and its dashpot" if scene.damped else ""
-        return EVENT, (f"{dem_reason(scene)}: Hertz's force{damped} (the DEM kernel's law) in the islands' steps "
-                       f"of order {_order(integrator)} ({integrator}), each contact's start and end stepped over s "
-                       "(t - t_0 ~ s^2, damped s^4: the force smooth in s), every contact's start and end"
+        return EVENT, (f"{dem_reason(scene)}: Hertz's force{damped} (the DEM kernel's law){sprung} in the islands' "
+                       f"steps of order {_order(integrator)} ({integrator}), each contact's start and end stepped "
+                       "over s (t - t_0 ~ s^2, damped s^4: the force smooth in s), every contact's start and end"
                        f"{' and each friction mode change' if scene.has_friction else ''} located")
     if scene.needs_dem and islands:
-        return EVENT, (f"{dem_reason(scene)} with the linear spring: its dashpot (the DEM kernel's law) in the "
-                       f"islands' steps of order {_order(integrator)} ({integrator}), every contact, its end and "
-                       "each friction mode change located")
+        what = "the DEM kernel's law" + (", its dashpot" if scene.damped else "")
+        return EVENT, (f"{dem_reason(scene)} with the linear spring: {what}{sprung} in the islands' steps of order "
+                       f"{_order(integrator)} ({integrator}), every contact, its end and each friction mode change "
+                       "located")
     if scene.needs_dem and len(scene.bodies) == 2 and scene.has_friction:
         return EVENT, (f"{dem_reason(scene)} with two spheres and no walls: their contact in the relative coordinate "
                        "(reduced mass, the line of centres turning, each sphere's spin) at order 6 (Gauss-Legendre), "

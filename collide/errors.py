@@ -6,3 +6,7 @@ from __future__ import annotations
 
 class RunError(RuntimeError):
     """A run that cannot be trusted: unstable step, blow-up, non-finite numbers, runaway length."""
+
+
+class SawtoothError(RunError):
+    """The islands met a tangential spring's sawtooth at a falling cap, which DEM takes instead."""

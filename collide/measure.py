@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from collide import diagnostics as dg
+from collide.errors import SawtoothError
 from collide.results import RunResult
 from collide.scene import Scene
 from collide.stepper import RunError
@@ -160,6 +161,8 @@ def measured(run, rerun: Rerun, max_steps: int):
                     "the estimate is the model's")
                 break
             finer = rerun.run(finer_tol, budget)
+        except SawtoothError:
+            raise  # the islands cannot take the scene: its caller hands it on
         except RunError as exc:
             candidate.result.warnings.append(f"the error could not be measured (a run at --tol {finer_tol:.2g}: "
                                              f"{exc}); the estimate is the model's")

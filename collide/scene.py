@@ -732,6 +732,9 @@ def dem_reason(scene: Scene) -> str:
 # A damped scene of more bodies than this under gravity among walls settles into lasting contacts
 # (a pile): DEM's, whose cost does not grow with the contacts' events.
 ISLAND_PILE = 50
+# Bodies at most for the islands' tangential springs, as collide.measure.MEASURED_MAX_BODIES: each
+# such run is confirmed by one at a tenth of --tol, and beyond this many final states decorrelate.
+SPRING_BODIES = 64
 
 
 def island_blocker(scene: Scene) -> str | None:
@@ -740,9 +743,12 @@ def island_blocker(scene: Scene) -> str | None:
     c = scene.contact
     if scene.has_rolling:
         return "rolling resistance is DEM's only"
-    if c.tangential != "coulomb":
-        return ("a tangential spring between spheres inside an island (three or more, or two with walls) is DEM's "
-                "so far: two spheres and no walls take it in the event engine")
+    if c.tangential != "coulomb" and scene.dim == 3:
+        return ("a tangential spring between spheres inside an island (three or more, or two with walls) in 3D is "
+                "DEM's so far: in 2D the islands take it, and in 3D two spheres and no walls")
+    if c.tangential != "coulomb" and len(scene.bodies) > SPRING_BODIES:
+        return (f"{len(scene.bodies)} spheres with a tangential spring: the islands take at most {SPRING_BODIES} "
+                "(each run confirmed by one at a tenth of --tol, and beyond that many final states decorrelate)")
     if len(scene.bodies) > ISLAND_PILE and scene.gravity is not None and scene.walls:
         what = "damped" if c.model == "linear" else "Hertz"
         return (f"{len(scene.bodies)} {what} spheres under gravity among walls settle into lasting contacts "

@@ -21,7 +21,7 @@ import numpy as np
 
 from collide.engine import jit, layout, tier
 from collide.engine.event import run as event_run
-from collide.errors import RunError
+from collide.errors import RunError, SawtoothError
 from collide.integrators import INTEGRATORS, Integrator
 from collide.limits import MAX_STEPS_DEFAULT
 from collide.model import (
@@ -368,6 +368,7 @@ def simulate(model: Model, initial: State, *, integrator: str, dt: np.ndarray,
                        for pair, wall in tables])
     fl[:, layout.FL_DAMPED] = damped
     fl[:, layout.FL_HERTZ] = model.hertz
+    fl[:, layout.FL_SPRING] = friction & model.tangential_spring
     fl[:, layout.FL_FRICTION] |= damped
     t_end = np.where(np.isfinite(duration), duration, np.inf)
     fp = np.zeros((b_count, int(layout.NFP)))
@@ -604,6 +605,10 @@ def _check_status(model: Model, b: int, st: np.ndarray, fg: np.ndarray, dt: np.n
                        "report this scene")
     if status == layout.MAXSTEPS:
         raise step_limit_error(int(st[layout.S_STEPS]), t, open_ended)
+    if status == layout.SAWTOOTH:
+        raise SawtoothError(f"a damped tangential spring sticks on at a cap that falls faster than it relaxes at {at}: "
+                            "its stretch is reset to the cap again and again (a sawtooth whose teeth shrink to "
+                            "nothing), which the islands do not follow yet")
     if status == layout.SINGULAR:
         raise RunError(f"the stuck contacts' friction could not be solved at {at} (a singular hold system)")
     raise RunError(f"the engine stopped with status {status} at {at}")

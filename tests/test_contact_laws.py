@@ -76,7 +76,8 @@ def test_report_scenes_keep_their_integrator_and_law():
 def test_a_tangential_spring_between_two_spheres_chooses_the_event_engine():
     """Two spheres and no walls with a tangential spring and friction: the event engine's
     integrator (event/pair.py); Coulomb friction with a dead band there: the islands'; a third
-    sphere with the spring (an island): DEM, and an event integrator asked for is refused."""
+    sphere with the spring (an island): the islands' in 2D, DEM's in 3D, where an event integrator
+    asked for is refused."""
     contact = {"model": "hertz", "restitution": 0.8, "mu": 0.3, "tangential": "spring",
                "tangential_stiffness_ratio": 0.5}
     body = [{"name": n, "material": "glass", "radius": 0.01, "position": [0.03 * k, 0.005 * k]}
@@ -85,12 +86,15 @@ def test_a_tangential_spring_between_two_spheres_chooses_the_event_engine():
     pair = {"dim": 2, "contact": contact, "material": [{"name": "glass", "density": 2800.0, **GLASS}],
             "body": body[:2]}
     assert parse_scene(copy.deepcopy(pair)).integrator != "dem"
-    assert parse_scene({**copy.deepcopy(pair), "body": copy.deepcopy(body)}).integrator == "dem"
+    assert parse_scene({**copy.deepcopy(pair), "body": copy.deepcopy(body)}).integrator != "dem"
+    trio3 = {**copy.deepcopy(pair), "dim": 3, "body": [{**b, "position": b["position"] + [0.0]} for b in body]}
+    trio3["body"][0]["velocity"] = [1.0, 0.0, 0.0]
+    assert parse_scene(copy.deepcopy(trio3)).integrator == "dem"
     coulomb = {**copy.deepcopy(pair), "contact": {**contact, "tangential": "coulomb"}}
     assert parse_scene(coulomb).integrator not in ("dem", "seed")
     assert island_blocker(parse_scene(coulomb)) is None
     with pytest.raises(SceneError, match="kahan6. cannot run this scene.s contact law"):
-        parse_scene({**copy.deepcopy(pair), "body": copy.deepcopy(body), "integrator": "kahan6"})
+        parse_scene({**trio3, "integrator": "kahan6"})
 
 
 def test_integrator_override_that_cannot_run_the_law_is_refused():

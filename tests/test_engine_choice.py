@@ -143,8 +143,8 @@ PAIR = {"dim": 2, "duration": 0.05, "tol": 1e-3,
         "contact": {"model": "hertz", "youngs_modulus": 1e8, "restitution": 0.7},
         "body": [{"name": "a", "mass": 1.0, "radius": 0.1, "position": [0.0, 0.0], "velocity": [1.0, 0.0]},
                  {"name": "b", "mass": 1.0, "radius": 0.1, "position": [0.3, 0.0]}]}
-# Three spheres under these laws: the islands', with Coulomb friction too; with a tangential
-# spring DEM's.
+# Three spheres under these laws: the islands', with Coulomb friction or a tangential spring (in
+# 3D the spring is DEM's).
 TRIO = {**PAIR, "body": PAIR["body"] + [{"name": "c", "mass": 1.0, "radius": 0.1, "position": [0.6, 0.0]}]}
 # Damped, with friction: the first sphere spins into the second off the line of centres, which
 # passes it on to the third.
@@ -152,6 +152,19 @@ RUBBING_TRIO = {**TRIO, "duration": 0.4, "contact": {**PAIR["contact"], "mu": 0.
                 "body": [{**TRIO["body"][0], "spin": 30.0}, {**TRIO["body"][1], "position": [0.3, 0.03]},
                          TRIO["body"][2]]}
 SPRUNG_TRIO = {**TRIO, "contact": {**RUBBING_TRIO["contact"], "tangential": "spring"}}
+
+
+def _in_3d(raw: dict) -> dict:
+    """The same scene in 3D, in the z = 0 plane (spins about z)."""
+    out = copy.deepcopy(raw)
+    out["dim"] = 3
+    for body in out["body"]:
+        for key in ("position", "velocity"):
+            if key in body:
+                body[key] = list(body[key]) + [0.0]
+        if "spin" in body:
+            body["spin"] = [0.0, 0.0, float(body["spin"])]
+    return out
 
 
 def _scene_file(tmp_path, raw: dict) -> str:
@@ -174,8 +187,13 @@ def test_the_json_says_which_engine_ran_and_why(monkeypatch, capsys, tmp_path):
     assert rubbing["engine"] == "event" and "Hertz's force and its dashpot" in rubbing["engine_reason"]
     assert "each friction mode change located" in rubbing["engine_reason"]
     sprung = _json([_scene_file(tmp_path, SPRUNG_TRIO)], monkeypatch, capsys, tmp_path)
-    assert sprung["engine"] == "dem" and "3 spheres" in sprung["engine_reason"]
-    assert "a tangential spring between spheres inside an island" in sprung["engine_reason"]
+    assert sprung["engine"] == "event" and "with the tangential spring" in sprung["engine_reason"]
+    assert "in the islands' steps" in sprung["engine_reason"]
+    # In 3D the spring inside an island is DEM's still.
+    sprung3 = _json([_scene_file(tmp_path, _in_3d(SPRUNG_TRIO))], monkeypatch, capsys, tmp_path)
+    assert sprung3["engine"] == "dem" and "3 spheres" in sprung3["engine_reason"]
+    assert "a tangential spring between spheres inside an island" in sprung3["engine_reason"]
+    assert "in 3D" in sprung3["engine_reason"]
     # Not head-on, the line of centres turns during the contact: the islands take it.
     oblique = copy.deepcopy(PAIR)
     oblique["body"][1]["position"], oblique["duration"] = [0.3, 0.05], 0.2
@@ -191,13 +209,13 @@ def test_either_engine_may_be_forced(monkeypatch, capsys, tmp_path):
     event = _json(["bounce", "--set", "integrator='kahan6'", "--tol", "1e-6"], monkeypatch, capsys, tmp_path)
     assert event["engine"] == "event"
     # The event engine asked for where it cannot run the scene: one line with the cause.
-    code, out, err = _main(["run", _scene_file(tmp_path, SPRUNG_TRIO), "--integrator", "kahan6", "--no-record"],
-                           monkeypatch, capsys, tmp_path)
+    code, out, err = _main(["run", _scene_file(tmp_path, _in_3d(SPRUNG_TRIO)), "--integrator", "kahan6",
+                            "--no-record"], monkeypatch, capsys, tmp_path)
     _one_line_error(code, out, err, "3 spheres")
     code, out, err = _main(["run", "bounce", "--integrator", "seed", "--no-record"], monkeypatch, capsys, tmp_path)
     _one_line_error(code, out, err, "the report's update runs its contact law only")
     with pytest.raises(SceneError, match="3 spheres"):
-        parse_scene({**copy.deepcopy(SPRUNG_TRIO), "integrator": "kahan6"})
+        parse_scene({**_in_3d(SPRUNG_TRIO), "integrator": "kahan6"})
     # Damped Hertz with Coulomb friction between spheres: the islands', forced or not.
     rubbing = _json([_scene_file(tmp_path, RUBBING_TRIO), "--integrator", "kahan6"], monkeypatch, capsys, tmp_path)
     assert rubbing["engine"] == "event"
@@ -213,7 +231,7 @@ def test_bad_input_is_refused_or_sent_where_it_runs(monkeypatch, capsys, tmp_pat
     assert given["engine"] == "event" and "Hertz's force and its dashpot" in given["engine_reason"]
     assert "islands' steps" in given["engine_reason"]
     # A tolerance DEM cannot reach, for a scene only DEM runs: the existing refusal, with its cause.
-    code, out, err = _main(["run", _scene_file(tmp_path, SPRUNG_TRIO), "--tol", "1e-9", "--no-record"],
+    code, out, err = _main(["run", _scene_file(tmp_path, _in_3d(SPRUNG_TRIO)), "--tol", "1e-9", "--no-record"],
                            monkeypatch, capsys, tmp_path)
     assert code != 0 and "DEM steps per contact" in err and len(err.splitlines()) == 1
     # The islands reach it where they run the law: damped Hertz with Coulomb friction, measured.
@@ -322,8 +340,8 @@ def test_two_spheres_meeting_off_centre_run_in_the_islands_at_full_order(offset,
 
 def test_a_tangential_spring_between_two_spheres_runs_in_the_event_engine(monkeypatch, capsys, tmp_path):
     """Two spheres and no walls meeting off-centre with friction and a tangential spring: the
-    event engine, the JSON saying how; a third sphere makes an island, where the spring is DEM's,
-    with that cause."""
+    event engine, the JSON saying how; a third sphere makes an island, which takes the spring in
+    2D; in 3D it is DEM's, with that cause."""
     spring = {**PAIR["contact"], "mu": 0.3, "tangential": "spring", "tangential_stiffness_ratio": 0.8}
     pair = {**copy.deepcopy(PAIR), "contact": spring}
     pair["body"][1]["position"], pair["duration"] = [0.3, 0.05], 0.2
@@ -331,4 +349,6 @@ def test_a_tangential_spring_between_two_spheres_runs_in_the_event_engine(monkey
     assert rubbing["engine"] == "event" and "two spheres and no walls" in rubbing["engine_reason"]
     assert "stick and slip located" in rubbing["engine_reason"]
     trio = _json([_scene_file(tmp_path, {**TRIO, "contact": spring})], monkeypatch, capsys, tmp_path)
-    assert trio["engine"] == "dem" and "tangential spring between spheres inside an island" in trio["engine_reason"]
+    assert trio["engine"] == "event" and "with the tangential spring" in trio["engine_reason"]
+    trio3 = _json([_scene_file(tmp_path, _in_3d({**TRIO, "contact": spring}))], monkeypatch, capsys, tmp_path)
+    assert trio3["engine"] == "dem" and "tangential spring between spheres inside an island" in trio3["engine_reason"]

@@ -38,6 +38,10 @@ import numpy as np
 from collide.integrators import SUZUKI4, YOSHIDA4, YOSHIDA6
 
 BAND, SLIDE, STICK = 0, 1, 2
+# A contact with a tangential spring (C_KTR > 0) sticks in SPRING (the spring and its dashpot on the
+# stretch C_XI: a smooth force, no rigid hold) and slips in SLIDE (the cap, the stretch the one that
+# holds it: `collide.engine.dem.tangential`); it has no band.
+SPRING = 3
 EDGE_TOL = 1e-9  # relative to the speed scale: how close to the band's edge counts as on it
 MODE_TOL = 0.5 * EDGE_TOL
 STICK_SCALE = 1e-3  # s: turns a friction force into a slip change, to compare with EDGE_TOL
@@ -154,7 +158,11 @@ C_GAMMA = 31  # the restitution's dashpot coefficient (kg/s; 0: undamped): the D
 # the contact's overlap, from C_ZETA and C_MSTAR)
 # Hertz (C_ESTAR > 0; 0: the linear spring C_K): E*, R*, and the dashpot's damping ratio and m*.
 C_ESTAR, C_RSTAR, C_ZETA, C_MSTAR = 32, 33, 34, 35
-NC = 36
+# A tangential spring (C_KTR > 0: k_t / k_n): the stretch along the tangent z x n (in the plane),
+# a state stepped with the bodies (the drifts integrate the slip into it), and its value at the
+# step's start (every trial starts from it).
+C_XI, C_XI0, C_KTR = 36, 37, 38
+NC = 39
 CI_I, CI_J, CI_GI, CI_GJ, CI_MODE, CI_Q, CI_EDGE, CI_RETRIED, CI_FLIPPED, CI_GRAZE = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
 # CI_RETRIED, CI_FLIPPED: `decide`'s marks (arrays of its own were allocated at every call);
 # CI_GRAZE: run_island's, for the next step.
@@ -178,7 +186,8 @@ FL_SPIN, FL_FRICTION, FL_SEED, FL_PLANAR, FL_RECORD, FL_AUTO, FL_MAXSTEPS, FL_DI
 # in the kicks with the friction (FL_FRICTION is set with it).
 FL_DAMPED = 9
 FL_HERTZ = 10  # the contacts are Hertz's
-NFL = 11
+FL_SPRING = 11  # friction has a tangential spring (2D): its stretches are kept per pair across phases
+NFL = 12
 FP_DT, FP_OMEGA_H, FP_TEND, FP_TAIL, FP_SCALE, FP_SLOW, FP_EVENT_TOL, FP_END_SLOW, FP_NOW, FP_NOW_STEPS = range(10)
 # FP_NOW, FP_NOW_STEPS are written by the run: time reached and steps, read by a progress display.
 # FP_BOX..: the periodic box (collide.engine.broad's `box`: the periods, 0 where an axis does not
@@ -190,6 +199,7 @@ NFP = 15
 TP_K, TP_MU, TP_EPS = range(3)
 TP_ESTAR = 3  # Hertz's E* (the model's TABLE_ESTAR)
 TP_ZETA = 4  # the event engine's tables carry the damping ratio where the model's hold the restitution
+TP_KTR = 6  # the tangential spring's k_t / k_n (the model's TABLE_KTR)
 # Records.
 # Knots: a body's exact state at a time, with its acceleration just before (K_A) and just after
 # (K_AN): a friction mode change or the seed's per-step forces make it jump there.
@@ -206,6 +216,11 @@ NS = 9  # S_REST: of the steps, intervals of a sphere on a wall in closed form (
 F_MAX_OVERLAP, F_DT_MIN, F_STATUS_T, F_STATUS_A, F_STATUS_B, F_MAX_FORCE, F_UNLOCATED_T = range(7)
 NF = 7
 OK, NONFINITE, ENERGY, STALL, MAXSTEPS, SINGULAR = range(6)
+# A damped tangential spring at a falling cap, its point moving along the force: the law resets its
+# stretch to the cap again and again (a sawtooth whose teeth shrink to nothing as a slip ends),
+# which the islands do not follow yet (`spring.spring_mode` marks it in CI_EDGE: TOOTH).
+SAWTOOTH = 6
+TOOTH = 5
 YES, NO = 1, 0
 # Numba compiles one specialisation per literal int an argument is called with: as numpy ints
 # these constants are plain int64 to it, and every function compiles once.

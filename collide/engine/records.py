@@ -46,6 +46,8 @@ from collide.engine.layout import (
     R_MODE,
     R_T,
     S_CONTACTS,
+    SPRING,
+    STICK,
     V_END,
     V_I,
     V_J,
@@ -155,7 +157,9 @@ def record_step(KN, RC, CNT, G, GI, X, XI, C, CI, na, nc, t, fl):
         RC[r, R_FN] = C[c, C_FN]
         for d in range(3):
             RC[r, R_FX + d] = C[c, C_FF + d] if fl[FL_FRICTION] else 0.0
-        RC[r, R_MODE] = CI[c, CI_MODE] if fl[FL_FRICTION] else 0.0
+        # A spring's stick is recorded as stick (2), as the DEM kernel's is.
+        mode = CI[c, CI_MODE]
+        RC[r, R_MODE] = (STICK if mode == SPRING else mode) if fl[FL_FRICTION] else 0.0
         CNT[CN_RECS] += 1
     return KN, RC
 

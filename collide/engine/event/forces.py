@@ -18,6 +18,7 @@ from collide.engine.event.contact import (
     slip,
     slip_rate,
 )
+from collide.engine.event.spring import spring_force
 from collide.engine.jit import jit_call, jit_inline
 from collide.engine.layout import (
     C_B,
@@ -39,6 +40,7 @@ from collide.engine.layout import (
     FL_SPIN,
     NO,
     SLIDE,
+    SPRING,
     STICK,
     X_A,
     X_F,
@@ -214,7 +216,8 @@ def slide_direction(X, C, CI, c, vc, wc, spin, span, planar):
 @jit_call
 def friction(X, C, CI, na, nc, vc, wc, stuck, A, b, fl, span, fresh):
     """Friction forces (C_FF, on body i) of every contact at the velocities in columns (vc, wc),
-    by mode, and their accelerations (X_F, X_L); X_A holds everything else's. Stuck contacts'
+    by mode, and their accelerations (X_F, X_L); X_A holds everything else's. A sticking tangential
+    spring's (SPRING) is its force at these velocities, with the slides'. Stuck contacts'
     slips stop changing: W f = -G, with G their slip rates under every other force. `span`: the
     velocities already hold the forces now in C_FF over that many seconds (see
     `slide_direction`); 0 when they hold none. `fresh`: the stuck contacts' matrix must be built
@@ -243,6 +246,13 @@ dashpots (`dashpots`) are velocity-dependent forces too: they go in first, with 
                 f = -cap(C, CI, c) / mag
                 C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2] = f * sx, f * sy, f * sz
                 add_force(X, C, CI, c, f * sx, f * sy, f * sz, X_SF, X_SL, spin, planar)
+        elif CI[c, CI_MODE] == SPRING:
+            # A sticking tangential spring: its force at these velocities (its dashpot's share
+            # follows them, as a normal dashpot's does).
+            f = spring_force(X, C, CI, c, vc, wc, spin)[0]
+            fx, fy = -f * C[c, C_N + 1], f * C[c, C_N]
+            C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2] = fx, fy, 0.0
+            add_force(X, C, CI, c, fx, fy, 0.0, X_SF, X_SL, spin, planar)
         else:
             C[c, C_FF] = 0.0
             C[c, C_FF + 1] = 0.0

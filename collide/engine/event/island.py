@@ -16,6 +16,7 @@ from collide.engine.event.contact import engaged, geometry, overlap, springs, st
 from collide.engine.event.locate import step_events, stiff_slide
 from collide.engine.event.modes import decide, flips, mode_events
 from collide.engine.event.rest import rest_phase, rest_ready
+from collide.engine.event.spring import held, keep_stretches, load_stretches, sawtooth, stretch_start
 from collide.engine.flight import bring, touch_time
 from collide.engine.jit import jit, jit_call, jit_inline, jit_part
 from collide.engine.layout import (
@@ -26,6 +27,7 @@ from collide.engine.layout import (
     C_FN,
     C_GAMMA,
     C_K,
+    C_KTR,
     C_MSTAR,
     C_MU,
     C_N,
@@ -67,6 +69,7 @@ from collide.engine.layout import (
     FL_RECORD,
     FL_SEED,
     FL_SPIN,
+    FL_SPRING,
     FL_TURNS,
     FLIP,
     FP_BOX,
@@ -116,10 +119,12 @@ from collide.engine.layout import (
     S_STATUS,
     S_STEPS,
     S_UNLOCATED,
+    SAWTOOTH,
     SHORT_SHARE,
     SINGULAR,
     SIXTH7_ERROR,
     SLIDE,
+    SPRING,
     STALL,
     STALL_LIMIT,
     STIFF_SLIDE_POWER,
@@ -130,6 +135,7 @@ from collide.engine.layout import (
     TP_EPS,
     TP_ESTAR,
     TP_K,
+    TP_KTR,
     TP_MU,
     TP_ZETA,
     VERLET_ERROR,
@@ -163,10 +169,11 @@ from collide.engine.records import add_knot, intervals, record_step, share
 
 
 @jit
-def gather(G, GI, X, XI, C, CI, Q, QF, nq, bodies_params, hertz):
+def gather(G, GI, X, XI, C, CI, Q, QF, nq, bodies_params, hertz, spring):
     """Set up the island's engaged contacts (C, CI) and their bodies (X, XI) from the engaged
     candidates; returns (bodies, contacts). `hertz`: the contacts are Hertz's (E* and R*; the
-    tables' k is then the run's bound on the stiffness dF/d delta, `collide.model.hertz_bound`)."""
+    tables' k is then the run's bound on the stiffness dF/d delta, `collide.model.hertz_bound`);
+    `spring`: friction has a tangential spring (C_KTR, the tables' k_t / k_n)."""
     ptab, wtab = bodies_params
     na = 0
     nc = 0
@@ -210,6 +217,8 @@ def gather(G, GI, X, XI, C, CI, Q, QF, nq, bodies_params, hertz):
         C[nc, C_REACH] = QF[k, QF_REACH]
         for d in range(3):
             C[nc, C_SH + d] = QF[k, QF_SH + d]
+        C[nc, C_KTR] = (ptab[mi, mj, TP_KTR] if gj >= 0 else wtab[mi, TP_KTR]) if spring else 0.0
+        CI[nc, CI_MODE] = SPRING  # a spring's mode comes from its stretch (`spring_mode`), kept across phases
         nc += 1
     return na, nc
 
@@ -217,8 +226,9 @@ def gather(G, GI, X, XI, C, CI, Q, QF, nq, bodies_params, hertz):
 @jit_inline
 def island_omega(X, C, CI, na, nc):
     """The stiffest frequency of the engaged contacts: exact for one contact, otherwise a
-    Gershgorin bound on the mass-symmetrised stiffness matrix (rows k/m_i + k/sqrt(m_i m_j))."""
-    if nc == 1:
+    Gershgorin bound on the mass-symmetrised stiffness matrix (rows k/m_i + k/sqrt(m_i m_j)), a
+    tangential spring's stiffness counted with its levers where it is the stiffer."""
+    if nc == 1 and C[0, C_KTR] == 0.0:
         i, j = CI[0, CI_I], CI[0, CI_J]
         return math.sqrt(C[0, C_K] * (X[i, X_IM] + (X[j, X_IM] if j >= 0 else 0.0)))
     for a in range(na):
@@ -226,6 +236,14 @@ def island_omega(X, C, CI, na, nc):
     for c in range(nc):
         i, j = CI[c, CI_I], CI[c, CI_J]
         k = C[c, C_K]
+        if C[c, C_KTR] > 0.0:
+            # A tangential spring k_t = ratio k acts on the slip through K (spins included):
+            # as a spring of ratio K m times k on each body.
+            lever = 1.0
+            for b in (i, j):
+                if b >= 0:
+                    lever = max(lever, 1.0 + X[b, X_R] ** 2 * X[b, X_II] * X[b, X_M])
+            k = max(k, C[c, C_KTR] * k * lever)
         if j >= 0:
             cross = k * math.sqrt(X[i, X_IM] * X[j, X_IM])
             X[i, X_FO] += k * X[i, X_IM] + cross
@@ -248,7 +266,7 @@ def energy(X, C, na, nc, grav, spin):
             if spin:
                 e += 0.5 * X[a, X_I] * X[a, X_W + d] ** 2
     for c in range(nc):
-        e += stored(C, c)
+        e += stored(C, c) + held(C, c)
     return e
 
 
@@ -267,7 +285,7 @@ def energy_scale(X, C, na, nc, grav, spin):
             if spin:
                 e += 0.5 * X[a, X_I] * X[a, X_W + d] ** 2
     for c in range(nc):
-        e += stored(C, c)
+        e += stored(C, c) + held(C, c)
     return e
 
 
@@ -661,10 +679,11 @@ def phase_checks(t, t_phase, idle, e_start, e_end, e_room, ST, FG):
 
 
 @jit_part
-def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
+def run_island(G, GI, Q, QF, T, W, tables, SP, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     """Advance the island of candidate contacts Q (N_Q, 3) from T to W: free flight in closed
     form while nothing is engaged, event-located steps of the bodies with engaged contacts while
-    something is. Returns the (grown) recording buffers; problems go to ST[S_STATUS]."""
+    something is; SP: the tangential springs' stretches by pair (`spring`). Returns the (grown)
+    recording buffers; problems go to ST[S_STATUS]."""
     KN, RC, IV, OP = bufs
     spin, fric, record = fl[FL_SPIN], fl[FL_FRICTION], fl[FL_RECORD]
     scale = fp[FP_SCALE]
@@ -695,7 +714,8 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             continue
         # A contact phase: the bodies of the engaged contacts are stepped.
         bring_engaged(G, Q, nq, t, grav, fl)
-        na, nc = gather(G, GI, X, XI, C, CI, Q, QF, nq, tables, fl[FL_HERTZ])
+        na, nc = gather(G, GI, X, XI, C, CI, Q, QF, nq, tables, fl[FL_HERTZ], fl[FL_SPRING])
+        load_stretches(SP, C, CI, Q, nq, nc, G.shape[0], fl[FL_SPRING])
         if 2 * nc > A.shape[0] and fric:
             A = np.zeros((2 * nc, 2 * nc))
         omega, dt, max_turn, negligible, nudge, reach, briefs, exact = phase_settings(X, C, CI, na, nc, weights, fl,
@@ -739,7 +759,12 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
                 ST[S_STATUS] = SINGULAR
                 FG[F_STATUS_T] = t
                 break
+            if sawtooth(CI, nc, fl[FL_SPRING]):
+                ST[S_STATUS] = SAWTOOTH
+                FG[F_STATUS_T] = t
+                break
             mark_start(G, GI, X, XI, Q, QF, KN, na, nq, t, WP, grav, fric, record)
+            stretch_start(C, nc, False)
             h_full, grown = step_length(X, C, CI, nc, dt, omega, W, t, grown, turner, spin, fric, fl)
             h_full = set_map(X, C, CI, nc, t, anchor, region, h_full, dt, omega, W, fl)
             h, work, ok, limited, late, located = step_events(
@@ -750,6 +775,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
             if late >= 0:
                 # Engage it from here: back to the step's start, and a new phase.
                 restart_late(X, Q, na, late)
+                stretch_start(C, nc, True)
                 changed = True
                 restarts += 1
                 if restarts > STALL_LIMIT:
@@ -799,5 +825,7 @@ def run_island(G, GI, Q, QF, T, W, tables, WP, grav, weights, fl, fp, bufs, CNT,
         # The phase ends here: the stepped bodies go back to base states at t.
         e_end = energy(X, C, na, nc, grav, spin)
         idle = phase_checks(t, t_phase, idle, e_start, e_end, e_room, ST, FG)
+        if fl[FL_SPRING]:
+            keep_stretches(G, GI, X, SP, C, CI, Q, QF, nc, t, WP, grav, G.shape[0])
         end_phase(G, GI, X, XI, Q, QF, KN, na, nq, t, WP, grav, record, changed)
     return KN, RC, IV, OP

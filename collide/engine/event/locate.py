@@ -9,6 +9,7 @@ import math
 
 from collide.engine.event.contact import cap, geometry, overlap, response, slip, slip_rate, springs
 from collide.engine.event.modes import flips, mode_events
+from collide.engine.event.spring import stretch_drift
 from collide.engine.event.substep import hold_pull, kick_start, settle, step
 from collide.engine.jit import jit_call, jit_inline, jit_part
 from collide.engine.layout import (
@@ -31,6 +32,7 @@ from collide.engine.layout import (
     FL_PLANAR,
     FL_SEED,
     FL_SPIN,
+    FL_SPRING,
     FORESEE_SPAN,
     LATE_SAFETY,
     MAP_END,
@@ -164,6 +166,8 @@ def foresee(G, GI, X, C, CI, Q, QF, E, na, nc, nq, t, h_full, WP, grav, stuck, A
     start's velocities and accelerations (the bodies are left there: the step restarts; its mode
     values in E[:, E_V1:]). inf if nothing is foreseen."""
     span = FORESEE_SPAN * h_full
+    if fl[FL_SPRING]:
+        stretch_drift(X, C, CI, nc, span, WP, fl[FL_SPIN], fl[FL_SEED])
     for a in range(na):
         for d in range(3):
             acc = X[a, X_A + d] + (X[a, X_F + d] if fl[FL_FRICTION] else 0.0)

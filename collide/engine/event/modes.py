@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import math
 
-from collide.engine.event.contact import cap, press, response, slip, slip_rate
+from collide.engine.event.contact import cap, dashpots, press, response, slip, slip_rate
 from collide.engine.event.forces import friction
+from collide.engine.event.spring import slide_sign, slide_value, spring_mode
 from collide.engine.event.substep import settle
 from collide.engine.jit import jit_call, jit_inline
 from collide.engine.layout import (
@@ -19,6 +20,7 @@ from collide.engine.layout import (
     C_FF,
     C_GAMMA,
     C_HELD,
+    C_KTR,
     C_MU,
     C_N,
     CI_EDGE,
@@ -29,21 +31,25 @@ from collide.engine.layout import (
     E_V0,
     E_V1,
     EDGE_TOL,
+    FL_DAMPED,
     FL_PLANAR,
     FL_SEED,
     FL_SPIN,
+    FL_SPRING,
     FLIP,
     FLIP_SAFETY,
     FLIP_SHARE,
     MODE_TOL,
     NO,
     SLIDE,
+    SPRING,
     STICK,
     STICK_SCALE,
     X_A,
     X_F,
     X_L,
     X_T,
+    X_UA,
     X_V,
     X_W,
     YES,
@@ -70,6 +76,15 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh, 
             X[a, X_T + d] = X[a, X_A + d] + X[a, X_F + d]
     for c in range(nc):
         second = nc + c
+        if C[c, C_KTR] > 0.0 and CI[c, CI_MODE] == SPRING:
+            # The spring's force within the cap, as the slip change it makes over STICK_SCALE.
+            k = response(X, C, CI, c, spin) * STICK_SCALE / scale
+            fx, fy = C[c, C_FF], C[c, C_FF + 1]
+            E[c, vcol] = (cap(C, CI, c) - math.sqrt(fx * fx + fy * fy)) * k
+            E[c, rcol] = math.nan
+            E[second, vcol] = 1.0
+            E[second, rcol] = 0.0
+            continue
         if CI[c, CI_MODE] == STICK:
             k = response(X, C, CI, c, spin) * STICK_SCALE / scale
             fx, fy, fz = C[c, C_FF], C[c, C_FF + 1], C[c, C_FF + 2]
@@ -81,6 +96,13 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh, 
             continue
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, planar)
         gx, gy, gz = slip_rate(X, C, CI, c, X_V, X_W, X_T, X_L, spin, seed, YES, planar)
+        if CI[c, CI_MODE] == SLIDE and C[c, C_KTR] > 0.0:
+            # A spring's slide (`spring.slide_value`): with a dashpot -s v_e, its rate -s v_e';
+            # without, less c' (its rate left to differences, as a stuck contact's).
+            s = slide_sign(C, c)
+            ex, ey = -C[c, C_N + 1], C[c, C_N]
+            E[c, vcol] = slide_value(X, C, CI, c, s, sx * ex + sy * ey) / scale
+            E[c, rcol] = -s * (gx * ex + gy * ey) / scale if C[c, C_GAMMA] > 0.0 else math.nan
         if CI[c, CI_MODE] == SLIDE:
             # |slip| - eps, with |slip| counted negative once the slip points against the way it
             # slid at the step's start: a slip reversing through the band within a step then
@@ -89,7 +111,9 @@ def mode_events(X, C, CI, E, na, nc, vcol, rcol, stuck, A, b, fl, scale, fresh, 
             mag = math.sqrt(sx * sx + sy * sy + sz * sz)
             along = sx * hx + sy * hy + sz * hz
             outward = (sx * gx + sy * gy + sz * gz) / mag if mag > 0 else 0.0
-            if planar:
+            if C[c, C_KTR] > 0.0:
+                pass
+            elif planar:
                 sign = 1.0 if along >= 0 else -1.0
                 E[c, vcol] = (sign * mag - C[c, C_EPS]) / scale
                 E[c, rcol] = sign * outward / scale
@@ -157,9 +181,16 @@ def decide(X, C, CI, na, nc, stuck, A, b, fl, scale):
     tol = EDGE_TOL * scale
     edges = 0
     flipped_any = False
+    if fl[FL_SPRING] and fl[FL_DAMPED]:
+        dashpots(X, C, CI, nc, X_V, X_UA)  # the springs' caps take F_n at these velocities (X_UA: scratch)
     for c in range(nc):
         CI[c, CI_RETRIED] = NO
         CI[c, CI_FLIPPED] = NO
+        if C[c, C_KTR] > 0.0:
+            # A tangential spring: its own mode, alone (no hold couples it to its neighbours).
+            CI[c, CI_EDGE] = 0
+            spring_mode(X, C, CI, c, spin, tol)
+            continue
         sx, sy, sz = slip(X, C, CI, c, X_V, X_W, spin, planar == YES)
         mag = math.sqrt(sx * sx + sy * sy + sz * sz)
         if mag > 0:

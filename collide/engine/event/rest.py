@@ -33,6 +33,7 @@ from collide.engine.layout import (
     FL_RECORD,
     FL_SEED,
     FL_SPIN,
+    FL_SPRING,
     FP_EVENT_TOL,
     G_WK,
     GI_KNOT,
@@ -395,9 +396,9 @@ def rest_aim(P, h, touch, start, ends, out, clock, budget):
 @jit
 def rest_ready(X, C, CI, na, nc, nq, fl):
     """Whether this contact phase runs in closed form: one sphere on one wall, undamped, the
-    contact's own step (dt auto) and the true lever, the linear spring."""
+    contact's own step (dt auto) and the true lever, the linear spring, no tangential spring."""
     return (fl[FL_AUTO] and nq == 1 and na == 1 and nc == 1 and CI[0, CI_J] < 0 and not fl[FL_SEED]
-            and not fl[FL_DAMPED] and not fl[FL_HERTZ])
+            and not fl[FL_DAMPED] and not fl[FL_HERTZ] and not fl[FL_SPRING])
 
 
 @jit_call

@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import math
 
-from collide.engine.event.contact import geometry, set_basis, slip, springs
+from collide.engine.event.contact import geometry, response, set_basis, slip, springs
 from collide.engine.event.forces import friction, hold, repull
+from collide.engine.event.spring import spring_law, stretch_drift, stretch_start
 from collide.engine.flight import turn
 from collide.engine.jit import jit_call, jit_inline
 from collide.engine.layout import (
@@ -32,11 +33,13 @@ from collide.engine.layout import (
     FL_PLANAR,
     FL_SEED,
     FL_SPIN,
+    FL_SPRING,
     MAP_BOTH,
     MAP_NONE,
     MAP_START,
     NO,
     SLIDE,
+    SPRING,
     STICK,
     X_A,
     X_F,
@@ -153,6 +156,9 @@ def hold_pull(X, C, CI, nc):
         if gamma > 0.0:
             i, j = CI[c, CI_I], CI[c, CI_J]
             pull += gamma * (X[i, X_IM] + (X[j, X_IM] if j >= 0 else 0.0))
+        if CI[c, CI_MODE] == SPRING:
+            # A sticking spring's dashpot follows the slip at gamma_t K.
+            pull += spring_law(C, c)[1] * response(X, C, CI, c, True)
     damped, pull = pull, 0.0
     for c in range(nc):
         if CI[c, CI_MODE] == STICK:
@@ -322,8 +328,11 @@ def settle(X, C, CI, na, nc, stuck, A, b, fl, fresh):
 
 @jit_inline
 def drift(X, C, CI, na, nc, hk, WP, grav, fl):
-    """A substep's drift over hk, then the geometry and spring accelerations at its end."""
+    """A substep's drift over hk (the sticking springs' stretches with the positions), then the
+    geometry and spring accelerations at its end."""
     spin, planar = fl[FL_SPIN], fl[FL_PLANAR]
+    if fl[FL_SPRING]:
+        stretch_drift(X, C, CI, nc, hk, WP, spin, fl[FL_SEED])
     for a in range(na):
         for d in range(3):
             X[a, X_S + d] += X[a, X_V + d] * hk
@@ -367,6 +376,7 @@ def step(X, C, CI, na, nc, h, weights, WP, grav, stuck, A, b, fl, restart, exact
                 X[a, X_S + d] = X[a, X_S0 + d]
             for d in range(3 if fric else 0):
                 X[a, X_F + d], X[a, X_L + d] = X[a, X_F0 + d], X[a, X_L0 + d]
+        stretch_start(C, nc, True)
         geometry(X, C, CI, nc, WP, fl[FL_SEED], fric)
         springs(X, C, CI, na, nc, grav)
     start = 0.0 if restart else X[0, X_MO]

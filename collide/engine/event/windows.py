@@ -22,6 +22,7 @@ from collide.engine.layout import (
     FL_AUTO,
     FL_DIM,
     FL_RECORD,
+    FL_SPRING,
     FP_BOX,
     FP_CAP,
     FP_DT,
@@ -333,7 +334,7 @@ def clusters(pairs, n):
 
 
 @jit_part
-def run_islands(G, GI, cand, parent, n, t, horizon, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
+def run_islands(G, GI, cand, parent, n, t, horizon, tables, SP, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     """Every island of the window's candidates (bucketed by the island's root: a counting sort)
     run from t to t + horizon. Returns the buffers."""
     KN, RC, IV, OP = bufs
@@ -360,7 +361,7 @@ def run_islands(G, GI, cand, parent, n, t, horizon, tables, WP, grav, weights, f
             QF[k - k0, QF_REACH] = G[i, G_R] + (G[j, G_R] if j >= 0 else 0.0)
             if j >= 0 and fp[FP_BOX + BOX_ANY] != 0.0:
                 image_shift(G, i, j, t, grav, fp[FP_BOX:FP_BOX + NBOX], QF[k - k0, QF_SH:QF_SH + 3])
-        KN, RC, IV, OP = run_island(G, GI, Q, QF, t, t + horizon, tables, WP, grav, weights, fl, fp,
+        KN, RC, IV, OP = run_island(G, GI, Q, QF, t, t + horizon, tables, SP, WP, grav, weights, fl, fp,
                                     (KN, RC, IV, OP), CNT, ST, FG)
         if ST[S_STATUS] != OK:
             break
@@ -401,6 +402,8 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
     span = float(WINDOW_STEPS)  # the next window's length, in steps of its stiffest contact
     ticks = 0  # jumps in a row to a contact due within the clock's resolution
     graph = (np.arange(n), np.zeros(n), np.zeros(1, np.int64))
+    # The tangential springs' stretches by pair (a wall w's column n + w): `spring`.
+    SP = np.zeros((n, n + WP.shape[0]) if fl[FL_SPRING] else (1, 1))
     while ST[S_STATUS] == OK and t < t_end:
         fp[FP_NOW] = t
         fp[FP_NOW_STEPS] = ST[S_STEPS]
@@ -420,6 +423,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
         saved_GI = GI.copy()
         saved_CNT = CNT.copy()
         saved_OP = OP[:CNT[CN_OPEN]].copy()
+        saved_SP = SP.copy()
         saved_flags = np.zeros(n)
         for i in range(n):
             if GI[i, GI_KNOT] >= 0:
@@ -456,7 +460,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 horizon = min(WINDOW_STEPS * step_est, t_end - t)
                 halved = True
                 continue
-            KN, RC, IV, OP = run_islands(G, GI, cand, parent, n, t, horizon, tables, WP, grav, weights, fl, fp,
+            KN, RC, IV, OP = run_islands(G, GI, cand, parent, n, t, horizon, tables, SP, WP, grav, weights, fl, fp,
                                          (KN, RC, IV, OP), CNT, ST, FG)
             if ST[S_STATUS] != OK or not missed_contact(G, P, V, n, t + horizon, cand, WP, grav, dim, P0, margin, box):
                 break
@@ -468,6 +472,7 @@ def windows(G, GI, tables, WP, grav, weights, fl, fp, bufs, CNT, ST, FG):
                 FG[F_STATUS_T], FG[F_STATUS_A] = t, 1.0
                 break
             restore_window(G, GI, KN, IV, OP, CNT, saved_G, saved_GI, saved_CNT, saved_OP, saved_flags, n)
+            SP[:] = saved_SP
             horizon *= 0.25
             safety *= 2.0
             positions_at(G, n, t, grav, P, V)
