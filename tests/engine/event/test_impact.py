@@ -46,7 +46,8 @@ def test_linear_dashpot_restitution_is_exact(e, v):
     """Without a pressing acceleration the linear spring-dashpot separates at exactly e v (the
     force may pull as it ends, as in the DEM kernel), after exactly pi / omega_d, and the dashpot
     takes exactly the kinetic energy lost. Heavily damped contacts too (e = 0.01, 0.05: their
-    slow separation once missed the tolerance by up to 4e-5 of v, `impact.fall_depth`)."""
+    slow separation needs `impact.fall_depth`: from a quarter of the largest overlap its end
+    would miss the tolerance by up to 4e-5 of v)."""
     zeta = float(damping_ratio(np.array(e), False))
     mstar, k = 0.02, 3e4
     out = im.normal_impact(im.impact_params(hertz=False, mstar=mstar, k=k, zeta=zeta), v, 1e-9)
