@@ -1,4 +1,4 @@
-"""Issue 51's bar for islands with a tangential spring: random cases (tests/test_island_spring.py's
+"""Issue 51's bar for islands with a tangential spring: random cases (tests/engine/event/test_spring.py's
 `spring_case`: three spheres in a row or two on a floor, angles, spins, k_t / k_n 0.1-1.5, mu
 0.02-0.9, linear or Hertz, damped or not), each run at --tol 1e-6, 1e-8 and 1e-10 as the CLI runs
 it (its error measured), and again at a hundredth of the tolerance.
@@ -25,7 +25,7 @@ from collide.accuracy import outcome, speed_scale  # noqa: E402
 from collide.errors import RunError  # noqa: E402
 from collide.run import run_scene  # noqa: E402
 from collide.scene import parse_scene  # noqa: E402
-from tests.test_island_spring import spring_case  # noqa: E402
+from tests.engine.event.test_spring import spring_case  # noqa: E402
 
 
 def main() -> int:
