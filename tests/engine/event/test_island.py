@@ -40,9 +40,7 @@ def _chain_scene(seed: int, tol: float, n: int = 3) -> tuple[dict, tuple, float]
     """n spheres on a line, random masses, radii and e, the first coming in: (scene, (masses,
     radii, positions, velocities), e). Gaps of many contact times: separate collisions."""
     rng = np.random.default_rng(seed)
-    # (Down to 0.5: at e = 0.32 five spheres' reference below missed the engine's outcome by 3e-3,
-    # where DEM at dt 1e-6 agreed with the engine to 1e-4; that reference is not yet trusted there.)
-    e = float(rng.uniform(0.5, 0.95))
+    e = float(rng.uniform(0.01, 0.95))  # heavily damped chains too: contacts that overlap in time
     m = rng.uniform(0.1, 1.0, n)
     r = rng.uniform(0.01, 0.03, n)
     v = np.zeros(n)
@@ -63,7 +61,8 @@ def _chain_outcome(raw: dict, start: tuple, e: float) -> np.ndarray:
     from collide.model import damping_ratio
 
     m, r, x, v = start
-    n, k = len(m), raw["contact"]["k"]
+    n = len(m)
+    k = raw["contact"]["k"] / 2.0  # each sphere's spring in series with the other's (docs/design.md)
     reach = r[:-1] + r[1:]
     mstar = m[:-1] * m[1:] / (m[:-1] + m[1:])
     gamma = 2.0 * float(damping_ratio(np.array(e), False)) * np.sqrt(mstar * k)
@@ -303,9 +302,9 @@ def _check(raw: dict, start: tuple, e: float) -> None:
 
 @pytest.mark.parametrize("seed", range(6))
 def test_hertz_chains_match_an_independent_integration(seed):
-    """Chains of 3 to 5 spheres, undamped (even seeds) and with Hertz's dashpot (odd, e 0.5 to
+    """Chains of 3 to 5 spheres, undamped (even seeds) and with Hertz's dashpot (odd, e 0.05 to
     0.95), at tol 1e-9: separate collisions passing the impulse along."""
-    e = 1.0 if seed % 2 == 0 else float(np.random.default_rng(50 + seed).uniform(0.5, 0.95))
+    e = 1.0 if seed % 2 == 0 else float(np.random.default_rng(50 + seed).uniform(0.05, 0.95))
     raw, start = _chain(seed, 3 + seed % 3, e, 1e-9)
     _check(raw, start, e)
 
