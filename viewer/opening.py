@@ -23,7 +23,7 @@ from viewer.frames import StartFrames, start_frames
 class StartOfRecording(StartFrames):
     """A recording's first frame (its scene's start) while its run is being read."""
 
-    preview_note = "its start: the recording is still loading"
+    preview_note = "the recording is still loading"
     recording_name = ""
 
     def status_lines(self) -> list[str]:
