@@ -173,6 +173,10 @@ def bench_view(path: Path, shot: str | None) -> None:
     app.stop()
 
 
+BODIES_JS = ("() => { const s = window.__viserSceneTree?.getState(); "
+             "return !!(s && (s['/bodies/spheres'] || s['/bodies/points'])); }")
+
+
 def _status_kb(pid: int, key: str) -> float:
     try:
         with open(f"/proc/{pid}/status") as f:
@@ -225,7 +229,9 @@ def _open_once(browser, path: Path, command: list[str], cwd: Path) -> dict[str, 
         page.goto(url + "/?fixedDpr=0.6")
         page.wait_for_function("(t) => ['bodies at the start', t].some(x => document.body.innerText.includes(x))",
                                arg=f"Replaying {path.name}", timeout=600_000, polling=50)
+        page.wait_for_function(BODIES_JS, timeout=600_000, polling=50)  # the bodies in the page's scene
         page.evaluate(_FRAME_JS)
+        page.evaluate(_FRAME_JS)  # a frame with them drawn (their mesh is built at the first)
         out["first frame"] = time.perf_counter() - start
         page.wait_for_function("(t) => document.body.innerText.includes(t)", arg=f"Replaying {path.name}",
                                timeout=900_000, polling=50)

@@ -159,11 +159,14 @@ def _tables(path: Path, chunks: list, meta: dict[str, Any]) -> dict[str, np.ndar
             values, order = _flat([values]), _flat([order]).astype(np.int64)
             if values.size != order.size * width or order.size and (order.min() < 0 or order.max() >= rows):
                 raise _fail(path, f"damaged collide recording ({entity}'s row numbers are not 0..{rows - 1})")
-            if seen[order].any() or len(np.unique(order)) != order.size:
+            if seen[order].any():
                 raise _fail(path, f"damaged collide recording ({entity}'s row numbers are not 0..{rows - 1})")
             seen[order] = True
             found += order.size
             table[order] = values.reshape(-1, width)
+        # A row number twice within one chunk: more rows than the table, or as many with one unseen.
+        if found > rows or not seen.all() and found == rows:
+            raise _fail(path, f"damaged collide recording ({entity}'s row numbers are not 0..{rows - 1})")
         if found != rows:
             raise _fail(path, f"incomplete collide recording ({entity} has {found} of {rows} rows)")
         out[name] = table
