@@ -2,6 +2,7 @@
 
     python benchmarks/bench_large_recording.py write SCENE [--set KEY=VALUE ...] --out FILE.rrd
     python benchmarks/bench_large_recording.py view FILE.rrd [--shot PNG]
+    python benchmarks/bench_large_recording.py open FILE.rrd [--repeats R] [--shot PNG]
 
 `write`: one fresh process loads the scene, runs it once tiny (the compiled kernels loaded: the
 baseline), then runs it recorded and writes the recording; a thread samples the process's
@@ -10,6 +11,16 @@ writer's frames, each entity, the trajectory's tables, the seal, the check). A 1
 bed pressed from the first step (every frame full of contacts), the pour's spheres on a lattice:
 
     python benchmarks/bench_large_recording.py write benchmarks/data/pour-bed.toml --set duration=0.025 --out bed.rrd
+
+`open`: `collide view FILE` as a user runs it, a fresh process each time, repeated: seconds from
+the command to the server listening (its banner), to headless Chromium (already running, as a
+user's browser is) showing the recording's first frame (its start, the status saying the rest is
+still loading) and to its run shown; the CPU seconds of the server and of its reader process by
+then, and each one's peak resident memory (the kernel's VmHWM); medians and ranges, and the
+load average before and after. The pile's recording:
+
+    collide run pile --out /tmp/pile.rrd
+    python benchmarks/bench_large_recording.py open /tmp/pile.rrd --repeats 5
 
 `view`: a viewer server in this process and headless Chromium open the recording (what the
 recordings list calls): seconds to the server's prepared run and to the page showing it, the
@@ -162,6 +173,143 @@ def bench_view(path: Path, shot: str | None) -> None:
     app.stop()
 
 
+BODIES_JS = ("() => { const s = window.__viserSceneTree?.getState(); "
+             "return !!(s && (s['/bodies/spheres'] || s['/bodies/points'])); }")
+
+
+def _status_kb(pid: int, key: str) -> float:
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith(key + ":"):
+                    return float(line.split()[1])
+    except OSError:
+        pass
+    return float("nan")
+
+
+def _watch(pid: int, seen: dict[int, tuple[float, float]], stop: list) -> None:
+    """CPU seconds and peak RSS (MB) of the server's reader processes, by pid, while they live (a
+    reader grown by a large file is replaced by a fresh one once it has answered)."""
+    import psutil
+
+    server = psutil.Process(pid)
+    while not stop:
+        try:
+            for child in server.children(recursive=True):
+                if "_serve_reads" in " ".join(child.cmdline()):
+                    times = child.cpu_times()
+                    seen[child.pid] = (times.user + times.system, _status_kb(child.pid, "VmHWM") / 1024)
+        except psutil.Error:
+            pass
+        time.sleep(0.05)
+
+
+def _open_once(browser, path: Path, command: list[str], cwd: Path) -> dict[str, float]:  # noqa: ANN001 - a Playwright browser
+    """One `collide view FILE`: its figures (s, CPU s, MB). The first frame is the recording's
+    start while the rest loads, or its run where the viewer shows nothing before it."""
+    import subprocess
+
+    import psutil
+
+    from viewer.testing import _FRAME_JS
+
+    start = time.perf_counter()
+    proc = subprocess.Popen([*command, "view", str(path.resolve()), "--port", "0"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=cwd)
+    out: dict[str, float] = {}
+    seen: dict[int, tuple[float, float]] = {}
+    stop: list = []
+    threading.Thread(target=_watch, args=(proc.pid, seen, stop), daemon=True).start()
+    try:
+        line = proc.stdout.readline()
+        out["listening"] = time.perf_counter() - start
+        url = line.split(" at ")[-1].split()[0]
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.goto(url + "/?fixedDpr=0.6")
+        page.wait_for_function("(t) => ['bodies at the start', t].some(x => document.body.innerText.includes(x))",
+                               arg=f"Replaying {path.name}", timeout=600_000, polling=50)
+        page.wait_for_function(BODIES_JS, timeout=600_000, polling=50)  # the bodies in the page's scene
+        page.evaluate(_FRAME_JS)
+        page.evaluate(_FRAME_JS)  # a frame with them drawn (their mesh is built at the first)
+        out["first frame"] = time.perf_counter() - start
+        page.wait_for_function("(t) => document.body.innerText.includes(t)", arg=f"Replaying {path.name}",
+                               timeout=900_000, polling=50)
+        page.evaluate(_FRAME_JS)
+        out["run shown"] = time.perf_counter() - start
+        server = psutil.Process(proc.pid)
+        times = server.cpu_times()
+        out["server CPU"] = times.user + times.system
+        out["server peak MB"] = _status_kb(proc.pid, "VmHWM") / 1024
+        stop.append(1)
+        time.sleep(0.1)
+        out["reader CPU"] = max((cpu for cpu, _ in seen.values()), default=float("nan"))
+        out["reader peak MB"] = max((mb for _, mb in seen.values()), default=float("nan"))
+        page.close()
+    finally:
+        stop.append(1)
+        proc.terminate()
+        proc.wait(60)
+    return out
+
+
+def bench_open(path: Path, repeats: int, shot: str | None, vs: Path | None) -> None:
+    import statistics
+    import sys
+
+    from playwright.sync_api import sync_playwright
+
+    from viewer.testing import launch
+
+    here = Path(__file__).resolve().parents[1]
+    checkouts = [here] + ([vs.resolve()] if vs else [])
+    print(f"collide view {path} ({path.stat().st_size / 1e6:.1f} MB), {repeats} fresh processes"
+          f"{' each, alternated: ' + ' against '.join(map(str, checkouts)) if vs else ''}; {os.cpu_count()} cores; "
+          f"load before {os.getloadavg()[0]:.1f}", flush=True)
+    rows: dict[Path, list[dict[str, float]]] = {c: [] for c in checkouts}
+    with sync_playwright() as p:
+        browser = launch(p)
+        for k in range(repeats):
+            for checkout in checkouts:
+                python = checkout / ".venv" / "bin" / "python"
+                command = [str(python) if python.exists() else sys.executable, "-m", "cli.main"]
+                rows[checkout].append(_open_once(browser, path, command, checkout))
+                print(f"  {checkout.name} {k + 1}: " + ", ".join(f"{key} {value:.2f}"
+                                                              for key, value in rows[checkout][-1].items()), flush=True)
+        if shot:
+            _shots(browser, path, [sys.executable, "-m", "cli.main"], shot)
+        browser.close()
+    print(f"medians of {repeats} (range); load after {os.getloadavg()[0]:.1f}")
+    for checkout, got in rows.items():
+        print(f"  {checkout}:")
+        for key in got[0]:
+            values = [r[key] for r in got]
+            unit = "MB" if "MB" in key else "s"
+            print(f"    {key:16s} {statistics.median(values):8.2f} {unit} ({min(values):.2f}-{max(values):.2f})")
+
+
+def _shots(browser, path: Path, command: list[str], shot: str) -> None:  # noqa: ANN001 - a Playwright browser
+    """Screenshots of the page while the recording loads and once its run is shown."""
+    import subprocess
+
+    proc = subprocess.Popen([*command, "view", str(path), "--port", "0"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        url = proc.stdout.readline().split(" at ")[-1].split()[0]
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.goto(url + "/?fixedDpr=0.6")
+        page.wait_for_function("() => document.body.innerText.includes('bodies at the start')", timeout=600_000)
+        page.screenshot(path=shot.replace(".png", "-loading.png"))
+        page.wait_for_function("(t) => document.body.innerText.includes(t)", arg=f"Replaying {path.name}",
+                               timeout=900_000)
+        page.evaluate("() => new Promise(r => setTimeout(r, 1500))")
+        page.screenshot(path=shot.replace(".png", "-loaded.png"))
+        page.close()
+    finally:
+        proc.terminate()
+        proc.wait(60)
+
+
 def main() -> None:
     import argparse
 
@@ -174,9 +322,16 @@ def main() -> None:
     view = sub.add_parser("view")
     view.add_argument("recording", type=Path)
     view.add_argument("--shot")
+    opening = sub.add_parser("open")
+    opening.add_argument("recording", type=Path)
+    opening.add_argument("--repeats", type=int, default=5)
+    opening.add_argument("--shot", help="also save FILE-loading.png and FILE-loaded.png")
+    opening.add_argument("--vs", type=Path, help="another checkout (its .venv) to alternate with, run by run")
     args = parser.parse_args()
     if args.what == "write":
         bench_write(args.scene, args.set, args.out)
+    elif args.what == "open":
+        bench_open(args.recording, args.repeats, args.shot, args.vs)
     else:
         bench_view(args.recording, args.shot)
 

@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from cli.common import UserError
+from collide.recording.spec import RecordingError
 
 
 def view(
@@ -39,6 +40,11 @@ def view(
 
       collide view my_scene.toml --scenes-dir scenes/
     """
+    if source.lower().endswith(".rrd") and Path(source).is_file():
+        # The reader process starts now and imports Rerun while this one imports the viewer.
+        from collide.recording.sandbox import warm_reader
+
+        warm_reader()
     from viewer.app import ViewerApp, check_listen_address
 
     if scenes_dir is not None and not scenes_dir.is_dir():
@@ -53,8 +59,11 @@ def view(
     except OSError as exc:
         raise UserError(f"--host {host}: {exc}") from None
     app = ViewerApp(source, host=host, port=port, recordings_dir=recordings, scenes_dir=scenes_dir)
-    # Reads the scene or the recording (in a child process: a damaged file can make Rerun's
-    # reader abort the process that reads it); a bad one is a one-line error before serving.
+    # A recording is read in a child process (a damaged file can make Rerun's reader abort the
+    # process that reads it) while the server starts: the page shows it as it comes, and a file
+    # that cannot be read is one line and exit code 2 (the server stops). A bad scene is one
+    # line before serving.
+    app.begin_reading()
     app.prepare()
     try:
         app.start()
@@ -64,6 +73,15 @@ def view(
     typer.echo(f"collide view: {shown} at {app.url}  (Ctrl+C to stop)")
     if host not in ("127.0.0.1", "localhost", "::1"):
         typer.echo(f"  listening on {host}: anyone who can reach this address can use the viewer", err=True)
+    if app.opening is not None:
+        try:
+            app.wait_for_recording()
+        except RecordingError as exc:
+            app.stop()
+            raise UserError(str(exc)) from None
+        except KeyboardInterrupt:
+            app.stop()
+            return
     app.serve_forever()
 
 

@@ -53,6 +53,25 @@ def test_good_file_reads_as_read_recording(good: Path) -> None:
     assert read_recording_safely(good).scene == plain.scene
 
 
+def test_the_scene_comes_first_and_the_run_is_read_as_before(good: Path) -> None:
+    """`on_scene` (what `collide view FILE` shows while the rest is read) gets the file's scene
+    once, before the run, and the run read with it is the one read without it, bit for bit."""
+    plain = read_recording(good, trusted=True)
+    got: list = []
+    safe = read_recording_safely(good, on_scene=lambda scene: got.append(scene))
+    assert len(got) == 1 and got[0] == plain.scene and got[0].to_toml() == plain.scene.to_toml()
+    for field in ("knots", "records", "intervals"):
+        np.testing.assert_array_equal(getattr(safe.result.trajectory, field), getattr(plain.result.trajectory, field))
+    np.testing.assert_array_equal(safe.result.final.s, plain.result.final.s)
+    assert safe.result.wall_time_s == plain.result.wall_time_s and safe.scene == plain.scene
+    # A file the reader refuses gives no scene, and the same one line as without `on_scene`.
+    with pytest.raises(RecordingError, match="crashed"):
+        read_recording_safely(ABORTS, on_scene=got.append)
+    assert len(got) == 1
+    # What the caller does with the scene cannot break the read.
+    assert read_recording_safely(good, on_scene=lambda scene: 1 / 0).scene == plain.scene
+
+
 def test_errors_of_the_plain_reader_pass_through(tmp_path: Path) -> None:
     text = tmp_path / "notes.rrd"
     text.write_text("not a recording")

@@ -9,9 +9,10 @@
 Each browser tab gets its own `Session` (controls, 3D scene, plots, timeline, worker); the
 first scene's run is computed once at start and shared. Tabs are set up two at a time, in the
 order they open, and torn down however viser orders their open and close (`viewer.tabs`); what
-a client sends cannot flood the log (`viewer.guard`). A scene or recording given at start that
-cannot be read raises (`SceneError`, `RunError`, `RecordingError`) before the server
-starts, so the CLI can turn it into a one-line error.
+a client sends cannot flood the log (`viewer.guard`). A scene given at start that cannot be
+read raises (`SceneError`, `RunError`) before the server starts, so the CLI can turn it into a
+one-line error; a recording is read while the server starts (`viewer.opening`: the page shows
+its start, then its run) and `wait_for_recording` raises its `RecordingError`.
 """
 
 from __future__ import annotations
@@ -29,14 +30,15 @@ from pathlib import Path
 import viser
 
 from collide.model import compile_scenes
+from collide.recording import RecordingError
 from collide.run import SceneRun, run_scene
 from collide.scene import Scene, load_scene
 from viewer import files
 from viewer.config import SessionConfig
 from viewer.guard import guard_connections
 from viewer.live import MANY_BODIES
+from viewer.opening import OpeningRecording
 from viewer.params import for_viewing
-from viewer.reading import read_untrusted
 from viewer.session import Session
 from viewer.state import ViewRun
 from viewer.tabs import Tabs
@@ -103,20 +105,49 @@ class ViewerApp:
         self.initial_cost: float | None = None  # s: wall time of the initial run
         self.scene_choices: list[files.SceneChoice] = []
         self.initial_label = ""
+        self.opening: OpeningRecording | None = None  # the recording given at start, while it is read
+
+    def begin_reading(self) -> None:
+        """Start reading the recording given at start now (before `prepare`): its reader
+        process imports and decodes while this process goes on."""
+        if self.initial.lower().endswith(".rrd") and self.opening is None:
+            self.opening = OpeningRecording(Path(self.initial), self.initial)
+
+    def wait_for_recording(self, timeout: float | None = None) -> None:
+        """Wait until the recording given at start is read and prepared; raises its
+        `RecordingError` if it cannot be (tests, benchmarks, the CLI)."""
+        if self.opening is None:
+            return
+        self.opening.wait(timeout)
+        if self.opening.error is not None:
+            raise RecordingError(self.opening.error)
+
+    @property
+    def initial_view(self) -> ViewRun | None:
+        """The initial run prepared for display (a recording's once it is read)."""
+        if self.opening is not None:
+            return self.opening.view
+        return self._initial_view
+
+    @initial_view.setter
+    def initial_view(self, view: ViewRun | None) -> None:
+        self._initial_view = view
 
     # ------------------------------------------------------------------------------------------
 
     def prepare(self) -> None:
-        """Read the initial scene or recording and run it once (raises on a bad one)."""
+        """Read the initial scene and run it once (raises on a bad one), or start reading the
+        initial recording (its errors: `wait_for_recording`, and each tab's status)."""
         source = self.initial
         extra = []
+        run: SceneRun | None = None
         if source.lower().endswith(".rrd"):
             path = Path(source)
-            # In a child process: a damaged file must not abort the CLI (issue 14, item 3).
-            run = read_untrusted(path, name=str(path))
+            # Read in a child process (a damaged file must not abort the CLI, issue 14, item 3),
+            # while the server starts: tabs show the recording as it comes (`viewer.opening`).
+            if self.opening is None or self.opening.path != path:
+                self.opening = OpeningRecording(path, str(path))
             self.initial_recording = path.name
-            self.initial_view = ViewRun(run, origin=f"recording {path.name}")
-            self.initial_scene = run.scene
         else:
             scene = for_viewing(load_scene(source))
             self.initial_scene = scene
@@ -144,7 +175,7 @@ class ViewerApp:
 
     def start(self) -> None:
         """Prepare the initial run and start serving (non-blocking)."""
-        if self.initial_scene is None:
+        if self.initial_scene is None and self.initial_recording is None:
             self.prepare()
         # viser retries the next port on any bind error and waits forever when none works: an
         # address this machine does not have hung `collide view --host 10.255.255.1`.
@@ -200,8 +231,8 @@ class ViewerApp:
         session = Session(self.session_config(), client)
         if closed():
             return session
-        if self.initial_recording is not None and self.initial_view is not None:
-            session.show_recording(self.initial_view, self.initial_recording)
+        if self.opening is not None:
+            session.follow_opening(self.opening)
         else:
             session.load_scene(self.initial_scene, run=self.initial_run, label=self.initial_label)
         return session

@@ -11,8 +11,7 @@ from pathlib import Path
 import viser
 from viser import _messages
 
-from collide.export import export_download
-from collide.recording import RecordingError, write_recording
+from collide.recording import RecordingError
 from collide.run import run_scene
 from collide.scene import SceneError
 from collide.stepper import RunError
@@ -185,6 +184,8 @@ class FileActions:
                 run = run_scene(view.scene, record=True)  # the scene's own run, its error measured
             self._folder.mkdir(parents=True, exist_ok=True)
             path = files.unique_path(self._folder, files.save_name(view.scene.name))
+            from collide.recording import write_recording  # Rerun's writer: imported when first saving
+
             write_recording(run, path)
         except (SceneError, RunError, OSError, ValueError) as exc:
             self._say(f"Not saved: {one_line(exc)}", error=True)
@@ -209,6 +210,8 @@ class FileActions:
         if view is None or getattr(view, "run", None) is None:
             self._say("No run to export.", error=True)
             return None
+        from collide.export import export_download  # imports Rerun's writer: not at start-up
+
         try:
             name, content = export_download(view.run, fmt, files.safe_stem(view.scene.name),
                                             max_frames=VIEWER_EXPORT_FRAMES)

@@ -181,7 +181,7 @@ class StartFrames(FramesRun):
                 "and replaces this when done"]
 
 
-def start_frames(scene: Scene) -> StartFrames:
+def start_frames(scene: Scene, kind: type[StartFrames] = StartFrames) -> StartFrames:
     """The scene's bodies where they start, as a one-frame run (O(N): its model and initial
     state, no stepping). A run of a thousand spheres takes seconds to minutes; this is drawn at
     once, so the page shows the scene (and a moved slider its new start) while the run goes."""
@@ -189,9 +189,9 @@ def start_frames(scene: Scene) -> StartFrames:
     walls = [(embed3(np.asarray(w.point, float)), embed3(np.asarray(w.normal, float))) for w in scene.walls]
     gravity = None if model.gravity is None else embed3(model.gravity[0])
     wxyz = orientation_wxyz(state.q[0])[None] if model.orient_dim else None
-    start = StartFrames(scene.name, model.dim, list(model.body_names), model.radius[0].astype(float),
-                      model.mass[0].astype(float), np.array([float(state.t[0])]), embed3(state.s[0])[None],
-                      embed3(state.v[0])[None], wxyz, walls=walls, gravity=gravity, origin="the start of the run")
+    start = kind(scene.name, model.dim, list(model.body_names), model.radius[0].astype(float),
+                 model.mass[0].astype(float), np.array([float(state.t[0])]), embed3(state.s[0])[None],
+                 embed3(state.v[0])[None], wxyz, walls=walls, gravity=gravity, origin="the start of the run")
     start.scene = scene
     return start
 

@@ -9,10 +9,12 @@ the user knows it (never a temporary path).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from collide.recording import RecordingError, read_recording_safely
 from collide.run import SceneRun
+from collide.scene import Scene
 
 TIMEOUT_S = 60.0
 # And this many seconds more per byte of the file: a 100 000-sphere pour's recording (1.1 GB)
@@ -22,11 +24,12 @@ MEMORY_MB = 6144  # address space of the child: rerun and numpy reserve much mor
 
 
 def read_untrusted(path: str | Path, *, name: str | None = None, timeout_s: float | None = None,
-                   memory_mb: int = MEMORY_MB) -> SceneRun:
+                   memory_mb: int = MEMORY_MB, on_scene: Callable[[Scene], None] | None = None) -> SceneRun:
     """Read a recording in a child process. `name` is how the file is shown in messages
     (default: its file name); `timeout_s` defaults to TIMEOUT_S and TIMEOUT_PER_BYTE of the
     file's size. Raises `RecordingError` (one line) for anything that goes wrong: not a
-    recording, damaged, a reader crash, a hang, too much memory."""
+    recording, damaged, a reader crash, a hang, too much memory. `on_scene` is handed the
+    recording's scene before its run is decoded (`read_recording_safely`)."""
     path = Path(path)
     if timeout_s is None:
         try:
@@ -34,7 +37,7 @@ def read_untrusted(path: str | Path, *, name: str | None = None, timeout_s: floa
         except OSError:
             timeout_s = TIMEOUT_S  # the reader says what is wrong with it
     try:
-        return read_recording_safely(path, timeout_s=timeout_s, memory_mb=memory_mb)
+        return read_recording_safely(path, timeout_s=timeout_s, memory_mb=memory_mb, on_scene=on_scene)
     except RecordingError as exc:
         raise RecordingError(_rename(str(exc), path, name or path.name)) from None
 

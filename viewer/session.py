@@ -38,6 +38,7 @@ from viewer.inside import Inspector
 from viewer.lesson_view import LessonView
 from viewer.live import LiveRuns, Preview, Request
 from viewer.messages import Messages, one_line
+from viewer.opening import OpeningRecording, start_of_recording
 from viewer.panel import Panel, Typing
 from viewer.param_controls import ParamControls
 from viewer.params import AUTO, Controls, add_ball, build_scene, remove_ball, scene_controls, values_of
@@ -235,6 +236,36 @@ class Session:
         self.messages.clear_notice()
         self.messages.file_message(f"Replaying **{name}** ({scene.name}). Move a parameter to re-simulate "
                                    "from its scene.")
+
+    def follow_opening(self, opening: OpeningRecording) -> None:
+        """Show the recording given at start as it is read: "reading", then its scene's start
+        (the status saying the run is still loading), then its run, or why it cannot be read."""
+        shown: list[str] = []
+        order = threading.Lock()
+
+        def update(o: OpeningRecording) -> None:
+            stage = ("run" if o.view is not None else "error" if o.error else
+                     "start" if o.scene is not None else "reading")
+            with order:
+                if self._closed.is_set() or stage in shown or {"run", "error"} & set(shown):
+                    return
+                shown.append(stage)
+                if stage == "run":
+                    self.show_recording(o.view, o.name)
+                    self.messages.show_progress("")
+                elif stage == "error":
+                    self.messages.show_progress("")
+                    self.messages.show_notice(f"Cannot open {o.name}: {o.error}", error=True)
+                    self.show_error(o.error)
+                elif stage == "start":
+                    with self._lock:
+                        self.panel.pick(f"rec: {o.name}")
+                    self._show_view(start_of_recording(o.scene, o.name), refit=True)
+                    self.messages.show_progress(f"*Reading {o.name}: its start is shown, the run follows...*")
+                else:
+                    self.messages.show_progress(f"*Reading {o.name}...*")
+
+        opening.follow(update)
 
     def show_frames(self, run: FramesRun) -> None:
         """Replay a run given as frames (many bodies; no parameters to change)."""

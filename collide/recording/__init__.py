@@ -66,9 +66,8 @@ Modules: `writer` (write_recording; what a person looks at is drawn by `draw`, a
 `accuracy` (a work-precision study as a recording). The names below are the public API.
 """
 
-from collide.recording.accuracy import write_accuracy_recording
-from collide.recording.frames import frame_times
-from collide.recording.reader import entity_paths
+from typing import Any
+
 from collide.recording.sandbox import (
     SAFE_MEMORY_MB,
     SAFE_TIMEOUT_S,
@@ -87,18 +86,22 @@ from collide.recording.spec import (
     checksum,
     collide_version,
 )
-from collide.recording.writer import (
-    CONTACT_FRAMES,
-    DEFAULT_FPS,
-    MANY_BODIES,
-    MANY_CONTACTS,
-    MAX_FREE_FRAMES,
-    MAX_RECORDED_TIME,
-    SEAL_ATTEMPTS,
-    WriteStats,
-    last_write,
-    write_recording,
-)
+
+# Imported when first asked for: writing imports Rerun (0.7-1 s), which a process that only
+# reads (the viewer opening a recording, whose reader process imports it) need not wait for.
+_LAZY = {"write_accuracy_recording": "accuracy", "frame_times": "frames", "entity_paths": "reader",
+         **{name: "writer" for name in ("CONTACT_FRAMES", "DEFAULT_FPS", "MANY_BODIES", "MANY_CONTACTS",
+                                        "MAX_FREE_FRAMES", "MAX_RECORDED_TIME", "SEAL_ATTEMPTS", "WriteStats",
+                                        "last_write", "write_recording")}}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module 'collide.recording' has no attribute '{name}'")
+    import importlib
+
+    return getattr(importlib.import_module(f"collide.recording.{_LAZY[name]}"), name)
+
 
 __all__ = ["APP_ID", "CONTACT_FRAMES", "DEFAULT_FPS", "DISSIPATION_PARTS", "FORMAT", "FORMAT_VERSION", "INTEGRITY",
            "MANY_BODIES", "MANY_CONTACTS", "MAX_FREE_FRAMES", "MAX_RECORDED_TIME", "SAFE_MEMORY_MB", "SAFE_TIMEOUT_S",

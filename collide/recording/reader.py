@@ -11,6 +11,7 @@ import math
 import re
 import tomllib
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +32,7 @@ from collide.recording.spec import (
 )
 from collide.results import ContactLog, RunResult, Trajectory
 from collide.run import SceneRun
-from collide.scene import SceneError, parse_scene
+from collide.scene import Scene, SceneError, parse_scene
 
 
 def _load_chunks(path: Path, under: str = "") -> list:
@@ -158,11 +159,14 @@ def _tables(path: Path, chunks: list, meta: dict[str, Any]) -> dict[str, np.ndar
             values, order = _flat([values]), _flat([order]).astype(np.int64)
             if values.size != order.size * width or order.size and (order.min() < 0 or order.max() >= rows):
                 raise _fail(path, f"damaged collide recording ({entity}'s row numbers are not 0..{rows - 1})")
-            if seen[order].any() or len(np.unique(order)) != order.size:
+            if seen[order].any():
                 raise _fail(path, f"damaged collide recording ({entity}'s row numbers are not 0..{rows - 1})")
             seen[order] = True
             found += order.size
             table[order] = values.reshape(-1, width)
+        # A row number twice within one chunk: more rows than the table, or as many with one unseen.
+        if found > rows or not seen.all() and found == rows:
+            raise _fail(path, f"damaged collide recording ({entity}'s row numbers are not 0..{rows - 1})")
         if found != rows:
             raise _fail(path, f"incomplete collide recording ({entity} has {found} of {rows} rows)")
         out[name] = table
@@ -187,13 +191,21 @@ def _verified_tables(path: Path, chunks: list, meta: dict[str, Any]) -> dict[str
     return tables
 
 
-def read_trusted(path: Path) -> SceneRun:
+def read_trusted(path: Path, on_scene: Callable[[Scene], None] | None = None) -> SceneRun:
     """`read_recording` in this process (its `trusted=True`): for files this program has just
-    written itself, and in the reader process (`sandbox`), where a crash costs only that process."""
+    written itself, and in the reader process (`sandbox`), where a crash costs only that process.
+    `on_scene`, if given, is handed the recording's scene as soon as the file's seal is checked,
+    before its trajectory is decoded (a viewer shows the scene's start meanwhile)."""
     chunks = _load_chunks(path, "/collide/")
     try:
         meta = _meta(path, chunks)
-        return _rebuild(path, _verified_tables(path, chunks, meta), meta)
+        # A sealed file's every byte is checked by now: its scene can be shown before the rest
+        # is decoded. An older one's scene waits for the trajectory's checksum.
+        scene = _scene(path, meta) if int(meta["format_version"]) >= 4 else None
+        if scene is not None and on_scene is not None:
+            on_scene(scene)
+        tables = _verified_tables(path, chunks, meta)
+        return _rebuild(path, scene or _scene(path, meta), tables, meta)
     except RecordingError:
         raise
     except Exception as exc:  # anything a foreign or damaged file's contents make the parsing raise
@@ -213,11 +225,14 @@ def verify_trusted(path: Path) -> None:
         raise _fail(path, f"not a valid collide recording ({type(exc).__name__}: {text})") from None
 
 
-def _rebuild(path: Path, tables: dict[str, np.ndarray], meta: dict[str, Any]) -> SceneRun:
+def _scene(path: Path, meta: dict[str, Any]) -> Scene:
     try:
-        scene = parse_scene(tomllib.loads(meta["scene_toml"]), meta["scene_name"])
+        return parse_scene(tomllib.loads(meta["scene_toml"]), meta["scene_name"])
     except (SceneError, tomllib.TOMLDecodeError) as exc:
         raise _fail(path, f"its stored scene is invalid: {exc}") from None
+
+
+def _rebuild(path: Path, scene: Scene, tables: dict[str, np.ndarray], meta: dict[str, Any]) -> SceneRun:
     model, _ = compile_scenes([scene])
     n, d = model.n_bodies, model.dim
     k, q_dim = model.spin_dim, model.orient_dim

@@ -17,12 +17,15 @@ import sys
 import threading
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from collide.recording.reader import read_trusted, verify_trusted
 from collide.recording.spec import RecordingError, _fail
-from collide.run import SceneRun
+
+if TYPE_CHECKING:  # the reader (numpy, pyarrow, the scene's model) is imported where it reads
+    from collide.run import SceneRun
+    from collide.scene import Scene
 
 SAFE_TIMEOUT_S = 60.0  # the reader process's limits (read_recording's defaults)
 SAFE_MEMORY_MB = 2048
@@ -43,6 +46,8 @@ def read_recording(path: str | Path, *, trusted: bool = False, timeout_s: float 
     """
     if not trusted:
         return read_recording_safely(path, timeout_s=timeout_s, memory_mb=memory_mb)
+    from collide.recording.reader import read_trusted
+
     return read_trusted(Path(path))
 
 
@@ -54,6 +59,8 @@ def verify_recording(path: str | Path, *, trusted: bool = False, timeout_s: floa
     if not trusted:
         _safely(path, "verify", timeout_s, memory_mb)
         return
+    from collide.recording.reader import verify_trusted
+
     verify_trusted(path)
 
 
@@ -92,10 +99,15 @@ def _serve_reads() -> None:
     """The reader process: read (path, memory_mb) requests on stdin, answer on stdout.
 
     Started by `read_recording_safely` as a fresh interpreter (never a fork of the caller, whose
-    threads or main script it must not inherit). Answers ("ok", SceneRun) or ("error", message);
-    a damaged file that aborts Rerun's Rust reader kills only this process.
+    threads or main script it must not inherit). Answers ("ok", SceneRun) or ("error", message),
+    after ("scene", Scene) when the request's mode is "scene+read"; a damaged file that aborts
+    Rerun's Rust reader kills only this process.
     """
     import resource
+
+    import rerun.chunk  # noqa: F401 - imported while no request waits for it
+
+    from collide.recording.reader import read_trusted, verify_trusted
 
     inp, out = sys.stdin.buffer, sys.stdout.buffer
     sys.stdout = sys.stderr  # nothing but answers on the answer channel
@@ -115,8 +127,11 @@ def _serve_reads() -> None:
         except (ValueError, OSError):
             pass
         try:
-            message: tuple[str, Any] = ("ok", verify_trusted(Path(path)) if mode == "verify"
-                                        else read_trusted(Path(path)))
+            def scene_first(scene: Scene) -> None:
+                _send_answer(out, ("scene", scene))
+
+            message: tuple[str, Any] = ("ok", verify_trusted(Path(path)) if mode == "verify" else
+                                        read_trusted(Path(path), scene_first if mode == "scene+read" else None))
         except RecordingError as exc:
             message = ("error", str(exc))
         except MemoryError:
@@ -154,13 +169,23 @@ class _Reader:
         except (OSError, ValueError, IndexError):
             return 0.0
 
-    def read(self, path: Path, timeout_s: float, memory_mb: int, mode: str = "read") -> tuple[str, Any]:
-        """Send one request; ("ok", run), ("error", message) or ("failed", reason)."""
+    def read(self, path: Path, timeout_s: float, memory_mb: int, mode: str = "read",
+             on_scene: Callable[[Scene], None] | None = None) -> tuple[str, Any]:
+        """Send one request; ("ok", run), ("error", message) or ("failed", reason). With
+        `on_scene`, the recording's scene is handed to it as soon as the reader has it."""
         try:
-            _send_message(self.proc.stdin, (str(path), int(memory_mb), mode))
+            _send_message(self.proc.stdin, (str(path), int(memory_mb), "scene+read" if on_scene else mode))
         except OSError:
             return "failed", self._died()
         deadline = time.monotonic() + timeout_s
+        while True:
+            answer = self._answer(deadline, timeout_s, memory_mb)
+            if answer[0] != "scene" or on_scene is None:
+                return answer
+            with contextlib.suppress(Exception):  # what the caller does with it must not stop the read
+                on_scene(answer[1])
+
+    def _answer(self, deadline: float, timeout_s: float, memory_mb: int) -> tuple[str, Any]:
         try:
             head = self._receive(bytearray(_ANSWER.size), deadline, timeout_s, memory_mb)
             length, count = _ANSWER.unpack(bytes(head))
@@ -243,7 +268,8 @@ def warm_reader() -> None:
 
 
 def read_recording_safely(path: str | Path, *, timeout_s: float = SAFE_TIMEOUT_S,
-                          memory_mb: int = SAFE_MEMORY_MB) -> SceneRun:
+                          memory_mb: int = SAFE_MEMORY_MB,
+                          on_scene: Callable[[Scene], None] | None = None) -> SceneRun:
     """`read_recording` in a child process (its default), for files from anywhere.
 
     Rerun's reader is Rust: a damaged file can make it panic and abort the whole process, or
@@ -252,12 +278,15 @@ def read_recording_safely(path: str | Path, *, timeout_s: float = SAFE_TIMEOUT_S
     one-line message naming the file, and the caller carries on. Readers are fresh interpreters
     (about a second to start); one is kept warm between reads unless a large read grew it past
     _IDLE_MAX_MB (then it is stopped: its memory is not held for the session); safe to call
-    from several threads.
+    from several threads. `on_scene`, if given, is called with the recording's scene as soon as
+    the file's seal is checked, before its trajectory is decoded and passed back (sealed files:
+    format 4 on).
     """
-    return _safely(Path(path), "read", timeout_s, memory_mb)
+    return _safely(Path(path), "read", timeout_s, memory_mb, on_scene)
 
 
-def _safely(path: Path, mode: str, timeout_s: float, memory_mb: int) -> Any:
+def _safely(path: Path, mode: str, timeout_s: float, memory_mb: int,
+            on_scene: Callable[[Scene], None] | None = None) -> Any:
     if not timeout_s > 0:
         raise ValueError(f"timeout_s must be positive, got {timeout_s}")
     if not memory_mb > 0:
@@ -269,7 +298,7 @@ def _safely(path: Path, mode: str, timeout_s: float, memory_mb: int) -> Any:
     reader = _take_reader()
     kind, value = "failed", "the reader stopped"
     try:
-        kind, value = reader.read(path.absolute(), timeout_s, memory_mb, mode)
+        kind, value = reader.read(path.absolute(), timeout_s, memory_mb, mode, on_scene)
     finally:
         if kind == "failed":
             reader.stop()
