@@ -16,6 +16,7 @@ from collide.recording.frames import _frame_residuals, _pad3, _quaternion_xyzw, 
 from collide.recording.spec import TIMELINE, collide_version
 
 _AXES = "xyz"
+SWEEP_ROWS = 1 << 18  # knots measured at once for the region the bodies sweep
 NORMAL_COLOUR, FRICTION_COLOUR = (255, 215, 0), (255, 64, 160)  # force arrows
 
 
@@ -41,9 +42,12 @@ class _Drawing:
 
     def _sweep(self) -> tuple[np.ndarray, float]:
         knots = self.traj.knots
-        s = _pad3(knots[:, layout.K_S:layout.K_S + self.model.dim])
-        r = self.model.radius[0][knots[:, layout.K_BODY].astype(int)][:, None]
-        lo, hi = (s - r).min(axis=0), (s + r).max(axis=0)
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for a in range(0, max(len(knots), 1), SWEEP_ROWS):  # a block at a time: a pour has millions of knots
+            part = knots[a:a + SWEEP_ROWS]
+            s = _pad3(part[:, layout.K_S:layout.K_S + self.model.dim])
+            r = self.model.radius[0][part[:, layout.K_BODY].astype(int)][:, None]
+            lo, hi = np.minimum(lo, (s - r).min(axis=0)), np.maximum(hi, (s + r).max(axis=0))
         return 0.5 * (lo + hi), float(max(np.max(hi - lo), 4 * self.model.radius.max()))
 
     def blueprint(self) -> rrb.Blueprint:
