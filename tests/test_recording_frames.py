@@ -157,8 +157,8 @@ def _contents(path: Path) -> dict:
     return {key: sorted(rows) for key, rows in out.items()}
 
 
-def test_many_contacts_drawn_a_block_at_a_time_are_the_frames_drawn_at_once(tmp_path: Path,
-                                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+def test_many_contacts_drawn_a_block_at_a_time_are_the_frames_drawn_at_once(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A recording of many contacts draws them a block of frames at a time (one frame a block
     here): every entity holds the same rows as when all frames are drawn in one block."""
     from collide.recording import writer
