@@ -131,8 +131,8 @@ print("done")
 
 def test_writes_past_the_limit_over_and_over_never_block(tmp_path: Path) -> None:
     """Rerun's own file sink blocked for good, now and then, in the flush after a failed write
-    (one CI run waited its 600 s; in one process, about one failing write in 30): collide has Rerun
-    encode in memory and writes the file itself (collide.recording.stream)."""
+    (one CI run waited its 600 s; in one process, about one failing write in 30): Rerun's sink
+    writes into a pipe, and collide copies the pipe into the file (collide.recording.stream)."""
     out = subprocess.run([sys.executable, "-c", REPEATED_FAILURES, str(tmp_path), "50"], capture_output=True,
                          text=True, timeout=300, cwd=ROOT, env=dict(os.environ, COLLIDE_JIT="0"))
     assert out.returncode == 0 and out.stdout.strip() == "done", out.stderr[-2000:]

@@ -23,7 +23,8 @@ step end falls inside another's step, whose bodies are interpolated there: resid
 only where every body's state is exact (`diagnostics.settled`). The 3D view adds at least
 `contact_frames` frames across each contact, interpolated between steps, so a contact taken in
 a few long steps still animates smoothly. Each entity is written with one `send_columns` call
-(the trajectory's tables 65 536 rows a call); static data with one `log`. Entities a scene
+(the trajectory's tables 65 536 rows a call, the drawn contacts of many a block of frames a
+call); static data with one `log`. The file is written as it is logged (`stream`). Entities a scene
 does not need are absent: no friction without friction, no spin when nothing spins, no walls
 without walls, no angular momentum in 1D, no contact entity for a contact that never happened.
 

@@ -16,6 +16,8 @@ from collide.recording.frames import _frame_residuals, _pad3, _quaternion_xyzw, 
 from collide.recording.spec import TIMELINE, collide_version
 
 _AXES = "xyz"
+SWEEP_ROWS = 1 << 18  # knots measured at once for the region the bodies sweep
+NORMAL_COLOUR, FRICTION_COLOUR = (255, 215, 0), (255, 64, 160)  # force arrows
 
 
 def _axis_with_zero(values: np.ndarray) -> rrb.ScalarAxis:
@@ -40,9 +42,12 @@ class _Drawing:
 
     def _sweep(self) -> tuple[np.ndarray, float]:
         knots = self.traj.knots
-        s = _pad3(knots[:, layout.K_S:layout.K_S + self.model.dim])
-        r = self.model.radius[0][knots[:, layout.K_BODY].astype(int)][:, None]
-        lo, hi = (s - r).min(axis=0), (s + r).max(axis=0)
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for a in range(0, max(len(knots), 1), SWEEP_ROWS):  # a block at a time: a pour has millions of knots
+            part = knots[a:a + SWEEP_ROWS]
+            s = _pad3(part[:, layout.K_S:layout.K_S + self.model.dim])
+            r = self.model.radius[0][part[:, layout.K_BODY].astype(int)][:, None]
+            lo, hi = np.minimum(lo, (s - r).min(axis=0)), np.maximum(hi, (s + r).max(axis=0))
         return 0.5 * (lo + hi), float(max(np.max(hi - lo), 4 * self.model.radius.max()))
 
     def blueprint(self) -> rrb.Blueprint:
@@ -210,11 +215,13 @@ class _Drawing:
             self._static(f"{entity}/point", rr.Points3D.from_fields(colors=[(0, 0, 0)], radii=0.05 * radius))
             points = rr.Points3D.columns(positions=point).partition(lengths)
             self._send(f"{entity}/point", points, self.view.index)
+            self._arrow_style(f"{entity}/normal_force", NORMAL_COLOUR)
             self._arrows(f"{entity}/normal_force", _pad3(view.normal_force[:, 0, c])[on], point, lengths,
-                         len(bodies), (255, 215, 0))
+                         len(bodies), self.view.index)
             if self.friction:
+                self._arrow_style(f"{entity}/friction_force", FRICTION_COLOUR)
                 self._arrows(f"{entity}/friction_force", _pad3(view.friction_force[:, 0, c])[on], point,
-                             lengths, len(bodies), (255, 64, 160))
+                             lengths, len(bodies), self.view.index)
             plot = f"/contacts/{name}"
             index = self.exact.index
             self._static(f"{plot}/compression", rr.SeriesLines(names=bodies))
@@ -229,33 +236,37 @@ class _Drawing:
 
     def _write_many_contacts(self) -> None:
         """Every contact at once: points and normal (and friction) force arrows of all contacts
-        pressed at each frame, and how many there are as a plot."""
-        view = self.view.engaged  # entries ordered by time, then contact
-        on = view.overlap > self.pressed
-        lengths = np.bincount(view.tk[on], minlength=len(self.view.times)).astype(np.int32)
-        point = _pad3(view.point[on])
+        pressed at each frame, a block of frames a call, and how many there are as a plot."""
         radius = float(self.model.radius.mean())
+        friction = self.friction
         self._static("/world/contacts/points", rr.Points3D.from_fields(colors=[(0, 0, 0)], radii=0.05 * radius))
-        self._send("/world/contacts/points", rr.Points3D.columns(positions=point).partition(lengths), self.view.index)
-        self._arrows("/world/contacts/normal_force", _pad3(view.normal_force[on]), point, lengths, 1, (255, 215, 0))
-        if self.friction and view.friction_force is not None:
-            self._arrows("/world/contacts/friction_force", _pad3(view.friction_force[on]), point, lengths, 1,
-                         (255, 64, 160))
-        exact = self.exact.engaged
-        exact_on = np.bincount(exact.tk[exact.overlap > self.pressed], minlength=len(self.exact.times)).astype(float)
-        self._send("/contacts/count", rr.Scalars.columns(scalars=exact_on), self.exact.index)
+        self._arrow_style("/world/contacts/normal_force", NORMAL_COLOUR)
+        if friction:
+            self._arrow_style("/world/contacts/friction_force", FRICTION_COLOUR)
+        for block, view in self._engaged(self.view):  # entries ordered by time, then contact
+            on = view.overlap > self.pressed
+            lengths = np.bincount(view.tk[on], minlength=block.stop - block.start).astype(np.int32)
+            index = rr.TimeColumn(TIMELINE, duration=self.view.times[block])
+            point = _pad3(view.point[on])
+            self._send("/world/contacts/points", rr.Points3D.columns(positions=point).partition(lengths), index)
+            self._arrows("/world/contacts/normal_force", _pad3(view.normal_force[on]), point, lengths, 1, index)
+            if friction:
+                self._arrows("/world/contacts/friction_force", _pad3(view.friction_force[on]), point, lengths, 1,
+                             index)
+        self._send("/contacts/count", rr.Scalars.columns(scalars=self.pressed_count), self.exact.index)
+
+    def _arrow_style(self, entity: str, color: tuple[int, int, int]) -> None:
+        self._static(entity, rr.Arrows3D.from_fields(colors=[color], radii=0.06 * float(self.model.radius.mean())))
 
     def _arrows(self, entity: str, force: np.ndarray, point: np.ndarray, lengths: np.ndarray,
-                n_bodies: int, color: tuple[int, int, int]) -> None:
+                n_bodies: int, index: rr.TimeColumn) -> None:
         """Force on each body of a contact, drawn from the contact point (equal and opposite)."""
         vec = self.force_scale * force
         if n_bodies == 2:
             vec = np.stack((vec, -vec), axis=1).reshape(-1, 3)
             point = np.repeat(point, 2, axis=0)
-        radius = float(self.model.radius.mean())
-        self._static(entity, rr.Arrows3D.from_fields(colors=[color], radii=0.06 * radius))
         columns = rr.Arrows3D.columns(origins=point, vectors=vec).partition(lengths * n_bodies)
-        self._send(entity, columns, self.view.index)
+        self._send(entity, columns, index)
 
     def _write_conserved(self) -> None:
         model, st, index, c = self.model, self.exact.state, self.exact.index, self.conserved

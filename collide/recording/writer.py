@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import uuid
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ import rerun as rr
 
 from collide import diagnostics as dg
 from collide.contact_forces import peak_normal_force
-from collide.contact_index import ContactIndex
+from collide.contact_index import ContactIndex, Engaged
 from collide.engine import layout
 from collide.model import State
 from collide.output import OutputError, check_file, write_atomic
@@ -52,6 +53,9 @@ MAX_FREE_FRAMES = 100_000  # frames of free flight in one recording, at most (fp
 # (/collide/knots ...) is stored whole whatever this is.
 MAX_BODY_FRAMES = 10_000_000
 CONTACT_FRAMES = 100  # least frames across one contact in the 3D view
+# Contacts engaged evaluated and sent at once, at most (or one frame's): a recording of many
+# contacts draws its frames a block at a time.
+BLOCK_ENTRIES = 1 << 20
 TABLE_ROWS = 1 << 16  # rows of a trajectory table sent in one call (/collide/knots ...)
 SEAL_ATTEMPTS = 4  # writes of a recording whose seal's placeholder LZ4 did not keep verbatim
 
@@ -139,6 +143,7 @@ class _Writer(_Drawing):
         self.spin = self.model.spin_dim > 0 and self.scene.has_spin
         self.friction = self.model.friction and self.scene.has_friction
         self.dissipative = self.model.dissipative
+        self.engaged_counts: np.ndarray | None = None  # `_engaged`'s contacts a frame, per frames
 
     # -- frames ---------------------------------------------------------------------------
 
@@ -146,12 +151,33 @@ class _Writer(_Drawing):
         st = dg.sample(self.model, self.traj, times, 0)
         index = rr.TimeColumn(TIMELINE, duration=times)
         if self.many_contacts:
-            # Only the contacts engaged at each frame: every contact of the run at every frame
-            # (a 100 000-sphere bed: a million contacts) was gigabytes held through the write.
-            frames = _one_run(st)
-            engaged = ContactIndex(self.model, self.traj, self.traj.index).at(times, frames.s)
-            return _Frames(times, frames, None, index, engaged)
+            # The contacts engaged at each frame come a block of frames at a time (`_engaged`):
+            # every frame's at once (a 100 000-sphere bed: a million contacts a frame) held
+            # gigabytes through the write.
+            return _Frames(times, _one_run(st), None, index)
         return _Frames(times, _one_run(st), dg.contact_series(self.model, self.traj, times, st), index)
+
+    def _engaged(self, frames: _Frames) -> Iterator[tuple[slice, Engaged]]:
+        """The contacts engaged at `frames`' times, a block of frames at a time: each block
+        (a slice of the frames; `tk` counts from its start) holds at most BLOCK_ENTRIES
+        contacts engaged, or one frame."""
+        index = self.contact_index
+        if self.engaged_counts is None or len(self.engaged_counts) != len(frames.times):
+            starts, ends = np.sort(index.iv_start), np.sort(index.iv_end)
+            times = frames.times
+            # Intervals begun by each frame less those ended before it: at least the entries there.
+            self.engaged_counts = np.searchsorted(starts, times, "right") - np.searchsorted(ends, times, "left")
+        counts = self.engaged_counts
+        start = 0
+        while start < len(frames.times):
+            stop = start + 1
+            total = counts[start]
+            while stop < len(frames.times) and total + counts[stop] <= BLOCK_ENTRIES:
+                total += counts[stop]
+                stop += 1
+            block = slice(start, stop)
+            yield block, index.at(frames.times[block], frames.state.s[block])
+            start = stop
 
     def _states(self, times: np.ndarray) -> State:
         return _one_run(dg.sample(self.model, self.traj, times, 0))
@@ -188,15 +214,37 @@ class _Writer(_Drawing):
         # Force arrows: the run's largest normal force (the engine's, as the JSON summary's
         # max_normal_force) is drawn as long as a sphere's diameter; the arrows are the recorded
         # forces (collide.contact_forces), none above it.
-        normal = self.exact.engaged.normal_force if self.many_contacts else self.exact.contacts.normal_force[:, 0]
-        drawn = float(np.max(np.linalg.norm(normal, axis=-1))) if normal.size else 0.0
+        drawn = 0.0
+        if self.many_contacts:
+            self.contact_index = ContactIndex(self.model, self.traj, self.traj.index)
+            self.pressed_count = np.zeros(len(exact))
+            for block, engaged in self._engaged(self.exact):
+                if len(engaged.tk):
+                    drawn = max(drawn, float(np.max(np.linalg.norm(engaged.normal_force, axis=-1))))
+                on = engaged.tk[engaged.overlap > self.pressed]
+                self.pressed_count[block] = np.bincount(on, minlength=block.stop - block.start)
+        else:
+            normal = self.exact.contacts.normal_force[:, 0]
+            drawn = float(np.max(np.linalg.norm(normal, axis=-1))) if normal.size else 0.0
         peak = max(peak_normal_force(self.result), drawn)
         self.force_scale = 2.0 * float(self.model.radius.mean()) / peak if peak > 0 else 1.0
-        st = self.exact.state
-        self.conserved = dg.conserved(self.model, st.t, st.s, st.v, st.w, st.work, pairs)
+        self.conserved = self._conserved(self.exact.state, pairs)
+
+    def _conserved(self, st: State, pairs: np.ndarray) -> dg.Conserved:
+        """`diagnostics.conserved` at every frame, a block of frames at a time: its spring energy
+        is a number a contact a frame (a 100 000-sphere pour: two million contacts touched)."""
+        per = max(1, BLOCK_ENTRIES // max(len(pairs), 1))
+        blocks = [dg.conserved(self.model, st.t[a:a + per], st.s[a:a + per], st.v[a:a + per], st.w[a:a + per],
+                               st.work[a:a + per], pairs) for a in range(0, max(len(st.t), 1), per)]
+        if len(blocks) == 1:
+            return blocks[0]
+        fields = {name: None if getattr(blocks[0], name) is None else
+                  np.concatenate([getattr(b, name) for b in blocks]) for name in blocks[0].__dataclass_fields__}
+        return dg.Conserved(**fields)
 
     def _send(self, entity: str, columns: Any, index: rr.TimeColumn) -> None:
         self.rec.send_columns(entity, indexes=[index], columns=columns, strict=True)
+        self.rec.flush()  # encoded and written now: Rerun holds one call's columns at a time
         self.calls += 1
         self.rows += len(index.as_arrow_array())
 
