@@ -48,7 +48,10 @@ class Spring3D:
         self.n, self.hertz = model.n_bodies, bool(model.hertz)
         self.dim = int(state.s[0].shape[1])
         self.m, self.r, self.inertia = model.mass[0], model.radius[0], model.inertia[0]
-        pad = (lambda a: np.pad(np.asarray(a, float), ((0, 0), (0, 3 - self.dim))))
+
+        def pad(a):
+            return np.pad(np.asarray(a, float), ((0, 0), (0, 3 - self.dim)))
+
         self.points, self.normals = pad(model.wall_point), pad(model.wall_normal)
         g = np.zeros(3) if model.gravity is None else np.asarray(model.gravity[0], float)
         self.gravity = np.pad(g, (0, 3 - g.size))
@@ -251,3 +254,57 @@ def reference(scene, rtol=1e-12, log=None, keep=None):
         keep.extend((law, y))
     _, v, w, _ = law.split(y)
     return np.concatenate((v.ravel(), (w * law.r[:, None]).ravel()))
+
+
+def _scene3d(body, ratio, mu, model, duration):
+    contact = {"model": model, "mu": mu, "tangential": "spring", "tangential_stiffness_ratio": ratio}
+    if model == "linear":
+        contact["k"] = 1e4
+    raw = {"dim": 3, "name": "rub3", "duration": duration, "contact": contact, "body": body, "dt": "auto"}
+    if model == "hertz":
+        # The density that makes a 1 cm sphere 10 g; E such that contacts last about as long.
+        raw["material"] = [{"name": "g", "density": 2387.3, "youngs_modulus": 5e7, "poisson_ratio": 0.25}]
+        for b in body:
+            b.pop("mass")
+            b["material"] = "g"
+    return raw
+
+
+def cluster3d(ratio=0.5, mu=0.3, model="linear", spin=(3.0, -5.0, 8.0), tilt=0.3, offset=(-0.004, 0.003),
+              back=(-0.5, 0.1, 0.2), duration=0.06):
+    """Three spheres out of a plane, the first thrown at the second off-centre and spun about all
+    axes, the third coming back: each pair's contact rubs, its normal turning out of any plane."""
+    r = 0.01
+    body = [{"name": "a", "mass": 0.01, "radius": r, "position": [0.0, 0.0, 0.0], "velocity": [1.0, 0.0, 0.1],
+             "spin": list(spin)},
+            {"name": "b", "mass": 0.01, "radius": r,
+             "position": [0.03, 0.03 * math.sin(tilt), 0.03 * math.sin(0.7 * tilt)]},
+            {"name": "c", "mass": 0.012, "radius": r, "position": [0.06, offset[0], offset[1]], "velocity": list(back)}]
+    return _scene3d(body, ratio, mu, model, duration)
+
+
+def floor3d(ratio=0.5, mu=0.3, model="linear", spin=(20.0, -10.0, 5.0), drop=(1.0, 0.4, -0.3), duration=0.04):
+    """Two spheres over a floor under gravity, the first thrown down at it and at the second, spun
+    about all axes: they rub on the floor and on each other."""
+    r = 0.01
+    body = [{"name": "a", "mass": 0.01, "radius": r, "position": [0.0, 0.0, r + 0.006], "velocity": list(drop),
+             "spin": list(spin)},
+            {"name": "b", "mass": 0.012, "radius": r, "position": [0.03, 0.012, r + 0.003]}]
+    raw = _scene3d(body, ratio, mu, model, duration)
+    raw["wall"] = [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0]}]
+    raw["gravity"] = [0.0, 0.0, -9.81]
+    return raw
+
+
+def case3d(seed):
+    """A random undamped 3D case: cluster or floor, linear or Hertz, k_t / k_n 0.1-1.5, mu
+    0.02-0.9, spins about all axes, out-of-plane angles and speeds."""
+    rng = np.random.default_rng(seed)
+    law = {"ratio": float(rng.uniform(0.1, 1.5)), "mu": float(rng.uniform(0.02, 0.9)),
+           "model": "hertz" if rng.random() < 0.5 else "linear",
+           "spin": tuple(float(x) for x in rng.uniform(-40.0, 40.0, 3))}
+    if rng.random() < 0.35:
+        return floor3d(drop=(float(rng.uniform(0.3, 1.5)), float(rng.uniform(-0.5, 0.5)),
+                             float(rng.uniform(-1.0, -0.1))), **law)
+    return cluster3d(tilt=float(rng.uniform(-0.6, 0.6)), offset=tuple(float(x) for x in rng.uniform(-0.012, 0.012, 2)),
+                     back=tuple(float(x) for x in rng.uniform(-0.5, 0.3, 3)), **law)
