@@ -75,19 +75,20 @@ def test_3d_spring_converges_to_the_continuous_law(raw):
 
 
 def test_3d_reference_keeps_momentum_and_balances_energy():
-    """The 3D law's reference, spheres without walls or gravity, sliding and sticking: momentum and
-    angular momentum (spins included; the friction acts at one point for both spheres) to
-    round-off, and the energy (kinetic, rotational, both springs) plus the slides' dissipation
+    """The 3D law's reference, spheres without walls or gravity, sliding and sticking: momentum to
+    round-off (a Runge-Kutta method keeps linear invariants exactly), angular momentum (spins
+    included; the friction acts at one point for both spheres: quadratic, kept to the integration's
+    error) to 1e-11 of it, and the energy (kinetic, rotational, both springs) plus the slides' dissipation
     constant to 1e-11 of it (DOP853 at rtol 1e-12), the dissipation not zero."""
     keep, log = [], []
     reference(parse_scene(cluster3d()), log=log, keep=keep)
     law, y = keep
     assert "cap" in {what for _, _, what, _ in log}
     (s0, v0, w0, _), (s, v, w, _) = law.split(law.y0), law.split(y)
-    for a, b in (((law.m[:, None] * v0).sum(0), (law.m[:, None] * v).sum(0)),
-                 ((law.m[:, None] * np.cross(s0, v0)).sum(0) + (law.inertia[:, None] * w0).sum(0),
-                  (law.m[:, None] * np.cross(s, v)).sum(0) + (law.inertia[:, None] * w).sum(0))):
-        assert np.abs(b - a).max() <= 1e-13 * np.abs(a).max()
+    for a, b, bound in (((law.m[:, None] * v0).sum(0), (law.m[:, None] * v).sum(0), 1e-13),
+                        ((law.m[:, None] * np.cross(s0, v0)).sum(0) + (law.inertia[:, None] * w0).sum(0),
+                         (law.m[:, None] * np.cross(s, v)).sum(0) + (law.inertia[:, None] * w).sum(0), 1e-11)):
+        assert np.abs(b - a).max() <= bound * np.abs(a).max()
     end, dissipated = law.energy(y)
     law.mode = [0] * law.nk
     start = law.energy(law.y0)[0]
