@@ -263,16 +263,11 @@ def reference(scene, rtol=1e-12, log=None, keep=None):
 
 
 def _scene3d(body, ratio, mu, model, duration):
-    contact = {"model": model, "mu": mu, "tangential": "spring", "tangential_stiffness_ratio": ratio}
-    if model == "linear":
-        contact["k"] = 1e4
-    raw = {"dim": 3, "name": "rub3", "duration": duration, "contact": contact, "body": body, "dt": "auto"}
-    if model == "hertz":
-        # The density that makes a 1 cm sphere 10 g; E such that contacts last about as long.
-        raw["material"] = [{"name": "g", "density": 2387.3, "youngs_modulus": 5e7, "poisson_ratio": 0.25}]
-        for b in body:
-            b.pop("mass")
-            b["material"] = "g"
+    """test_spring's scene of these bodies (undamped), in 3D (imported here: it imports this module)."""
+    from tests.engine.event.test_spring import _scene
+
+    raw = _scene(body, ratio, mu, model, 1.0, duration)
+    raw["dim"], raw["name"] = 3, "rub3"
     return raw
 
 
