@@ -1,8 +1,8 @@
 """The tangential spring in 3D as a continuous law, integrated by scipy's DOP853: every body, each
 contact's stretch a vector state, each mode change (the cap reached, a slip ending, a contact's
-start and end) a located event. Written from the law's statement (docs/method.md, "Tangential
-spring in 3D"), not from any kernel: the reference the DEM kernel's 3D spring converges to, and
-the one an event engine's 3D spring is to be checked against.
+start and end) a located event. Written from the law's statement (docs/method.md, "The spring
+in 3D"), not from any kernel: the reference the DEM kernel's 3D spring converges to
+(tests/engine/dem/test_tangential.py).
 
 The law is the DEM kernel's per-step law (collide/engine/dem/tangential.py) taken to a vanishing
 step, for a contact without a tangential dashpot (restitution 1):
