@@ -1,9 +1,11 @@
 """Issue 51's bar for islands with a tangential spring: random cases (tests/engine/event/test_spring.py's
 `spring_case`: three spheres in a row or two on a floor, angles, spins, k_t / k_n 0.1-1.5, mu
-0.02-0.9, linear or Hertz, damped or not), each run at --tol 1e-6, 1e-8 and 1e-10 as the CLI runs
-it (its error measured), and again at a hundredth of the tolerance.
+0.02-0.9, linear or Hertz, damped or not; with --dim 3 tests/spring3d_reference.py's `case3d`:
+three spheres out of a plane or two on a floor, spun about all axes, undamped), each run at --tol
+1e-6, 1e-8 and 1e-10 as the CLI runs it (its error measured), and again at a hundredth of the
+tolerance.
 
-    python scripts/island_spring.py [--cases 26] [--seed 0] [--tols 1e-6,1e-8,1e-10]
+    python scripts/island_spring.py [--cases 26] [--seed 0] [--tols 1e-6,1e-8,1e-10] [--dim 2]
 
 Printed per case and tolerance: the engine, the difference from the tighter run (over the speed),
 the reported estimate and their ratio, or the cause it was handed on (or refused) with. Exits 1 if
@@ -26,6 +28,7 @@ from collide.errors import RunError  # noqa: E402
 from collide.run import run_scene  # noqa: E402
 from collide.scene import parse_scene  # noqa: E402
 from tests.engine.event.test_spring import spring_case  # noqa: E402
+from tests.spring3d_reference import case3d  # noqa: E402
 
 
 def main() -> int:
@@ -33,11 +36,12 @@ def main() -> int:
     parser.add_argument("--cases", type=int, default=26)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--tols", default="1e-6,1e-8,1e-10")
+    parser.add_argument("--dim", type=int, choices=(2, 3), default=2)
     args = parser.parse_args()
     tols = [float(x) for x in args.tols.split(",")]
     worst, answered, handed, bad = 0.0, 0, 0, 0
     for seed in range(args.seed, args.seed + args.cases):
-        raw = spring_case(seed)
+        raw = spring_case(seed) if args.dim == 2 else case3d(seed)
         scene = parse_scene(raw)
         law = raw["contact"]
         tag = (f"{seed:3d} {law['model']:6s} ratio {law['tangential_stiffness_ratio']:.2f} mu {law['mu']:.2f} "
