@@ -90,7 +90,7 @@ def _run(walls, position, velocity, t_end):
     fl[layout.FL_RECORD], fl[layout.FL_MAXSTEPS], fl[layout.FL_PLANAR] = 1, 10**6, 1
     fp = np.zeros(layout.NFP)
     fp[layout.FP_TEND], fp[layout.FP_TAIL] = t_end, math.nan
-    rubs = np.zeros((len(walls), 3))  # no tangential spring (collide.alone.rub_rows)
+    rubs = np.zeros((len(walls), 4))  # no tangential spring nor rolling resistance (collide.alone.rub_rows)
     rubs.setflags(write=False)
     return alone.alone_run(G, WP, laws, rubs, np.array([0.0, -9.81, 0.0]), fl, fp,
                            np.array(im.steps_for(1e-8) + rub_steps(1e-8)))

@@ -279,3 +279,59 @@ def test_a_slip_off_one_line_goes_to_dem_with_its_cause():
     assert run.result.engine == "dem" and "not along one line" in run.result.engine_reason
     with pytest.raises(RunError, match="not along one line"):
         run_scene(parse_scene({**copy.deepcopy(raw), "integrator": "kahan6"}), record=False)
+
+
+def _roll_on(P, T, y, stop, steps_per_period):
+    """`oblique.middle` from the state y (over time, delta in Y0) to the stop, as `rub` steps a
+    contact that gravity holds: the trail of `keep`'s rows."""
+    from numba.typed import List
+
+    from collide.engine.event import impact as im
+    from collide.engine.event import oblique as ob
+
+    P = P.copy()
+    P[im.P_STOP] = stop
+    P[im.P_SPEED] = 1e-17
+    ws = np.zeros((9, ob.NY))
+    floors = np.full(ob.NY, 1e-300)
+    trail = List([(0.0,) * 13])
+    trail.pop()
+    count = np.zeros(2, np.int64)
+    period = 2.0 * math.pi / math.sqrt(P[1] / P[4])
+    t, mode, how = ob.middle(P, T, ob.STICK, 0.0, 0.0, period / steps_per_period, 10**7, y, ws, floors, trail,
+                             count)
+    assert how == 2 and t == stop
+    return np.array(list(trail))
+
+
+def test_a_ball_rolling_under_rolling_resistance_stops_where_the_closed_form_says_and_stays_held():
+    """A solid ball rolling without slip on a floor (linear spring at its rest overlap, so F_n = m g;
+    the tangential spring stretched to the steady force) under rolling resistance mu_r r F_n
+    decelerates at a = mu_r r l m g / (I + m l^2) (l = r - delta the lever: 5/7 mu_r g for l = r)
+    and stops at v0 / a after v0^2 / (2 a); then held: the spin locked at 0 (the torque that holds
+    it, at most 5/7 of the cap). Both to 1e-9 relative: the motion is polynomial in time between
+    the two located events, so the steps are exact to round-off (of 1e4 steps: 1e-12 a step)."""
+    from collide.engine.event import impact as im
+    from collide.engine.event import oblique as ob
+
+    m, r, k, g, mu, mu_r, v0 = 0.1, 0.03, 1e6, 9.81, 0.5, 0.05, 0.5
+    inertia = 0.4 * m * r * r
+    P = im.impact_params(hertz=False, mstar=m, k=k, accel=g)
+    deq = m * g / k
+    lever = r - deq
+    a = mu_r * r * lever * m * g / (inertia + m * lever**2)
+    ratio = 2.0 / 7.0
+    T = np.array([mu, ratio, math.sqrt(ratio), m, inertia, r, 0.0, 1.0, 1.0, math.inf, 0.0, 0.0, 0.0, mu_r, -1.0])
+    y = np.zeros(ob.NY)
+    y[ob.Y0], y[ob.YVT], y[ob.YWB] = deq, v0, -v0 / lever
+    y[ob.YXI] = m * a / (ratio * k)  # the spring's force -k_t xi = m v' = -m a
+    t_stop = v0 / a
+    rows = _roll_on(P, T, y, 1.5 * t_stop, 8)
+    spin = rows[:, 7]
+    held = np.flatnonzero(spin == 0.0)
+    assert held.size and (spin[held[0]:] == 0.0).all(), "held from the spin's zero on"
+    assert rows[held[0], 0] == pytest.approx(t_stop, rel=1e-9)
+    assert rows[held[0], 4] == pytest.approx(v0**2 / (2 * a), rel=1e-9)
+    assert a == pytest.approx(5.0 / 7.0 * mu_r * g, rel=1e-4)  # (l = r less 3e-4)
+    # Held: the tangential spring's release moves the centre by at most its stretch's share.
+    assert np.abs(rows[held[0]:, 5]).max() <= 1.01 * a / math.sqrt(ratio * k / m)
