@@ -130,13 +130,9 @@ def test_the_rolling_resistance_slider_moves_a_full_order_run():
     """A ball thrown along a floor with a tangential spring and rolling resistance: the mu_r slider
     moved, the scene still runs in the event engine (rolling and held located), not DEM, and the
     ball rolls farther under a smaller mu_r."""
-    raw = {"name": "rolling", "dim": 2, "duration": 0.4, "tol": 1e-6, "gravity": [0.0, -9.81],
-           "contact": {"model": "hertz", "restitution": 0.5, "mu": 0.3, "tangential": "spring",
-                       "rolling_friction": 0.2},
-           "material": [{"name": "rubber", "density": 1100.0, "youngs_modulus": 5e6, "poisson_ratio": 0.45}],
-           "body": [{"name": "ball", "material": "rubber", "radius": 0.03, "position": [0.0, 0.031],
-                     "velocity": [0.4, 0.0], "spin": 5.0}],
-           "wall": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}]}
+    from tests.engine.event.test_alone import _rolling
+
+    raw = _rolling(tol=1e-6)
     controls = scene_controls(parse_scene(raw))
     assert "contact.rolling_friction" in {p.ident for p in controls.params}
     way = []
