@@ -6,11 +6,11 @@ report's linear spring it runs every scene, and its islands take Hertz and the r
 dashpot with Coulomb friction, and in 2D a tangential spring (`collide.scene.island_blocker`,
 `collide.engine.event.spring`). A sphere alone among walls
 never forms an island: each contact is one normal contact (`collide.engine.event.impact`, order
-8) between closed-form flights, with a tangential spring too, so such a scene runs there at full
-order whatever its tolerance; so do two spheres and no walls (`event.pair`: head-on, or with a
-tangential spring and friction at any angle; off-centre without one, the islands). Scenes with
-these laws that none of these take run in the fixed-step, first-order DEM kernel
-(docs/method.md, "Which engine runs a scene").
+8) between closed-form flights, with a tangential spring and rolling resistance too
+(`collide.engine.event.oblique`), so such a scene runs there at full order whatever its tolerance;
+so do two spheres and no walls (`event.pair`: head-on, or with a tangential spring and friction
+at any angle; off-centre without one, the islands). Scenes with these laws that none of these
+take run in the fixed-step, first-order DEM kernel (docs/method.md, "Which engine runs a scene").
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""A sphere alone among walls under the laws beyond the report's (Hertz, the restitution's dashpot):
+"""A sphere alone among walls under the laws beyond the report's (Hertz, the restitution's dashpot,
+a tangential spring, rolling resistance):
 `alone_run` flies it in closed form from wall to wall and takes each contact whole from
 `impact.contact` at full order. It returns what `run.simulate` returns, so a run reads it the
 same way.

@@ -53,7 +53,14 @@ stretch, along the turning tangent, turns with it as the DEM kernel's projection
 The tangential motion must stay in one line of the wall (the contact point's slip, the centre's
 velocity along the wall and gravity's part along it parallel, no spin about that line): always so
 in a 2D scene. In 3D a contact that is not such is DEM's so far (`PLANE`). A contact that does
-not separate (a ball held on the wall, rolling) is DEM's too (`HELD`).
+not separate (a ball held on the wall, rolling) goes on over time, as `impact.contact`'s does.
+
+Rolling resistance (T_ROLL = mu_r) is a second mode beside stick and slip, the DEM kernel's
+law (`collide.engine.dem.rolling`: `rolling_cap`, `rolling_torque`) at the vanishing step:
+rolling, the torque mu_r R* max(F_n, 0) against the spin's sign (T_RS); held (T_RS = 0), the
+spin locked, the torque that holds it -(r - delta) F within that cap. The spin reaching zero
+(then held where the cap holds it, else rolling on the other way) and the held torque reaching
+the cap are events, landed as the others.
 """
 
 from __future__ import annotations
