@@ -6,11 +6,11 @@ report's linear spring it runs every scene, and its islands take Hertz and the r
 dashpot with Coulomb friction, and in 2D a tangential spring (`collide.scene.island_blocker`,
 `collide.engine.event.spring`). A sphere alone among walls
 never forms an island: each contact is one normal contact (`collide.engine.event.impact`, order
-8) between closed-form flights, with a tangential spring too, so such a scene runs there at full
-order whatever its tolerance; so do two spheres and no walls (`event.pair`: head-on, or with a
-tangential spring and friction at any angle; off-centre without one, the islands). Scenes with
-these laws that none of these take run in the fixed-step, first-order DEM kernel
-(docs/method.md, "Which engine runs a scene").
+8) between closed-form flights, with a tangential spring and rolling resistance too
+(`collide.engine.event.oblique`), so such a scene runs there at full order whatever its tolerance;
+so do two spheres and no walls (`event.pair`: head-on, or with a tangential spring and friction
+at any angle; off-centre without one, the islands). Scenes with these laws that none of these
+take run in the fixed-step, first-order DEM kernel (docs/method.md, "Which engine runs a scene").
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from collide.engine import jit, layout, tier
-from collide.model import TABLE_ESTAR, TABLE_K, TABLE_KTR, TABLE_MU, TABLE_REST, Model, State, select_model
+from collide.model import TABLE_ESTAR, TABLE_K, TABLE_KTR, TABLE_MU, TABLE_REST, TABLE_ROLL, Model, State, select_model
 from collide.results import ContactLog, RunResult
 from collide.scene import Scene, alone_blocker, dem_reason, island_blocker
 from collide.stepper import (
@@ -83,6 +83,9 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
     if scene.needs_dem:
         rubs = (", friction's stick and slip located, the tangential spring at order 6 (Gauss-Legendre)"
                 if scene.contact.tangential == "spring" and scene.has_friction else "")
+        if scene.has_rolling:
+            rubs += (", rolling resistance (its cap mu_r R* F_n against the spin, or the spin held within it) with "
+                     "each change between rolling and held located, at order 6 (Gauss-Legendre)")
         return EVENT, (f"{dem_reason(scene)} with a sphere alone among walls: each contact at order 8 "
                        f"(DOP853's Runge-Kutta), its start and end located{rubs}, flights in closed form")
     return EVENT, (f"the report's contact law: every contact and friction mode change located, steps of "
@@ -129,12 +132,14 @@ def pair_row(model: Model, b: int = 0) -> np.ndarray:
 
 
 def rub_rows(model: Model, b: int = 0) -> np.ndarray:
-    """Each wall's tangential spring as `alone.alone_run` takes it (W, 3): mu, k_t / k_n and its
-    root; mu 0 (no rubbing) without a spring."""
-    rows = np.zeros((model.n_walls, 3))
-    if model.tangential_spring and model.spin_dim:
+    """Each wall's tangential spring and rolling resistance as `alone.alone_run` takes them (W, 4):
+    mu, k_t / k_n and its root, mu_r; mu 0 (no rubbing) without a spring (the scene's choice
+    sends friction with the dead band elsewhere), mu_r 0 without rolling resistance."""
+    rows = np.zeros((model.n_walls, 4))
+    if model.spin_dim:
         row = model.wall_table[b, int(model.material[b, 0])]
-        rows[:] = row[TABLE_MU], row[TABLE_KTR], math.sqrt(row[TABLE_KTR])
+        rows[:] = row[TABLE_MU] if model.tangential_spring else 0.0, row[TABLE_KTR], math.sqrt(row[TABLE_KTR]), \
+            row[TABLE_ROLL]
     rows.setflags(write=False)
     return rows
 
@@ -276,6 +281,8 @@ def _check(model: Model, st: np.ndarray, fg: np.ndarray, t: float, open_ended: b
                              "takes)",
         alone.ALONE_PLANE: "the sphere's slip on wall {wall} at {at} is not along one line of the wall (spin about "
                            "an axis along it, or gravity across it): such a contact is DEM's so far",
+        alone.ALONE_TWIST: "the sphere touches wall {wall} at {at} spinning about the wall's normal: rolling "
+                           "resistance against a twist and a roll at once is DEM's so far",
     }
     failed = "the sphere's contact with wall {wall} at {at} could not be integrated (its steps did not converge)"
     cause = PairTurns if status == pair.PAIR_OBLIQUE else AloneError

@@ -742,7 +742,7 @@ def island_blocker(scene: Scene) -> str | None:
     they can: the linear spring or Hertz, with the restitution's dashpot and Coulomb friction)."""
     c = scene.contact
     if scene.has_rolling:
-        return "rolling resistance is DEM's only"
+        return "the islands do not take rolling resistance (a sphere alone among walls takes it at full order)"
     if c.tangential != "coulomb" and scene.dim == 3:
         return ("a tangential spring between spheres inside an island (three or more, or two with walls) in 3D is "
                 "DEM's so far: in 2D the islands take it, and in 3D two spheres and no walls")
@@ -760,8 +760,12 @@ def alone_blocker(scene: Scene) -> str | None:
     """Why the event engine cannot run a scene whose law goes beyond the report's (None: it can,
     as a sphere alone among walls or two spheres and no walls)."""
     c = scene.contact
-    if scene.has_rolling:
-        return "rolling resistance is DEM's only"
+    if scene.has_rolling and len(scene.bodies) != 1:
+        return ("rolling resistance between spheres is DEM's so far: the event engine takes it for a sphere alone "
+                "among walls")
+    if scene.has_rolling and scene.has_friction and c.tangential != "spring":
+        return ("rolling resistance with Coulomb friction's dead band is DEM's so far: with tangential = 'spring' "
+                "(Coulomb's cap on a history spring) the event engine takes a sphere alone among walls at full order")
     if len(scene.bodies) == 2 and scene.walls:
         return ("two spheres with walls: the event engine takes a sphere alone among walls, or two spheres and no "
                 "walls, whole; more run in its islands where they can")

@@ -55,7 +55,8 @@ def test_materials_give_masses_moduli_and_mixed_pair_values():
     ({"contact": {"model": "hooke"}}, "contact.model: unknown 'hooke'"),
     ({"contact": {"tangential": "mindlin"}}, "contact.tangential: unknown 'mindlin'"),
     ({"contact": {"rolling_friction": 0.1, "mu": 0.3}, "integrator": "kahan6"},
-     "integrator: 'kahan6' cannot run this scene's contact law (rolling_friction): rolling resistance is DEM's only"),
+     "integrator: 'kahan6' cannot run this scene's contact law (rolling_friction): rolling resistance with Coulomb "
+     "friction's dead band is DEM's so far"),
     ({"body": [{"name": "a", "radius": 0.1, "position": [0, 0, 0], "material": "wood"}]}, "body.a.material: unknown"),
     ({"body": [{"name": "a", "radius": 0.1, "position": [0, 0, 0]}]}, "body.a.mass: missing"),
     ({"rest": 1e-6}, "rest: ends a DEM run"),
@@ -98,10 +99,14 @@ def test_a_tangential_spring_between_two_spheres_chooses_the_event_engine():
 
 
 def test_integrator_override_that_cannot_run_the_law_is_refused():
-    # (Rolling resistance is DEM's only; the bounce itself runs in the event engine, and with
-    # Coulomb friction during its damped Hertz contacts in the islands.)
+    # (Rolling resistance with the dead band's Coulomb friction is DEM's; the bounce itself runs in
+    # the event engine, with rolling resistance alone too, and with Coulomb friction during its
+    # damped Hertz contacts in the islands.)
     with pytest.raises(SceneError, match="runs with --integrator dem"):
-        run_scene(load_scene("bounce", ["contact.rolling_friction=0.01"]), integrator="kahan6", record=False)
+        run_scene(load_scene("bounce", ["contact.rolling_friction=0.01", "contact.mu=0.3"]), integrator="kahan6",
+                  record=False)
+    run = run_scene(load_scene("bounce", ["contact.rolling_friction=0.01"]), integrator="kahan6", record=False)
+    assert run.result.engine == "event" and "between rolling and held located" in run.result.engine_reason
     run = run_scene(load_scene("bounce", ["contact.mu=0.3"]), integrator="kahan6", record=False)
     assert run.result.engine == "event" and "each friction mode change located" in run.result.engine_reason
 

@@ -126,6 +126,25 @@ def test_slider_values_reach_the_scene_in_si_units():
     assert scene.bodies[1].spin == (-2.0,)
 
 
+def test_the_rolling_resistance_slider_moves_a_full_order_run():
+    """A ball thrown along a floor with a tangential spring and rolling resistance: the mu_r slider
+    moved, the scene still runs in the event engine (rolling and held located), not DEM, and the
+    ball rolls farther under a smaller mu_r."""
+    from tests.engine.event.test_alone import _rolling
+
+    raw = _rolling(tol=1e-6)
+    controls = scene_controls(parse_scene(raw))
+    assert "contact.rolling_friction" in {p.ident for p in controls.params}
+    way = []
+    for mu_r in (0.2, 0.1):
+        scene = build_scene(controls, controls.defaults() | {"contact.rolling_friction": mu_r}, controls.settings)
+        assert scene.contact.rolling_friction == mu_r and scene.integrator != "dem"
+        res = run_scene(scene, record=False).result
+        assert res.engine == "event" and "between rolling and held located" in res.engine_reason
+        way.append(float(res.final.s[0, 0, 0]))
+    assert way[1] > way[0]
+
+
 @pytest.mark.parametrize("text, value", [("1e-7", 1e-7), ("2.5E9", 2.5e9), (" -0.02 ", -0.02), ("\u22123", -3.0),
                                          ("1500", 1500.0), (".5", 0.5)])
 def test_typed_values_are_read_exactly(text, value):

@@ -24,7 +24,7 @@ from collide.engine.dem.layout import (
     T_ZETA,
 )
 from collide.engine.dem.normal import normal_elastic
-from collide.engine.dem.rolling import rolling_resistance
+from collide.engine.dem.rolling import rolling_cap, rolling_resistance
 from collide.engine.dem.tangential import coulomb_slip, friction_cap, spring_coefficients, tangential_spring
 from collide.engine.jit import jit_inline
 
@@ -81,7 +81,7 @@ def contact_into(X, V, W, Fi, Ti, TRi, PTi, oi, Fj, Tj, TRj, PTj, oj, Bd, i, j, 
         friction_torque(Ti, PTi, oi, Tj, PTj, oj, nx, ny, nz, ai, aj, sx, sy, sz)
     roll = tabs[mi, mj, T_ROLL]
     if spin and roll > 0.0 and press > 0.0:
-        rolling_resistance(W, TRi, PTi, oi, TRj, PTj, oj, Bd, i, j, roll * rstar * press, dt)
+        rolling_resistance(W, TRi, PTi, oi, TRj, PTj, oj, Bd, i, j, rolling_cap(roll, rstar, fn), dt)
     Fi[oi, 0] += fx
     Fi[oi, 1] += fy
     Fi[oi, 2] += fz

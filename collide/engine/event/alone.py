@@ -1,4 +1,5 @@
-"""A sphere alone among walls under the laws beyond the report's (Hertz, the restitution's dashpot):
+"""A sphere alone among walls under the laws beyond the report's (Hertz, the restitution's dashpot,
+a tangential spring, rolling resistance):
 `alone_run` flies it in closed form from wall to wall and takes each contact whole from
 `impact.contact` at full order. It returns what `run.simulate` returns, so a run reads it the
 same way.
@@ -91,8 +92,8 @@ from collide.engine.records import put_knot, tail_after
 
 # S_STATUS: a second wall within a contact; a contact not answered; a rubbing contact held on its
 # wall (not separating); a rubbing contact's tangential motion not in one line; its stick and slip
-# alternating without end (`oblique`)
-ALONE_WALLS, ALONE_FAILED, ALONE_HELD, ALONE_PLANE, ALONE_CHATTER = 16, 17, 18, 19, 20
+# alternating without end (`oblique`); spin about the wall's normal under rolling resistance
+ALONE_WALLS, ALONE_FAILED, ALONE_HELD, ALONE_PLANE, ALONE_CHATTER, ALONE_TWIST = 16, 17, 18, 19, 20, 21
 NO_BOX = np.zeros(4)
 
 
@@ -250,7 +251,8 @@ def rubbing_state(X, G, N, e, b, s0, row, fl):
 
 @jit
 def take_rubbing(G, WP, LAW, TW, grav, fl, w, t, t_end, ends, steps_left, out, trail, rubbed, bufs, CNT):
-    """`take_contact` with friction and a tangential spring (TW[w]: mu, k_t / k_n and its root):
+    """`take_contact` with friction and a tangential spring, or rolling resistance (TW[w]: mu, k_t / k_n
+    and its root, mu_r):
     the normal contact's peaks from `impact.contact`, the rest from `oblique.rub`. Returns as
     `take_contact`, and the status where it failed."""
     KN, RC = bufs
@@ -265,8 +267,10 @@ def take_rubbing(G, WP, LAW, TW, grav, fl, w, t, t_end, ends, steps_left, out, t
     e, b, in_line = frame(N, v, spin, grav, G[0, G_R])
     if not in_line:
         return t, False, True, KN, RC, ALONE_PLANE
+    if TW[w, 3] > 0.0 and spin[0] * N[0] + spin[1] * N[1] + spin[2] * N[2] != 0.0:
+        return t, False, True, KN, RC, ALONE_TWIST
     T = np.array([TW[w, 0], TW[w, 1], TW[w, 2], G[0, G_M], G[0, G_I], G[0, G_R],
-                  grav[0] * e[0] + grav[1] * e[1] + grav[2] * e[2], 1.0, 1.0, math.inf, 0.0, 0.0, 0.0])
+                  grav[0] * e[0] + grav[1] * e[1] + grav[2] * e[2], 1.0, 1.0, math.inf, 0.0, 0.0, 0.0, TW[w, 3], 0.0])
     y = np.zeros(NY)
     y[YVT] = v[0] * e[0] + v[1] * e[1] + v[2] * e[2]
     y[YWB] = spin[0] * b[0] + spin[1] * b[1] + spin[2] * b[2]
@@ -320,8 +324,9 @@ def clear_of_radius(WP, w, s, vt, gt, span, depth, radius):
 @jit
 def alone_run(G, WP, LAW, TW, grav, fl, fp, ends):
     """Run the sphere of G (one row) among the walls WP, the law of its contact with wall w in
-    LAW[w] (impact.impact_params' P) and, where it rubs (a tangential spring with mu > 0), TW[w]
-    (mu, k_t / k_n and its root; mu 0 where it does not), from time 0 to fp[FP_TEND] (or, with none, until it leaves
+    LAW[w] (impact.impact_params' P) and, where it rubs (a tangential spring with mu > 0, or
+    rolling resistance), TW[w] (mu, k_t / k_n and its root, mu_r; mu and mu_r 0 where it does
+    not), from time 0 to fp[FP_TEND] (or, with none, until it leaves
     every wall for good, and fp[FP_TAIL] or the usual tail after). ends: the steps over sigma
     at each end of a contact and per contact time between (impact.steps_for), then those of a
     rubbing contact (oblique.rub_steps). Returns (final
@@ -363,7 +368,7 @@ def alone_run(G, WP, LAW, TW, grav, fl, fp, ends):
         ST[S_CONTACTS] += 1
         start = t
         failed = ALONE_FAILED
-        if TW[w, 0] > 0.0:
+        if TW[w, 0] > 0.0 or TW[w, 3] > 0.0:
             t, ok, clear, KN, RC, failed = take_rubbing(G, WP, LAW, TW, grav, fl, w, t, t_end, ends,
                                                         fl[FL_MAXSTEPS] - ST[S_STEPS], out, trail, rubbed, (KN, RC),
                                                         CNT)

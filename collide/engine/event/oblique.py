@@ -53,7 +53,14 @@ stretch, along the turning tangent, turns with it as the DEM kernel's projection
 The tangential motion must stay in one line of the wall (the contact point's slip, the centre's
 velocity along the wall and gravity's part along it parallel, no spin about that line): always so
 in a 2D scene. In 3D a contact that is not such is DEM's so far (`PLANE`). A contact that does
-not separate (a ball held on the wall, rolling) is DEM's too (`HELD`).
+not separate (a ball held on the wall, rolling) goes on over time, as `impact.contact`'s does.
+
+Rolling resistance (T_ROLL = mu_r) is a second mode beside stick and slip, the DEM kernel's
+law (`collide.engine.dem.rolling`: `rolling_cap`, `rolling_torque`) at the vanishing step:
+rolling, the torque mu_r R* max(F_n, 0) against the spin's sign (T_RS); held (T_RS = 0), the
+spin locked, the torque that holds it -(r - delta) F within that cap. The spin reaching zero
+(then held where the cap holds it, else rolling on the other way) and the held torque reaching
+the cap are events, landed as the others.
 """
 
 from __future__ import annotations
@@ -63,6 +70,7 @@ import math
 import numpy as np
 
 from collide.engine.dem.normal import normal_elastic
+from collide.engine.dem.rolling import rolling_cap, rolling_torque
 from collide.engine.dem.tangential import friction_cap, slip_stretch, spring_coefficients, spring_trial
 from collide.engine.event.impact import (
     ENDED,
@@ -91,10 +99,11 @@ from collide.engine.numerics import dot3, illinois
 # T, the spring's parameters: mu, k_t / k_n, its root, the sphere's mass, inertia and radius,
 # gravity along the line e, the slip's sign s (set as the contact goes); the lever's share of
 # delta (1 at a wall, 1/2 between spheres), the other sphere's inertia and radius (a wall: inf
-# and 0), the line of centres' length at touching (a wall: 0, no turning) and HOLD's end speed
-# (set by `rub`)
-T_MU, T_KTR, T_ROOT, T_M, T_I, T_R, T_G, T_S, T_LEVER, T_I2, T_R2, T_D, T_HOLD = range(13)
-NT = 13
+# and 0), the line of centres' length at touching (a wall: 0, no turning), HOLD's end speed
+# (set by `rub`), the rolling resistance mu_r (0: none; a wall's R* is the sphere's radius) and
+# its mode: the spin's sign while rolling, 0 while held (set as the contact goes)
+T_MU, T_KTR, T_ROOT, T_M, T_I, T_R, T_G, T_S, T_LEVER, T_I2, T_R2, T_D, T_HOLD, T_ROLL, T_RS = range(15)
+NT = 15
 # y, the state: delta over time (the time over sigma), delta's rate, the dashpot's work, the
 # stretch xi, the centre's velocity along e, the spin about b = -N x e, friction's work, the
 # centre's way along e (two spheres: the angle the line of centres turned), the angle turned
@@ -154,6 +163,22 @@ def forces(P, T, mode, delta, y):
 
 
 @jit
+def rolled(T, fn, ft, delta, y):
+    """(rolling resistance's torque about b, the torque that would hold the spin, its cap): the
+    cap against the spin while rolling (`rolling_torque` at the vanishing step's limit); held,
+    NaN for the first (the spin locked, whatever torque holds it)."""
+    if T[T_ROLL] == 0.0:
+        return 0.0, 0.0, 0.0
+    cap = rolling_cap(T[T_ROLL], T[T_R], fn)
+    need = -(T[T_R] - T[T_LEVER] * delta) * ft
+    if T[T_RS] == 0.0:
+        return math.nan, need, cap
+    # against the mode's sign: a trial stage past the spin's zero keeps the mode's torque (so the
+    # step stays smooth and the zero is found as an event)
+    return rolling_torque(cap, math.inf, T[T_RS], 0.0, 0.0)[0], need, cap
+
+
+@jit
 def rhs(P, T, phase, mode, x, y, f):
     """The derivatives of y over the phase's variable into f."""
     delta, scale = overlap(P, phase, x, y)
@@ -166,8 +191,9 @@ def rhs(P, T, phase, mode, x, y, f):
     f[YWN] = gamma * u * u * scale
     f[YXI] = vc * scale if mode == STICK else 0.0
     f[YVT] = (ft / T[T_M] + T[T_G] + u * turning) * scale
-    f[YWB] = (T[T_R] - T[T_LEVER] * delta) * ft / T[T_I] * scale
-    f[YWT] = -ft * vc * scale
+    tr = rolled(T, fn, ft, delta, y)[0]
+    f[YWB] = 0.0 if tr != tr else ((T[T_R] - T[T_LEVER] * delta) * ft + tr) / T[T_I] * scale
+    f[YWT] = (-ft * vc - (0.0 if tr != tr else tr * y[YWB])) * scale
     f[YP] = (turning if T[T_D] > 0.0 else y[YVT]) * scale
     f[YTH] = y[YWB] * scale
     f[YW2] = (T[T_R2] - T[T_LEVER] * delta) * ft / T[T_I2] * scale
@@ -212,13 +238,20 @@ def gl_step(P, T, phase, mode, x, y, h, e, ws, floors):
 @jit
 def watched(P, T, phase, mode, x, y, which):
     """which 0: the mode's own switch function (> 0 while it lasts); 1: the time past P_STOP; 2:
-    the normal force (where it changes sign the cap mu max(F_n, 0) has a kink)."""
+    the normal force (where it changes sign the cap mu max(F_n, 0) has a kink); 3: rolling
+    resistance's mode's (rolling: the spin along its sign; held: the cap less the torque that
+    holds it)."""
     if which == 1:
         return (x if phase == TIME else y[Y0]) - P[P_STOP]
     delta, _ = overlap(P, phase, x, y)
     acc, fn, gamma, ft, vc, kt, gt, cap, kn = forces(P, T, mode, delta, y)
     if which == 2:
         return fn
+    if which == 3:
+        if T[T_RS] != 0.0:
+            return T[T_RS] * y[YWB]
+        _, need, cap_r = rolled(T, fn, ft, delta, y)
+        return cap_r - abs(need)
     if mode == STICK:
         return cap - abs(ft)
     if mode == HOLD:
@@ -267,6 +300,47 @@ def changed(P, T, phase, mode, x, y, count, at_once):
 
 
 @jit
+def roll_switch(P, T, phase, mode, x, y, count):
+    """Rolling resistance's mode after a located switch at (x, y): from rolling (the spin reached
+    zero), held where the cap can hold it, else rolling on the other way; from held (the torque
+    that holds the spin reached the cap), rolling the way the rest of the torque turns it. Counts
+    the change in count[1]; ok False beyond CHANGES."""
+    delta, _ = overlap(P, phase, x, y)
+    acc, fn, gamma, ft, vc, kt, gt, cap, kn = forces(P, T, mode, delta, y)
+    if T[T_RS] != 0.0:
+        y[YWB] = 0.0
+        T[T_RS] = 0.0
+        _, need, cap = rolled(T, fn, ft, delta, y)
+        if abs(need) > cap:
+            T[T_RS] = -1.0 if need > 0.0 else 1.0
+    else:
+        _, need, cap = rolled(T, fn, ft, delta, y)
+        T[T_RS] = -1.0 if need > 0.0 else 1.0
+    count[1] += 1
+    return count[1] <= CHANGES
+
+
+@jit
+def first_roll(P, T, v_in, dmax, mode, y):
+    """Rolling resistance's mode at touching: rolling the spin's way, or with no spin held if its
+    cap holds the torque a little way in (both vanish at touching), else rolling the torque's way."""
+    if T[T_ROLL] == 0.0:
+        return
+    if y[YWB] != 0.0:
+        T[T_RS] = 1.0 if y[YWB] > 0.0 else -1.0
+        return
+    T[T_RS] = 0.0
+    d = 1e-8 * dmax
+    vc = y[YVT] + (T[T_R] - T[T_LEVER] * d) * y[YWB]
+    y[YXI] = vc * d / v_in if mode == STICK else 0.0
+    acc, fn, gamma, ft, vc, kt, gt, cap, kn = forces(P, T, mode, d, y)
+    y[YXI] = 0.0
+    _, need, cap = rolled(T, fn, ft, d, y)
+    if abs(need) > cap:
+        T[T_RS] = -1.0 if need > 0.0 else 1.0
+
+
+@jit
 def land(P, T, phase, mode, x, y, h, which, g0, g1, e, ws, floors):
     """The step's length from (x, y) that puts the watched function (g0 at 0, g1 at h) at zero, by
     secant (Illinois) steps, its end state in e. Returns (length, ok)."""
@@ -282,7 +356,7 @@ def land(P, T, phase, mode, x, y, h, which, g0, g1, e, ws, floors):
             break
         lo, hi, glo, ghi, side = illinois(lo, hi, glo, ghi, side, m, g)
     # the mode's side of the root: a switch landed just past it would start the next mode early
-    if which == 0 and watched(P, T, phase, mode, x + m, e, 0) < 0.0 and lo > 0.0:
+    if (which == 0 or which == 3) and watched(P, T, phase, mode, x + m, e, which) < 0.0 and lo > 0.0:
         m = lo
         if not gl_step(P, T, phase, mode, x, y, m, e, ws, floors):
             return m, False
@@ -320,19 +394,34 @@ def advance(P, T, phase, mode, x, end, y, ws, floors, trail, count):
                     return x, mode, 1
                 kink = True
         g1 = watched(P, T, phase, mode, x + h, e, 0)
-        switched = False
-        if g1 < 0.0:
+        r1 = watched(P, T, phase, mode, x + h, e, 3) if T[T_ROLL] > 0.0 else 1.0
+        switched, rolls = False, False
+        if g1 < 0.0 or r1 < 0.0:
             g0 = watched(P, T, phase, mode, x, y, 0)
-            if g0 <= 0.0:  # the mode does not hold from here (at touch, or just switched): the other
+            r0 = watched(P, T, phase, mode, x, y, 3) if T[T_ROLL] > 0.0 else 1.0
+            if g1 < 0.0 and g0 <= 0.0:  # the mode does not hold from here (at touch, or just switched): the other
                 mode, ok = changed(P, T, phase, mode, x, y, count, True)
                 if not ok:
                     return x, mode, 4
                 at_kink = False
                 continue
-            h, ok = land(P, T, phase, mode, x, y, h, 0, g0, g1, e, ws, floors)
-            if not ok:
-                return x, mode, 1
-            switched, kink = True, False
+            if r1 < 0.0 and r0 <= 0.0:  # so for rolling resistance's
+                if not roll_switch(P, T, phase, mode, x, y, count):
+                    return x, mode, 4
+                at_kink = False
+                continue
+            if g1 < 0.0:
+                h, ok = land(P, T, phase, mode, x, y, h, 0, g0, g1, e, ws, floors)
+                if not ok:
+                    return x, mode, 1
+                switched, kink = True, False
+                if T[T_ROLL] > 0.0:
+                    r1 = watched(P, T, phase, mode, x + h, e, 3)
+            if r1 < 0.0:  # rolling resistance's switch, first of the two
+                h, ok = land(P, T, phase, mode, x, y, h, 3, r0, r1, e, ws, floors)
+                if not ok:
+                    return x, mode, 1
+                switched, rolls, kink = False, True, False
         stopped = False
         t1 = x + h if phase == TIME else e[Y0]
         if t1 > P[P_STOP]:
@@ -350,6 +439,9 @@ def advance(P, T, phase, mode, x, end, y, ws, floors, trail, count):
         if switched:
             mode, ok = changed(P, T, phase, mode, x, y, count, False)
             if not ok:
+                return x, mode, 4
+        elif rolls:
+            if not roll_switch(P, T, phase, mode, x, y, count):
                 return x, mode, 4
         elif not kink:
             return end, mode, 0
@@ -380,7 +472,11 @@ def sigma_steps(P, T, mode, x, end, n, y, ws, floors, trail, count, v_in):
     1 failed, 2 stopped, 3 turned, 4 chattering."""
     h = (end - x) / n
     start = x
+    save = np.empty(NY)
     for s in range(n):
+        for c in range(NY):
+            save[c] = y[c]
+        x0, mode0, sign, rolling, kept = x, mode, T[T_S], T[T_RS], len(trail)
         x, mode, how = advance(P, T, SIGMA, mode, x, end if s == n - 1 else start + (s + 1) * h, y, ws, floors,
                                trail, count)
         if how == 4:
@@ -388,7 +484,13 @@ def sigma_steps(P, T, mode, x, end, n, y, ws, floors, trail, count, v_in):
         if how == 1 or (h > 0.0 and not y[YU] > 0.25 * v_in):
             return x, mode, 1
         if h < 0.0 and not y[YU] < 0.0:
-            return x, mode, 3
+            # turned: back to the state before this step (its steps over sigma pass 1/u = inf)
+            for c in range(NY):
+                y[c] = save[c]
+            T[T_S], T[T_RS] = sign, rolling
+            while len(trail) > kept:
+                trail.pop()
+            return x0, mode0, 3
         if how == 2:
             return x, mode, 2
     return x, mode, 0
@@ -404,14 +506,14 @@ def middle(P, T, mode, t, delta1, h, limit, y, ws, floors, trail, count):
     while count[0] < limit:
         for c in range(NY):
             save[c] = y[c]
-        sign, kept = T[T_S], len(trail)
+        sign, rolling, kept = T[T_S], T[T_RS], len(trail)
         x, after, how = advance(P, T, TIME, mode, t, t + h, y, ws, floors, trail, count)
         if how == 4:
             return t, mode, 4
         if how == 1 or (y[YU] < 0.0 and y[Y0] < 0.5 * delta1):
             for c in range(NY):  # too long a step for this part of the contact
                 y[c] = save[c]
-            T[T_S] = sign
+            T[T_S], T[T_RS] = sign, rolling
             while len(trail) > kept:
                 trail.pop()
             h *= 0.5
@@ -455,6 +557,7 @@ def rub(P, T, v_in, n_end, n_mid, limit, out, trail, y):
         for c in range(NY):
             y[c] = y0[c]
         mode = first_mode(P, T, v_in, dmax, y)
+        first_roll(P, T, v_in, dmax, mode, y)
         y[Y0], y[YU] = 0.0, v_in
         delta1 = frac * dmax
         x, mode, how = sigma_steps(P, T, mode, 0.0, delta1 ** (1.0 / P[7]), n_end, y, ws, floors, trail, count,
@@ -464,17 +567,22 @@ def rub(P, T, v_in, n_end, n_mid, limit, out, trail, y):
         frac *= 0.5
         count[1] = 0
     t, d = y[Y0], x ** P[7]
-    if how == 0:
+    while how == 0:
         y[Y0] = d
         t, mode, how = middle(P, T, mode, t, delta1, span / n_mid, limit, y, ws, floors, trail, count)
         d = y[Y0]
-        if how == 0:
-            y[Y0] = t
-            x, mode, how = sigma_steps(P, T, mode, d ** (1.0 / P[7]), 0.0, n_end, y, ws, floors, trail, count,
-                                       v_in)
-            t, d = y[Y0], x ** P[7]
-    elif how == 2:
-        d = x ** P[7]
+        if how != 0:
+            break
+        y[Y0] = t
+        x, mode, how = sigma_steps(P, T, mode, d ** (1.0 / P[7]), 0.0, n_end, y, ws, floors, trail, count,
+                                   v_in)
+        t, d = y[Y0], x ** P[7]
+        if how == 0:  # separated
+            break
+        if how == 3:
+            # Held on the wall (or the separation too slow for sigma's steps): over time again, back
+            # to the end's sigma only if it goes on well below here (as `impact.contact`).
+            delta1, how = 0.25 * d, 0
     out[O_VOUT], out[O_TIME], out[O_WORK], out[O_STEPS] = -y[YU], t, y[YWN] + y[YWT], count[0]
     out[O_DELTA], out[O_U] = d, y[YU]
     out[O_END] = (ENDED, FAILED, STOPPED, HELD, CHATTER)[how]

@@ -202,7 +202,7 @@ def rub_pair(G, P, TW, n, t, ends, steps_left, out, rubbed, grav, fl, bufs, CNT)
         return KN, RC, PAIR_PLANE
     m0, m1, i0, i1 = G[0, G_M], G[1, G_M], G[0, G_I], G[1, G_I]
     mstar = m0 * m1 / (m0 + m1)
-    T = np.array([TW[0, 0], TW[0, 1], TW[0, 2], mstar, i1, r1, 0.0, 1.0, 0.5, i0, r0, r0 + r1, 0.0])
+    T = np.array([TW[0, 0], TW[0, 1], TW[0, 2], mstar, i1, r1, 0.0, 1.0, 0.5, i0, r0, r0 + r1, 0.0, 0.0, 0.0])
     y = np.zeros(NY)
     y[YVT] = rel[0] * e[0] + rel[1] * e[1] + rel[2] * e[2]
     y[YWB] = G[1, G_W] * b[0] + G[1, G_W + 1] * b[1] + G[1, G_W + 2] * b[2]

@@ -28,7 +28,7 @@ INERTIA = 0.4 * MASS * R * R
 def _scene(case: dict, tol: float) -> dict:
     theta, spin, ratio, mu, model, e = (case[k] for k in ("theta", "spin", "ratio", "mu", "model", "e"))
     contact = {"model": model, "restitution": e, "tangential": "spring", "mu": mu,
-               "tangential_stiffness_ratio": ratio}
+               "tangential_stiffness_ratio": ratio, "rolling_friction": case.get("mu_r", 0.0)}
     if model == "linear":
         contact["k"] = 1e7
     return {"name": "oblique", "dim": 2, "tol": tol, "duration": 1e-3, "contact": contact,
@@ -107,8 +107,12 @@ def reference(case: dict, hold: float = 1e-7) -> tuple[float, float]:
     centre's velocity along the wall and the spin, in stick or slip; each switch (the spring's
     force reaching mu F_n; slip stopping) located by scipy's events and the integration restarted
     there; a hold (`after_event`) until the point moves along the force at hold of the speed.
-    Returns (velocity along the wall, spin times R) after it."""
+    With rolling resistance (case["mu_r"]) the spin rolls (the torque mu_r R max(F_n, 0) against
+    its sign) or is held (locked, while the torque holding it, -(R - delta) F, is within that cap),
+    each switch an event too. Returns (velocity along the wall, spin times R) after it."""
     hertz = case["model"] == "hertz"
+    mu_r = case.get("mu_r", 0.0)
+    roll = [0.0]  # the spin's sign while rolling, 0 held
     estar = E / (1.0 - NU * NU)
     zeta = float(damping_ratio(np.array(case["e"]), hertz))
     mu, ratio = case["mu"], case["ratio"]
@@ -133,7 +137,15 @@ def reference(case: dict, hold: float = 1e-7) -> tuple[float, float]:
 
     def rhs(_, y, mode, s):
         fn, kn, kt, gt, cap, slip, f = parts(y, mode, s)
-        return [y[1], -fn / MASS, slip if mode == "stick" else 0.0, f / MASS, (R - y[0]) * f / INERTIA]
+        torque = (R - y[0]) * f - roll[0] * mu_r * R * max(fn, 0.0)
+        return [y[1], -fn / MASS, slip if mode == "stick" else 0.0, f / MASS,
+                torque / INERTIA if roll[0] != 0.0 or mu_r == 0.0 else 0.0]
+
+    def turns(_, y, mode, s):
+        if mu_r == 0.0:
+            return 1.0
+        fn, kn, kt, gt, cap, slip, f = parts(y, mode, s)
+        return roll[0] * y[4] if roll[0] != 0.0 else mu_r * R * max(fn, 0.0) - abs((R - y[0]) * f)
 
     def leaves(_, y, mode, s):
         fn, kn, kt, gt, cap, slip, f = parts(y, mode, s)
@@ -149,7 +161,7 @@ def reference(case: dict, hold: float = 1e-7) -> tuple[float, float]:
     def apart(_, y, mode, s):
         return y[0] if y[1] < 0 else 1.0
 
-    for ev in (leaves, apart):
+    for ev in (leaves, apart, turns):
         ev.terminal, ev.direction = True, -1
     theta = case["theta"]
     v0, w0 = SPEED * math.sin(theta), case["spin"]
@@ -161,14 +173,28 @@ def reference(case: dict, hold: float = 1e-7) -> tuple[float, float]:
     mode = "stick" if abs(kt * slip0 * d / u0 + gt * slip0) <= cap else "slip"
     s = -math.copysign(1.0, slip0)
     y, t = [0.0, u0, 0.0, v0, w0], 0.0
+    roll[0] = math.copysign(1.0, w0)
+    fresh = False  # rolling from a hold: the spin leaves zero at a rate that starts from zero
+    # (a held spin is 0: its error absolute, at 1e-14 of the speed over R, or the steps collapse)
+    atol = [1e-30, 1e-30, 1e-30, 1e-30, 1e-14 * SPEED / R] if mu_r > 0.0 else 1e-30
     for _ in range(20000):
-        sol = solve_ivp(rhs, (t, t + 1.0), y, method="DOP853", rtol=1e-12, atol=1e-30, args=(mode, s),
-                        events=(leaves, apart), max_step=1e-6)
+        # (a spin just let go leaves zero as t^2: its zero at the start is not looked for again
+        # over the first 1e-10 s, 1e-6 of the contact)
+        sol = solve_ivp(rhs, (t, t + (1e-10 if fresh else 1.0)), y, method="DOP853", rtol=1e-12, atol=atol,
+                        args=(mode, s), events=(leaves, apart) if fresh else (leaves, apart, turns), max_step=1e-6)
+        fresh = False
         t, y = sol.t[-1], list(sol.y[:, -1])
         if sol.status == 1 and len(sol.t_events[1]):
             return y[3], y[4] * R
         fn, kn, kt, gt, cap, slip, f = parts(y, mode, s)
-        if len(sol.t_events[0]):
+        if sol.status == 1 and len(sol.t_events) > 2 and len(sol.t_events[2]):
+            need = -(R - y[0]) * f
+            if roll[0] != 0.0:  # the spin reached zero: held where the cap holds it
+                y[4] = 0.0
+                roll[0] = 0.0 if abs(need) <= mu_r * R * max(fn, 0.0) else (-1.0 if need > 0.0 else 1.0)
+            else:  # the torque holding it reached the cap: rolling the way the rest turns it
+                roll[0], fresh = (-1.0 if need > 0.0 else 1.0), True
+        elif sol.status == 1 and len(sol.t_events[0]):
             mode, s, y[2] = after_event(mode, s, (slip, f, cap, kt, gt), leaves, rhs, t, np.array(y), 2)
         t += 1e-15 * max(t, 1e-9)  # past the located switch
     raise AssertionError("the reference contact did not end")
@@ -222,7 +248,7 @@ def switched(mode: str, s: float, slip: float, f: float, cap: float, kt: float, 
     return mode, s if mode == "stick" or s * slip < 0.0 else math.copysign(1.0, held), stretch
 
 
-@pytest.mark.parametrize("case", _cases(6, seed=7))
+@pytest.mark.parametrize("case", _cases(6, seed=7) + [dict(c, mu_r=0.1) for c in _cases(6, seed=7)])
 def test_oblique_impacts_match_dop853(case):
     """A handful of cases (both laws, damped and not, sticking and sliding) against DOP853:
     velocity along the wall and spin times R within 1e-8 of the speed at tol 1e-10."""
@@ -279,3 +305,59 @@ def test_a_slip_off_one_line_goes_to_dem_with_its_cause():
     assert run.result.engine == "dem" and "not along one line" in run.result.engine_reason
     with pytest.raises(RunError, match="not along one line"):
         run_scene(parse_scene({**copy.deepcopy(raw), "integrator": "kahan6"}), record=False)
+
+
+def _roll_on(P, T, y, stop, steps_per_period):
+    """`oblique.middle` from the state y (over time, delta in Y0) to the stop, as `rub` steps a
+    contact that gravity holds: the trail of `keep`'s rows."""
+    from numba.typed import List
+
+    from collide.engine.event import impact as im
+    from collide.engine.event import oblique as ob
+
+    P = P.copy()
+    P[im.P_STOP] = stop
+    P[im.P_SPEED] = 1e-17
+    ws = np.zeros((9, ob.NY))
+    floors = np.full(ob.NY, 1e-300)
+    trail = List([(0.0,) * 13])
+    trail.pop()
+    count = np.zeros(2, np.int64)
+    period = 2.0 * math.pi / math.sqrt(P[1] / P[4])
+    t, mode, how = ob.middle(P, T, ob.STICK, 0.0, 0.0, period / steps_per_period, 10**7, y, ws, floors, trail,
+                             count)
+    assert how == 2 and t == stop
+    return np.array(list(trail))
+
+
+def test_a_ball_rolling_under_rolling_resistance_stops_where_the_closed_form_says_and_stays_held():
+    """A solid ball rolling without slip on a floor (linear spring at its rest overlap, so F_n = m g;
+    the tangential spring stretched to the steady force) under rolling resistance mu_r r F_n
+    decelerates at a = mu_r r l m g / (I + m l^2) (l = r - delta the lever: 5/7 mu_r g for l = r)
+    and stops at v0 / a after v0^2 / (2 a); then held: the spin locked at 0 (the torque that holds
+    it, at most 5/7 of the cap). Both to 1e-9 relative: the motion is polynomial in time between
+    the two located events, so the steps are exact to round-off (of 1e4 steps: 1e-12 a step)."""
+    from collide.engine.event import impact as im
+    from collide.engine.event import oblique as ob
+
+    m, r, k, g, mu, mu_r, v0 = 0.1, 0.03, 1e6, 9.81, 0.5, 0.05, 0.5
+    inertia = 0.4 * m * r * r
+    P = im.impact_params(hertz=False, mstar=m, k=k, accel=g)
+    deq = m * g / k
+    lever = r - deq
+    a = mu_r * r * lever * m * g / (inertia + m * lever**2)
+    ratio = 2.0 / 7.0
+    T = np.array([mu, ratio, math.sqrt(ratio), m, inertia, r, 0.0, 1.0, 1.0, math.inf, 0.0, 0.0, 0.0, mu_r, -1.0])
+    y = np.zeros(ob.NY)
+    y[ob.Y0], y[ob.YVT], y[ob.YWB] = deq, v0, -v0 / lever
+    y[ob.YXI] = m * a / (ratio * k)  # the spring's force -k_t xi = m v' = -m a
+    t_stop = v0 / a
+    rows = _roll_on(P, T, y, 1.5 * t_stop, 8)
+    spin = rows[:, 7]
+    held = np.flatnonzero(spin == 0.0)
+    assert held.size and (spin[held[0]:] == 0.0).all(), "held from the spin's zero on"
+    assert rows[held[0], 0] == pytest.approx(t_stop, rel=1e-9)
+    assert rows[held[0], 4] == pytest.approx(v0**2 / (2 * a), rel=1e-9)
+    assert a == pytest.approx(5.0 / 7.0 * mu_r * g, rel=1e-4)  # (l = r less 3e-4)
+    # Held: the tangential spring's release moves the centre by at most its stretch's share.
+    assert np.abs(rows[held[0]:, 5]).max() <= 1.01 * a / math.sqrt(ratio * k / m)
