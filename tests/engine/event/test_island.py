@@ -36,11 +36,11 @@ def test_an_asymmetric_break_meets_its_tolerance_with_short_trials_as_yoshida_st
 # `dashpots`, stepped with the friction in substep.py): the DEM kernel's law, unclipped, so each
 # separated head-on contact gives the restitution e exactly.
 
-def _chain_scene(seed: int, tol: float, n: int = 3) -> tuple[dict, tuple, float]:
+def _chain_scene(seed: int, tol: float, n: int = 3, lowest_e: float = 0.01) -> tuple[dict, tuple, float]:
     """n spheres on a line, random masses, radii and e, the first coming in: (scene, (masses,
     radii, positions, velocities), e). Gaps of many contact times: separate collisions."""
     rng = np.random.default_rng(seed)
-    e = float(rng.uniform(0.01, 0.95))  # heavily damped chains too: contacts that overlap in time
+    e = float(rng.uniform(lowest_e, 0.95))  # heavily damped chains too: contacts that overlap in time
     m = rng.uniform(0.1, 1.0, n)
     r = rng.uniform(0.01, 0.03, n)
     v = np.zeros(n)
@@ -188,7 +188,9 @@ def test_the_measured_error_of_damped_frictional_islands_holds_against_a_hundred
 def test_the_dem_kernel_converges_at_first_order_towards_the_islands_answer():
     from collide.scene import parse_scene
 
-    raw, _, _ = _chain_scene(3, 1e-10, n=3)
+    # Moderately damped (e = 0.54): at these steps a heavily damped chain's DEM error is not yet
+    # in its first-order range.
+    raw, _, _ = _chain_scene(3, 1e-10, n=3, lowest_e=0.5)
     ref = run_scene(parse_scene(raw), record=False, measure=False).result.final.v[0].ravel()
     dem = []
     for dt in (4e-6, 2e-6, 1e-6):
