@@ -41,6 +41,12 @@ def view(
       collide view my_scene.toml --scenes-dir scenes/
     """
     if source.lower().endswith(".rrd") and Path(source).is_file():
+        from collide.recording.spec import check_rrd_header
+
+        try:
+            check_rrd_header(Path(source))  # a file that is no recording at all: one line, no banner
+        except RecordingError as exc:
+            raise UserError(str(exc)) from None
         # The reader process starts now and imports Rerun while this one imports the viewer.
         from collide.recording.sandbox import warm_reader
 

@@ -39,6 +39,22 @@ def _fail(path: Path, reason: str) -> RecordingError:
     return RecordingError(f"{path}: {reason}")
 
 
+# Rerun's file header: "RRF" and the format's digit (its FourCC).
+RRD_MAGIC = b"RRF"
+
+
+def check_rrd_header(path: Path) -> None:
+    """Refuse at once a file that does not begin as a Rerun recording, before a viewer says it
+    serves it; the reader process checks the rest as it reads."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+    except OSError as exc:
+        raise _fail(path, f"cannot be read: {exc.strerror or exc}") from None
+    if not (head.startswith(RRD_MAGIC) and head[3:4].isdigit()):
+        raise _fail(path, "not a Rerun recording (.rrd): it does not begin with Rerun's header")
+
+
 DISSIPATION_PARTS = ("damping", "friction", "rolling")  # RunResult.dissipation's columns
 _TABLES = (("knots", "/collide/knots", int(layout.NK)), ("records", "/collide/contact_records", int(layout.NR)),
            ("intervals", "/collide/contact_intervals", 4))
