@@ -66,11 +66,17 @@ def view(
         raise UserError(f"--host {host}: {exc}") from None
     app = ViewerApp(source, host=host, port=port, recordings_dir=recordings, scenes_dir=scenes_dir)
     # A recording is read in a child process (a damaged file can make Rerun's reader abort the
-    # process that reads it) while the server starts: the page shows it as it comes, and a file
-    # that cannot be read is one line and exit code 2 (the server stops). A bad scene is one
-    # line before serving.
+    # process that reads it) while the server starts: the page shows it as it comes. A file that
+    # cannot be read is one line and exit code 2 (refused later, the server stops). A bad scene is
+    # one line before serving.
     app.begin_reading()
     app.prepare()
+    if app.opening is not None:
+        # Serve once the page has the recording's start to show (its seal checked), so that a file
+        # refused by then is its one line, with no banner before it.
+        app.opening.wait_begun()
+        if app.opening.error is not None:
+            raise UserError(app.opening.error)
     try:
         app.start()
     except OSError as exc:

@@ -48,6 +48,7 @@ class OpeningRecording:
         self.scene: Scene | None = None
         self.view: Any = None  # a ViewRun once prepared
         self.error: str | None = None
+        self.begun = threading.Event()  # the scene, the run or the error: something to show
         self.done = threading.Event()
         self._lock = threading.Lock()
         self._followers: list[Callable[[OpeningRecording], None]] = []
@@ -79,6 +80,7 @@ class OpeningRecording:
             for key, value in change.items():
                 setattr(self, key, value)
             followers = list(self._followers)
+        self.begun.set()
         for callback in followers:
             callback(self)
 
@@ -87,6 +89,10 @@ class OpeningRecording:
         with self._lock:
             self._followers.append(callback)
         callback(self)
+
+    def wait_begun(self, timeout: float | None = None) -> bool:
+        """Wait until the recording's start can be shown, or it is refused; True if so."""
+        return self.begun.wait(timeout)
 
     def wait(self, timeout: float | None = None) -> bool:
         """Wait until the recording is read or refused; True if done."""
