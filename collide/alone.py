@@ -71,11 +71,14 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
         return EVENT, (f"{dem_reason(scene)} with the linear spring: {what}{sprung} in the islands' steps of order "
                        f"{_order(integrator)} ({integrator}), every contact, its end and each friction mode change "
                        "located")
-    if scene.needs_dem and len(scene.bodies) == 2 and scene.has_friction:
+    if scene.needs_dem and len(scene.bodies) == 2 and (scene.has_friction or scene.has_rolling):
+        rubs = ", friction's stick and slip located, the tangential spring" if scene.has_friction else ""
+        if scene.has_rolling:
+            rubs += (", rolling resistance (its cap mu_r R* F_n against the relative spin, or that spin held within "
+                     "it) with each change between rolling and held located")
         return EVENT, (f"{dem_reason(scene)} with two spheres and no walls: their contact in the relative coordinate "
                        "(reduced mass, the line of centres turning, each sphere's spin) at order 6 (Gauss-Legendre), "
-                       "its start and end and friction's stick and slip located, the tangential spring, flights in "
-                       "closed form")
+                       f"its start and end located{rubs}, flights in closed form")
     if scene.needs_dem and len(scene.bodies) == 2:
         return EVENT, (f"{dem_reason(scene)} with two spheres and no walls, no friction: their contact in the "
                        "relative coordinate (reduced mass and radius, head-on) at order 8 (DOP853's Runge-Kutta), its "
@@ -145,12 +148,13 @@ def rub_rows(model: Model, b: int = 0) -> np.ndarray:
 
 
 def pair_rub_row(model: Model, b: int = 0) -> np.ndarray:
-    """The two spheres' tangential spring as `pair.pair_run` takes it (1, 3), from the pair table
-    as `rub_rows` from the wall table."""
-    row = np.zeros((1, 3))
-    if model.tangential_spring and model.spin_dim:
+    """The two spheres' tangential spring and rolling resistance as `pair.pair_run` takes them
+    (1, 4), from the pair table as `rub_rows` from the wall table."""
+    row = np.zeros((1, 4))
+    if model.spin_dim:
         tab = model.pair_table[b, int(model.material[b, 0]), int(model.material[b, 1])]
-        row[0] = tab[TABLE_MU], tab[TABLE_KTR], math.sqrt(tab[TABLE_KTR])
+        row[0] = tab[TABLE_MU] if model.tangential_spring else 0.0, tab[TABLE_KTR], math.sqrt(tab[TABLE_KTR]), \
+            tab[TABLE_ROLL]
     row.setflags(write=False)
     return row
 
@@ -266,16 +270,14 @@ def _check(model: Model, st: np.ndarray, fg: np.ndarray, t: float, open_ended: b
         pair.PAIR_OBLIQUE: "the spheres touch at {at} not head-on (moving across the line of their centres): the "
                            "line turns during the contact, which is DEM's so far",
         pair.PAIR_FAILED: "the spheres' contact at {at} could not be integrated (its steps did not converge)",
-        pair.PAIR_HELD: "the spheres' contact at {at} does not separate: such a contact with a tangential spring is "
-                        "DEM's so far",
+        pair.PAIR_TWIST: "the spheres touch at {at} spinning against each other about the line of their centres: "
+                         "rolling resistance against a twist and a roll at once is DEM's so far",
         pair.PAIR_CHATTER: "the spheres' contact at {at} alternates between stick and slip without end (beyond "
                            "the sliding and the saw of the spring's law that the event engine takes)",
         pair.PAIR_PLANE: "the spheres' slip at {at} is not along one line (their motion not in one plane): such a "
                          "contact is DEM's so far",
         alone.ALONE_WALLS: "the sphere's contact with wall {wall} at {at} comes within reach of another wall: "
                            "two contacts at once under these laws are DEM's so far",
-        alone.ALONE_HELD: "the sphere's contact with wall {wall} at {at} does not separate (held on the wall, "
-                          "rolling or resting): such a contact with a tangential spring is DEM's so far",
         alone.ALONE_CHATTER: "the sphere's contact with wall {wall} at {at} alternates between stick and slip "
                              "without end (beyond the sliding and the saw of the spring's law that the event engine "
                              "takes)",

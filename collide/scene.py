@@ -760,12 +760,13 @@ def alone_blocker(scene: Scene) -> str | None:
     """Why the event engine cannot run a scene whose law goes beyond the report's (None: it can,
     as a sphere alone among walls or two spheres and no walls)."""
     c = scene.contact
-    if scene.has_rolling and len(scene.bodies) != 1:
-        return ("rolling resistance between spheres is DEM's so far: the event engine takes it for a sphere alone "
-                "among walls")
+    if scene.has_rolling and (len(scene.bodies) > 2 or len(scene.bodies) == 2 and scene.walls):
+        return ("rolling resistance among more than two spheres, or between two with walls, is DEM's so far: the "
+                "event engine takes it for a sphere alone among walls and for two spheres and no walls")
     if scene.has_rolling and scene.has_friction and c.tangential != "spring":
         return ("rolling resistance with Coulomb friction's dead band is DEM's so far: with tangential = 'spring' "
-                "(Coulomb's cap on a history spring) the event engine takes a sphere alone among walls at full order")
+                "(Coulomb's cap on a history spring) the event engine takes a sphere alone among walls, or two "
+                "spheres and no walls, at full order")
     if len(scene.bodies) == 2 and scene.walls:
         return ("two spheres with walls: the event engine takes a sphere alone among walls, or two spheres and no "
                 "walls, whole; more run in its islands where they can")

@@ -35,7 +35,7 @@ from collide.engine.event.impact import (
     contact,
     law,
 )
-from collide.engine.event.oblique import CHATTER, HELD, NY, YVT, YWB, frame, rub
+from collide.engine.event.oblique import CHATTER, NY, YVT, YWB, frame, rub
 from collide.engine.flight import bring, touch_time, turn
 from collide.engine.jit import jit, jit_call
 from collide.engine.layout import (
@@ -90,10 +90,10 @@ from collide.engine.layout import (
 from collide.engine.numerics import grow
 from collide.engine.records import put_knot, tail_after
 
-# S_STATUS: a second wall within a contact; a contact not answered; a rubbing contact held on its
-# wall (not separating); a rubbing contact's tangential motion not in one line; its stick and slip
-# alternating without end (`oblique`); spin about the wall's normal under rolling resistance
-ALONE_WALLS, ALONE_FAILED, ALONE_HELD, ALONE_PLANE, ALONE_CHATTER, ALONE_TWIST = 16, 17, 18, 19, 20, 21
+# S_STATUS: a second wall within a contact; a contact not answered; spin about the wall's normal
+# under rolling resistance; a rubbing contact's tangential motion not in one line; its stick and
+# slip alternating without end (`oblique`)
+ALONE_WALLS, ALONE_FAILED, ALONE_TWIST, ALONE_PLANE, ALONE_CHATTER = 16, 17, 18, 19, 20
 NO_BOX = np.zeros(4)
 
 
@@ -281,8 +281,7 @@ def take_rubbing(G, WP, LAW, TW, grav, fl, w, t, t_end, ends, steps_left, out, t
     rub(P, T, v_in, math.ceil(ends[2] * grow), math.ceil(ends[3] * grow), steps_left - steps, out, rubbed, y)
     out[O_DMAX], out[O_FMAX], out[O_STEPS] = dmax, fmax, out[O_STEPS] + steps
     if out[O_END] != ENDED and out[O_END] != STOPPED:
-        return t, False, True, KN, RC, (ALONE_HELD if out[O_END] == HELD else
-                                        ALONE_CHATTER if out[O_END] == CHATTER else ALONE_FAILED)
+        return t, False, True, KN, RC, ALONE_CHATTER if out[O_END] == CHATTER else ALONE_FAILED
     X = np.empty((1, G.shape[1]))
     acc = np.empty(3)
     clear = True

@@ -52,15 +52,19 @@ stretch, along the turning tangent, turns with it as the DEM kernel's projection
 
 The tangential motion must stay in one line of the wall (the contact point's slip, the centre's
 velocity along the wall and gravity's part along it parallel, no spin about that line): always so
-in a 2D scene. In 3D a contact that is not such is DEM's so far (`PLANE`). A contact that does
+in a 2D scene. In 3D a contact that is not such is DEM's so far (`frame`). A contact that does
 not separate (a ball held on the wall, rolling) goes on over time, as `impact.contact`'s does.
 
 Rolling resistance (T_ROLL = mu_r) is a second mode beside stick and slip, the DEM kernel's
 law (`collide.engine.dem.rolling`: `rolling_cap`, `rolling_torque`) at the vanishing step:
-rolling, the torque mu_r R* max(F_n, 0) against the spin's sign (T_RS); held (T_RS = 0), the
-spin locked, the torque that holds it -(r - delta) F within that cap. The spin reaching zero
-(then held where the cap holds it, else rolling on the other way) and the held torque reaching
-the cap are events, landed as the others.
+rolling, the torque mu_r R* max(F_n, 0) against the relative spin's sign (T_RS); held (T_RS =
+0), the relative spin locked, the torque that holds it within that cap. At a wall the spin is the
+sphere's, R* its radius and the holding torque -(r - delta) F; between two spheres (`pair`) it is
+their spins' difference (the DEM kernel's w_i - w_j, the torque on one and its reverse on the
+other), R* their reduced radius, and held, both spins turn together at (a_1 + a_2) F / (I_1 + I_2)
+(a_k the levers), which the torque I_1 that - a_1 F holds. The relative spin reaching zero (then
+held where the cap holds it, else rolling on the other way) and the held torque reaching the cap
+are events, landed as the others.
 """
 
 from __future__ import annotations
@@ -69,6 +73,7 @@ import math
 
 import numpy as np
 
+from collide.engine.dem.geometry import reduced
 from collide.engine.dem.normal import normal_elastic
 from collide.engine.dem.rolling import rolling_cap, rolling_torque
 from collide.engine.dem.tangential import friction_cap, slip_stretch, spring_coefficients, spring_trial
@@ -116,8 +121,7 @@ STICK, SLIP, HOLD = 0, 1, 2
 # the tolerance start the saw at different phases: module docstring)
 HOLD_SPEED = 1e3
 SWITCHES = 1000  # mode changes inside one step before the step counts as failed
-HELD, PLANE, CHATTER = 3.0, 4.0, 5.0  # O_END beyond impact's: a contact that does not separate; not in
-# one line; modes alternating beyond CHANGES (module docstring)
+CHATTER = 5.0  # O_END beyond impact's: modes alternating beyond CHANGES (module docstring)
 CHANGES = 64  # stick-slip changes in one contact beyond which it counts as CHATTER
 # Gauss-Legendre, three stages (order 6): nodes _C, matrix _A, weights _B.
 _R15 = math.sqrt(15.0)
@@ -164,18 +168,22 @@ def forces(P, T, mode, delta, y):
 
 @jit
 def rolled(T, fn, ft, delta, y):
-    """(rolling resistance's torque about b, the torque that would hold the spin, its cap): the
-    cap against the spin while rolling (`rolling_torque` at the vanishing step's limit); held,
-    NaN for the first (the spin locked, whatever torque holds it)."""
+    """(rolling resistance's torque about b on the sphere (the other's its reverse), the torque
+    that would hold the relative spin, its cap, the rate of both spins while held): the cap
+    against the relative spin while rolling (`rolling_torque` at the vanishing step's limit);
+    held, the holding torque itself (the relative spin locked). A wall's R* is the sphere's
+    radius and its spin none; two spheres' R* is their reduced radius (the DEM kernel's)."""
     if T[T_ROLL] == 0.0:
-        return 0.0, 0.0, 0.0
-    cap = rolling_cap(T[T_ROLL], T[T_R], fn)
-    need = -(T[T_R] - T[T_LEVER] * delta) * ft
+        return 0.0, 0.0, 0.0, 0.0
+    a1, a2 = T[T_R] - T[T_LEVER] * delta, T[T_R2] - T[T_LEVER] * delta
+    cap = rolling_cap(T[T_ROLL], T[T_R] if T[T_D] == 0.0 else reduced(T[T_R], T[T_R2]), fn)
+    common = (a1 + a2) * ft / (T[T_I] + T[T_I2])  # held: both spins' rate (a wall's inertia inf: none)
+    need = T[T_I] * common - a1 * ft
     if T[T_RS] == 0.0:
-        return math.nan, need, cap
+        return need, need, cap, common
     # against the mode's sign: a trial stage past the spin's zero keeps the mode's torque (so the
     # step stays smooth and the zero is found as an event)
-    return rolling_torque(cap, math.inf, T[T_RS], 0.0, 0.0)[0], need, cap
+    return rolling_torque(cap, math.inf, T[T_RS], 0.0, 0.0)[0], need, cap, common
 
 
 @jit
@@ -191,12 +199,13 @@ def rhs(P, T, phase, mode, x, y, f):
     f[YWN] = gamma * u * u * scale
     f[YXI] = vc * scale if mode == STICK else 0.0
     f[YVT] = (ft / T[T_M] + T[T_G] + u * turning) * scale
-    tr = rolled(T, fn, ft, delta, y)[0]
-    f[YWB] = 0.0 if tr != tr else ((T[T_R] - T[T_LEVER] * delta) * ft + tr) / T[T_I] * scale
-    f[YWT] = (-ft * vc - (0.0 if tr != tr else tr * y[YWB])) * scale
+    tr, _, _, common = rolled(T, fn, ft, delta, y)
+    held = T[T_ROLL] > 0.0 and T[T_RS] == 0.0
+    f[YWB] = (common if held else ((T[T_R] - T[T_LEVER] * delta) * ft + tr) / T[T_I]) * scale
+    f[YWT] = (-ft * vc - (0.0 if held else tr * (y[YWB] - y[YW2]))) * scale
     f[YP] = (turning if T[T_D] > 0.0 else y[YVT]) * scale
     f[YTH] = y[YWB] * scale
-    f[YW2] = (T[T_R2] - T[T_LEVER] * delta) * ft / T[T_I2] * scale
+    f[YW2] = (common if held else ((T[T_R2] - T[T_LEVER] * delta) * ft - tr) / T[T_I2]) * scale
     f[YTH2] = y[YW2] * scale
 
 
@@ -249,8 +258,8 @@ def watched(P, T, phase, mode, x, y, which):
         return fn
     if which == 3:
         if T[T_RS] != 0.0:
-            return T[T_RS] * y[YWB]
-        _, need, cap_r = rolled(T, fn, ft, delta, y)
+            return T[T_RS] * (y[YWB] - y[YW2])
+        _, need, cap_r, _ = rolled(T, fn, ft, delta, y)
         return cap_r - abs(need)
     if mode == STICK:
         return cap - abs(ft)
@@ -308,13 +317,15 @@ def roll_switch(P, T, phase, mode, x, y, count):
     delta, _ = overlap(P, phase, x, y)
     acc, fn, gamma, ft, vc, kt, gt, cap, kn = forces(P, T, mode, delta, y)
     if T[T_RS] != 0.0:
-        y[YWB] = 0.0
+        # the spins made equal (a wall's: none), their angular momentum about b kept
+        y[YWB] = y[YW2] if T[T_D] == 0.0 else (T[T_I] * y[YWB] + T[T_I2] * y[YW2]) / (T[T_I] + T[T_I2])
+        y[YW2] = y[YWB]
         T[T_RS] = 0.0
-        _, need, cap = rolled(T, fn, ft, delta, y)
+        _, need, cap, _ = rolled(T, fn, ft, delta, y)
         if abs(need) > cap:
             T[T_RS] = -1.0 if need > 0.0 else 1.0
     else:
-        _, need, cap = rolled(T, fn, ft, delta, y)
+        _, need, cap, _ = rolled(T, fn, ft, delta, y)
         T[T_RS] = -1.0 if need > 0.0 else 1.0
     count[1] += 1
     return count[1] <= CHANGES
@@ -326,16 +337,16 @@ def first_roll(P, T, v_in, dmax, mode, y):
     cap holds the torque a little way in (both vanish at touching), else rolling the torque's way."""
     if T[T_ROLL] == 0.0:
         return
-    if y[YWB] != 0.0:
-        T[T_RS] = 1.0 if y[YWB] > 0.0 else -1.0
+    if y[YWB] != y[YW2]:
+        T[T_RS] = 1.0 if y[YWB] > y[YW2] else -1.0
         return
     T[T_RS] = 0.0
     d = 1e-8 * dmax
-    vc = y[YVT] + (T[T_R] - T[T_LEVER] * d) * y[YWB]
+    vc = y[YVT] + (T[T_R] - T[T_LEVER] * d) * y[YWB] + (T[T_R2] - T[T_LEVER] * d) * y[YW2]
     y[YXI] = vc * d / v_in if mode == STICK else 0.0
     acc, fn, gamma, ft, vc, kt, gt, cap, kn = forces(P, T, mode, d, y)
     y[YXI] = 0.0
-    _, need, cap = rolled(T, fn, ft, d, y)
+    _, need, cap, _ = rolled(T, fn, ft, d, y)
     if abs(need) > cap:
         T[T_RS] = -1.0 if need > 0.0 else 1.0
 
@@ -534,7 +545,7 @@ def rub(P, T, v_in, n_end, n_mid, limit, out, trail, y):
     (`impact.contact`'s steps: n_end over sigma at each end, a contact time over n_mid between),
     with friction; y (NY) holds the tangential state at touching (YVT, YWB) and gets the state at
     the end. out (impact's NOUT): the speed of separation, the time, the work of the dashpot and
-    friction, the steps, O_END (ENDED; STOPPED, with O_DELTA and O_U; FAILED; HELD); the peaks
+    friction, the steps, O_END (ENDED; STOPPED, with O_DELTA and O_U; FAILED; CHATTER); the peaks
     are left to `impact.contact`. trail gets `keep`'s row after every step."""
     dmax, span = estimate(P, v_in)
     P[P_SPEED] = 1e-300 + 1e-17 * v_in
@@ -585,7 +596,7 @@ def rub(P, T, v_in, n_end, n_mid, limit, out, trail, y):
             delta1, how = 0.25 * d, 0
     out[O_VOUT], out[O_TIME], out[O_WORK], out[O_STEPS] = -y[YU], t, y[YWN] + y[YWT], count[0]
     out[O_DELTA], out[O_U] = d, y[YU]
-    out[O_END] = (ENDED, FAILED, STOPPED, HELD, CHATTER)[how]
+    out[O_END] = (ENDED, FAILED, STOPPED, FAILED, CHATTER)[how]  # (how 3, turned, goes on over time above)
     out[O_OK] = 1.0 if how == 0 else 0.0
 
 

@@ -10,10 +10,13 @@ relative velocity across that line at touching; a grazing contact turns the line
 stops with PAIR_OBLIQUE, its caller running the DEM kernel or refusing). Their centre of mass
 flies on under gravity; after separating they never meet again.
 
-With friction and a tangential spring (TW's mu > 0) any contact, head-on or oblique, is
-`oblique.rub`'s in the relative coordinate (`rub_pair`): the line of centres turns as the spheres
-slide past each other, and each sphere's spin is its own (their motion in one plane, as
-`oblique.frame` asks: else PAIR_PLANE).
+With friction and a tangential spring (TW's mu > 0), or rolling resistance (TW's mu_r > 0), any
+contact, head-on or oblique, is `oblique.rub`'s in the relative coordinate (`rub_pair`): the line
+of centres turns as the spheres slide past each other, and each sphere's spin is its own (their
+motion in one plane, as `oblique.frame` asks: else PAIR_PLANE). Rolling resistance acts against
+their relative spin (the DEM kernel's w_i - w_j, its cap mu_r R* F_n with R* the reduced radius),
+which must then lie along the plane's normal b (no relative twist about the line of centres:
+else PAIR_TWIST).
 """
 
 from __future__ import annotations
@@ -40,7 +43,7 @@ from collide.engine.event.impact import (
     contact,
     law,
 )
-from collide.engine.event.oblique import CHATTER, HELD, NY, YVT, YW2, YWB, frame, rub
+from collide.engine.event.oblique import CHATTER, NY, YVT, YW2, YWB, frame, rub
 from collide.engine.flight import bring, touch_time, turn
 from collide.engine.jit import jit
 from collide.engine.layout import (
@@ -89,9 +92,9 @@ from collide.engine.numerics import grow
 from collide.engine.records import add_knot, tail_after
 
 # S_STATUS (after event/alone.py's): a contact not head-on; a contact not answered; a rubbing
-# contact that does not separate, that alternates between stick and slip without end, or whose
-# motion is not in one plane (`oblique`)
-PAIR_OBLIQUE, PAIR_FAILED, PAIR_HELD, PAIR_CHATTER, PAIR_PLANE = 21, 22, 23, 24, 25
+# contact whose spins twist against each other under rolling resistance, that alternates between
+# stick and slip without end, or whose motion is not in one plane (`oblique`)
+PAIR_OBLIQUE, PAIR_FAILED, PAIR_TWIST, PAIR_CHATTER, PAIR_PLANE = 21, 22, 23, 24, 25
 HEAD_ON = 1e-12  # relative velocity across the line of centres, over the approach speed, taken as none
 NO_BOX = np.zeros(4)
 NO_WALLS = np.zeros((0, 6))
@@ -183,10 +186,10 @@ def rubbing_pair(X, G0, n, e, b, row, grav, fl):
 @jit
 def rub_pair(G, P, TW, n, t, ends, steps_left, out, rubbed, grav, fl, bufs, CNT):
     """The spheres' contact from touching (G at t, n from sphere 0 to 1) with friction and a
-    tangential spring (TW[0]: mu, k_t / k_n and its root) by `oblique.rub` in the relative
-    coordinate, sphere 1 as its sphere and sphere 0's spin its second; G left at the contact's
-    end (or P_STOP). Returns (knots, records, status), out as `rub` leaves it with the peaks of
-    its steps."""
+    tangential spring, or rolling resistance (TW[0]: mu, k_t / k_n and its root, mu_r) by
+    `oblique.rub` in the relative coordinate, sphere 1 as its sphere and sphere 0's spin its
+    second; G left at the contact's end (or P_STOP). Returns (knots, records, status), out as
+    `rub` leaves it with the peaks of its steps."""
     KN, RC = bufs
     rel, comb = np.empty(3), np.empty(3)
     r0, r1 = G[0, G_R], G[1, G_R]
@@ -200,9 +203,16 @@ def rub_pair(G, P, TW, n, t, ends, steps_left, out, rubbed, grav, fl, bufs, CNT)
         in_line = in_line and G[k, G_R] * abs(we) <= 1e-12 * (scale + G[k, G_R] * abs(we))
     if not in_line:
         return KN, RC, PAIR_PLANE
+    twist, size = 0.0, scale
+    for d in range(3):
+        twist += (G[1, G_W + d] - G[0, G_W + d]) * n[d]
+    for k in range(2):
+        size += G[k, G_R] * math.sqrt(G[k, G_W] ** 2 + G[k, G_W + 1] ** 2 + G[k, G_W + 2] ** 2)
+    if TW[0, 3] > 0.0 and (r0 + r1) * abs(twist) > 1e-12 * size:  # (as `frame`'s one line: round-off)
+        return KN, RC, PAIR_TWIST
     m0, m1, i0, i1 = G[0, G_M], G[1, G_M], G[0, G_I], G[1, G_I]
     mstar = m0 * m1 / (m0 + m1)
-    T = np.array([TW[0, 0], TW[0, 1], TW[0, 2], mstar, i1, r1, 0.0, 1.0, 0.5, i0, r0, r0 + r1, 0.0, 0.0, 0.0])
+    T = np.array([TW[0, 0], TW[0, 1], TW[0, 2], mstar, i1, r1, 0.0, 1.0, 0.5, i0, r0, r0 + r1, 0.0, TW[0, 3], 0.0])
     y = np.zeros(NY)
     y[YVT] = rel[0] * e[0] + rel[1] * e[1] + rel[2] * e[2]
     y[YWB] = G[1, G_W] * b[0] + G[1, G_W + 1] * b[1] + G[1, G_W + 2] * b[2]
@@ -216,7 +226,7 @@ def rub_pair(G, P, TW, n, t, ends, steps_left, out, rubbed, grav, fl, bufs, CNT)
         RC = add_record(RC, CNT, t, -2, 0.0, f0)
     rub(P, T, v_in, math.ceil(ends[2] * grow), math.ceil(ends[3] * grow), steps_left, out, rubbed, y)
     if out[O_END] != ENDED and out[O_END] != STOPPED:
-        return KN, RC, (PAIR_HELD if out[O_END] == HELD else PAIR_CHATTER if out[O_END] == CHATTER else PAIR_FAILED)
+        return KN, RC, (PAIR_CHATTER if out[O_END] == CHATTER else PAIR_FAILED)
     X = np.empty_like(G)
     force = np.empty(3)
     out[O_DMAX], out[O_FMAX] = 0.0, 0.0
@@ -246,9 +256,10 @@ def rub_pair(G, P, TW, n, t, ends, steps_left, out, rubbed, grav, fl, bufs, CNT)
 def pair_run(G, LAW, TW, grav, fl, fp, ends):
     """Run the two spheres of G (two rows) from time 0 to fp[FP_TEND] (or, with none, their
     contact's end and fp[FP_TAIL] or the usual tail after), the law of their contact in LAW
-    (impact.impact_params' P, with m* and R*), their tangential spring in TW (1, 3: mu, k_t / k_n
-    and its root; mu 0: none). ends: as `alone.alone_run`'s. Returns (final time,
-    knots, records, intervals, counters, figures) as `run.simulate`."""
+    (impact.impact_params' P, with m* and R*), their tangential spring and rolling resistance in
+    TW (1, 4: mu, k_t / k_n and its root, mu_r; mu 0: no spring, mu_r 0: no rolling resistance).
+    ends: as `alone.alone_run`'s. Returns (final time, knots, records, intervals, counters,
+    figures) as `run.simulate`."""
     KN = np.empty((16, NK))
     RC = np.empty((16, NR))
     IV = np.empty((16, 4))
@@ -281,7 +292,7 @@ def pair_run(G, LAW, TW, grav, fl, fp, ends):
         FG[F_STATUS_T], FG[F_STATUS_A] = t, 1.0
         P = LAW[0].copy()
         P[P_STOP] = t_end - t
-        if TW[0, 0] > 0.0:
+        if TW[0, 0] > 0.0 or TW[0, 3] > 0.0:
             out = np.zeros(NOUT)
             rubbed = [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
             KN, RC, status = rub_pair(G, P, TW, n, t, ends, fl[FL_MAXSTEPS], out, rubbed, grav, fl, (KN, RC), CNT)

@@ -182,7 +182,7 @@ def test_rolling_resistance_beyond_a_sphere_alone_goes_to_dem_with_its_cause():
                                                                                                     False)[1]
     two = _rolling()
     two["body"] = two["body"] + [{"name": "b", "material": "rubber", "radius": 0.03, "position": [0.2, 0.031]}]
-    assert "rolling resistance between spheres is DEM's so far" in engine_choice(parse_scene(two), "dem", False)[1]
+    assert "between two with walls, is DEM's so far" in engine_choice(parse_scene(two), "dem", False)[1]
     with pytest.raises(SceneError, match="rolling resistance with Coulomb friction's dead band"):
         parse_scene({**dead_band, "integrator": "kahan6"})
 

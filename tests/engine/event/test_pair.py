@@ -121,7 +121,7 @@ def rub_scene(case: dict, tol: float) -> dict:
     """The case as a scene: sphere a along x at SPEED, b at rest on the line at theta from x."""
     r0, r1 = case["radius"]
     contact = {"model": case["model"], "restitution": case["e"], "tangential": "spring", "mu": case["mu"],
-               "tangential_stiffness_ratio": case["ratio"]}
+               "tangential_stiffness_ratio": case["ratio"], "rolling_friction": case.get("mu_r", 0.0)}
     if case["model"] == "linear":
         contact["k"] = case["k"]
     at = (r0 + r1) * 1.0001 * np.array([np.cos(case["theta"]), np.sin(case["theta"])])
@@ -143,7 +143,11 @@ def rub_outcome(res) -> np.ndarray:
 def rub_reference(case: dict, hold: float = 1e-7) -> np.ndarray:
     """The case by DOP853 at rtol 1e-13 from touching to separating, as `rub_outcome` (its stick,
     slip and hold as `test_oblique.reference`, the hold until the point moves along the force at
-    hold of the speed)."""
+    hold of the speed). With rolling resistance (case["mu_r"], the DEM kernel's law between two
+    spheres: collide/engine/dem/rolling.py) the relative spin w_a - w_b rolls, the torque mu_r R*
+    max(F_n, 0) (R* the reduced radius) against its sign on a and its reverse on b, or is held
+    (both spins turning together, while the torque on a that holds them is within that cap), each
+    switch an event; with mu = 0 the friction force is none throughout."""
     from collide.chung_ooi import Material, effective_modulus, sphere_mass
 
     r = np.array(case["radius"])
@@ -153,6 +157,8 @@ def rub_reference(case: dict, hold: float = 1e-7) -> np.ndarray:
     mstar, rstar, estar = m[0] * m[1] / m.sum(), r[0] * r[1] / r.sum(), effective_modulus(mats[0], mats[1])
     hertz, mu, ratio = case["model"] == "hertz", case["mu"], case["ratio"]
     zeta = float(damping_ratio(np.array(case["e"]), hertz))
+    mu_r = case.get("mu_r", 0.0)
+    roll = [0.0]  # the sign of w_a - w_b while rolling, 0 held
 
     def parts(y, mode, s):
         d = y[5:7] - y[0:2]
@@ -175,13 +181,33 @@ def rub_reference(case: dict, hold: float = 1e-7) -> np.ndarray:
         f = -kt * y[10] - gt * slip if mode == "stick" else s * cap
         return n, t, delta, u, fn, kt, gt, cap, lever, slip, f
 
+    def rolling(y, mode, s):
+        """(the rolling torque's cap, both spins' rate while held, the torque on a that holds them)"""
+        n, t, delta, u, fn, kt, gt, cap, lever, slip, f = parts(y, mode, s)
+        common = (lever[0] + lever[1]) * f / inertia.sum()
+        return mu_r * rstar * max(fn, 0.0), common, inertia[0] * common - lever[0] * f
+
     def rhs(_, y, mode, s):
         n, t, delta, u, fn, kt, gt, cap, lever, slip, f = parts(y, mode, s)
         force = -fn * n + f * t  # on a
-        return np.concatenate([y[2:4], force / m[0], [lever[0] * f / inertia[0]], y[7:9], -force / m[1],
-                               [lever[1] * f / inertia[1]], [slip if mode == "stick" else 0.0]])
+        spins = [lever[0] * f / inertia[0], lever[1] * f / inertia[1]]
+        if mu_r > 0.0:
+            cap_r, common, _ = rolling(y, mode, s)
+            torque = -roll[0] * cap_r  # on a
+            spins = [common, common] if roll[0] == 0.0 else [spins[0] + torque / inertia[0],
+                                                             spins[1] - torque / inertia[1]]
+        return np.concatenate([y[2:4], force / m[0], [spins[0]], y[7:9], -force / m[1], [spins[1]],
+                               [slip if mode == "stick" else 0.0]])
+
+    def turns(_, y, mode, s):
+        if mu_r == 0.0:
+            return 1.0
+        cap_r, _, need = rolling(y, mode, s)
+        return roll[0] * (y[4] - y[9]) if roll[0] != 0.0 else cap_r - abs(need)
 
     def leaves(_, y, mode, s):
+        if mu == 0.0:
+            return 1.0  # no force to stick or slip
         n, t, delta, u, fn, kt, gt, cap, lever, slip, f = parts(y, mode, s)
         if mode == "stick":
             return cap - abs(f)
@@ -194,7 +220,7 @@ def rub_reference(case: dict, hold: float = 1e-7) -> np.ndarray:
     def apart(_, y, mode, s):
         return r.sum() - math.hypot(*(y[5:7] - y[0:2])) if (y[2:4] - y[7:9]) @ (y[5:7] - y[0:2]) < 0 else 1.0
 
-    for ev in (leaves, apart):
+    for ev in (leaves, apart, turns):
         ev.terminal, ev.direction = True, -1
     # Touching: a at SPEED along x, b on the line at theta
     c, s_ = math.cos(case["theta"]), math.sin(case["theta"])
@@ -204,21 +230,36 @@ def rub_reference(case: dict, hold: float = 1e-7) -> np.ndarray:
     probe = y.copy()
     probe[0:2] += 1e-10 * r.min() * np.array([c, s_])  # a little way in: the ratio of spring to cap settles
     n, tt, delta, u, fn, kt, gt, cap, lever, slip, f = parts(probe, "stick", 1.0)
-    mode = "stick" if abs(kt * slip * delta / u + gt * slip) <= cap else "slip"
+    mode = "stick" if abs(kt * slip * delta / u + gt * slip) <= cap and mu > 0.0 else "slip"
     s = -math.copysign(1.0, slip)
+    if y[4] != y[9]:
+        roll[0] = math.copysign(1.0, y[4] - y[9])
+    elif mu_r > 0.0:  # no relative spin: held where the cap holds the torque a little way in
+        probe[10] = slip * delta / u if mode == "stick" else 0.0
+        cap_r, _, need = rolling(probe, mode, s)
+        roll[0] = 0.0 if abs(need) <= cap_r else -math.copysign(1.0, need)
     # Round-off of each part (an atol far below it made the parts that start at zero, a spin or
     # the stretch, take steps of round-off's length)
     atol = 1e-16 * np.array([r[0], r[0], SPEED, SPEED, SPEED / r[0], r[0], r[0], SPEED, SPEED, SPEED / r[1],
                              1e-3 * r[0]])
     t = 0.0
+    fresh = False  # rolling from a hold: the relative spin leaves zero as t^2 (`test_oblique.reference`)
     for _ in range(20000):
-        sol = solve_ivp(rhs, (t, t + 1.0), y, method="DOP853", rtol=1e-13, atol=atol, args=(mode, s),
-                        events=(leaves, apart), max_step=1e-6)
+        sol = solve_ivp(rhs, (t, t + (1e-10 if fresh else 1.0)), y, method="DOP853", rtol=1e-13, atol=atol,
+                        args=(mode, s), events=(leaves, apart) if fresh else (leaves, apart, turns), max_step=1e-6)
+        fresh = False
         t, y = sol.t[-1], sol.y[:, -1].copy()
         if sol.status == 1 and len(sol.t_events[1]):
             return np.concatenate([y[2:4], y[7:9], y[[4, 9]] * r]) / SPEED
         n, tt, delta, u, fn, kt, gt, cap, lever, slip, f = parts(y, mode, s)
-        if len(sol.t_events[0]):
+        if sol.status == 1 and len(sol.t_events) > 2 and len(sol.t_events[2]):
+            if roll[0] != 0.0:  # the relative spin reached zero: both the same, their momentum kept
+                y[4] = y[9] = (inertia[0] * y[4] + inertia[1] * y[9]) / inertia.sum()
+                cap_r, _, need = rolling(y, mode, s)
+                roll[0] = 0.0 if abs(need) <= cap_r else -math.copysign(1.0, need)
+            else:  # the torque holding them reached the cap: rolling the way the rest turns a
+                roll[0], fresh = -math.copysign(1.0, rolling(y, mode, s)[2]), True
+        elif len(sol.t_events[0]):
             mode, s, y[10] = after_event(mode, s, (slip, f, cap, kt, gt), leaves, rhs, t, y, 10)
         t += 1e-15 * max(t, 1e-9)  # past the located switch
     raise AssertionError("the reference contact did not end")
