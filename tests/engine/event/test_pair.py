@@ -90,8 +90,8 @@ def test_status_codes_of_the_event_kernels_are_distinct():
     from collide.engine.event import alone, pair
 
     codes = [layout.OK, layout.NONFINITE, layout.ENERGY, layout.STALL, layout.MAXSTEPS, layout.SINGULAR,
-             alone.ALONE_WALLS, alone.ALONE_FAILED, alone.ALONE_HELD, alone.ALONE_PLANE, alone.ALONE_CHATTER,
-             pair.PAIR_OBLIQUE, pair.PAIR_FAILED, pair.PAIR_HELD, pair.PAIR_CHATTER, pair.PAIR_PLANE]
+             alone.ALONE_WALLS, alone.ALONE_FAILED, alone.ALONE_TWIST, alone.ALONE_PLANE, alone.ALONE_CHATTER,
+             pair.PAIR_OBLIQUE, pair.PAIR_FAILED, pair.PAIR_TWIST, pair.PAIR_CHATTER, pair.PAIR_PLANE]
     assert len(set(codes)) == len(codes)
 
 
@@ -197,13 +197,15 @@ def rub_reference(case: dict, hold: float = 1e-7) -> np.ndarray:
             spins = [common, common] if roll[0] == 0.0 else [spins[0] + torque / inertia[0],
                                                              spins[1] - torque / inertia[1]]
         return np.concatenate([y[2:4], force / m[0], [spins[0]], y[7:9], -force / m[1], [spins[1]],
-                               [slip if mode == "stick" else 0.0]])
+                               [slip if mode == "stick" else 0.0, spins[0] - spins[1]]])
 
     def turns(_, y, mode, s):
         if mu_r == 0.0:
             return 1.0
         cap_r, _, need = rolling(y, mode, s)
-        return roll[0] * (y[4] - y[9]) if roll[0] != 0.0 else cap_r - abs(need)
+        if roll[0] != 0.0:
+            return roll[0] * y[11]
+        return cap_r - abs(need) if need != 0.0 else 1.0  # (none to hold where F_n pulls in slip: both 0)
 
     def leaves(_, y, mode, s):
         if mu == 0.0:
@@ -226,7 +228,10 @@ def rub_reference(case: dict, hold: float = 1e-7) -> np.ndarray:
     c, s_ = math.cos(case["theta"]), math.sin(case["theta"])
     gap = r.sum() * 1.0001
     tau = (gap * c - math.sqrt(r.sum() ** 2 - (gap * s_) ** 2)) / SPEED
-    y = np.array([SPEED * tau, 0.0, SPEED, 0.0, case["spin"][0], gap * c, gap * s_, 0.0, 0.0, case["spin"][1], 0.0])
+    # (the relative spin w_a - w_b in y[11] too: from a hold it leaves zero as t^2, below the
+    # round-off of the spins' difference)
+    y = np.array([SPEED * tau, 0.0, SPEED, 0.0, case["spin"][0], gap * c, gap * s_, 0.0, 0.0, case["spin"][1], 0.0,
+                  case["spin"][0] - case["spin"][1]])
     probe = y.copy()
     probe[0:2] += 1e-10 * r.min() * np.array([c, s_])  # a little way in: the ratio of spring to cap settles
     n, tt, delta, u, fn, kt, gt, cap, lever, slip, f = parts(probe, "stick", 1.0)
@@ -241,7 +246,7 @@ def rub_reference(case: dict, hold: float = 1e-7) -> np.ndarray:
     # Round-off of each part (an atol far below it made the parts that start at zero, a spin or
     # the stretch, take steps of round-off's length)
     atol = 1e-16 * np.array([r[0], r[0], SPEED, SPEED, SPEED / r[0], r[0], r[0], SPEED, SPEED, SPEED / r[1],
-                             1e-3 * r[0]])
+                             1e-3 * r[0], 1e2 * SPEED / r.min()])
     t = 0.0
     fresh = False  # rolling from a hold: the relative spin leaves zero as t^2 (`test_oblique.reference`)
     for _ in range(20000):
@@ -255,6 +260,7 @@ def rub_reference(case: dict, hold: float = 1e-7) -> np.ndarray:
         if sol.status == 1 and len(sol.t_events) > 2 and len(sol.t_events[2]):
             if roll[0] != 0.0:  # the relative spin reached zero: both the same, their momentum kept
                 y[4] = y[9] = (inertia[0] * y[4] + inertia[1] * y[9]) / inertia.sum()
+                y[11] = 0.0
                 cap_r, _, need = rolling(y, mode, s)
                 roll[0] = 0.0 if abs(need) <= cap_r else -math.copysign(1.0, need)
             else:  # the torque holding them reached the cap: rolling the way the rest turns a
@@ -370,3 +376,135 @@ def test_a_pair_in_any_plane_of_3d_gives_the_plane_outcome():
         w = res.final.w[0] @ turn[:, 2] * np.array(res.model.radius[0, :2])
         assert np.abs(v[:, 2]).max() <= 1e-12 * SPEED
         assert np.abs(np.concatenate([v[:, :2].ravel(), w]) / SPEED - flat).max() <= 1e-12
+
+
+# Rolling resistance between the two spheres (oblique.py's rolling and held modes in the pair's
+# relative coordinate): against the same DOP853 reference (`rub_reference`, its rolling and held
+# switches located by scipy's events), with and without friction.
+
+
+def roll_case(seed: int) -> dict:
+    """`rub_case` with rolling resistance mu_r in [0.02, 0.5]; every fourth without friction."""
+    case = rub_case(seed)
+    case["mu_r"] = float(np.random.default_rng(seed + 1000).uniform(0.02, 0.5))
+    if seed % 4 == 0:
+        case["mu"] = 0.0
+    return case
+
+
+def roll_run(case: dict, tol: float):
+    """The case at tol as `collide run` runs it: (outcome, reported error, result, error method)."""
+    run = run_scene(parse_scene(copy.deepcopy(rub_scene(case, tol))), record=False)
+    res = run.result
+    assert res.engine == "event" and "between rolling and held located" in res.engine_reason, res.engine_reason
+    return rub_outcome(res), float(np.max(run.error_estimate)), res, run.error_method[0]
+
+
+HELD_AT_TOUCH = {**roll_case(201), "spin": [10.0, 10.0], "e": 1.0}  # no relative spin at touching, no dashpot
+
+
+@pytest.mark.parametrize("case", [roll_case(seed) for seed in range(200, 206)] + [HELD_AT_TOUCH])
+def test_pairs_with_rolling_resistance_match_dop853(case):
+    """Both velocities and spins (times the radius) within 1e-8 of the speed of DOP853 at tol 1e-10
+    (measured: within 1.1e-11); momentum kept to round-off. Seeds 200 and 204 have no friction
+    (rolling resistance alone), 204 ends held (both spins exactly equal), 201 is held and rolls
+    on; one more starts with no relative spin."""
+    got, _, res, _ = roll_run(case, 1e-10)
+    ref = rub_reference(case)
+    assert np.abs(got - ref).max() <= 1e-8, (got, ref)
+    m = res.model.mass[0, :2]
+    assert res.final.v[0].T @ m == pytest.approx(np.array([SPEED * m[0], 0.0]), abs=1e-14 * SPEED * m.sum())
+
+
+def test_a_pair_held_by_rolling_resistance_leaves_with_equal_spins():
+    """Seeds 204 (no friction) and 213 separate held: their spins exactly equal at the end, as
+    the DOP853 reference's (which holds them by hand) to 1e-8 of the speed over the radius."""
+    for seed in (204, 213):
+        case = roll_case(seed)
+        _, _, res, _ = roll_run(case, 1e-9)
+        w = np.ravel(res.final.w[0])
+        assert w[0] == w[1]
+        ref = rub_reference(case)
+        assert ref[4] / case["radius"][0] == pytest.approx(ref[5] / case["radius"][1], abs=1e-8 * SPEED / min(
+            case["radius"]))
+
+
+def test_random_pairs_with_rolling_resistance_agree_across_tolerances_and_their_error_holds():
+    """Sixteen random cases: outcomes at tol 1e-6 and 1e-9 within 1e-6 (measured: within 3e-9),
+    the 1e-6 run's difference at most 10 times its estimate; those with friction measured. A
+    case whose saw's phase the law leaves open (206) is handed on with that cause."""
+    counted = 0
+    for seed in range(200, 216):
+        case = roll_case(seed)
+        try:
+            (coarse, estimate, _, method), (fine, _, _, _) = roll_run(case, 1e-6), roll_run(case, 1e-9)
+        except RunError as exc:
+            assert "could not be confirmed" in str(exc) or "alternates between" in str(exc), str(exc)
+            continue
+        counted += 1
+        assert method == "measured" or case["mu"] == 0.0
+        diff = np.abs(coarse - fine).max()
+        assert diff <= 1e-6 and diff <= 10.0 * estimate, (seed, diff, estimate)
+    assert counted >= 14
+
+
+def test_a_pair_twisting_under_rolling_resistance_goes_to_dem_with_its_cause():
+    """In 3D spins differing about the line of centres (a twist with the roll) are DEM's: chosen by
+    itself the run goes there and says why; with the event engine asked for it is refused."""
+    case = roll_case(201)
+    raw = rub_scene(case, 1e-3)
+    raw["dim"] = 3
+    for body in raw["body"]:
+        body["position"], body["velocity"] = body["position"] + [0.0], body["velocity"] + [0.0]
+        body["spin"] = [0.0, 0.0, body["spin"]]
+    # the line of centres at touching (a moving along x onto b, as `rub_reference` starts)
+    rsum = sum(case["radius"])
+    gap = np.array(raw["body"][1]["position"][:2])
+    x = gap[0] - math.sqrt(rsum**2 - gap[1] ** 2)
+    n = (gap - [x, 0.0]) / rsum
+    raw["body"][1]["spin"] = [30.0 * n[0], 30.0 * n[1], raw["body"][1]["spin"][2]]  # about the line of centres
+    run = run_scene(parse_scene(copy.deepcopy(raw)), record=False)
+    assert run.result.engine == "dem" and "twist and a roll at once" in run.result.engine_reason
+    with pytest.raises(RunError, match="twist and a roll at once"):
+        run_scene(parse_scene({**raw, "integrator": "kahan6"}), record=False)
+
+
+def test_a_pair_with_rolling_resistance_in_any_plane_of_3d_gives_the_plane_outcome():
+    """A rolling case turned into a plane of random orientation in 3D (spins along its normal):
+    the outcome, turned back, is the 2D run's within 1e-12 of the speed."""
+    rng = np.random.default_rng(52)
+    case = roll_case(201)
+    flat = roll_run(case, 1e-8)[0]
+    turn, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    turn[:, 0] *= np.linalg.det(turn)
+    raw = rub_scene(case, 1e-8)
+    raw["dim"] = 3
+    for body in raw["body"]:
+        for key in ("position", "velocity"):
+            body[key] = (turn @ np.array(body[key] + [0.0])).tolist()
+        body["spin"] = (turn[:, 2] * body["spin"]).tolist()
+    res = run_scene(parse_scene(raw), record=False).result
+    assert res.engine == "event" and "between rolling and held located" in res.engine_reason, res.engine_reason
+    v = res.final.v[0, :, :] @ turn
+    w = res.final.w[0] @ turn[:, 2] * np.array(res.model.radius[0, :2])
+    assert np.abs(v[:, 2]).max() <= 1e-12 * SPEED
+    assert np.abs(np.concatenate([v[:, :2].ravel(), w]) / SPEED - flat).max() <= 1e-12
+
+
+def test_dem_converges_to_a_pair_held_by_rolling_resistance_at_first_order():
+    """Seed 213 (sticking friction, rolling then held, separating held): DEM's rolling resistance
+    (the cap, below it a viscous torque stopping the relative spin in ROLL_STEPS steps) tends to
+    the event engine's answer at tol 1e-10 as its step halves: each halving's ratio between 1.8
+    and 2.5 (measured 2.29, 2.17 from 1/8000 of the contact time down: first order, its second-order
+    part fading) and 9.4e-7 of the speed at 1/32000 (within 2e-6)."""
+    case = roll_case(213)
+    got, _, res, _ = roll_run(case, 1e-10)
+    span = float(res.contacts.duration[0])
+    errors = []
+    for parts in (8000, 16000, 32000):
+        raw = {**rub_scene(case, 1e-10), "integrator": "dem", "dt": span / parts}
+        raw.pop("tol")
+        errors.append(np.abs(rub_outcome(run_scene(parse_scene(raw), record=False).result) - got).max())
+    ratios = [errors[i] / errors[i + 1] for i in range(2)]
+    assert all(1.8 < q < 2.5 for q in ratios), (errors, ratios)
+    assert errors[-1] < 2e-6
