@@ -742,7 +742,8 @@ def island_blocker(scene: Scene) -> str | None:
     they can: the linear spring or Hertz, with the restitution's dashpot and Coulomb friction)."""
     c = scene.contact
     if scene.has_rolling:
-        return "the islands do not take rolling resistance (a sphere alone among walls takes it at full order)"
+        return ("the islands do not take rolling resistance (a sphere alone among walls, or two spheres and no "
+                "walls, take it at full order)")
     if c.tangential != "coulomb" and scene.dim == 3:
         return ("a tangential spring between spheres inside an island (three or more, or two with walls) in 3D is "
                 "DEM's so far: in 2D the islands take it, and in 3D two spheres and no walls")

@@ -356,10 +356,11 @@ def test_a_pair_out_of_one_plane_goes_to_dem_with_its_cause():
 
 
 def test_a_pair_in_any_plane_of_3d_gives_the_plane_outcome():
-    """The sliding and a random case turned into a plane of random orientation in 3D (spins along
-    its normal): the outcome, turned back, is the 2D run's within 1e-12 of the speed."""
+    """The sliding and a random case, and one with rolling resistance (`roll_case`), turned into
+    a plane of random orientation in 3D (spins along its normal): the outcome, turned back, is
+    the 2D run's within 1e-12 of the speed."""
     rng = np.random.default_rng(51)
-    for case in (SLIDING, rub_case(4)):
+    for case in (SLIDING, rub_case(4), roll_case(201)):
         flat, _, _ = rub_run(case, 1e-8)
         turn, _ = np.linalg.qr(rng.normal(size=(3, 3)))
         turn[:, 0] *= np.linalg.det(turn)  # a rotation, not a reflection (spins are axial)
@@ -467,28 +468,6 @@ def test_a_pair_twisting_under_rolling_resistance_goes_to_dem_with_its_cause():
     assert run.result.engine == "dem" and "twist and a roll at once" in run.result.engine_reason
     with pytest.raises(RunError, match="twist and a roll at once"):
         run_scene(parse_scene({**raw, "integrator": "kahan6"}), record=False)
-
-
-def test_a_pair_with_rolling_resistance_in_any_plane_of_3d_gives_the_plane_outcome():
-    """A rolling case turned into a plane of random orientation in 3D (spins along its normal):
-    the outcome, turned back, is the 2D run's within 1e-12 of the speed."""
-    rng = np.random.default_rng(52)
-    case = roll_case(201)
-    flat = roll_run(case, 1e-8)[0]
-    turn, _ = np.linalg.qr(rng.normal(size=(3, 3)))
-    turn[:, 0] *= np.linalg.det(turn)
-    raw = rub_scene(case, 1e-8)
-    raw["dim"] = 3
-    for body in raw["body"]:
-        for key in ("position", "velocity"):
-            body[key] = (turn @ np.array(body[key] + [0.0])).tolist()
-        body["spin"] = (turn[:, 2] * body["spin"]).tolist()
-    res = run_scene(parse_scene(raw), record=False).result
-    assert res.engine == "event" and "between rolling and held located" in res.engine_reason, res.engine_reason
-    v = res.final.v[0, :, :] @ turn
-    w = res.final.w[0] @ turn[:, 2] * np.array(res.model.radius[0, :2])
-    assert np.abs(v[:, 2]).max() <= 1e-12 * SPEED
-    assert np.abs(np.concatenate([v[:, :2].ravel(), w]) / SPEED - flat).max() <= 1e-12
 
 
 def test_dem_converges_to_a_pair_held_by_rolling_resistance_at_first_order():
