@@ -71,9 +71,10 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
         return EVENT, (f"{dem_reason(scene)} with the linear spring: {what}{sprung} in the islands' steps of order "
                        f"{_order(integrator)} ({integrator}), every contact, its end and each friction mode change "
                        "located")
-    if scene.needs_dem and len(scene.bodies) == 2 and (scene.has_friction or scene.has_rolling):
+    rolls = scene.has_rolling and scene.dim > 1  # (in 1D nothing spins: no rolling resistance to take)
+    if scene.needs_dem and len(scene.bodies) == 2 and (scene.has_friction or rolls):
         rubs = ", friction's stick and slip located, the tangential spring" if scene.has_friction else ""
-        if scene.has_rolling:
+        if rolls:
             rubs += (", rolling resistance (its cap mu_r R* F_n against the relative spin, or that spin held within "
                      "it) with each change between rolling and held located")
         return EVENT, (f"{dem_reason(scene)} with two spheres and no walls: their contact in the relative coordinate "
@@ -86,7 +87,7 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
     if scene.needs_dem:
         rubs = (", friction's stick and slip located, the tangential spring at order 6 (Gauss-Legendre)"
                 if scene.contact.tangential == "spring" and scene.has_friction else "")
-        if scene.has_rolling:
+        if rolls:
             rubs += (", rolling resistance (its cap mu_r R* F_n against the spin, or the spin held within it) with "
                      "each change between rolling and held located, at order 6 (Gauss-Legendre)")
         return EVENT, (f"{dem_reason(scene)} with a sphere alone among walls: each contact at order 8 "
