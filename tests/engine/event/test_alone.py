@@ -170,7 +170,7 @@ def test_a_bouncing_ball_with_rolling_resistance_runs_at_full_order():
 
 
 def test_rolling_resistance_beyond_a_sphere_alone_goes_to_dem_with_its_cause():
-    """With the dead band's Coulomb friction, or between two spheres: DEM, the JSON's reason naming
+    """With the dead band's Coulomb friction, or between two spheres with a wall: DEM, the JSON's reason naming
     why (and an event integrator asked for is refused with it)."""
     from collide.alone import engine_choice
     from collide.scene import SceneError, parse_scene
