@@ -487,3 +487,24 @@ def test_dem_converges_to_a_pair_held_by_rolling_resistance_at_first_order():
     ratios = [errors[i] / errors[i + 1] for i in range(2)]
     assert all(1.8 < q < 2.5 for q in ratios), (errors, ratios)
     assert errors[-1] < 2e-6
+
+
+def test_collide_run_answers_two_spheres_under_rolling_resistance(tmp_path):
+    """`collide run --json` of a rolling case at the default --tol (1e-6): exit 0, the event
+    engine with its reason, the error measured."""
+    import json
+    import subprocess
+    import sys
+
+    from collide.scene import dump_toml
+
+    raw = rub_scene(roll_case(201), 1e-6)
+    raw.pop("tol")
+    path = tmp_path / "rolling-pair.toml"
+    path.write_text(dump_toml(raw))
+    done = subprocess.run([sys.executable, "-m", "cli.main", "run", str(path), "--json"], capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    assert summary["engine"] == "event" and "between rolling and held located" in summary["engine_reason"]
+    assert summary["tol"] == 1e-6 and summary["error_method"] == "measured"
