@@ -71,7 +71,7 @@ def engine_choice(scene: Scene, integrator: str, forced: bool, blocker: str | No
         return EVENT, (f"{dem_reason(scene)} with the linear spring: {what}{sprung} in the islands' steps of order "
                        f"{_order(integrator)} ({integrator}), every contact, its end and each friction mode change "
                        "located")
-    rolls = scene.has_rolling and scene.dim > 1  # (in 1D nothing spins: no rolling resistance to take)
+    rolls = scene.has_rolling and scene.has_spin  # (where nothing spins there is no rolling resistance to take)
     if scene.needs_dem and len(scene.bodies) == 2 and (scene.has_friction or rolls):
         rubs = ", friction's stick and slip located, the tangential spring" if scene.has_friction else ""
         if rolls:
