@@ -61,10 +61,11 @@ rolling, the torque mu_r R* max(F_n, 0) against the relative spin's sign (T_RS);
 0), the relative spin locked, the torque that holds it within that cap. At a wall the spin is the
 sphere's, R* its radius and the holding torque -(r - delta) F; between two spheres (`pair`) it is
 their spins' difference (the DEM kernel's w_i - w_j, the torque on one and its reverse on the
-other), R* their reduced radius, and held, both spins turn together at (a_1 + a_2) F / (I_1 + I_2)
-(a_k the levers), which the torque I_1 that - a_1 F holds. The relative spin reaching zero (then
-held where the cap holds it, else rolling on the other way) and the held torque reaching the cap
-are events, landed as the others.
+other), R* their reduced radius; held, both spins turn together at (a_1 + a_2) F / (I_1 + I_2)
+(a_k the levers), held so by the torque I_1 times that rate less a_1 F on the first. The
+relative spin reaching zero (then held where the cap holds it, else rolling on the other way;
+the spins made equal with their angular momentum kept) and the held torque reaching the cap are
+events, landed as the others.
 """
 
 from __future__ import annotations
