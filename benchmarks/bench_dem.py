@@ -17,7 +17,8 @@
    this one's) against the first, the load average at each run, and for the threaded runs the
    time on one thread in the driver, the time each thread waited at the barrier and at the other
    threads' flags, the meetings and flag waits a step and the stretches taken on one thread
-   (`--no-pace`: none, whatever the load).
+   (`--no-pace`: none, whatever the load). `--spin 100000,1000000` runs each threaded count once
+   with each spin of the barrier before a waiting thread sleeps (`barrier.SPIN_CYCLES`), alternated.
 """
 
 from __future__ import annotations
@@ -111,14 +112,16 @@ def _cycle_rate() -> float:
     return (cycles() - c0) / (time.perf_counter() - t0)
 
 
-def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
-    """The box on each thread count in turn, repeats alternated: wall and CPU medians, the CPU
-    efficiency (one thread's CPU over this count's: 1.0 when the threads waste nothing), the
-    load average at each run, and where the threaded runs' time went (`dem_threads.LAST_RUN`)."""
+def thread_scan(scene, counts: list[int], repeats: int, spheres: int, spins: list[int]) -> None:
+    """The box on each thread count in turn (a threaded count once for each of the barrier's
+    spins, `barrier.SPIN_CYCLES`), repeats alternated: wall and CPU medians, the CPU efficiency
+    (one thread's CPU over this count's: 1.0 when the threads waste nothing), the load average at
+    each run, and where the threaded runs' time went (`dem_threads.LAST_RUN`)."""
     import resource
 
     import collide.dem
     from collide.dem_threads import LAST_RUN
+    from collide.engine.dem import barrier
 
     spent: list[tuple[float, float]] = []
     real = collide.dem.run_members
@@ -133,42 +136,49 @@ def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
 
     rate = _cycle_rate()
     collide.dem.run_members = timed
-    times: dict[int, list[tuple[float, float]]] = {c: [] for c in counts}
-    loads: dict[int, list[float]] = {c: [] for c in counts}
-    where: dict[int, list[tuple]] = {c: [] for c in counts}
+    # (threads, spin): the runs' configurations; a spin counts only on several threads
+    configs = [(c, s) for c in counts for s in (spins if c > 1 else spins[:1])]
+    times: dict[tuple, list[tuple[float, float]]] = {c: [] for c in configs}
+    loads: dict[tuple, list[float]] = {c: [] for c in configs}
+    where: dict[tuple, list[tuple]] = {c: [] for c in configs}
     steps = 0
+    kept = barrier.SPIN_CYCLES
     for _ in range(repeats):
-        for count in counts:
+        for config in configs:
+            count, barrier.SPIN_CYCLES = config  # (read as each run's barrier is made)
             os.environ["COLLIDE_THREADS"] = str(count)
-            loads[count].append(os.getloadavg()[0])
+            loads[config].append(os.getloadavg()[0])
             LAST_RUN.clear()
             result = run_scene(scene, record=False).result
             assert result.threads == count
-            times[count].append(spent[-1])
+            times[config].append(spent[-1])
             steps = int(result.steps[0])
             if LAST_RUN:  # (a run on one thread takes the one-thread kernel)
                 waited = LAST_RUN["waited"] / rate
                 waits = int(LAST_RUN["meets"][0]) + float(LAST_RUN["flags"].mean())
-                where[count].append((LAST_RUN["seconds"] - LAST_RUN["parallel"], float(waited.mean()),
+                where[config].append((LAST_RUN["seconds"] - LAST_RUN["parallel"], float(waited.mean()),
                                      float(LAST_RUN["sleeps"].mean()) / max(1.0, waits),
                                      LAST_RUN.get("alone", 0), int(LAST_RUN["meets"][0]) / max(1, steps),
                                      float(LAST_RUN["flags"].sum()) / max(1, steps),
                                      ", ".join(f"{w:.3f}" for w in waited)))
     collide.dem.run_members = real
+    barrier.SPIN_CYCLES = kept
     print(f"\n{spheres} spheres, {steps} steps, {repeats} runs each alternated, on {os.cpu_count()} cores\n")
+    label = {c: f"{c[0]}" if len(spins) == 1 or c[0] == 1 else f"{c[0]}, spin {c[1]:,}" for c in configs}
     print("| threads | wall s (median; runs) | CPU s (median; runs) | load (1 min) at each run | "
           "particle-steps/s wall | per CPU s | speedup wall | CPU efficiency |")
     print("|---|---|---|---|---|---|---|---|")
     base = None
-    for count in counts:
-        wall = statistics.median(w for w, _ in times[count])
-        cpu = statistics.median(c for _, c in times[count])
+    for config in configs:
+        wall = statistics.median(w for w, _ in times[config])
+        cpu = statistics.median(c for _, c in times[config])
         base = base or (wall, cpu)
-        walls = ", ".join(f"{w:.2f}" for w, _ in times[count])
-        cpus = ", ".join(f"{c:.2f}" for _, c in times[count])
-        load = ", ".join(f"{x:.1f}" for x in loads[count])
-        print(f"| {count} | {wall:.3f} ({walls}) | {cpu:.3f} ({cpus}) | {load} | {spheres * steps / wall:.3g} | "
-              f"{spheres * steps / cpu:.3g} | {base[0] / wall:.2f} | {base[1] / cpu:.2f} |")
+        walls = ", ".join(f"{w:.2f}" for w, _ in times[config])
+        cpus = ", ".join(f"{c:.2f}" for _, c in times[config])
+        load = ", ".join(f"{x:.1f}" for x in loads[config])
+        print(f"| {label[config]} | {wall:.3f} ({walls}) | {cpu:.3f} ({cpus}) | {load} | "
+              f"{spheres * steps / wall:.3g} | {spheres * steps / cpu:.3g} | {base[0] / wall:.2f} | "
+              f"{base[1] / cpu:.2f} |")
     if any(where.values()):
         print("\nThreaded runs (medians): seconds on one thread in the driver (the rebuilds' cell grid, coasting, "
               "hand-offs), seconds a thread waited at the barrier and at other threads' flags (mean of the threads; "
@@ -178,13 +188,13 @@ def thread_scan(scene, counts: list[int], repeats: int, spheres: int) -> None:
         print("| threads | driver s | waited s | each thread's | slept | meetings a step | flag waits a step | "
               "stretches on one thread |")
         print("|---|---|---|---|---|---|---|---|")
-        for count in counts:
-            if where[count]:
-                serial, waited, slept, alone, meets, flags = (statistics.median(x[c] for x in where[count])
+        for config in configs:
+            if where[config]:
+                serial, waited, slept, alone, meets, flags = (statistics.median(x[c] for x in where[config])
                                                               for c in range(6))
-                each = sorted(where[count], key=lambda x: x[1])[len(where[count]) // 2][6]
-                print(f"| {count} | {serial:.3f} | {waited:.3f} | {each} | {slept:.1%} | {meets:.2f} | {flags:.2f} | "
-                      f"{alone:g} |")
+                each = sorted(where[config], key=lambda x: x[1])[len(where[config]) // 2][6]
+                print(f"| {label[config]} | {serial:.3f} | {waited:.3f} | {each} | {slept:.1%} | {meets:.2f} | "
+                      f"{flags:.2f} | {alone:g} |")
 
 
 def main() -> None:
@@ -194,6 +204,10 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=4000)
     parser.add_argument("--skip-errors", action="store_true")
     parser.add_argument("--threads", help="thread counts to compare, e.g. 1,2 (skips the error table)")
+    parser.add_argument("--spin", default=None,
+                        help="with --threads: the barrier's spins before a waiting thread sleeps, in cycles, e.g. "
+                             "100000,1000000 (each threaded count runs once with each, alternated; default "
+                             "`barrier.SPIN_CYCLES`)")
     parser.add_argument("--no-pace", action="store_true",
                         help="with --threads: every stretch of steps on all the threads, however long they wait "
                              "(`dem_threads._Pace` off), for the threaded kernel's own CPU cost on a loaded machine")
@@ -211,7 +225,10 @@ def main() -> None:
 
             _Pace.WAITED = math.inf
         run_scene(scene, record=False)  # load (or compile) the kernels
-        thread_scan(scene, [int(c) for c in args.threads.split(",")], args.repeats, args.spheres)
+        from collide.engine.dem.barrier import SPIN_CYCLES
+
+        spins = [int(c) for c in args.spin.split(",")] if args.spin else [SPIN_CYCLES]
+        thread_scan(scene, [int(c) for c in args.threads.split(",")], args.repeats, args.spheres, spins)
         return
     if not args.skip_errors:
         error_table()
