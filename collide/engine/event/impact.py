@@ -22,9 +22,10 @@ error). The largest overlap (delta' = 0) and
 the largest force (dF/dt = 0) are landed by re-taking the step that contains them at the
 length that puts the root at its end (secant steps), so they keep the step's order too.
 
-The law and the stage evaluations are copied into the step (`jit_inline`), and the step, the
-landing and the stop are called without reference counting (`jit_call`); each step's end is
-evaluated once for the force and the watched rates, and the next step starts from it.
+The law and the stage evaluations are copied into the step, which may divide by multiplying
+with a reciprocal and fuse products into sums (`jit_inline_fast`, `jit_call_fast`); the step,
+the landing and the stop are called without reference counting; each step's end is evaluated
+once for the force and the watched rates, and the next step starts from it.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ import numpy as np
 
 from collide.engine.dem.damping import dashpot
 from collide.engine.dem.normal import normal_elastic
-from collide.engine.jit import jit, jit_call, jit_inline
+from collide.engine.jit import jit, jit_call, jit_call_fast, jit_inline, jit_inline_fast
 from collide.engine.numerics import illinois
 
 # Dormand and Prince's explicit Runge-Kutta pair of order 8 (DOP853, Hairer, Norsett and Wanner,
@@ -86,7 +87,7 @@ NP = 10
 ENDED, STOPPED, FAILED = 1.0, 2.0, 0.0  # O_END: separated, stopped at P_STOP, not answered
 
 
-@jit_inline
+@jit_inline_fast
 def law_stiff(P, delta, u):
     """(acceleration of delta, normal force, dashpot gamma, stiffness dF_el / d delta) at overlap
     delta and rate u. P: hertz flag, k, E*, R*, m*, zeta, a, p. Hertz past touching (a trial
@@ -100,14 +101,14 @@ def law_stiff(P, delta, u):
     return P[6] - fn / P[4], fn, gamma, kn
 
 
-@jit_inline
+@jit_inline_fast
 def law(P, delta, u):
     """`law_stiff` without the stiffness: (acceleration of delta, normal force, dashpot gamma)."""
     acc, fn, gamma, _ = law_stiff(P, delta, u)
     return acc, fn, gamma
 
 
-@jit_inline
+@jit_inline_fast
 def overlap(P, x):
     """delta = x^p at sigma = x: by products for Hertz's 4 and the linear spring's 1 (a power with
     a float exponent cost more than the rest of an evaluation, measured)."""
@@ -120,7 +121,7 @@ def overlap(P, x):
     return x ** p
 
 
-@jit_inline
+@jit_inline_fast
 def rhs(P, phase, x, y0, y1, y2):
     """The derivatives over the phase's variable x. TIME: y = (delta, u, work); SIGMA:
     y = (t, u, work) at delta = x^p."""
@@ -140,7 +141,7 @@ def rhs(P, phase, x, y0, y1, y2):
     return jac / y1, acc * jac / y1, gamma * y1 * jac
 
 
-@jit_call
+@jit_call_fast
 def rk_step(P, phase, x, y0, y1, y2, h):
     """One step of h from (x, y) by DOP853's order-8 solution, its stages written out with the
     coefficients folded in (a loop over RK_A took 1.5 times as long: kernel time of ten bounces).
@@ -527,13 +528,35 @@ def impact(P, v_in, n_end, n_mid, out):
     out[O_END] = ENDED if how == DONE else FAILED
 
 
-def steps_for(tol: float) -> tuple[int, int]:
+# The error constants of `steps_for` (error about C / n^8 of the separation speed relative to
+# the approach speed, of the contact time and of the largest overlap and force, relative), the
+# ends' over sigma apart from the middle's over time: the most measured on single contacts at
+# n = 6 to 24 (ends with the middle converged, and the other way round) over e = 0.05 to 1
+# against the pressing acceleration's share g t_c / v from 0 to 1 (speeds 1e-3 to 100 m/s
+# under gravity and without), padded about twofold. Hertz's ends grow with the damping: their
+# largest, 6e-4 (e = 1), 1e-3 (e = 0.8), 2.9e-3 (e = 0.5), 6.7e-3 (e = 0.3), 5.7e-2 (e = 0.1),
+# 6.9e-2 (e = 0.05, the contact time), about 6.4e-4 exp(8 zeta); its middle's 2e-2 at most
+# (e = 0.8 to 0.99). The linear spring's are 1e-6 to 8e-5 at any e: its law is smooth at the
+# ends and its error two to three orders below Hertz's.
+HERTZ_END_C, HERTZ_END_GROWTH, HERTZ_MID_C = 1.5e-3, 8.0, 2.5e-2
+LINEAR_C = 2e-4
+
+
+def steps_for(tol: float, laws: np.ndarray) -> tuple[int, int]:
     """Steps over sigma at each end, and per contact time between, for a relative error tol of
-    the separation speed, the contact time and the peaks: order 8, error about C / n^8 (measured
-    on a ten-bounce ball's contacts, n = 6 to 20: C up to 1e-2 for Hertz at e = 0.3 to 0.99, 5e-2
-    at e = 0.05, 1e-5 for the linear spring; tests/engine/event/test_impact.py), n for 5e-2."""
-    n = max(4, math.ceil((5e-2 / tol) ** (1.0 / 8.0)))
-    return n, 2 * n
+    the separation speed, the contact time and the peaks under the laws P (one row, or one per
+    wall: the costliest's, `impact_params`): order 8, error about C / n^8 at each end and in the
+    middle, each given half of tol (the constants above; tests/engine/event/test_impact.py
+    checks them over e and gravity's share)."""
+    laws = np.asarray(laws)
+    if (laws[..., 0] > 0.0).any():
+        c_end = HERTZ_END_C * math.exp(HERTZ_END_GROWTH * float(laws[..., 5].max()))
+        c_mid = HERTZ_MID_C
+    else:
+        c_end = c_mid = LINEAR_C
+    n_end = max(4, math.ceil((2.0 * c_end / tol) ** (1.0 / 8.0)))
+    n = max(4, math.ceil((2.0 * c_mid / tol) ** (1.0 / 8.0)))
+    return n_end, 2 * n
 
 
 def impact_params(*, hertz: bool, mstar: float, k: float = 0.0, estar: float = 0.0, rstar: float = 0.0,
@@ -551,6 +574,6 @@ def normal_impact(params: np.ndarray, v_in: float, tol: float) -> np.ndarray:
     """One contact at approach speed v_in, with the steps `steps_for(tol)`: the OUT row of
     `impact`."""
     out = np.zeros(NOUT)
-    n_end, n_mid = steps_for(tol)
+    n_end, n_mid = steps_for(tol, params)
     impact(params, float(v_in), n_end, n_mid, out)
     return out
