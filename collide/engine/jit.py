@@ -497,15 +497,6 @@ if tier.COMPILED:
     # which multiplied the machine code (the cache 32 MB) and the compile's time; still without
     # reference counting, which was most of the gain. Kernel times unchanged, measured.
     jit_call = _one_signature(_part)
-    # The normal contact's order-8 step and its law (event/impact.py), whose stages follow one
-    # another: each stage's division by m* and, over sigma, by the overlap's rate lay on the
-    # chain from stage to stage. These may divide by multiplying with the reciprocal (taken once
-    # a step) and fuse a product into its sum ("arcp", "contract"; no flag that assumes finite
-    # values: a NaN still fails a step). The results move by round-off; the kernel's time of ten
-    # linear-spring bounces fell by about 15 %, Hertz's by 5 % (measured, the steps the same).
-    _FAST = {"fastmath": {"arcp", "contract"}}
-    jit_inline_fast = _one_signature(dict(_part, forceinline=True, **_FAST))
-    jit_call_fast = _one_signature(dict(_part, **_FAST))
     # Stages with one caller (the event engine's windows, islands, the step's event location)
     # allocate their work arrays, so they keep reference counting; called, not copied into
     # their caller (numba's `inline="always"` spent 10 s of CPU re-typing them inside
@@ -519,6 +510,4 @@ else:
 
     jit_inline = jit
     jit_call = jit
-    jit_inline_fast = jit
-    jit_call_fast = jit
     jit_part = jit

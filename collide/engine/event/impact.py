@@ -22,10 +22,9 @@ error). The largest overlap (delta' = 0) and
 the largest force (dF/dt = 0) are landed by re-taking the step that contains them at the
 length that puts the root at its end (secant steps), so they keep the step's order too.
 
-The law and the stage evaluations are copied into the step, which may divide by multiplying
-with a reciprocal and fuse products into sums (`jit_inline_fast`, `jit_call_fast`); the step,
-the landing and the stop are called without reference counting; each step's end is evaluated
-once for the force and the watched rates, and the next step starts from it.
+The law and the stage evaluations are copied into the step (`jit_inline`), and the step, the
+landing and the stop are called without reference counting (`jit_call`); each step's end is
+evaluated once for the force and the watched rates, and the next step starts from it.
 """
 
 from __future__ import annotations
@@ -36,7 +35,7 @@ import numpy as np
 
 from collide.engine.dem.damping import dashpot
 from collide.engine.dem.normal import normal_elastic
-from collide.engine.jit import jit, jit_call, jit_call_fast, jit_inline, jit_inline_fast
+from collide.engine.jit import jit, jit_call, jit_inline
 from collide.engine.numerics import illinois
 
 # Dormand and Prince's explicit Runge-Kutta pair of order 8 (DOP853, Hairer, Norsett and Wanner,
@@ -87,7 +86,7 @@ NP = 10
 ENDED, STOPPED, FAILED = 1.0, 2.0, 0.0  # O_END: separated, stopped at P_STOP, not answered
 
 
-@jit_inline_fast
+@jit_inline
 def law_stiff(P, delta, u):
     """(acceleration of delta, normal force, dashpot gamma, stiffness dF_el / d delta) at overlap
     delta and rate u. P: hertz flag, k, E*, R*, m*, zeta, a, p. Hertz past touching (a trial
@@ -101,14 +100,14 @@ def law_stiff(P, delta, u):
     return P[6] - fn / P[4], fn, gamma, kn
 
 
-@jit_inline_fast
+@jit_inline
 def law(P, delta, u):
     """`law_stiff` without the stiffness: (acceleration of delta, normal force, dashpot gamma)."""
     acc, fn, gamma, _ = law_stiff(P, delta, u)
     return acc, fn, gamma
 
 
-@jit_inline_fast
+@jit_inline
 def overlap(P, x):
     """delta = x^p at sigma = x: by products for Hertz's 4 and the linear spring's 1 (a power with
     a float exponent cost more than the rest of an evaluation, measured)."""
@@ -121,7 +120,7 @@ def overlap(P, x):
     return x ** p
 
 
-@jit_inline_fast
+@jit_inline
 def rhs(P, phase, x, y0, y1, y2):
     """The derivatives over the phase's variable x. TIME: y = (delta, u, work); SIGMA:
     y = (t, u, work) at delta = x^p."""
@@ -141,7 +140,7 @@ def rhs(P, phase, x, y0, y1, y2):
     return jac / y1, acc * jac / y1, gamma * y1 * jac
 
 
-@jit_call_fast
+@jit_call
 def rk_step(P, phase, x, y0, y1, y2, h):
     """One step of h from (x, y) by DOP853's order-8 solution, its stages written out with the
     coefficients folded in (a loop over RK_A took 1.5 times as long: kernel time of ten bounces).
