@@ -3,9 +3,12 @@ ten bounces of the built-in bounce's ball (Hertz at E = 1e9 Pa, or a linear spri
 thrown at 0.3 m/s along the floor from 1 m), the JSON's wall_time_s (every run the measurement
 took, and the first run alone), the error method and estimate, the most steps a contact took,
 and the rebound speeds' largest error against the same run at a 100 times finer tolerance; then
-the built-in bounce at --tol 1e-9 against a run at 1e-11. Prints Markdown tables.
+the built-in bounce at --tol 1e-9 against a run at 1e-11. Prints Markdown tables. With
+--variants, ten bounces at --tol 1e-9 over the restitution, the stiffness and the speed
+(thrown down onto the floor): wall_time_s and the rebound speeds' largest error against DOP853's
+chain of the same law at rtol 1e-13 (tests/test_event_laws.py's `reference_contact`).
 
-    .venv/bin/python benchmarks/bench_bounce_run.py [--repeat 11]
+    .venv/bin/python benchmarks/bench_bounce_run.py [--repeat 11] [--variants]
 """
 
 from __future__ import annotations
@@ -17,6 +20,8 @@ os.environ.setdefault("COLLIDE_JIT", "1")  # time the compiled kernels
 import argparse
 import math
 import statistics
+import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -66,10 +71,76 @@ def steps_per_contact(run) -> float:
     return max(((times > a) & (times <= b)).sum() for a, b in traj.intervals[:, 2:4])
 
 
+def thrown(hertz: bool, e: float, stiffness: float, speed: float) -> tuple[dict | None, list[float]]:
+    """Up to ten bounces of the bounce's ball (r = 0.03 m, 1100 kg/m^3) thrown down at `speed`
+    from 0.05 speed^2 / g above the floor (it lands at 1.05 times that), Hertz at E = stiffness
+    or a linear spring of k = stiffness, under gravity, until gravity holds it on the floor: the
+    scene, to half the last bounce's flight (None for fewer than two bounces), and DOP853's
+    rebound speeds."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from tests.test_event_laws import reference_contact
+
+    r, nu = 0.03, 0.45
+    mass = 4.0 / 3.0 * math.pi * r**3 * 1100.0
+    zeta = float(damping_ratio(np.array(e), hertz))
+    params = im.impact_params(hertz=hertz, mstar=mass, k=stiffness, estar=stiffness / (1 - nu * nu), rstar=r,
+                              zeta=zeta, accel=G)
+    drop = 0.05 * speed**2 / G
+    v = math.sqrt(speed**2 + 2 * G * drop)
+    expected, flights = [], [(v - speed) / G]
+    for _ in range(10):
+        out = im.normal_impact(params, v, 1e-12)
+        if out[im.O_OK] != 1.0 or out[im.O_VOUT] < 1e-3 * speed:
+            break  # held on the floor, or (below 1e-3 of the speed) about to be
+        try:
+            v, contact_time = reference_contact(params, v)
+        except AssertionError:  # DOP853's contact did not separate within its span
+            break
+        expected.append(v)
+        flights.append(contact_time + 2 * v / G)
+    if len(expected) < 2:
+        return None, expected
+    duration = sum(flights) - 1.5 * expected[-1] / G  # half the last flight
+    contact = {"model": "hertz", "youngs_modulus": stiffness, "poisson_ratio": nu} if hertz else {"k": stiffness}
+    return {"dim": 2, "duration": duration, "gravity": [0.0, -G], "contact": {**contact, "restitution": e},
+            "body": [{"name": "ball", "radius": r, "mass": mass, "position": [0.0, r + drop],
+                      "velocity": [0.0, -speed]}],
+            "wall": [{"point": [0.0, 0.0], "normal": [0.0, 1.0]}]}, expected
+
+
+def variants(repeat: int) -> None:
+    print("| law | e | E or k | speed (m/s) | bounces | wall_time_s (median) | steps per contact (most) | "
+          "error estimate | largest error of the rebound speeds against DOP853 |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for hertz, stiffnesses in ((True, (1e6, 1e9, 1e12)), (False, (1e3, 1e6, 1e9))):
+        for e in (0.05, 0.3, 0.8, 0.95):
+            for stiffness in stiffnesses:
+                for speed in (1e-3, 1.0, 100.0):
+                    raw, expected = thrown(hertz, e, stiffness, speed)
+                    head = f"| {'hertz' if hertz else 'linear'} | {e} | {stiffness:.0e} | {speed:g} |"
+                    if raw is None:
+                        print(f"{head} {len(expected)} | (held on the floor: fewer than two bounces) | | | |")
+                        continue
+                    scene = parse_scene(raw)
+                    runs = [run_scene(scene, tol=1e-9) for _ in range(repeat)]
+                    run = runs[0]
+                    got = rebounds(run)
+                    error = float(np.max(np.abs(got[:len(expected)] / np.array(expected)[:len(got)] - 1)))
+                    wall = statistics.median(r.result.wall_time_s for r in runs)
+                    print(f"{head} {int(run.result.contacts.count[0])} | {wall * 1e3:.3f} ms | "
+                          f"{steps_per_contact(run)} | {float(run.error_estimate[0]):.1e} "
+                          f"({run.error_method[0]}) | {error:.1e} |", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=11)
+    parser.add_argument("--variants", action="store_true", help="ten bounces over e, the stiffness and the speed")
     args = parser.parse_args()
+    if args.variants:
+        run_scene(parse_scene(ten_bounces(True, 0.8)), tol=1e-6)  # load the kernels before timing
+        variants(args.repeat)
+        return
     run_scene(parse_scene(ten_bounces(True, 0.8)), tol=1e-6)  # load the kernels before timing
     print("| law | e | tol | contacts | wall_time_s (median, measured) | of it the run itself | error method, estimate "
           "| steps per contact (most) | largest error of the rebound speeds |")

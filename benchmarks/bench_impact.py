@@ -34,7 +34,7 @@ def ball(hertz: bool, e: float, young: float) -> np.ndarray:
 
 def bounces(params: np.ndarray, tol: float, count: int = 10) -> tuple[list[float], float]:
     """The rebound speeds of `count` bounces from 1 m, and the most steps one contact took."""
-    n_end, n_mid = im.steps_for(tol)
+    n_end, n_mid = im.steps_for(tol, params)
     out = np.zeros(im.NOUT)
     v, speeds, steps = math.sqrt(2 * 9.81), [], 0.0
     for _ in range(count):

@@ -182,12 +182,24 @@ def alone_step(model: Model, state: State, tol: float, duration: float = math.na
     """The time step of a contact's middle at tol: the shortest contact time the scene can
     produce over the steps per contact time (`impact.steps_for`); the ends step over sigma."""
     from collide import dem
-    from collide.engine.event import impact
 
     if not model.n_walls and model.n_bodies < 2:
         return math.inf
     t_c, _, _ = dem.contact_time(model, state)
-    return float(t_c[0]) / impact.steps_for(contact_tol(model, state, tol, duration))[1]
+    return float(t_c[0]) / contact_steps(model, contact_tol(model, state, tol, duration))[1]
+
+
+def contact_laws(model: Model) -> np.ndarray:
+    """The law rows the kernel takes: two spheres' (`pair_row`) or each wall's (`law_rows`)."""
+    return pair_row(model) if model.n_bodies == 2 else law_rows(model)
+
+
+def contact_steps(model: Model, share: float, laws: np.ndarray | None = None) -> tuple[int, int, int, int]:
+    """The kernel's `ends` for a contact tolerance `share` (`contact_tol`): the normal contact's
+    steps (`impact.steps_for`, for these laws) and a rubbing one's (`oblique.rub_steps`)."""
+    from collide.engine.event import impact, oblique
+
+    return impact.steps_for(share, contact_laws(model) if laws is None else laws) + oblique.rub_steps(share)
 
 
 def check_tol(tol: float) -> None:
@@ -200,7 +212,7 @@ def simulate_alone(model: Model, state: State, *, tol: float, duration: float, t
                    max_steps: int) -> RunResult:
     """Run one scene of one sphere among walls, or of two spheres and no walls (a batch of one),
     in the event engine."""
-    from collide.engine.event import alone, impact, oblique, pair
+    from collide.engine.event import alone, pair
 
     check_tol(tol)
     G, WP, grav = kernel_inputs(model, state)
@@ -210,11 +222,11 @@ def simulate_alone(model: Model, state: State, *, tol: float, duration: float, t
     fp = np.zeros(int(layout.NFP))
     fp[layout.FP_TEND] = duration if math.isfinite(duration) else math.inf
     fp[layout.FP_TAIL] = tail
-    share = contact_tol(model, state, tol, duration)
-    ends = np.array(impact.steps_for(share) + oblique.rub_steps(share), np.int64)
+    laws = contact_laws(model)
+    ends = np.array(contact_steps(model, contact_tol(model, state, tol, duration), laws), np.int64)
     two = model.n_bodies == 2
-    args = (G[0], pair_row(model), pair_rub_row(model), grav[0], fl, fp, ends) if two else \
-        (G[0], WP, law_rows(model), rub_rows(model), grav[0], fl, fp, ends)
+    args = (G[0], laws, pair_rub_row(model), grav[0], fl, fp, ends) if two else \
+        (G[0], WP, laws, rub_rows(model), grav[0], fl, fp, ends)
     kernel = pair.pair_run if two else alone.alone_run
     _load_compiled(kernel, args)  # loading is not simulating
     started = time.perf_counter()

@@ -12,7 +12,7 @@ import numpy as np
 from collide import diagnostics as dg
 from collide import measure as measure_mod
 from collide.alone import TOL_FLOOR as ALONE_TOL_FLOOR
-from collide.alone import AloneError, PairTurns, alone_step, contact_tol, engine_choice, simulate_alone
+from collide.alone import AloneError, PairTurns, alone_step, contact_steps, contact_tol, engine_choice, simulate_alone
 from collide.errors import SawtoothError
 from collide.integrators import INTEGRATORS
 from collide.invariant import check_invariant
@@ -366,14 +366,13 @@ def _run_alone(scene: Scene, integ: str, model, state, tol: float, record: bool,
     (`collide.alone`); where it meets what only DEM takes (two walls at once), DEM runs it
     instead, unless the event engine was asked for."""
     from collide.dem import contact_time
-    from collide.engine.event.impact import steps_for
-    from collide.engine.event.oblique import rub_steps
 
     if scene.gravity is not None and scene.walls and scene.duration is None:
         raise SceneError("duration: required when a scene has both gravity and walls (a bouncing sphere never stops)")
     duration = math.nan if scene.duration is None else scene.duration
     share = contact_tol(model, state, tol, duration)
-    limit = step_limit([scene.duration], max_steps, max(2 * n + m for n, m in (steps_for(share), rub_steps(share))))
+    n_end, n_mid, rub_end, rub_mid = contact_steps(model, share)
+    limit = step_limit([scene.duration], max_steps, max(2 * n_end + n_mid, 2 * rub_end + rub_mid))
     try:
         result = simulate_alone(model, state, tol=tol, duration=duration,
                                 tail=np.nan if scene.tail is None else scene.tail, record=record, max_steps=limit)

@@ -527,13 +527,35 @@ def impact(P, v_in, n_end, n_mid, out):
     out[O_END] = ENDED if how == DONE else FAILED
 
 
-def steps_for(tol: float) -> tuple[int, int]:
+# The error constants of `steps_for` (error about C / n^8 of the separation speed relative to
+# the approach speed, of the contact time and of the largest overlap and force, relative), the
+# ends' over sigma apart from the middle's over time: the most measured on single contacts at
+# n = 6 to 24 (ends with the middle converged, and the other way round) over e = 0.05 to 1
+# against the pressing acceleration's share g t_c / v from 0 to 1 (speeds 1e-3 to 100 m/s
+# under gravity and without), padded about twofold. Hertz's ends grow with the damping: their
+# largest, 6e-4 (e = 1), 1e-3 (e = 0.8), 2.9e-3 (e = 0.5), 6.7e-3 (e = 0.3), 5.7e-2 (e = 0.1),
+# 6.9e-2 (e = 0.05, the contact time), about 6.4e-4 exp(8 zeta); its middle's 2e-2 at most
+# (e = 0.8 to 0.99). The linear spring's are 1e-6 to 8e-5 at any e: its law is smooth at the
+# ends and its error two to three orders below Hertz's.
+HERTZ_END_C, HERTZ_END_GROWTH, HERTZ_MID_C = 1.5e-3, 8.0, 2.5e-2
+LINEAR_C = 2e-4
+
+
+def steps_for(tol: float, laws: np.ndarray) -> tuple[int, int]:
     """Steps over sigma at each end, and per contact time between, for a relative error tol of
-    the separation speed, the contact time and the peaks: order 8, error about C / n^8 (measured
-    on a ten-bounce ball's contacts, n = 6 to 20: C up to 1e-2 for Hertz at e = 0.3 to 0.99, 5e-2
-    at e = 0.05, 1e-5 for the linear spring; tests/engine/event/test_impact.py), n for 5e-2."""
-    n = max(4, math.ceil((5e-2 / tol) ** (1.0 / 8.0)))
-    return n, 2 * n
+    the separation speed, the contact time and the peaks under the laws P (one row, or one per
+    wall: the costliest's, `impact_params`): order 8, error about C / n^8 at each end and in the
+    middle, each given half of tol (the constants above; tests/engine/event/test_impact.py
+    checks them over e and gravity's share)."""
+    laws = np.asarray(laws)
+    if (laws[..., 0] > 0.0).any():
+        c_end = HERTZ_END_C * math.exp(HERTZ_END_GROWTH * float(laws[..., 5].max()))
+        c_mid = HERTZ_MID_C
+    else:
+        c_end = c_mid = LINEAR_C
+    n_end = max(4, math.ceil((2.0 * c_end / tol) ** (1.0 / 8.0)))
+    n = max(4, math.ceil((2.0 * c_mid / tol) ** (1.0 / 8.0)))
+    return n_end, 2 * n
 
 
 def impact_params(*, hertz: bool, mstar: float, k: float = 0.0, estar: float = 0.0, rstar: float = 0.0,
@@ -551,6 +573,6 @@ def normal_impact(params: np.ndarray, v_in: float, tol: float) -> np.ndarray:
     """One contact at approach speed v_in, with the steps `steps_for(tol)`: the OUT row of
     `impact`."""
     out = np.zeros(NOUT)
-    n_end, n_mid = steps_for(tol)
+    n_end, n_mid = steps_for(tol, params)
     impact(params, float(v_in), n_end, n_mid, out)
     return out

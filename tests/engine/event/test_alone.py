@@ -25,7 +25,7 @@ def _stopped(params, v, stop, tol=1e-10):
     P[im.P_STOP] = stop
     out = np.zeros(im.NOUT)
     trail = List([(0.0, 0.0, 0.0, 0.0)])  # (emptied by `contact`: numba cannot type an empty list)
-    n_end, n_mid = im.steps_for(tol)
+    n_end, n_mid = im.steps_for(tol, P)
     im.contact(P, v, n_end, n_mid, 10**6, out, trail)
     return out, trail
 
@@ -93,7 +93,7 @@ def _run(walls, position, velocity, t_end):
     rubs = np.zeros((len(walls), 4))  # no tangential spring nor rolling resistance (collide.alone.rub_rows)
     rubs.setflags(write=False)
     return alone.alone_run(G, WP, laws, rubs, np.array([0.0, -9.81, 0.0]), fl, fp,
-                           np.array(im.steps_for(1e-8) + rub_steps(1e-8)))
+                           np.array(im.steps_for(1e-8, laws) + rub_steps(1e-8)))
 
 
 def test_a_second_wall_within_reach_stops_the_run():
