@@ -1132,3 +1132,26 @@ def test_the_restitution_slider_keeps_the_event_engine_where_it_runs_the_law(nam
         assert float(run.error_estimate[0]) <= scene.tol
     else:
         assert moved.tol >= DEM_TOL
+
+
+def test_opening_replaces_a_grown_reader_once_the_run_is_prepared(tmp_path, monkeypatch):
+    # The reader grown by the file is not replaced while the run is prepared and sent to the
+    # tabs (its replacement's import of Rerun competed with them), but once that is done.
+    from collide.recording import sandbox, write_recording
+    from viewer.opening import OpeningRecording
+
+    path = write_recording(run_scene(load_scene("demo-bonus")), tmp_path / "bonus.rrd")
+    monkeypatch.setattr(sandbox, "_IDLE_MAX_MB", 0)  # every reader counts as grown
+    idle_when_shown: list[int] = []
+
+    def shown(opening: OpeningRecording) -> None:
+        if opening.view is not None:
+            with sandbox._idle_lock:
+                idle_when_shown.append(len(sandbox._idle))
+
+    opening = OpeningRecording(path, path.name)
+    opening.follow(shown)
+    assert opening.wait(120) and opening.error is None and opening.view is not None
+    assert idle_when_shown == [0]  # no fresh reader while the run was being shown
+    with sandbox._idle_lock:
+        assert len(sandbox._idle) == 1 and sandbox._idle[0].proc.poll() is None
