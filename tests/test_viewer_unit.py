@@ -1155,3 +1155,30 @@ def test_opening_replaces_a_grown_reader_once_the_run_is_prepared(tmp_path, monk
     assert idle_when_shown == [0]  # no fresh reader while the run was being shown
     with sandbox._idle_lock:
         assert len(sandbox._idle) == 1 and sandbox._idle[0].proc.poll() is None
+
+
+def test_states_at_knots_are_the_sampled_states():
+    """`Knots.at_knots` (the angular momentum at the contact steps' ends) gives the states
+    `sample` evaluates at times where every body has a knot, to round-off (a body's final knot
+    is reached by `sample` from the segment before it), and None where some body has none."""
+    from collide.engine import layout
+    from collide.trajectory import Knots, body_knots
+
+    for scene in (load_scene("demo-bonus"), load_scene("break-3d"), _gas(30, 0.2)):
+        run = run_scene(scene)
+        traj, model = run.result.trajectory, run.result.model
+        knots = Knots(model, traj)
+        each = [set(mine[:, layout.K_T]) for mine in body_knots(traj)]
+        common = np.array(sorted(set.intersection(*each)))
+        assert len(common), scene.name
+        s, v, w = knots.at_knots(common)
+        st = knots.sample(common)
+        size = float(np.max(np.abs(st.s[:, 0])))
+        speed = float(np.max(np.abs(st.v[:, 0])))
+        spin = max(float(np.max(np.abs(st.w), initial=0.0)), 1e-300)
+        np.testing.assert_allclose(s, st.s[:, 0], rtol=0, atol=1e-14 * size, err_msg=scene.name)
+        np.testing.assert_allclose(v, st.v[:, 0], rtol=0, atol=1e-14 * speed, err_msg=scene.name)
+        np.testing.assert_allclose(w, st.w[:, 0], rtol=0, atol=1e-14 * spin, err_msg=scene.name)
+        lonely = np.setdiff1d(traj.knot_times, common)
+        if len(lonely):
+            assert knots.at_knots(lonely[:1]) is None, scene.name
