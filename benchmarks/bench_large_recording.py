@@ -15,9 +15,9 @@ bed pressed from the first step (every frame full of contacts), the pour's spher
 `open`: `collide view FILE` as a user runs it, a fresh process each time, repeated: seconds from
 the command to the server listening (its banner), to headless Chromium (already running, as a
 user's browser is) showing the recording's first frame (its start, the status saying the rest is
-still loading) and to its run shown; the CPU seconds of the server and of its reader process by
-then, and each one's peak resident memory (the kernel's VmHWM); medians and ranges, and the
-load average before and after. The pile's recording:
+still loading) and to its run shown; the CPU seconds of the server, of its reader process and
+of every reader (a replacement included) by then, and each one's peak resident memory (the
+kernel's VmHWM); medians and ranges, and the load average before and after. The pile's recording:
 
     collide run pile --out /tmp/pile.rrd
     python benchmarks/bench_large_recording.py open /tmp/pile.rrd --repeats 5
@@ -244,6 +244,7 @@ def _open_once(browser, path: Path, command: list[str], cwd: Path) -> dict[str, 
         stop.append(1)
         time.sleep(0.1)
         out["reader CPU"] = max((cpu for cpu, _ in seen.values()), default=float("nan"))
+        out["all readers CPU"] = sum(cpu for cpu, _ in seen.values())  # a replacement reader's too
         out["reader peak MB"] = max((mb for _, mb in seen.values()), default=float("nan"))
         page.close()
     finally:

@@ -217,6 +217,23 @@ class Knots:
             stepped[0] = False
         return stepped
 
+    def at_knots(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Positions, velocities and spins (T, N, D) and (T, N, K) at times where every body has
+        a knot: the knots' own values (the last at that time, the one `sample` starts from),
+        with no search for a segment to evaluate. None if some body has no knot at some time."""
+        times = np.asarray(times, dtype=float)
+        model = self.model
+        if not len(times) or (self.end <= self.start).any():
+            return None
+        at = segment_search(self.t, self.start[None, :], self.end[None, :], times[:, None], "right") - 1
+        if (at < self.start[None, :]).any() or (self.t[at] != times[:, None]).any():
+            return None
+        rows = self.order[at]
+        s = self.knots[rows, layout.K_S:layout.K_S + model.dim]
+        v = self.knots[rows, layout.K_V:layout.K_V + model.dim]
+        w = self.knots[rows, layout.K_W + 3 - model.spin_dim:layout.K_W + 3]
+        return s, v, w
+
     def sample(self, times: np.ndarray, member: int = 0) -> State:
         """States at the given times (T,), shaped (T, 1, N, D) (`sample`)."""
         times = np.asarray(times, dtype=float)

@@ -127,3 +127,22 @@ def test_a_grown_reader_is_replaced_by_a_fresh_one(good: Path, monkeypatch: pyte
     monkeypatch.undo()
     run = read_recording_safely(good)  # the fresh one reads
     assert run.scene.name == "demo-bonus"
+
+
+def test_a_grown_reader_is_replaced_when_the_caller_says(good: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # rewarm=False (the viewer opening a file): the grown reader is stopped and no fresh one
+    # starts until `warm_reader()`, called once the run is shown.
+    from collide.recording import sandbox
+
+    sandbox.warm_reader()
+    with sandbox._idle_lock:
+        first = sandbox._idle[-1]
+    monkeypatch.setattr(sandbox, "_IDLE_MAX_MB", 0)
+    run = read_recording_safely(good, rewarm=False)
+    assert run.scene.name == "demo-bonus"
+    assert first.proc.poll() is not None
+    with sandbox._idle_lock:
+        assert sandbox._idle == []
+    sandbox.warm_reader()
+    with sandbox._idle_lock:
+        assert len(sandbox._idle) == 1 and sandbox._idle[0].proc.poll() is None

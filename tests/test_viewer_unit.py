@@ -1132,3 +1132,53 @@ def test_the_restitution_slider_keeps_the_event_engine_where_it_runs_the_law(nam
         assert float(run.error_estimate[0]) <= scene.tol
     else:
         assert moved.tol >= DEM_TOL
+
+
+def test_opening_replaces_a_grown_reader_once_the_run_is_prepared(tmp_path, monkeypatch):
+    # The reader grown by the file is not replaced while the run is prepared and sent to the
+    # tabs (its replacement's import of Rerun competed with them), but once that is done.
+    from collide.recording import sandbox, write_recording
+    from viewer.opening import OpeningRecording
+
+    path = write_recording(run_scene(load_scene("demo-bonus")), tmp_path / "bonus.rrd")
+    monkeypatch.setattr(sandbox, "_IDLE_MAX_MB", 0)  # every reader counts as grown
+    idle_when_shown: list[int] = []
+
+    def shown(opening: OpeningRecording) -> None:
+        if opening.view is not None:
+            with sandbox._idle_lock:
+                idle_when_shown.append(len(sandbox._idle))
+
+    opening = OpeningRecording(path, path.name)
+    opening.follow(shown)
+    assert opening.wait(120) and opening.error is None and opening.view is not None
+    assert idle_when_shown == [0]  # no fresh reader while the run was being shown
+    with sandbox._idle_lock:
+        assert len(sandbox._idle) == 1 and sandbox._idle[0].proc.poll() is None
+
+
+def test_states_at_knots_are_the_sampled_states():
+    """`Knots.at_knots` (the angular momentum at the contact steps' ends) gives the states
+    `sample` evaluates at times where every body has a knot, to round-off (a body's final knot
+    is reached by `sample` from the segment before it), and None where some body has none."""
+    from collide.engine import layout
+    from collide.trajectory import Knots, body_knots
+
+    for scene in (load_scene("demo-bonus"), load_scene("break-3d"), _gas(30, 0.2)):
+        run = run_scene(scene)
+        traj, model = run.result.trajectory, run.result.model
+        knots = Knots(model, traj)
+        each = [set(mine[:, layout.K_T]) for mine in body_knots(traj)]
+        common = np.array(sorted(set.intersection(*each)))
+        assert len(common), scene.name
+        s, v, w = knots.at_knots(common)
+        st = knots.sample(common)
+        size = float(np.max(np.abs(st.s[:, 0])))
+        speed = float(np.max(np.abs(st.v[:, 0])))
+        spin = max(float(np.max(np.abs(st.w), initial=0.0)), 1e-300)
+        np.testing.assert_allclose(s, st.s[:, 0], rtol=0, atol=1e-14 * size, err_msg=scene.name)
+        np.testing.assert_allclose(v, st.v[:, 0], rtol=0, atol=1e-14 * speed, err_msg=scene.name)
+        np.testing.assert_allclose(w, st.w[:, 0], rtol=0, atol=1e-14 * spin, err_msg=scene.name)
+        lonely = np.setdiff1d(traj.knot_times, common)
+        if len(lonely):
+            assert knots.at_knots(lonely[:1]) is None, scene.name

@@ -59,7 +59,7 @@ class OpeningRecording:
         from viewer.reading import read_untrusted
 
         try:
-            run = read_untrusted(self.path, name=self.shown, on_scene=self._scene_read)
+            run = read_untrusted(self.path, name=self.shown, on_scene=self._scene_read, rewarm=False)
             from viewer.state import ViewRun
 
             view = ViewRun(run, origin=f"recording {self.name}")
@@ -70,6 +70,11 @@ class OpeningRecording:
         else:
             self._step(view=view, scene=run.scene)
         finally:
+            # A reader grown by the file is replaced now that the tabs have the run (or its
+            # error), not while they were being sent it.
+            from collide.recording.sandbox import warm_reader
+
+            warm_reader()
             self.done.set()
 
     def _scene_read(self, scene: Scene) -> None:

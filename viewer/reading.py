@@ -24,12 +24,14 @@ MEMORY_MB = 6144  # address space of the child: rerun and numpy reserve much mor
 
 
 def read_untrusted(path: str | Path, *, name: str | None = None, timeout_s: float | None = None,
-                   memory_mb: int = MEMORY_MB, on_scene: Callable[[Scene], None] | None = None) -> SceneRun:
+                   memory_mb: int = MEMORY_MB, on_scene: Callable[[Scene], None] | None = None,
+                   rewarm: bool = True) -> SceneRun:
     """Read a recording in a child process. `name` is how the file is shown in messages
     (default: its file name); `timeout_s` defaults to TIMEOUT_S and TIMEOUT_PER_BYTE of the
     file's size. Raises `RecordingError` (one line) for anything that goes wrong: not a
     recording, damaged, a reader crash, a hang, too much memory. `on_scene` is handed the
-    recording's scene before its run is decoded (`read_recording_safely`)."""
+    recording's scene before its run is decoded; `rewarm=False` leaves a grown reader's
+    replacement to the caller (`read_recording_safely`)."""
     path = Path(path)
     if timeout_s is None:
         try:
@@ -37,7 +39,8 @@ def read_untrusted(path: str | Path, *, name: str | None = None, timeout_s: floa
         except OSError:
             timeout_s = TIMEOUT_S  # the reader says what is wrong with it
     try:
-        return read_recording_safely(path, timeout_s=timeout_s, memory_mb=memory_mb, on_scene=on_scene)
+        return read_recording_safely(path, timeout_s=timeout_s, memory_mb=memory_mb, on_scene=on_scene,
+                                     rewarm=rewarm)
     except RecordingError as exc:
         raise RecordingError(_rename(str(exc), path, name or path.name)) from None
 

@@ -248,7 +248,7 @@ def _take_reader() -> _Reader:
     return _Reader()
 
 
-def _give_back(reader: _Reader) -> None:
+def _give_back(reader: _Reader, rewarm: bool = True) -> None:
     with _idle_lock:
         if len(_idle) < _IDLE_READERS and reader.rss_mb() <= _IDLE_MAX_MB:
             _idle.append(reader)
@@ -256,7 +256,8 @@ def _give_back(reader: _Reader) -> None:
     reader.stop()
     # A fresh one in its place, starting while nothing waits for it: a cold reader spends about
     # a second importing Rerun before it reads (2 s of a 1 000-sphere pile's open under load).
-    warm_reader()
+    if rewarm:
+        warm_reader()
 
 
 def warm_reader() -> None:
@@ -269,7 +270,7 @@ def warm_reader() -> None:
 
 def read_recording_safely(path: str | Path, *, timeout_s: float = SAFE_TIMEOUT_S,
                           memory_mb: int = SAFE_MEMORY_MB,
-                          on_scene: Callable[[Scene], None] | None = None) -> SceneRun:
+                          on_scene: Callable[[Scene], None] | None = None, rewarm: bool = True) -> SceneRun:
     """`read_recording` in a child process (its default), for files from anywhere.
 
     Rerun's reader is Rust: a damaged file can make it panic and abort the whole process, or
@@ -280,13 +281,15 @@ def read_recording_safely(path: str | Path, *, timeout_s: float = SAFE_TIMEOUT_S
     _IDLE_MAX_MB (then it is stopped: its memory is not held for the session); safe to call
     from several threads. `on_scene`, if given, is called with the recording's scene as soon as
     the file's seal is checked, before its trajectory is decoded and passed back (sealed files:
-    format 4 on).
+    format 4 on). `rewarm=False`: a reader grown by this file is stopped but not replaced at
+    once; the caller calls `warm_reader()` when the cores are free (the viewer, once the run is
+    shown: a replacement's import of Rerun took 1.4 s of CPU from a pile's opening).
     """
-    return _safely(Path(path), "read", timeout_s, memory_mb, on_scene)
+    return _safely(Path(path), "read", timeout_s, memory_mb, on_scene, rewarm)
 
 
 def _safely(path: Path, mode: str, timeout_s: float, memory_mb: int,
-            on_scene: Callable[[Scene], None] | None = None) -> Any:
+            on_scene: Callable[[Scene], None] | None = None, rewarm: bool = True) -> Any:
     if not timeout_s > 0:
         raise ValueError(f"timeout_s must be positive, got {timeout_s}")
     if not memory_mb > 0:
@@ -304,7 +307,7 @@ def _safely(path: Path, mode: str, timeout_s: float, memory_mb: int,
             reader.stop()
             _give_back(_Reader())  # warm up the next one while the caller reports this one
         else:
-            _give_back(reader)
+            _give_back(reader, rewarm)
     if kind == "ok":
         return value
     if kind == "error":
